@@ -41,10 +41,10 @@ def _check_kappa_lengths(kappa: npt.ArrayLike, lengths: npt.ArrayLike) -> tuple[
     lengths = np.asarray(lengths, dtype=float)
     if kappa.ndim == 0:
         raise ValueError("kappa must have shape (..., N), got a scalar")
-    lengths = np.broadcast_to(lengths, np.broadcast_shapes(lengths.shape, kappa.shape[-1:]))
-    if lengths.shape[-1] != kappa.shape[-1]:
+    if lengths.ndim and lengths.shape[-1] not in (1, kappa.shape[-1]):
         raise ValueError(
             f"lengths must broadcast to kappa's last axis ({kappa.shape[-1]}), got {lengths.shape}")
+    lengths = np.broadcast_to(lengths, np.broadcast_shapes(lengths.shape, kappa.shape[-1:]))
     return kappa, lengths
 
 
@@ -68,17 +68,26 @@ def forward_kinematics(
     if base.shape[-1] != 3:
         raise ValueError(f"base_pose must have shape (..., 3), got {base.shape}")
     shape = np.broadcast_shapes(kappa.shape[:-1], base.shape[:-1], lengths.shape[:-1])
+    n = kappa.shape[-1]
+    out = np.empty(shape + (n + 1, 3))
     turn = kappa * lengths
-    theta = base[..., 2:3] + np.concatenate(
-        [np.zeros(turn.shape[:-1] + (1,)), np.cumsum(turn, axis=-1)], axis=-1)
-    mid = theta[..., :-1] + 0.5 * turn
-    chord = lengths * _sinc(0.5 * turn)
-    out = np.empty(shape + (kappa.shape[-1] + 1, 3))
+    half = 0.5 * turn
+    theta = out[..., 2]
+    theta[..., 0] = base[..., 2]
+    np.cumsum(turn, axis=-1, out=theta[..., 1:])
+    theta[..., 1:] += base[..., 2:3]
+    mid = theta[..., :-1] + half
+    chord = np.sin(half)
+    nonzero = half != 0
+    np.divide(chord, half, out=chord, where=nonzero)
+    chord[~nonzero] = 1.0
+    chord *= lengths
     out[..., 0, 0] = base[..., 0]
     out[..., 0, 1] = base[..., 1]
-    out[..., 1:, 0] = base[..., 0:1] + np.cumsum(chord * np.cos(mid), axis=-1)
-    out[..., 1:, 1] = base[..., 1:2] + np.cumsum(chord * np.sin(mid), axis=-1)
-    out[..., :, 2] = theta
+    np.cumsum(chord * np.cos(mid), axis=-1, out=out[..., 1:, 0])
+    np.cumsum(chord * np.sin(mid), axis=-1, out=out[..., 1:, 1])
+    out[..., 1:, 0] += base[..., 0:1]
+    out[..., 1:, 1] += base[..., 1:2]
     return out
 
 

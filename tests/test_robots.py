@@ -1,0 +1,67 @@
+"""Robot descriptions load from data files and bad files name the bad field."""
+
+import math
+
+import pytest
+
+from core import robots
+
+
+def test_soft_arm_matches_the_paper():
+    arm = robots.load("soft-arm")
+    assert arm.n_segments == 6 and arm.segment_length == pytest.approx(0.0627)
+    assert arm.kappa_max == pytest.approx(16.7)
+    assert math.degrees(arm.kappa_max * arm.segment_length) == pytest.approx(60, abs=0.1)
+    assert arm.gripper.length == pytest.approx(0.106)
+    assert arm.drive_cylinders == 13
+    assert tuple(arm.base_pose) == (0.0, 0.0, pytest.approx(math.pi / 2))
+
+
+def test_extensible_defaults():
+    arm = robots.load("extensible")
+    assert arm.n_segments == 2 and arm.d == pytest.approx(0.03)
+    assert (arm.rack_min, arm.rack_max) == (0.05, 0.41)
+    assert arm.phi == pytest.approx(math.pi) and arm.tip_speed == pytest.approx(0.10)
+    assert arm.n_segments * arm.rack_max == pytest.approx(0.82)
+
+
+def _write(tmp_path, name, old, new):
+    text = (robots.ROBOTS_DIR / f"{name}.toml").read_text()
+    assert old in text
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("length = 0.0627", "length = -1", "segments.length"),
+    ("kappa_max = 16.7", "kappa_max = \"high\"", "segments.kappa_max"),
+    ("count = 6 ", "count = 0 ", "segments.count"),
+    ("pose = [0.0, 0.0, 1.5707963267948966]", "pose = [0.0, 0.0]", "base.pose"),
+    ("g_off = 0.010", "", "gripper.g_off"),
+])
+def test_bad_soft_arm_file_names_the_field(tmp_path, old, new, field):
+    with pytest.raises(robots.RobotFileError, match=field.replace(".", r"\.")):
+        robots.load(_write(tmp_path, "soft-arm", old, new))
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("rack_max = 0.41", "rack_max = 0.01", "segments.rack_max"),
+    ("count = 6", "count = 5", "motors.count"),
+    ("rack_radius = 0.03", "rack_radius = 0", "segments.rack_radius"),
+])
+def test_bad_extensible_file_names_the_field(tmp_path, old, new, field):
+    with pytest.raises(robots.RobotFileError, match=field.replace(".", r"\.")):
+        robots.load(_write(tmp_path, "extensible", old, new))
+
+
+def test_unknown_robot_lists_the_shipped_ones():
+    with pytest.raises(robots.RobotFileError, match="soft-arm"):
+        robots.load("no-such-arm")
+
+
+def test_not_toml_is_reported(tmp_path):
+    p = tmp_path / "x.toml"
+    p.write_text("this is = = not toml")
+    with pytest.raises(robots.RobotFileError, match="not valid TOML"):
+        robots.load(p)
