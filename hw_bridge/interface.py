@@ -8,6 +8,10 @@ while active) calls :meth:`on_error`: best-effort DISARM, port closed, state ``U
 ``fault`` set. Nothing re-arms automatically: the operator must configure (reconnect) and
 activate (arm) again. configure/activate block for up to a few hundred ms; they are operator
 actions, not per-cycle calls. Only the control thread may call these methods.
+
+A receive thread (one per connection) reads the port in chunks, decodes and timestamps STATE
+frames on arrival, so round trips do not include the control loop's phase; :meth:`read`
+drains what it queued.
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ import abc
 import dataclasses
 import enum
 import itertools
+import queue
+import threading
 import time
 from typing import Callable
 
@@ -122,6 +128,25 @@ class SerialHardware(HardwareInterface):
         self.fault: str | None = None
         self.link: Link | None = None
         self._config_ids = itertools.count(1)
+        self._rxq: queue.SimpleQueue[p.Message | TransportError] = queue.SimpleQueue()
+        self._rx_stop = threading.Event()
+        self._rx_thread: threading.Thread | None = None
+
+    # -- receive thread ---------------------------------------------------------------------
+    def _start_rx(self, link: Link) -> None:
+        self._rxq = queue.SimpleQueue()
+        self._rx_stop = threading.Event()
+        self._rx_thread = threading.Thread(target=_rx_loop, args=(link, self._rxq, self._rx_stop),
+                                           daemon=True, name=f"hw-rx {self.port}")
+        self._rx_thread.start()
+
+    def _close(self) -> None:
+        self._rx_stop.set()
+        if self._rx_thread is not None and self._rx_thread is not threading.current_thread():
+            self._rx_thread.join(timeout=1.0)
+        self._rx_thread = None
+        if self.link is not None:
+            self.link.transport.close()
 
     # -- transitions ------------------------------------------------------------------------
     def configure(self) -> ReturnType:
@@ -138,6 +163,7 @@ class SerialHardware(HardwareInterface):
         try:
             transport.reset_input()
             transport.write(p.DELIMITER)  # terminate any partial frame the device holds
+            self._start_rx(self.link)
             self.link.send(p.Hello())
             hello = self._wait_for(lambda m: isinstance(m, p.Hello), self.config.hello_timeout_s)
             if hello is None:
@@ -181,9 +207,10 @@ class SerialHardware(HardwareInterface):
             self.link.reset_sequence()
             deadline = self._clock() + self.config.hello_timeout_s
             while self._clock() < deadline:
-                seq = self.link.send_demand(hold)
-                st = self._wait_for(lambda m: isinstance(m, p.State) and m.ack_seq == seq,
-                                    self.config.period_s)
+                self.link.send_demand(hold)
+                st = self._wait_for(
+                    lambda m: isinstance(m, p.State)
+                    and bool(m.status & (p.Status.ARMED | p.Status.ESTOP)), self.config.period_s)
                 if st is not None and st.status & p.Status.ARMED:
                     self.state = LifecycleState.ACTIVE
                     return ReturnType.OK
@@ -212,7 +239,7 @@ class SerialHardware(HardwareInterface):
                     self.link.send(p.Disarm())
                 except TransportError:
                     pass
-            self.link.transport.close()
+        self._close()
         self.state = LifecycleState.UNCONFIGURED
         return ReturnType.OK
 
@@ -224,7 +251,7 @@ class SerialHardware(HardwareInterface):
                 self.link.send(p.Disarm())
             except TransportError:
                 pass
-            self.link.transport.close()
+        self._close()
         self.state = LifecycleState.UNCONFIGURED
         return ReturnType.ERROR
 
@@ -237,11 +264,13 @@ class SerialHardware(HardwareInterface):
         """Decode waiting telemetry; ERROR on link loss, transport failure or device fault."""
         if self.state is LifecycleState.UNCONFIGURED or self.link is None:
             return ReturnType.ERROR
-        try:
-            while self.link.poll(0.0):
-                pass
-        except TransportError as exc:
-            return self.on_error(f"link lost: {exc}")
+        while True:
+            try:
+                item = self._rxq.get_nowait()
+            except queue.Empty:
+                break
+            if isinstance(item, TransportError):
+                return self.on_error(f"link lost: {item}")
         last = self.link.last_state_time
         age = self._clock() - last if last is not None else float("inf")
         if age > self.config.link_timeout_s:
@@ -310,6 +339,26 @@ class SerialHardware(HardwareInterface):
             remaining = deadline - self._clock()
             if remaining <= 0:
                 return None
-            for m in self.link.poll(min(remaining, 0.005)):
-                if pred(m):
-                    return m
+            try:
+                item = self._rxq.get(timeout=remaining)
+            except queue.Empty:
+                return None
+            if isinstance(item, TransportError):
+                raise item
+            if pred(item):
+                return item
+
+
+def _rx_loop(link: Link, out: "queue.SimpleQueue[p.Message | TransportError]",
+             stop: threading.Event) -> None:
+    """Receive thread: chunked reads, decode on arrival, hand messages to the control thread."""
+    while not stop.is_set():
+        try:
+            chunk = link.transport.read_chunk()
+        except TransportError as exc:
+            if not stop.is_set():
+                out.put(exc)
+            return
+        if chunk:
+            for m in link.feed(chunk, link.clock()):
+                out.put(m)

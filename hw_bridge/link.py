@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import threading
 import time
 from typing import Callable
 
@@ -56,6 +57,7 @@ class Link:
         self.last_state: p.State | None = None
         self.last_state_time: float | None = None
         self._pending: collections.OrderedDict[int, float] = collections.OrderedDict()
+        self._lock = threading.Lock()  # a receive thread and the control thread share the link
 
     def send(self, msg: p.Message) -> None:
         """Encode and write one message (TransportError propagates)."""
@@ -69,29 +71,33 @@ class Link:
         msg = (p.Demand.full(self.seq, values) if mask is None
                else p.Demand(self.seq, mask, values))
         data = p.encode(msg)
-        self._pending[self.seq] = self.clock()
-        while len(self._pending) > _PENDING_MAX:
-            self._pending.popitem(last=False)
-            self.counters.lost += 1
+        with self._lock:
+            self._pending[self.seq] = self.clock()
+            while len(self._pending) > _PENDING_MAX:
+                self._pending.popitem(last=False)
+                self.counters.lost += 1
         self.transport.write(data)
         self.counters.sent += 1
         return self.seq
 
     def reset_sequence(self) -> None:
         """Start over at seq 1 (after HELLO/ARM the device accepts any seq); pending are dropped."""
-        self.seq = 0
-        self._pending.clear()
+        with self._lock:
+            self.seq = 0
+            self._pending.clear()
 
-    def poll(self, timeout: float = 0.0) -> list[p.Message]:
-        """Read what is waiting (up to ``timeout`` for the first byte) and decode it."""
-        chunk = self.transport.read_chunk(timeout)
-        if not chunk:
-            return []
-        now = self.clock()
+    def poll(self) -> list[p.Message]:
+        """Read what is waiting (or wait the transport's short read timeout) and decode it."""
+        chunk = self.transport.read_chunk()
+        return self.feed(chunk, self.clock()) if chunk else []
+
+    def feed(self, chunk: bytes, now: float) -> list[p.Message]:
+        """Decode bytes received at ``now`` and update statistics."""
         msgs = self.decoder.feed(chunk)
         for m in msgs:
             if isinstance(m, p.State):
-                self._on_state(m, now)
+                with self._lock:
+                    self._on_state(m, now)
         return msgs
 
     def _on_state(self, m: p.State, now: float) -> None:
@@ -115,12 +121,14 @@ class Link:
 
     def finish(self) -> None:
         """Count every still-unechoed DEMAND as lost (call after a final drain)."""
-        self.counters.lost += len(self._pending)
-        self._pending.clear()
+        with self._lock:
+            self.counters.lost += len(self._pending)
+            self._pending.clear()
 
     def rtt_percentiles_ms(self, samples: "list[float] | None" = None) -> dict[str, float | None]:
         """p50/p99 of the round trips in ms (None without samples)."""
-        data = list(self.rtts) if samples is None else samples
+        with self._lock:
+            data = list(self.rtts) if samples is None else list(samples)
         if not data:
             return {"p50": None, "p99": None}
         a = np.asarray(data) * 1000.0

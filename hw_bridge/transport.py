@@ -21,8 +21,8 @@ class TransportError(IOError):
 class Transport(Protocol):
     """What the link needs from a byte pipe."""
 
-    def read_chunk(self, timeout: float = 0.0) -> bytes:
-        """Bytes available now (waiting up to ``timeout`` s for the first one); b'' if none."""
+    def read_chunk(self) -> bytes:
+        """Bytes available now, else wait a short time (a few ms) for the first; b'' if none."""
         ...
 
     def write(self, data: bytes) -> None:
@@ -39,10 +39,14 @@ class Transport(Protocol):
 
 
 class SerialTransport:
-    """A pyserial port opened exclusively where the platform supports it (POSIX flock)."""
+    """A pyserial port opened exclusively where the platform supports it (POSIX flock).
 
-    def __init__(self, url: str, baud: int, write_timeout: float = 0.05):
-        kwargs = dict(baudrate=baud or 115200, timeout=0, write_timeout=write_timeout)
+    ``read_chunk`` is ``read(in_waiting or 1)`` with a fixed ``read_timeout``.
+    """
+
+    def __init__(self, url: str, baud: int, read_timeout: float = 0.005,
+                 write_timeout: float = 0.05):
+        kwargs = dict(baudrate=baud or 115200, timeout=read_timeout, write_timeout=write_timeout)
         try:
             try:
                 self._ser = serial.serial_for_url(url, exclusive=True, **kwargs)
@@ -54,22 +58,9 @@ class SerialTransport:
             raise TransportError(f"cannot open {url!r}: {exc}") from None
         self.url = url
 
-    def read_chunk(self, timeout: float = 0.0) -> bytes:
+    def read_chunk(self) -> bytes:
         try:
-            n = self._ser.in_waiting
-            if n:
-                return self._ser.read(n)
-            if timeout <= 0:
-                return b""
-            self._ser.timeout = timeout
-            try:
-                first = self._ser.read(1)
-            finally:
-                self._ser.timeout = 0
-            if not first:
-                return b""
-            n = self._ser.in_waiting
-            return first + (self._ser.read(n) if n else b"")
+            return self._ser.read(self._ser.in_waiting or 1)
         except (serial.SerialException, OSError) as exc:
             raise TransportError(f"read from {self.url!r} failed: {exc}") from None
 

@@ -1,0 +1,301 @@
+"""Device emulator on a pseudo-terminal, so the whole serial stack runs without hardware.
+
+``python -m hw_bridge.emulator --robot extensible|soft-arm [--baud B] [--drop P] [--corrupt P]
+[--stall-after S] [--disconnect-after S [--disconnect-for D]] [--motors N] [--mocap-port P]``
+
+* stdout line 1: the pty slave path (open it with pyserial); later lines: JSON events
+  (``{"event": "watchdog_tripped", "t": ..., "positions": [...]}``, armed, disarmed,
+  link_cut, link_restored, stalled, status on SIGUSR1, exit).
+* Wire time at ``--baud``: each direction is a serial line delivering ``10/baud`` s per byte
+  (``--baud 0``: no wire model, like the Due's native USB port).
+* Faults: ``--drop P`` / ``--corrupt P`` drop or bit-flip each outgoing frame and each incoming
+  chunk with probability P; ``--stall-after S`` freezes the device (no processing, no output,
+  like a hung MCU); ``--disconnect-after S`` cuts the wire (bytes lost both ways, the device
+  keeps running so its watchdog acts) for ``--disconnect-for D`` s (default: for good).
+* SIGUSR2 toggles the hardware e-stop input. SIGTERM/SIGINT exit cleanly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import os
+import queue
+import random
+import select
+import signal
+import socket
+import sys
+import threading
+import time
+import tty
+from typing import Any, Callable
+
+from core.robots import ExtensibleArm, Robot, load
+from hw_bridge.config import BridgeConfig, EmulatorConfig
+from hw_bridge.device import DeviceCore
+from hw_bridge.mocap import encode_mocap_packet
+from hw_bridge.plants import CurvaturePlant, MotorBank
+
+
+def _emit(event: str, **fields: Any) -> None:
+    print(json.dumps({"event": event, "t": round(time.monotonic(), 4), **fields}), flush=True)
+
+
+class _Writer(threading.Thread):
+    """TX line: one frame at a time, each taking len*10/baud seconds before it reaches the host."""
+
+    def __init__(self, fd: int, baud: int, connected: Callable[[], bool]):
+        super().__init__(daemon=True, name="emulator-tx")
+        self.fd, self.baud, self.connected = fd, baud, connected
+        self.q: queue.Queue[bytes | None] = queue.Queue()
+        self.dropped_overflow = 0
+
+    def _serve_requests(self, now: float) -> None:
+        requests, self.requests = self.requests, set()
+        if "status" in requests:
+            self.status()
+        if "estop" in requests:
+            self.core.set_estop(not self.core.estop, now)
+            _emit("estop", pressed=self.core.estop)
+
+    def run(self) -> None:
+        while (data := self.q.get()) is not None:
+            if self.baud:
+                time.sleep(len(data) * 10 / self.baud)
+            if not self.connected():
+                continue  # nobody has the port open: the bytes go nowhere
+            try:
+                os.write(self.fd, data)
+            except BlockingIOError:
+                self.dropped_overflow += 1  # nobody reads the pty: drop, like a UART
+            except OSError:
+                return
+
+
+class Emulator:
+    """Device process state: pty, wire model, faults, the DeviceCore and the plants."""
+
+    def __init__(self, robot: Robot, args: argparse.Namespace):
+        self.args = args
+        self.rng = random.Random(args.seed)
+        self.bridge = BridgeConfig.from_robot(robot, n_motors=args.motors)
+        emu = EmulatorConfig.from_robot(robot)
+        self.baud = self.bridge.baud if args.baud is None else args.baud
+        self.master, slave = os.openpty()
+        tty.setraw(slave)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(slave)
+        # Close our slave end: while no host has the port open the master reads EIO ("cable
+        # unplugged") and output is dropped instead of piling up stale frames in the pty.
+        os.close(slave)
+        self.host_present = False
+        now = time.monotonic()
+        self.t0 = now
+        self.core = DeviceCore(MotorBank(self.bridge.n_motors, emu.motor_speed_counts),
+                               self.bridge.watchdog_s, self.bridge.period_s, now=now)
+        self.plant: CurvaturePlant | None = None
+        self.udp: socket.socket | None = None
+        if not isinstance(robot, ExtensibleArm):
+            from core.kinematics.planar import forward_kinematics
+            fk = functools.partial(forward_kinematics, lengths=robot.lengths,
+                                   base_pose=robot.base_pose)
+            self.plant = CurvaturePlant(robot.n_segments, emu.counts_per_kappa, emu.tau,
+                                        robot.kappa_max, fk)
+            self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.mocap_addr = ("127.0.0.1", args.mocap_port or emu.mocap_port)
+            self.mocap_seq = 0
+        self.writer = _Writer(self.master, self.baud, lambda: self.host_present)
+        self.rx_pending: list[tuple[float, bytes]] = []
+        self.rx_busy_until = now
+        self.stop = False
+        self.stalled = False
+        self.cut = False
+        self.requests: set[str] = set()  # filled by signal handlers, served by the loop
+
+    # -- wire ---------------------------------------------------------------------------------
+    def _fault(self, data: bytes) -> bytes | None:
+        if self.args.drop and self.rng.random() < self.args.drop:
+            return None
+        if self.args.corrupt and self.rng.random() < self.args.corrupt and data:
+            b = bytearray(data)
+            b[self.rng.randrange(len(b))] ^= 1 << self.rng.randrange(8)
+            return bytes(b)
+        return data
+
+    def _on_readable(self, now: float) -> None:
+        try:
+            data = os.read(self.master, 4096)
+        except BlockingIOError:
+            return
+        except OSError:  # EIO: the host closed the port
+            self._set_host(False)
+            return
+        self._set_host(True)
+        if self.cut or self.stalled or not data:
+            return True
+        data = self._fault(data)
+        if data is None:
+            return
+        start = max(now, self.rx_busy_until)
+        self.rx_busy_until = start + (len(data) * 10 / self.baud if self.baud else 0.0)
+        self.rx_pending.append((self.rx_busy_until, data))
+
+    def _set_host(self, present: bool) -> None:
+        if present != self.host_present:
+            self.host_present = present
+            self.rx_pending.clear()
+            _emit("host_connected" if present else "host_disconnected")
+
+    def _check_host(self) -> None:
+        po = select.poll()
+        po.register(self.master, select.POLLIN)
+        self._set_host(not any(ev & select.POLLHUP for _, ev in po.poll(0)))
+    def _deliver(self, now: float) -> None:
+        while self.rx_pending and self.rx_pending[0][0] <= now:
+            _, data = self.rx_pending.pop(0)
+            self.core.receive(data, now)
+        self._flush_output()
+
+    def _flush_output(self) -> None:
+        for frame in self.core.take_output():
+            if self.cut or self.stalled or not self.host_present:
+                continue
+            frame = self._fault(frame)
+            if frame is not None:
+                self.writer.q.put(frame)
+
+    # -- timer --------------------------------------------------------------------------------
+    def _tick(self, now: float) -> None:
+        elapsed = now - self.t0
+        a = self.args
+        if a.stall_after is not None and elapsed >= a.stall_after and not self.stalled:
+            self.stalled = True
+            _emit("stalled")
+        if self.stalled:
+            return
+        if a.disconnect_after is not None:
+            cut = elapsed >= a.disconnect_after and (
+                a.disconnect_for is None or elapsed < a.disconnect_after + a.disconnect_for)
+            if cut != self.cut:
+                self.cut = cut
+                self.rx_pending.clear()
+                _emit("link_cut" if cut else "link_restored")
+        self.core.tick(now)
+        ev = self.core.take_events()
+        pos = [int(c) for c in self.core.motors.encoders]
+        if ev.watchdog_tripped:
+            _emit("watchdog_tripped", positions=pos)
+        if ev.armed:
+            _emit("armed", positions=pos)
+        if ev.disarmed:
+            _emit("disarmed", positions=pos)
+        if self.plant is not None and self.udp is not None:
+            self.plant.step(self.core.motors.position, self.bridge.period_s)
+            self.mocap_seq += 1
+            try:
+                self.udp.sendto(encode_mocap_packet(self.mocap_seq, now, self.plant.shape(), True),
+                                self.mocap_addr)
+            except OSError:
+                pass
+        self._flush_output()
+
+    def status(self) -> None:
+        """Print a status event (SIGUSR1)."""
+        _emit("status", armed=self.core.armed, tripped=self.core.tripped, estop=self.core.estop,
+              positions=[int(c) for c in self.core.motors.encoders],
+              rx_bad_frames=self.core.decoder.stats.bad_frames,
+              tx_overflow=self.writer.dropped_overflow, path=self.path)
+
+    def _serve_requests(self, now: float) -> None:
+        requests, self.requests = self.requests, set()
+        if "status" in requests:
+            self.status()
+        if "estop" in requests:
+            self.core.set_estop(not self.core.estop, now)
+            _emit("estop", pressed=self.core.estop)
+
+    def run(self) -> None:
+        self.writer.start()
+        period = self.bridge.period_s
+        next_tick = time.monotonic() + period
+        while not self.stop:
+            now = time.monotonic()
+            wake = next_tick if not self.rx_pending else min(next_tick, self.rx_pending[0][0])
+            if self.host_present:
+                ready, _, _ = select.select([self.master], [], [], max(0.0, wake - now))
+            else:  # a hung-up master is always readable: sleep, then look again
+                time.sleep(max(0.0, wake - now))
+                self._check_host()
+                ready = [self.master] if self.host_present else []
+            now = time.monotonic()
+            if ready:
+                self._on_readable(now)
+            if not self.stalled:
+                self._deliver(now)
+            if self.requests:
+                self._serve_requests(now)
+            if now >= next_tick:
+                self._tick(now)
+                next_tick += period
+                if next_tick <= now:  # overrun: skip, do not catch up
+                    next_tick = now + period
+        self.writer.q.put(None)
+        _emit("exit")
+        try:
+            os.close(self.master)
+        except OSError:
+            pass
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog="python -m hw_bridge.emulator", description=__doc__.split("\n")[0])
+    ap.add_argument("--robot", required=True, help="robot name (extensible, soft-arm) or TOML path")
+    ap.add_argument("--baud", type=int, default=None, help="wire model baud rate (0: none); "
+                    "default [bridge].baud")
+    ap.add_argument("--drop", type=float, default=0.0, help="probability of dropping a frame")
+    ap.add_argument("--corrupt", type=float, default=0.0, help="probability of flipping a bit")
+    ap.add_argument("--stall-after", type=float, default=None, metavar="S")
+    ap.add_argument("--disconnect-after", type=float, default=None, metavar="S")
+    ap.add_argument("--disconnect-for", type=float, default=None, metavar="D")
+    ap.add_argument("--motors", type=int, default=None, help="override the channel count")
+    ap.add_argument("--mocap-port", type=int, default=None, help="UDP port (soft arm)")
+    ap.add_argument("--seed", type=int, default=None, help="fault-injection random seed")
+    args = ap.parse_args(argv)
+    for name in ("drop", "corrupt"):
+        if not 0.0 <= getattr(args, name) <= 1.0:
+            ap.error(f"--{name} must be a probability in [0, 1]")
+    if args.motors is not None and not 1 <= args.motors <= 32:
+        ap.error("--motors must be in 1..32")
+    if args.baud is not None and args.baud < 0:
+        ap.error("--baud must be >= 0")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        robot = load(args.robot)
+        emu = Emulator(robot, args)
+    except Exception as exc:  # noqa: BLE001 - report any setup failure plainly
+        print(f"emulator: {exc}", file=sys.stderr)
+        return 2
+    print(emu.path, flush=True)
+
+    def _stop(signum: int, frame: object) -> None:
+        emu.stop = True
+
+    def _flag(name: str) -> Any:
+        return lambda signum, frame: emu.requests.add(name)
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+    signal.signal(signal.SIGUSR1, _flag("status"))
+    signal.signal(signal.SIGUSR2, _flag("estop"))
+    emu.run()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,231 @@
+"""The device emulator over a real pseudo-terminal, driven by the host stack in this process.
+
+Event timestamps printed by the emulator use CLOCK_MONOTONIC, as does ``time.monotonic`` here.
+Time bounds below carry generous slack for a loaded 2-core CI box; the figures themselves are
+measured by benchmarks/bench_serial_link.py.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import queue
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import pytest
+
+from core.robots import load
+from hw_bridge import protocol as p
+from hw_bridge.config import BridgeConfig, EmulatorConfig
+from hw_bridge.interface import LifecycleState, ReturnType, SerialHardware
+from hw_bridge.mocap import UdpMocapReceiver, frame_health
+from hw_bridge.probe import run_probe
+
+ROOT = Path(__file__).resolve().parent.parent
+EXT = load("extensible")
+SPEED = EmulatorConfig.from_robot(EXT).motor_speed_counts
+
+
+def tolerant(robot) -> BridgeConfig:
+    """Shipped settings with 200 ms link timeout and watchdog, for tests about motion, not timing,
+    so a CPU-starved CI box does not turn them into (correct) link-loss holds."""
+    return dataclasses.replace(BridgeConfig.from_robot(robot), link_timeout_s=0.2, watchdog_s=0.2)
+
+
+class Emu:
+    """A running emulator process with its stdout events collected on a thread."""
+
+    def __init__(self, *args: str):
+        self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", *args],
+                                     cwd=ROOT, stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout is not None
+        self.path = self.proc.stdout.readline().strip()
+        assert self.path.startswith("/dev/"), self.path
+        self.events: queue.Queue[dict] = queue.Queue()
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.events.put(json.loads(line))
+
+    def wait_event(self, name: str, timeout: float = 3.0) -> dict:
+        end = time.monotonic() + timeout
+        while True:
+            ev = self.events.get(timeout=max(0.01, end - time.monotonic()))
+            if ev["event"] == name:
+                return ev
+
+    def stop(self) -> int:
+        self.proc.send_signal(signal.SIGTERM)
+        return self.proc.wait(timeout=5)
+
+
+@pytest.fixture
+def emu(request: pytest.FixtureRequest) -> Iterator[Emu]:
+    e = Emu("--robot", "extensible", *getattr(request, "param", ()))
+    yield e
+    assert e.stop() == 0  # exits cleanly on SIGTERM
+
+
+def _stream(hw: SerialHardware, target: np.ndarray, seconds: float) -> ReturnType:
+    period = hw.config.period_s
+    nxt = time.perf_counter()
+    end = nxt + seconds
+    while time.perf_counter() < end:
+        if hw.read() is ReturnType.ERROR or hw.write(target) is ReturnType.ERROR:
+            return ReturnType.ERROR
+        nxt += period
+        time.sleep(max(0.0, nxt - time.perf_counter()))
+    return ReturnType.OK
+
+
+def test_probe_cli_without_arming(emu: Emu) -> None:
+    out = subprocess.run([sys.executable, "-m", "hw_bridge.probe", "--port", emu.path,
+                          "--seconds", "0.5", "--json"], cwd=ROOT, capture_output=True,
+                         text=True, timeout=20, check=True)
+    stats = json.loads(out.stdout)
+    assert 45 <= stats["sent"] <= 51
+    assert stats["lost"] == 0 and stats["crc_errors"] == 0
+    assert stats["received"] >= stats["sent"]  # one echo per demand + timer telemetry
+    assert 0 < stats["rtt_ms"]["p50"] <= stats["rtt_ms"]["p99"] < 10.0
+    assert stats["device"] == {"protocol": 1, "motors": 6, "watchdog_ms": 50}
+    # never armed: nothing moved and the device did not trip
+    with pytest.raises(queue.Empty):
+        emu.wait_event("armed", timeout=0.05)
+
+
+def test_arm_and_demand_move_motors_at_the_speed_limit(emu: Emu) -> None:
+    hw = SerialHardware(tolerant(EXT), emu.path)
+    assert hw.configure() is ReturnType.OK, hw.fault
+    np.testing.assert_array_equal(hw.positions(), np.zeros(6))
+    assert hw.activate() is ReturnType.OK, hw.fault
+    target = np.array([1500, -800, 0, 0, 0, 0])
+    t0 = time.perf_counter()
+    assert _stream(hw, target, 0.15) is ReturnType.OK, hw.fault
+    pos = hw.positions().astype(float)
+    elapsed = time.perf_counter() - t0
+    assert 0 < pos[0] <= SPEED * elapsed + 50  # speed-limited, 1500 counts need 0.33 s
+    assert pos[1] == -pos[0] or abs(pos[1] + pos[0]) <= 50  # both move at the same limit
+    assert _stream(hw, target, 0.45) is ReturnType.OK, hw.fault
+    np.testing.assert_array_equal(hw.positions(), target)
+    h = hw.health()
+    assert h.lost == 0 and h.crc_errors == 0 and h.armed
+    assert hw.deactivate() is ReturnType.OK
+    emu.wait_event("disarmed")
+    hw.cleanup()
+
+
+HOST = textwrap.dedent("""
+    import sys, time
+    import numpy as np
+    from core.robots import load
+    from hw_bridge.config import BridgeConfig
+    from hw_bridge.interface import SerialHardware
+    hw = SerialHardware(BridgeConfig.from_robot(load("extensible")), sys.argv[1])
+    assert hw.configure().value == "ok", hw.fault
+    assert hw.activate().value == "ok", hw.fault
+    n = 0
+    while True:
+        hw.read(); hw.write(np.full(6, 100000)); n += 1
+        if n == 20:
+            print("moving", flush=True)
+        time.sleep(0.01)
+""")
+
+
+def test_watchdog_trips_when_host_is_killed(emu: Emu) -> None:
+    host = subprocess.Popen([sys.executable, "-c", HOST, emu.path], cwd=ROOT,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert host.stdout is not None and host.stdout.readline().strip() == "moving"
+        emu.wait_event("armed")
+        t_kill = time.monotonic()
+        os.kill(host.pid, signal.SIGKILL)
+        host.wait(timeout=5)
+    finally:
+        if host.poll() is None:
+            host.kill()
+    ev = emu.wait_event("watchdog_tripped")
+    assert ev["t"] - t_kill < 0.15  # 50 ms watchdog + 10 ms tick + scheduling slack
+    # a second connection sees the latched trip and motors at rest
+    hw = SerialHardware(BridgeConfig.from_robot(EXT), emu.path)
+    assert hw.configure() is ReturnType.OK, hw.fault
+    first = hw.positions().copy()
+    assert first[0] > 0
+    time.sleep(0.1)
+    assert hw.read() is ReturnType.OK
+    st = hw.device_state()
+    assert st is not None and st.status & p.Status.WATCHDOG_TRIPPED
+    assert not st.status & p.Status.ARMED
+    np.testing.assert_array_equal(hw.positions(), first)
+    np.testing.assert_array_equal(ev["positions"], first)
+    hw.cleanup()
+
+
+@pytest.mark.parametrize("emu", [("--disconnect-after", "1.0", "--disconnect-for", "0.4")],
+                         indirect=True)
+def test_link_cut_mid_motion_stops_then_reconnect_and_rearm(emu: Emu) -> None:
+    hw = SerialHardware(BridgeConfig.from_robot(EXT), emu.path)
+    assert hw.configure() is ReturnType.OK and hw.activate() is ReturnType.OK, hw.fault
+    target = np.full(6, 100000)
+    assert _stream(hw, target, 3.0) is ReturnType.ERROR  # the cut comes at t = 1.0 s
+    t_err = time.monotonic()
+    cut = emu.wait_event("link_cut")
+    assert 0 < t_err - cut["t"] < 0.1, (t_err - cut["t"], hw.fault)  # 40 ms timeout + 10 ms cycle + slack
+    assert hw.state is LifecycleState.UNCONFIGURED and "no valid STATE" in hw.fault
+    assert hw.write(target) is ReturnType.ERROR  # stopped commanding
+    trip = emu.wait_event("watchdog_tripped")  # the device stops on its own
+    assert trip["t"] - cut["t"] < 0.15
+    emu.wait_event("link_restored")
+    # operator reconnects and re-arms, same process
+    assert hw.configure() is ReturnType.OK, hw.fault
+    assert hw.health().watchdog_tripped
+    stopped = hw.positions().copy()
+    np.testing.assert_array_equal(stopped, trip["positions"])
+    assert hw.activate() is ReturnType.OK, hw.fault
+    assert _stream(hw, target, 0.2) is ReturnType.OK, hw.fault
+    assert np.all(hw.positions() > stopped)
+    hw.cleanup()
+
+
+@pytest.mark.parametrize("emu", [("--drop", "0.05", "--corrupt", "0.05", "--seed", "3")],
+                         indirect=True)
+def test_probe_counts_injected_faults(emu: Emu) -> None:
+    stats = run_probe(emu.path, 1.0)
+    assert stats["lost"] > 0 and stats["crc_errors"] + stats["device_rx_errors"] > 0
+    assert stats["received"] > 0.7 * stats["sent"]
+
+
+def test_soft_arm_streams_mocap_shape() -> None:
+    robot = load("soft-arm")
+    emu_cfg = EmulatorConfig.from_robot(robot)
+    rx = UdpMocapReceiver(0)
+    rx.start()
+    e = Emu("--robot", "soft-arm", "--mocap-port", str(rx.addr[1]))
+    try:
+        hw = SerialHardware(tolerant(robot), e.path)
+        assert hw.configure() is ReturnType.OK and hw.activate() is ReturnType.OK, hw.fault
+        target = np.zeros(13)
+        target[0] = 300  # segment 0, left cylinder: kappa_ss = 300 / counts_per_kappa
+        assert _stream(hw, target, 1.3) is ReturnType.OK, hw.fault
+        frame = rx.latest()
+        assert frame_health(frame) == "ok"
+        assert frame is not None and frame.points.shape == (robot.n_segments + 1, 3)
+        kappa0 = (frame.points[1, 2] - frame.points[0, 2]) / robot.segment_length
+        # 300 counts reached after 0.15 s, then 7 time constants of lag: within 1 %
+        assert kappa0 == pytest.approx(300 / emu_cfg.counts_per_kappa, rel=0.01)
+        np.testing.assert_allclose(frame.points[2:, 2], frame.points[1, 2], atol=1e-9)
+        hw.cleanup()
+    finally:
+        assert e.stop() == 0
+        rx.stop()

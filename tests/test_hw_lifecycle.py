@@ -1,0 +1,203 @@
+"""Lifecycle of the hardware interface against the in-process device (MockHardware) and loop://."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from core.robots import load
+from hw_bridge import protocol as p
+from hw_bridge.config import BridgeConfig, EmulatorConfig
+from hw_bridge.device import DeviceCore
+from hw_bridge.interface import LifecycleState, ReturnType, SerialHardware
+from hw_bridge.mock import DeviceRunner, DeviceTransport, MockHardware
+from hw_bridge.plants import MotorBank
+
+ROBOT = load("extensible")
+SPEED = EmulatorConfig.from_robot(ROBOT).motor_speed_counts
+
+
+def _run(hw: MockHardware, target: np.ndarray, seconds: float) -> list[ReturnType]:
+    """A 100 Hz read -> write loop with absolute deadlines; returns read() results."""
+    results = []
+    period = hw.config.period_s
+    nxt = time.perf_counter()
+    end = nxt + seconds
+    while time.perf_counter() < end:
+        r = hw.read()
+        results.append(r)
+        if r is ReturnType.OK and hw.state is LifecycleState.ACTIVE:
+            hw.write(target)
+        nxt += period
+        time.sleep(max(0.0, nxt - time.perf_counter()))
+    return results
+
+
+@pytest.fixture
+def hw():
+    mock = MockHardware(ROBOT)
+    yield mock
+    mock.shutdown()
+
+
+def test_configure_activate_move_deactivate(hw: MockHardware) -> None:
+    assert hw.write(np.zeros(6)) is ReturnType.ERROR  # unconfigured: nothing is commanded
+    assert hw.configure() is ReturnType.OK and hw.state is LifecycleState.INACTIVE
+    assert hw.device.decoder.stats.frames >= 2  # HELLO + CONFIG reached the device
+    assert hw.write(np.zeros(6)) is ReturnType.ERROR  # inactive: still nothing
+    assert hw.activate() is ReturnType.OK and hw.state is LifecycleState.ACTIVE
+    target = np.array([300, -200, 0, 0, 0, 50])
+    t0 = time.perf_counter()
+    assert all(r is ReturnType.OK for r in _run(hw, target, 0.03))
+    elapsed = time.perf_counter() - t0
+    moved = hw.device.motors.position.copy()
+    # speed limit: no motor moved further than speed * elapsed (plus one tick of slack)
+    assert np.all(np.abs(moved) <= SPEED * (elapsed + 0.02))
+    assert abs(moved[0]) < 300  # 300 counts take 66 ms at the limit
+    assert all(r is ReturnType.OK for r in _run(hw, target, 0.15))
+    np.testing.assert_array_equal(hw.positions(), target)
+    h = hw.health()
+    assert h.armed and h.lost == 0 and h.crc_errors == 0 and h.rtt_ms_p50 is not None
+    assert hw.deactivate() is ReturnType.OK and hw.state is LifecycleState.INACTIVE
+    assert hw.read() is ReturnType.OK
+    assert hw.cleanup() is ReturnType.OK and hw.state is LifecycleState.UNCONFIGURED
+
+
+def test_write_rejects_bad_demands_and_moves_nothing(hw: MockHardware) -> None:
+    assert hw.configure() is ReturnType.OK and hw.activate() is ReturnType.OK
+    frames = hw.device.decoder.stats.frames
+    assert hw.write(np.zeros(5)) is ReturnType.ERROR and "6 finite counts" in hw.fault
+    assert hw.write(np.array([np.nan] * 6)) is ReturnType.ERROR
+    assert hw.write(np.full(6, 3e9)) is ReturnType.ERROR and "int32" in hw.fault
+    assert hw.device.decoder.stats.frames == frames
+    assert hw.state is LifecycleState.ACTIVE  # bad input is refused, not a link fault
+
+
+def test_link_cut_gives_error_within_timeout_and_no_automatic_rearm(hw: MockHardware) -> None:
+    assert hw.configure() is ReturnType.OK and hw.activate() is ReturnType.OK
+    target = np.full(6, 5000)
+    _run(hw, target, 0.1)
+    assert hw.transport is not None
+    hw.transport.connected = False  # cable cut mid-motion
+    t_cut = time.perf_counter()
+    while hw.read() is ReturnType.OK:
+        assert hw.write(target) is ReturnType.OK
+        time.sleep(0.01)
+        assert time.perf_counter() - t_cut < 1.0
+    detected = time.perf_counter() - t_cut
+    # last STATE arrived before the cut, so detection is bounded by timeout + one cycle
+    assert detected <= hw.config.link_timeout_s + 0.02, detected
+    assert hw.state is LifecycleState.UNCONFIGURED and "no valid STATE" in hw.fault
+    frames = hw.device.decoder.stats.frames
+    for _ in range(10):  # the loop keeps calling: nothing is sent, nothing re-arms
+        assert hw.read() is ReturnType.ERROR and hw.write(target) is ReturnType.ERROR
+        time.sleep(0.01)
+    assert hw.device.decoder.stats.frames == frames
+    assert hw.device.tripped and not hw.device.armed  # the device stopped on its watchdog
+    stopped = hw.device.motors.position.copy()
+    # operator: reconnect (configure) then arm (activate)
+    assert hw.configure() is ReturnType.OK
+    assert hw.health().watchdog_tripped  # latched until ARM
+    assert hw.activate() is ReturnType.OK and not hw.device.tripped
+    _run(hw, target, 0.1)
+    assert np.all(hw.device.motors.position > stopped)
+
+
+def test_config_is_retried_until_acknowledged() -> None:
+    cfg = BridgeConfig.from_robot(ROBOT)
+    device = DeviceCore(MotorBank(6, SPEED), cfg.watchdog_s, cfg.period_s, now=time.perf_counter())
+    runner = DeviceRunner(device)
+    seen = {"config": 0}
+
+    class LossyConfig(DeviceTransport):
+        def write(self, data: bytes) -> None:
+            msgs = p.StreamDecoder().feed(data)
+            if any(isinstance(m, p.Config) for m in msgs):
+                seen["config"] += 1
+                if seen["config"] <= 2:
+                    return  # first two CONFIG frames are lost
+            super().write(data)
+
+    hw = SerialHardware(cfg, "lossy://",
+                        transport_factory=lambda port, baud: LossyConfig(runner))
+    assert hw.configure() is ReturnType.OK
+    assert seen["config"] == 3
+    hw.cleanup()
+    runner.stop()
+
+
+def test_config_gives_up_after_retries() -> None:
+    cfg = BridgeConfig.from_robot(ROBOT)
+    device = DeviceCore(MotorBank(6, SPEED), cfg.watchdog_s, cfg.period_s, now=time.perf_counter())
+    runner = DeviceRunner(device)
+
+    class NoConfig(DeviceTransport):
+        def write(self, data: bytes) -> None:
+            if not any(isinstance(m, p.Config) for m in p.StreamDecoder().feed(data)):
+                super().write(data)
+
+    hw = SerialHardware(cfg, "x://", transport_factory=lambda a, b: NoConfig(runner))
+    assert hw.configure() is ReturnType.ERROR
+    assert "CONFIG_ACK" in hw.fault and hw.state is LifecycleState.UNCONFIGURED
+    runner.stop()
+
+
+def test_loopback_url_is_not_a_device() -> None:
+    # loop:// echoes our own HELLO (n_motors=0): configure must refuse with a clear reason.
+    hw = SerialHardware(BridgeConfig.from_robot(ROBOT), "loop://")
+    assert hw.configure() is ReturnType.ERROR
+    assert "0 motors" in hw.fault and hw.state is LifecycleState.UNCONFIGURED
+
+
+def test_bad_port_is_reported() -> None:
+    hw = SerialHardware(BridgeConfig.from_robot(ROBOT), "/dev/does-not-exist")
+    assert hw.configure() is ReturnType.ERROR
+    assert "does-not-exist" in hw.fault
+
+
+def test_demands_are_latest_wins_on_the_device() -> None:
+    cfg = BridgeConfig.from_robot(ROBOT)
+    dev = DeviceCore(MotorBank(6, SPEED), cfg.watchdog_s, cfg.period_s, now=0.0)
+    dev.receive(p.encode(p.Arm()) + p.encode(p.Demand.full(10, [100] * 6))
+                + p.encode(p.Demand.full(9, [-100] * 6)), now=0.001)
+    np.testing.assert_array_equal(dev.motors.target, [100] * 6)  # older seq 9 ignored
+    acks = [m.ack_seq for m in p.StreamDecoder().feed(b"".join(dev.take_output()))
+            if isinstance(m, p.State)]
+    assert acks == [10]
+
+
+@pytest.mark.parametrize("armed", [False, True])
+def test_device_echoes_demand_seq_armed_or_not(armed: bool) -> None:
+    dev = DeviceCore(MotorBank(2, 100.0), 0.05, 0.01, now=0.0)
+    if armed:
+        dev.receive(p.encode(p.Arm()), 0.0)
+    dev.receive(p.encode(p.Demand.full(42, [7, 7])), 0.001)
+    states = [m for m in p.StreamDecoder().feed(b"".join(dev.take_output()))
+              if isinstance(m, p.State)]
+    assert states[-1].ack_seq == 42
+    assert bool(states[-1].status & p.Status.ARMED) is armed
+    np.testing.assert_array_equal(dev.motors.target, [7, 7] if armed else [0, 0])
+
+
+def test_device_watchdog_latches_until_arm() -> None:
+    dev = DeviceCore(MotorBank(1, 1000.0), 0.05, 0.01, now=0.0)
+    dev.receive(p.encode(p.Arm()) + p.encode(p.Demand.full(1, [1000])), 0.0)
+    t = 0.0
+    for _ in range(4):
+        t += 0.01
+        dev.tick(t)
+    assert dev.armed and dev.motors.position[0] == pytest.approx(40.0)
+    for _ in range(3):  # 70 ms without a DEMAND
+        t += 0.01
+        dev.tick(t)
+    assert dev.tripped and not dev.armed
+    pos = dev.motors.position[0]
+    dev.receive(p.encode(p.Demand.full(2, [1000])), t)  # demands alone do not clear the trip
+    for _ in range(5):
+        t += 0.01
+        dev.tick(t)
+    assert dev.tripped and dev.motors.position[0] == pos
+    dev.receive(p.encode(p.Arm()), t)
+    assert dev.armed and not dev.tripped
