@@ -1,0 +1,379 @@
+"""Tip motion paths for the extensible arm: Fig. 9's traverses and corners, sampled for the motors.
+
+A path is a polyline of tip waypoints (the builders make the paper's linear traverse, diagonal
+traverse and four corners from a centre, a size and a plane; :func:`polyline` takes any list).
+:func:`plan_path` turns it into a :class:`MotionPath` a 100 Hz loop can stream:
+
+1. the polyline is sampled every ``spacing`` metres of tip travel (corners kept exactly) and the
+   tip IK is solved per sample, warm-started from the previous one and without restarts, so the
+   solution follows one continuous branch; an interval whose racks move more than
+   ``jump_ratio`` times the tip displacement is bisected (``max_bisections`` times), and one
+   still that steep is counted in ``MotionPath.jumps``; where the branch cannot reach the
+   target (it ran into rack limits) the IK restarts may switch branch (also a jump);
+2. time law: each interval lasts max(tip travel / speed, largest rack travel / rack_speed), the
+   limits scaled by ``limit_margin``, so the tip speed (Table I: 0.10 m/s) and every rack's speed
+   stay within their limits;
+3. the rack lengths are interpolated linearly in time at ``rate_hz``, so consecutive samples move
+   a rack by at most rack_speed / rate_hz and Delta = M L - Delta_0 by at most ||M||_inf times
+   that (no jumps); tips are recomputed by forward kinematics and every sample's error to its
+   tip target is reported;
+4. motor demands: U^-1 L in encoder counts (:func:`delta.motor_counts_from_lengths`).
+
+Settings come from the robot file's optional ``[paths]`` table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import TYPE_CHECKING, Any, Literal, Mapping, Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from core.kinematics import delta as dk
+from core.kinematics.delta_ik import IKSettings, solve_tip_ik
+
+if TYPE_CHECKING:
+    from core.robots import ExtensibleArm
+
+Array = npt.NDArray[np.float64]
+Plane = Literal["xy", "xz", "yz"]
+PathKind = Literal["linear", "diagonal", "corners"]
+PATH_KINDS: tuple[PathKind, ...] = ("linear", "diagonal", "corners")
+_PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+
+
+@dataclasses.dataclass(frozen=True)
+class PathSettings:
+    """Sampling settings (robot file ``[paths]``; every key optional).
+
+    Attributes:
+        rate_hz: Output sample rate (the control loop's rate).
+        spacing: Largest tip travel between IK samples (m).
+        limit_margin: Fraction of the tip and rack speed limits the time law plans for.
+        jump_ratio: Rack travel / tip travel above which an interval is bisected.
+        max_bisections: How often an interval may be bisected.
+        retry_spacing: Tip travel between restart attempts while the target is out of reach of
+            the branch being followed (m).
+    """
+
+    rate_hz: float = 100.0
+    spacing: float = 0.001
+    limit_margin: float = 0.98
+    jump_ratio: float = 20.0
+    max_bisections: int = 6
+    retry_spacing: float = 0.01
+
+    @classmethod
+    def from_robot(cls, robot: "ExtensibleArm") -> "PathSettings":
+        """Defaults overridden by the robot file's ``[paths]`` table; bad values raise ValueError."""
+        table: Mapping[str, Any] = robot.raw.get("paths", {}) if robot.raw else {}
+        names = {f.name for f in dataclasses.fields(cls)}
+        if set(table) - names:
+            raise ValueError(f"paths: unknown keys {sorted(set(table) - names)}")
+        kwargs: dict[str, Any] = {}
+        for name, value in table.items():
+            if name == "max_bisections":
+                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                    raise ValueError(f"paths.{name}: must be an integer >= 0, got {value!r}")
+            elif (isinstance(value, bool) or not isinstance(value, (int, float))
+                  or not math.isfinite(value) or value <= 0):
+                raise ValueError(f"paths.{name}: must be a finite number > 0, got {value!r}")
+            kwargs[name] = value
+        settings = cls(**kwargs)
+        if settings.limit_margin > 1:
+            raise ValueError(f"paths.limit_margin: must be <= 1, got {settings.limit_margin}")
+        return settings
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionPath:
+    """A time-parametrised tip path, sampled at ``rate_hz``; K samples, n segments.
+
+    Attributes:
+        times: (K,) s, from 0 in steps of 1 / rate_hz.
+        targets: (K, 3) tip targets on the polyline.
+        tips: (K, 3) tips reached by ``deltas`` (forward kinematics).
+        deltas: (K, n, 3) postures.
+        lengths: (K, n, 3) rack lengths, within [rack_min, rack_max].
+        motor_counts: (K, 3n) encoder demands, U^-1 L in counts.
+        errors: (K,) |targets - tips| (m).
+        rate_hz: Sample rate.
+        jumps: Branch switches plus IK intervals still steeper than ``jump_ratio`` after
+            bisection; the racks cross them at their speed limit, the tip off the path.
+    """
+
+    times: Array
+    targets: Array
+    tips: Array
+    deltas: Array
+    lengths: Array
+    motor_counts: npt.NDArray[np.int64]
+    errors: Array
+    rate_hz: float
+    jumps: int
+
+    @property
+    def duration(self) -> float:
+        """Time of the last sample (s)."""
+        return float(self.times[-1])
+
+    @property
+    def max_error(self) -> float:
+        """Largest distance between a target and the tip reached (m)."""
+        return float(self.errors.max())
+
+    def max_tip_speed(self) -> float:
+        """Largest tip speed between consecutive samples (m/s)."""
+        return _max_rate(self.tips, self.times, norm="l2")
+
+    def max_rack_speed(self) -> float:
+        """Largest single-rack speed between consecutive samples (m/s)."""
+        return _max_rate(self.lengths.reshape(len(self.times), -1), self.times, norm="inf")
+
+    def max_delta_step(self) -> float:
+        """Largest change of any Delta component between consecutive samples (m)."""
+        if len(self.times) < 2:
+            return 0.0
+        return float(np.abs(np.diff(self.deltas, axis=0)).max())
+
+
+def _max_rate(x: Array, t: Array, norm: Literal["l2", "inf"]) -> float:
+    if len(t) < 2:
+        return 0.0
+    dx = np.diff(x, axis=0)
+    step = np.linalg.norm(dx, axis=1) if norm == "l2" else np.abs(dx).max(axis=1)
+    return float((step / np.diff(t)).max())
+
+
+def _check_point(value: npt.ArrayLike, name: str) -> Array:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 numbers (x, y, z), got {value!r}") from None
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be 3 finite numbers (x, y, z), got {value!r}")
+    return arr
+
+
+def _frame(centre: npt.ArrayLike, size: float, plane: Plane) -> tuple[Array, Array, Array]:
+    c = _check_point(centre, "centre")
+    if isinstance(size, bool) or not isinstance(size, (int, float)) or not math.isfinite(size) \
+            or size <= 0:
+        raise ValueError(f"size must be a finite number > 0 (m), got {size!r}")
+    if plane not in _PLANE_AXES:
+        raise ValueError(f"plane must be one of {sorted(_PLANE_AXES)}, got {plane!r}")
+    i, j = _PLANE_AXES[plane]
+    u, v = np.zeros(3), np.zeros(3)
+    u[i], v[j] = 0.5 * size, 0.5 * size
+    return c, u, v
+
+
+def linear_traverse(centre: npt.ArrayLike, size: float, plane: Plane = "xy",
+                    axis: Literal[0, 1] = 0) -> Array:
+    """Fig. 9A: a straight traverse of length ``size`` through ``centre``.
+
+    Args:
+        centre: (3,) midpoint (m).
+        size: Length (m).
+        plane: Plane of the path; the traverse runs along its first (``axis=0``) or second axis.
+
+    Returns:
+        (2, 3) waypoints.
+    """
+    c, u, v = _frame(centre, size, plane)
+    if axis not in (0, 1):
+        raise ValueError(f"axis must be 0 or 1, got {axis!r}")
+    w = u if axis == 0 else v
+    return np.stack([c - w, c + w])
+
+
+def diagonal_traverse(centre: npt.ArrayLike, size: float, plane: Plane = "xy") -> Array:
+    """Fig. 9B: the diagonal of a ``size`` x ``size`` square centred on ``centre``; (2, 3)."""
+    c, u, v = _frame(centre, size, plane)
+    return np.stack([c - u - v, c + u + v])
+
+
+def four_corners(centre: npt.ArrayLike, size: float, plane: Plane = "xy",
+                 closed: bool = True) -> Array:
+    """Fig. 9C: the four corners of a ``size`` x ``size`` square, in turn.
+
+    Returns:
+        (5, 3) waypoints (back to the first corner), or (4, 3) if not ``closed``.
+    """
+    c, u, v = _frame(centre, size, plane)
+    corners = [c - u - v, c + u - v, c + u + v, c - u + v]
+    return np.stack(corners + [corners[0]] if closed else corners)
+
+
+def polyline(points: Sequence[Sequence[float]] | npt.ArrayLike) -> Array:
+    """Any polyline: (k, 3) finite waypoints, k >= 1 (m)."""
+    try:
+        arr = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError("points must be a list of (x, y, z) points") from None
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 1:
+        raise ValueError(f"points must have shape (k, 3) with k >= 1, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("points must be finite")
+    return arr
+
+
+def build_path(kind: PathKind, centre: npt.ArrayLike, size: float, plane: Plane = "xy") -> Array:
+    """Waypoints of a named path (the console's "path, size" choice)."""
+    if kind == "linear":
+        return linear_traverse(centre, size, plane)
+    if kind == "diagonal":
+        return diagonal_traverse(centre, size, plane)
+    if kind == "corners":
+        return four_corners(centre, size, plane)
+    raise ValueError(f"path kind must be one of {PATH_KINDS}, got {kind!r}")
+
+
+def _sample_polyline(points: Array, spacing: float) -> Array:
+    """Points every <= ``spacing`` along the polyline, its vertices included exactly."""
+    out = [points[:1]]
+    for a, b in zip(points[:-1], points[1:]):
+        n = max(1, math.ceil(float(np.linalg.norm(b - a)) / spacing))
+        if np.allclose(a, b):
+            continue
+        out.append(a + (b - a) * (np.arange(1, n + 1) / n)[:, None])
+    return np.vstack(out)
+
+
+def _track(robot: "ExtensibleArm", targets: Array, first: Array, ik: IKSettings,
+           ps: PathSettings) -> tuple[Array, Array, int]:
+    """Warm-started IK along ``targets`` with bisection of steep intervals.
+
+    When the branch being followed cannot reach a target (a rack limit ends it) the seeded
+    restarts are tried, at most once per ``retry_spacing`` of travel; a better configuration
+    they find is taken as a branch switch (counted as a jump; the time law then moves the racks
+    across at their speed limit while the tip leaves the path, which the errors show).
+
+    Returns the targets actually solved (with inserted midpoints), their rack lengths (k, n, 3)
+    and the number of jumps (branch switches and intervals still steep after bisection).
+    """
+    out_t, out_L = [targets[0]], [first]
+    jumps, travel, last_retry = 0, 0.0, -math.inf
+    for target in targets[1:]:
+        stack = [(target, 0)]
+        while stack:
+            tgt, depth = stack[-1]
+            prev = dk.delta_from_actuators(out_L[-1], robot.phi, robot.L0)
+            res = solve_tip_ik(robot, tgt, prev, restarts=False, settings=ik)
+            ds = float(np.linalg.norm(tgt - out_t[-1]))
+            travel += ds
+            if res.error > ik.tolerance and travel - last_retry >= ps.retry_spacing:
+                last_retry = travel
+                other = solve_tip_ik(robot, tgt, prev, restarts=True, settings=ik)
+                if other.error < res.error - ik.tolerance:
+                    jumps += 1
+                    stack.pop()
+                    out_t.append(tgt)
+                    out_L.append(other.lengths)
+                    continue
+            rack = float(np.abs(res.lengths - out_L[-1]).max())
+            if rack > ps.jump_ratio * ds + 1e-9 and depth < ps.max_bisections:
+                travel -= ds
+                stack.append((0.5 * (out_t[-1] + tgt), depth + 1))
+                continue
+            jumps += rack > ps.jump_ratio * ds + 1e-9
+            stack.pop()
+            out_t.append(tgt)
+            out_L.append(res.lengths)
+    return np.array(out_t), np.array(out_L), jumps
+
+
+def _densify(targets: Array, L: Array, spacing: float) -> tuple[Array, Array]:
+    """Split every interval whose racks travel more than ``spacing`` into equal parts of
+    linearly interpolated rack lengths (and targets), so the chord bound below stays tight."""
+    if len(L) < 2:
+        return targets, L
+    travel = np.abs(np.diff(L, axis=0)).reshape(len(L) - 1, -1).max(axis=1)
+    parts = np.maximum(1, np.ceil(travel / spacing - 1e-9).astype(int))
+    if (parts == 1).all():
+        return targets, L
+    out_t, out_L = [targets[:1]], [L[:1]]
+    for i, m in enumerate(parts):
+        frac = (np.arange(1, m + 1) / m)[:, None]
+        out_t.append(targets[i] + (targets[i + 1] - targets[i]) * frac)
+        out_L.append(L[i] + (L[i + 1] - L[i]) * frac[:, :, None])
+    return np.vstack(out_t), np.vstack(out_L)
+
+
+def _tip_chord_bound(robot: "ExtensibleArm", L: Array, substeps: int = 8) -> Array:
+    """Per interval, ``substeps`` times the longest tip chord over equal parts of the linear
+    interpolation of the rack lengths: a tip travel that, divided by the tip speed, keeps the
+    reached tip (not only the target) within the speed limit between any two samples."""
+    frac = np.arange(substeps + 1) / substeps
+    sub = L[:-1, None] + (L[1:] - L[:-1])[:, None] * frac[None, :, None, None]
+    tips = dk.tip_position(robot, dk.delta_from_actuators(sub, robot.phi, robot.L0))
+    return substeps * np.linalg.norm(np.diff(tips, axis=1), axis=2).max(axis=1)
+
+
+def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float | None = None,
+              start_delta: npt.ArrayLike | None = None,
+              settings: PathSettings | None = None) -> MotionPath:
+    """Time-parametrised, rack-limited joint path that moves the tip along ``waypoints``.
+
+    Args:
+        robot: The extensible arm.
+        waypoints: (k, 3) tip polyline (m), e.g. from :func:`build_path`.
+        speed: Tip speed (m/s), at most the robot's ``tip_speed`` (default: that limit).
+        start_delta: (n, 3) current posture. When given, the path starts at its tip and first
+            moves to ``waypoints[0]``; otherwise it starts at ``waypoints[0]`` (cold IK).
+        settings: Overrides the robot file's ``[paths]`` settings.
+
+    Returns:
+        The :class:`MotionPath`.
+
+    Raises:
+        ValueError: bad waypoints, speed above the limit or not positive, bad start posture.
+    """
+    if getattr(robot, "kind", None) != "delta":
+        raise ValueError(f"robot must be an extensible (delta) arm, got {type(robot).__name__}")
+    ps = settings if settings is not None else PathSettings.from_robot(robot)
+    ik = IKSettings.from_robot(robot)
+    points = polyline(waypoints)
+    v = robot.tip_speed if speed is None else speed
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise ValueError(f"speed must be a finite number > 0 (m/s), got {speed!r}")
+    if v > robot.tip_speed:
+        raise ValueError(f"speed {v:g} m/s exceeds the tip speed limit {robot.tip_speed:g} m/s")
+    n = robot.n_segments
+    if start_delta is not None:
+        sd = np.asarray(start_delta, dtype=float)
+        if sd.shape != (n, 3) or not np.all(np.isfinite(sd)):
+            raise ValueError(f"start_delta must be a finite ({n}, 3) array, got shape {sd.shape}")
+        L_start = np.clip(dk.robot_rack_lengths(robot, sd), robot.rack_min, robot.rack_max)
+        start_tip = dk.tip_position(robot, dk.delta_from_actuators(L_start, robot.phi, robot.L0))
+        points = np.vstack([start_tip, points])
+    else:
+        L_start = solve_tip_ik(robot, points[0], settings=ik).lengths
+
+    spacing = min(ps.spacing, v / ps.rate_hz)
+    targets, L, jumps = _track(robot, _sample_polyline(points, spacing), L_start, ik, ps)
+    targets, L = _densify(targets, L, spacing)
+
+    # Time law: every interval at the tip speed unless a rack would exceed its speed limit.
+    flat = L.reshape(len(L), -1)
+    v_tip, v_rack = v * ps.limit_margin, robot.rack_speed * ps.limit_margin
+    dt = np.maximum.reduce([
+        np.linalg.norm(np.diff(targets, axis=0), axis=1) / v_tip,
+        _tip_chord_bound(robot, L) / v_tip,
+        np.abs(np.diff(flat, axis=0)).max(axis=1) / v_rack,
+    ]) if len(targets) > 1 else np.zeros(0)
+    t_ik = np.concatenate([[0.0], np.cumsum(dt)])
+
+    count = math.ceil(t_ik[-1] * ps.rate_hz - 1e-9) + 1
+    times = np.arange(count) / ps.rate_hz
+    lengths = np.stack([np.interp(times, t_ik, flat[:, j]) for j in range(flat.shape[1])], axis=1)
+    lengths = np.clip(lengths, robot.rack_min, robot.rack_max).reshape(count, n, 3)
+    tgt = np.stack([np.interp(times, t_ik, targets[:, j]) for j in range(3)], axis=1)
+    deltas = dk.delta_from_actuators(lengths, robot.phi, robot.L0)
+    reached = dk.tip_position(robot, deltas)
+    return MotionPath(
+        times=times, targets=tgt, tips=reached, deltas=deltas, lengths=lengths,
+        motor_counts=dk.motor_counts_from_lengths(robot, lengths),
+        errors=np.linalg.norm(tgt - reached, axis=1), rate_hz=ps.rate_hz, jumps=int(jumps))

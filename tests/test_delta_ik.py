@@ -1,0 +1,187 @@
+"""Tip IK of the extensible arm (eq. 4-6): against forward kinematics, the rack limits, closed-form
+distances to unreachable targets and an independent bounded optimiser."""
+
+import dataclasses
+import math
+import tomllib
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from scipy.optimize import minimize
+
+from core import robots
+from core.kinematics import delta as dk
+from core.kinematics.delta_ik import IKSettings, TipIKResult
+
+ARM = robots.load("extensible")
+LO, HI = ARM.rack_min, ARM.rack_max
+TOL = 1e-3
+
+
+def random_reachable(rng, count):
+    """Targets reachable by construction: tips of random rack lengths within the limits."""
+    lengths = rng.uniform(LO, HI, (count, ARM.n_segments, 3))
+    deltas = dk.delta_from_actuators(lengths, ARM.phi, ARM.L0)
+    return lengths, dk.tip_position(ARM, deltas)
+
+
+def assert_consistent(res, target):
+    """Invariants of every result: limits, delta <-> lengths, error and tip by FK."""
+    assert isinstance(res, TipIKResult)
+    assert res.delta.shape == (ARM.n_segments, 3) and res.lengths.shape == (ARM.n_segments, 3)
+    assert np.all(res.lengths >= LO) and np.all(res.lengths <= HI)
+    np.testing.assert_allclose(dk.robot_rack_lengths(ARM, res.delta), res.lengths, atol=1e-12)
+    tip = dk.tip_position(ARM, res.delta)
+    np.testing.assert_allclose(res.tip, tip, atol=1e-15)
+    assert res.error == pytest.approx(np.linalg.norm(np.asarray(target) - tip), abs=1e-15)
+    assert res.reachable == (res.error <= TOL)
+
+
+def test_reexported_from_delta_module():
+    from core.kinematics import delta_ik
+    assert dk.solve_tip_ik is delta_ik.solve_tip_ik
+    assert dk.TipIKResult is delta_ik.TipIKResult
+
+
+def test_random_reachable_targets_cold_start_all_solved():
+    rng = np.random.default_rng(11)
+    _, targets = random_reachable(rng, 100)
+    for target in targets:
+        res = dk.solve_tip_ik(ARM, target)
+        assert_consistent(res, target)
+        assert res.reachable and res.error <= TOL, (target, res.error)
+
+
+def test_random_reachable_targets_from_retracted_start_all_solved():
+    """No single-arc guess: the iteration itself (with its restarts) from the retracted arm."""
+    rng = np.random.default_rng(12)
+    _, targets = random_reachable(rng, 40)
+    for target in targets:
+        res = dk.solve_tip_ik(ARM, target, np.zeros((ARM.n_segments, 3)))
+        assert_consistent(res, target)
+        assert res.error <= TOL, (target, res.error)
+
+
+def test_warm_start_near_the_solution_converges_alone():
+    rng = np.random.default_rng(13)
+    lengths, targets = random_reachable(rng, 30)
+    for L, target in zip(lengths, targets):
+        near = np.clip(L + rng.uniform(-0.005, 0.005, L.shape), LO, HI)
+        res = dk.solve_tip_ik(ARM, target, dk.delta_from_actuators(near, ARM.phi, ARM.L0),
+                              restarts=False)
+        assert_consistent(res, target)
+        assert res.error <= 1e-5 and res.starts == 1
+
+
+def test_exact_target_returns_its_configuration_without_iterating():
+    delta = dk.delta_from_actuators([[0.2, 0.25, 0.3], [0.1, 0.3, 0.2]], ARM.phi, ARM.L0)
+    target = dk.tip_position(ARM, delta)
+    res = dk.solve_tip_ik(ARM, target, delta)
+    assert res.iterations == 0 and res.error < 1e-12
+    np.testing.assert_allclose(res.delta, delta, atol=1e-15)
+
+
+finite = st.floats(-1.5, 1.5, allow_nan=False)
+warm_starts = st.none() | st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6).map(
+    lambda v: np.array(v).reshape(2, 3))
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.tuples(finite, finite, finite), warm_starts)
+def test_limits_never_exceeded_and_error_is_true_distance(target, delta0):
+    # Targets up to ~2.6 m away (mostly unreachable) and warm starts far outside the limits.
+    res = dk.solve_tip_ik(ARM, target, delta0)
+    assert_consistent(res, target)
+
+
+@pytest.mark.parametrize("z", [0.83, 0.9, 1.5])
+@pytest.mark.parametrize("bent_start", [False, True])
+def test_target_above_the_fully_extended_arm(z, bent_start):
+    # Every rack <= rack_max, so each backbone (their mean) is <= rack_max and the tip, at most
+    # the backbone's arc length from the base, lies within n * rack_max of it; the straight,
+    # fully extended arm attains it. Closest distance: z - n * rack_max.
+    delta0 = [[0.05, -0.02, 0.1], [-0.03, 0.04, 0.2]] if bent_start else None
+    res = dk.solve_tip_ik(ARM, [0.0, 0.0, z], delta0)
+    assert_consistent(res, [0.0, 0.0, z])
+    assert not res.reachable
+    assert res.error == pytest.approx(z - ARM.n_segments * HI, abs=TOL)
+    np.testing.assert_allclose(res.lengths, HI, atol=TOL)
+
+
+def bounded_best(target, starts=8, seed=0):
+    """Independent check: L-BFGS-B over the rack box from random starts, best distance."""
+    M = dk.rack_matrix(ARM.phi)
+
+    def f(flat):
+        p, J = dk.chain_tip_and_jacobian(dk.delta_from_actuators(flat.reshape(2, 3), ARM.phi, ARM.L0),
+                                         ARM.L0, ARM.d)
+        e = target - p
+        return 0.5 * e @ e, -(J.reshape(3, 2, 3) @ M).reshape(3, 6).T @ e
+
+    rng = np.random.default_rng(seed)
+    return min(math.sqrt(2 * minimize(f, rng.uniform(LO, HI, 6), jac=True, method="L-BFGS-B",
+                                      bounds=[(LO, HI)] * 6).fun) for _ in range(starts))
+
+
+@pytest.mark.parametrize("target", [(1.0, 1.0, 1.0), (0.0, 0.0, -1.0), (0.6, 0.0, 0.6),
+                                    (0.3, 0.2, -0.5)])
+def test_unreachable_error_matches_independent_bounded_optimiser(target):
+    target = np.array(target)
+    res = dk.solve_tip_ik(ARM, target)
+    assert_consistent(res, target)
+    assert not res.reachable
+    assert res.error <= bounded_best(target) + TOL
+
+
+def test_restarts_escape_the_local_minimum_of_a_poor_warm_start():
+    # The straight, retracted arm is a poor start for a target curled below the base: alone it
+    # stalls at a local minimum (still feasible); the seeded restarts reach the target.
+    target = np.array([-0.069, 0.0, -0.108])
+    alone = dk.solve_tip_ik(ARM, target, np.zeros((2, 3)), restarts=False)
+    assert_consistent(alone, target)
+    assert alone.starts == 1 and not alone.reachable
+    seeded = dk.solve_tip_ik(ARM, target, np.zeros((2, 3)))
+    assert_consistent(seeded, target)
+    assert seeded.reachable and seeded.starts > 1
+
+
+@pytest.mark.parametrize("target", [[0.1, 0.2], [[0.1, 0.2, 0.3]], [0.1, float("nan"), 0.3],
+                                    [0.1, float("inf"), 0.3], "abc", None])
+def test_bad_target_raises_clear_error(target):
+    with pytest.raises(ValueError, match="target_xyz"):
+        dk.solve_tip_ik(ARM, target)
+
+
+@pytest.mark.parametrize("delta0", [np.zeros((3, 3)), np.zeros(5), np.full((2, 3), np.nan), "x"])
+def test_bad_warm_start_raises_clear_error(delta0):
+    with pytest.raises(ValueError, match="delta0"):
+        dk.solve_tip_ik(ARM, [0.1, 0.0, 0.4], delta0)
+
+
+def test_flat_warm_start_accepted():
+    res = dk.solve_tip_ik(ARM, [0.1, 0.0, 0.4], np.zeros(6))
+    assert res.reachable
+
+
+def test_wrong_robot_raises():
+    with pytest.raises(ValueError, match="extensible"):
+        dk.solve_tip_ik(robots.load("soft-arm"), [0.1, 0.0, 0.4])
+
+
+def test_settings_read_from_robot_file():
+    table = tomllib.loads(ARM.source.read_text())["ik"]
+    s = IKSettings.from_robot(ARM)
+    for key, value in table.items():
+        assert getattr(s, key) == value
+
+
+@pytest.mark.parametrize("ik, match", [({"tolerance": -1.0}, "ik.tolerance"),
+                                       ({"max_iterations": 0}, "ik.max_iterations"),
+                                       ({"max_iterations": 2.5}, "ik.max_iterations"),
+                                       ({"goal_tolerance": 0.01}, "ik.goal_tolerance"),
+                                       ({"bogus": 1}, "unknown")])
+def test_bad_settings_in_robot_file_raise(ik, match):
+    robot = dataclasses.replace(ARM, raw={**ARM.raw, "ik": ik})
+    with pytest.raises(ValueError, match=match):
+        dk.solve_tip_ik(robot, [0.1, 0.0, 0.4])
