@@ -1,0 +1,235 @@
+"""The operator console: one viser server, one arm, composable panels and a single render thread.
+
+``ConsoleApp(robot, server)`` sets up the theme (share button off), the table (z = 0 plane with a
+subtle grid), the arm view and the camera, then composes its panels. ``start()`` launches the
+render thread; ``stop()`` ends it (the app is also a context manager).
+
+Data flow (see ``console.state``)::
+
+    GUI callback --store.request/edit--> command --(mirror, or hardware bridge)--> display
+    render thread: newest display state -> ArmView.update -> panel.on_state  (<= render_hz)
+
+Adding a panel (other engineers): write ``class MyPanel(console.panels.base.Panel)`` in
+``console/panels/my_panel.py`` with ``title``, ``order``, optional ``kinds = ("planar",)``,
+``build()`` creating widgets with thin callbacks that call ``self.app.store.request(q, "me")``,
+and ``on_state(state)`` for display updates. Then add it to the :data:`DEFAULT_PANELS` tuple
+below (``kinds`` keeps it off the other robot), pass ``panels=`` to the constructor, or call
+``app.add_panel(MyPanel)``; find it again with ``app.panel(MyPanel)``.
+
+Plugging in hardware: build the app with ``mirror_commands=False``; the bridge's control thread
+reads ``app.store.wait_command(seq, timeout)`` and reports measurements with
+``app.store.report(q, "hardware")``; the view then draws what the robot measured.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Sequence, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+import viser
+
+from console.arm_view import ArmView, make_arm_view
+from console.model import ArmModel, model_for
+from console.panels.base import Panel
+from console.panels.jog import JogPanel
+from console.panels.readout import ReadoutPanel
+from console.state import ArmState, StateStore
+from core.robots import Robot
+
+log = logging.getLogger(__name__)
+
+DEFAULT_PANELS: tuple[type[Panel], ...] = (JogPanel, ReadoutPanel)
+BRAND_COLOR = (38, 110, 150)
+TABLE_COLOR = (226, 222, 214)
+P = TypeVar("P", bound=Panel)
+
+
+class ConsoleApp:
+    """Viser operator console for one robot.
+
+    Args:
+        robot: A loaded description (``core.robots.load``).
+        server: The viser server to draw into (the app does not own its lifetime).
+        panels: Panel classes to compose, in addition order (default :data:`DEFAULT_PANELS`);
+            those whose ``supports(robot)`` is false are skipped.
+        mirror_commands: True to display commands at once (no hardware); False when a hardware
+            bridge reports the measured state.
+        render_hz: Upper bound on redraws per second; only the newest state is drawn.
+        status: One line shown at the top of the control panel (e.g. the hardware mode).
+        initial: Initial configuration (default: straight / retracted).
+    """
+
+    def __init__(self, robot: Robot, server: viser.ViserServer, *,
+                 panels: Sequence[type[Panel]] | None = None,
+                 mirror_commands: bool = True, render_hz: float = 30.0,
+                 status: str = "Kinematic simulation (no hardware connected)",
+                 initial: npt.ArrayLike | None = None) -> None:
+        if render_hz <= 0:
+            raise ValueError(f"render_hz must be > 0, got {render_hz}")
+        self.robot = robot
+        self.server = server
+        self.model: ArmModel = model_for(robot)
+        self.store = StateStore(self.model, initial, mirror_commands=mirror_commands)
+        self.render_period = 1.0 / render_hz
+        self.frames_drawn = 0
+        self.last_drawn_seq = -1
+        self._panels: list[Panel] = []
+        self._panel_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+        self._setup_theme(status)
+        self._setup_table()
+        self._setup_lights()
+        self.view: ArmView = make_arm_view(server.scene, self.model)
+        self._setup_camera()
+        for panel_cls in DEFAULT_PANELS if panels is None else panels:
+            self.add_panel(panel_cls)
+
+    # -- composition -------------------------------------------------------------------------
+
+    def add_panel(self, panel_cls: type[P]) -> P | None:
+        """Construct ``panel_cls(self)`` if it supports this robot; returns it (or None)."""
+        if not panel_cls.supports(self.robot):
+            return None
+        panel = panel_cls(self)
+        with self._panel_lock:
+            self._panels.append(panel)
+        return panel
+
+    def panel(self, panel_cls: type[P]) -> P:
+        """The composed panel of class ``panel_cls`` (KeyError if absent)."""
+        with self._panel_lock:
+            for p in self._panels:
+                if isinstance(p, panel_cls):
+                    return p
+        raise KeyError(f"no {panel_cls.__name__} in this console")
+
+    @property
+    def panels(self) -> tuple[Panel, ...]:
+        """Composed panels in addition order."""
+        with self._panel_lock:
+            return tuple(self._panels)
+
+    # -- lifecycle ---------------------------------------------------------------------------
+
+    def start(self) -> ConsoleApp:
+        """Start the render thread (idempotent)."""
+        if self._thread is None or not self._thread.is_alive():
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._render_loop, name="console-render",
+                                            daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the render thread; the viser server keeps running (its owner stops it)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    def __enter__(self) -> ConsoleApp:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # -- rendering ---------------------------------------------------------------------------
+
+    def render(self, state: ArmState) -> None:
+        """Draw ``state`` and notify panels; only the render thread should call this."""
+        with self.server.atomic():
+            self.view.update(np.asarray(state.q))
+            for panel in self.panels:
+                try:
+                    panel.on_state(state)
+                except Exception:  # a broken panel must not stop the arm from drawing
+                    log.exception("panel %s failed in on_state", type(panel).__name__)
+        self.frames_drawn += 1
+        self.last_drawn_seq = state.seq
+
+    def _render_loop(self) -> None:
+        last_seq = -1
+        next_frame = 0.0
+        while not self._stop.is_set():
+            state = self.store.wait_display(last_seq, timeout=0.2)
+            if state is None:
+                continue
+            wait = next_frame - time.perf_counter()
+            if wait > 0 and self._stop.wait(wait):
+                break
+            state = self.store.display  # the newest after the wait: skip, never catch up
+            try:
+                self.render(state)
+            except Exception:
+                log.exception("render failed for state #%d", state.seq)
+            last_seq = state.seq
+            next_frame = time.perf_counter() + self.render_period
+
+    # -- scene setup -------------------------------------------------------------------------
+
+    def _setup_theme(self, status: str) -> None:
+        gui = self.server.gui
+        gui.configure_theme(show_share_button=False, show_logo=False, brand_color=BRAND_COLOR,
+                            control_width="medium")
+        gui.set_panel_label(f"Arm console · {self.robot.name}")
+        self.status = gui.add_markdown(f"<small>{status}</small>", order=0.0)
+
+    def _span(self) -> float:
+        """Largest distance of any arm point from the base (straight, fully extended)."""
+        r = self.robot
+        if self.model.kind == "planar":
+            return r.n_segments * r.segment_length + r.gripper.length  # type: ignore[union-attr]
+        return r.n_segments * r.rack_max  # type: ignore[union-attr]
+
+    def _table_extent(self) -> tuple[float, float, float, float]:
+        """Table rectangle (x0, x1, y0, y1) around the arm's workspace."""
+        span = self._span()
+        if self.model.kind == "planar":
+            return -1.0 * span, 1.0 * span, -0.4 * span, 1.15 * span
+        return -0.75 * span, 0.75 * span, -0.75 * span, 0.75 * span
+
+    def _setup_table(self) -> None:
+        x0, x1, y0, y1 = self._table_extent()
+        w, h = x1 - x0, y1 - y0
+        centre = ((x0 + x1) / 2, (y0 + y1) / 2)
+        thickness = 0.02
+        scene = self.server.scene
+        self.table = scene.add_box("/table/top", color=TABLE_COLOR, dimensions=(w, h, thickness),
+                                   position=(centre[0], centre[1], -thickness / 2),
+                                   cast_shadow=False, receive_shadow=True)
+        self.grid = scene.add_grid("/table/grid", width=w, height=h, plane="xy",
+                                   cell_size=0.05, cell_color=(200, 196, 188),
+                                   section_size=0.25, section_color=(165, 160, 150),
+                                   position=(centre[0], centre[1], 0.0005), shadow_opacity=0.15)
+        scene.world_axes.visible = False
+
+    def _setup_lights(self) -> None:
+        # Cheap lighting for software-rendered WebGL (lab PCs without a GPU, CI). Measured here
+        # in headless Chromium/SwiftShader: with viser's HDR environment map and shadow maps a
+        # slider step took ~0.4-0.6 s to process, without them ~0.1-0.2 s. A hemisphere light
+        # plus shadowless default lights looks much the same.
+        scene = self.server.scene
+        scene.configure_environment_map(None)
+        scene.configure_default_lights(enabled=True, cast_shadow=False)
+        scene.add_light_hemisphere("/lights/hemisphere", sky_color=(255, 255, 255),
+                                   ground_color=(150, 140, 130), intensity=1.3)
+
+    def _setup_camera(self) -> None:
+        # Framed so the table and every reachable arm shape are in view with the control panel
+        # docked on the right (the look-at point sits right of the workspace centre).
+        cam = self.server.initial_camera
+        span = self._span()
+        if self.model.kind == "planar":
+            cam.look_at = (0.3 * span, 0.32 * span, 0.0)
+            cam.position = (0.55 * span, -1.25 * span, 1.75 * span)
+        else:
+            cam.look_at = (0.15 * span, 0.0, 0.3 * span)
+            cam.position = (1.45 * span, -1.75 * span, 1.25 * span)
+        cam.fov = float(np.deg2rad(50.0))
+        cam.up = (0.0, 0.0, 1.0)

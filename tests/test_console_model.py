@@ -1,0 +1,121 @@
+"""Console limits: jogged configurations stay feasible, clamps are the largest feasible move."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from console.model import DeltaModel, PlanarModel, model_for
+from core.kinematics import delta as dk
+from core.robots import load
+
+EXT = load("extensible")
+SOFT = load("soft-arm")
+
+
+def racks(q: np.ndarray) -> np.ndarray:
+    """Closed-form rack lengths L0 + dL - dx cos(beta_j) - dy sin(beta_j), (n, 3)."""
+    beta = -EXT.phi + 2 * np.pi * np.arange(3) / 3
+    return EXT.L0 + q[:, 2:3] - q[:, 0:1] * np.cos(beta) - q[:, 1:2] * np.sin(beta)
+
+
+def feasible(q: np.ndarray, tol: float = 1e-9) -> bool:
+    r = racks(q)
+    return bool(np.all(r >= EXT.rack_min - tol) and np.all(r <= EXT.rack_max + tol))
+
+
+rack_lengths = st.floats(EXT.rack_min, EXT.rack_max)
+feasible_q = st.lists(rack_lengths, min_size=6, max_size=6).map(
+    lambda ls: dk.delta_from_actuators(np.reshape(ls, (2, 3)), EXT.phi, EXT.L0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(q=feasible_q, which=st.integers(0, 5), value=st.floats(-0.5, 0.5))
+def test_jogging_one_coordinate_keeps_racks_feasible_and_clamps_maximally(q, which, value):
+    model = DeltaModel(EXT)
+    coord = model.coordinates[which]
+    out, note = model.set_coordinate(q, coord, value)
+    assert feasible(out)
+    others = np.ones(q.shape, bool)
+    others[coord.index] = False
+    np.testing.assert_allclose(out[others], q[others], atol=1e-12)
+    applied = out[coord.index]
+    if note is None:
+        assert applied == pytest.approx(value, abs=1e-9)
+    else:
+        assert "clamped" in note
+        # Largest feasible move: one micrometre further towards the request is infeasible.
+        beyond = out.copy()
+        beyond[coord.index] += 1e-6 * np.sign(value - applied)
+        assert not feasible(beyond, tol=0.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(q=st.lists(st.floats(-0.6, 0.6), min_size=6, max_size=6).map(
+    lambda v: np.reshape(v, (2, 3))))
+def test_clamp_returns_feasible_configurations_and_keeps_feasible_ones(q):
+    model = DeltaModel(EXT)
+    out, notes = model.clamp(q)
+    assert feasible(out)
+    if feasible(q, tol=-1e-9):  # strictly inside the limits: untouched
+        np.testing.assert_array_equal(out, q)
+        assert notes == ()
+    elif not np.array_equal(out, q):
+        assert notes
+    # Bending keeps its direction (only scaled) within each segment.
+    for i in range(2):
+        cross = out[i, 0] * q[i, 1] - out[i, 1] * q[i, 0]
+        assert cross == pytest.approx(0.0, abs=1e-12)
+        assert out[i, :2] @ q[i, :2] >= 0.0
+
+
+def test_bending_slider_range_is_exactly_what_some_extension_allows():
+    model = DeltaModel(EXT)
+    dl = np.linspace(0.0, EXT.rack_max - EXT.L0, 3601)
+    for coord in model.coordinates:
+        seg, axis = coord.index
+        if axis == 2:
+            assert (coord.lo, coord.hi) == pytest.approx((0.0, EXT.rack_max - EXT.L0))
+            continue
+        for value, reachable in ((coord.hi, True), (coord.hi + coord.step, False)):
+            qs = np.zeros((len(dl), 2, 3))
+            qs[:, seg, 2] = dl
+            qs[:, seg, axis] = value
+            assert any(feasible(q) for q in qs) is reachable
+        assert coord.lo == -coord.hi
+
+
+def test_bending_a_retracted_segment_says_to_extend_first():
+    model = DeltaModel(EXT)
+    out, note = model.set_coordinate(model.zero(), model.coordinates[0], 0.05)
+    np.testing.assert_array_equal(out, model.zero())
+    assert note is not None and "extend δL₁ first" in note
+
+
+def test_planar_curvature_is_clipped_to_kappa_max_with_a_note():
+    model = PlanarModel(SOFT)
+    out, note = model.set_coordinate(model.zero(), model.coordinates[2], 40.0)
+    assert out[2] == SOFT.kappa_max and np.count_nonzero(out) == 1
+    assert note is not None and "κ₃" in note
+    out, note = model.set_coordinate(model.zero(), model.coordinates[2], -3.0)
+    assert out[2] == -3.0 and note is None
+
+
+@pytest.mark.parametrize("robot, bad, message", [
+    (SOFT, np.zeros(5), r"shape \(6,\)"),
+    (SOFT, [0, 0, np.nan, 0, 0, 0], "finite"),
+    (EXT, np.zeros(6), r"shape \(2, 3\)"),
+    (EXT, [["a", 0, 0], [0, 0, 0]], "numeric"),
+])
+def test_bad_configurations_are_refused_with_a_clear_message(robot, bad, message):
+    with pytest.raises(ValueError, match=message):
+        model_for(robot).validate(bad)
+
+
+def test_straightening_keeps_extension_and_removes_bending():
+    model = DeltaModel(EXT)
+    q = np.array([[0.02, -0.01, 0.1], [0.0, 0.03, 0.2]])
+    np.testing.assert_array_equal(model.straightened(q), [[0, 0, 0.1], [0, 0, 0.2]])
+    np.testing.assert_array_equal(PlanarModel(SOFT).straightened(np.ones(6)), np.zeros(6))
