@@ -1,0 +1,143 @@
+"""Objects panel: place objects on the table by clicking, typing or dragging; save and load them.
+
+A click on the table (the click ray meets z = 0) selects the object under it or places a new
+one there; each object carries a transform gizmo in the 3D view to drag it in x and y (the
+planner re-plans live while it moves, see ``console.panels.planner``). The number boxes show and
+edit the selected object; "Add object" places one at the typed x, y, r. The scene is saved as a
+JSON download and loaded from an uploaded file (``console.plan_view.scene_from_json``; a bad
+file is refused with its reason and changes nothing).
+"""
+
+from __future__ import annotations
+
+import html
+
+from console.panels.base import Panel
+from console.panels.planner import SessionView, session_for
+from console.plan_view import ray_to_table, scene_from_json, scene_to_json
+
+
+class ObjectsPanel(Panel):
+    """Table objects: click / type / drag, remove, save and load."""
+
+    title = "Objects"
+    order = 30.0
+    kinds = ("planar",)
+
+    def build(self) -> None:
+        self.session = session_for(self.app)
+        view = self.session.view()
+        first = view.objects[0] if view.objects else None
+        self.click_place = self.gui.add_checkbox(
+            "Click on table places object", True,
+            hint="A click on free table places an object; a click on an object selects it.")
+        self.selected = self.gui.add_dropdown(
+            "Selected", [o.name for o in view.objects] or ["(none)"],
+            initial_value=view.selected or "(none)")
+        self.x = self.gui.add_number("x (m)", round(first.x, 4) if first else -0.2, step=0.001)
+        self.y = self.gui.add_number("y (m)", round(first.y, 4) if first else 0.2, step=0.001)
+        self.r = self.gui.add_number("radius (m)", round(first.r, 4) if first else 0.0165,
+                                     min=0.002, max=0.2, step=0.0005)
+        self.add_button = self.gui.add_button("Add object", hint="New object at the typed x, y, r.")
+        self.remove_button = self.gui.add_button("Remove object", color="red")
+        self.save_button = self.gui.add_button("Save scene", hint="Download the objects as JSON.")
+        self.load_button = self.gui.add_upload_button("Load scene", mime_type="application/json",
+                                                      hint="Upload a scene JSON file.")
+        self.info = self.gui.add_html("")
+        self._mirror = False
+        self.selected.on_update(self._on_select)
+        for handle in (self.x, self.y, self.r):
+            handle.on_update(self._on_typed)
+        self.add_button.on_click(self._on_add)
+        self.remove_button.on_click(self._on_remove)
+        self.save_button.on_click(self._on_save)
+        self.load_button.on_upload(self._on_load)
+        self.app.server.scene.on_click()(self._on_scene_click)
+        self.session.add_listener(self.refresh)
+
+    # -- callbacks (thin) ------------------------------------------------------------------
+    def _error(self, event, message: str) -> None:
+        if event.client is not None:
+            event.client.add_notification("Objects", message, color="red", auto_close_seconds=6)
+
+    def _on_scene_click(self, event) -> None:
+        if not self.click_place.value:
+            return
+        hit = ray_to_table(event.ray_origin, event.ray_direction)
+        if hit is None:
+            return
+        try:
+            self.session.place(*hit, r=float(self.r.value))
+        except ValueError as exc:
+            self._error(event, str(exc))
+
+    def _on_select(self, event) -> None:
+        if event.client is None or self.selected.value == "(none)":
+            return
+        try:
+            self.session.select(self.selected.value)
+        except ValueError as exc:
+            self._error(event, str(exc))
+
+    def _on_typed(self, event) -> None:
+        if event.client is None or self._mirror:
+            return
+        name = self.session.view().selected
+        if name is None:
+            return
+        try:
+            self.session.update(name, x=float(self.x.value), y=float(self.y.value),
+                                r=float(self.r.value))
+        except ValueError as exc:
+            self._error(event, str(exc))
+
+    def _on_add(self, event) -> None:
+        view = self.session.view()
+        x, y = float(self.x.value), float(self.y.value)
+        if any(((o.x - x) ** 2 + (o.y - y) ** 2) ** 0.5 <= o.r for o in view.objects):
+            x += 0.06  # typed spot taken (it shows the selected object): place beside it
+        try:
+            self.session.place(x, y, r=float(self.r.value))
+        except ValueError as exc:
+            self._error(event, str(exc))
+
+    def _on_remove(self, event) -> None:
+        name = self.session.view().selected
+        if name is not None:
+            self.session.remove(name)
+
+    def _on_save(self, event) -> None:
+        if event.client is not None:
+            text = scene_to_json(list(self.session.view().objects))
+            event.client.send_file_download("grasp_scene.json", text.encode())
+
+    def _on_load(self, event) -> None:
+        upload = self.load_button.value
+        try:
+            objects = scene_from_json(upload.content.decode("utf-8"), self.app.robot)
+        except (ValueError, UnicodeDecodeError) as exc:
+            self._error(event, f"Could not load {upload.name}: {exc}")
+            return
+        self.session.set_objects(objects)
+
+    # -- display (grasp worker thread) -----------------------------------------------------
+    def refresh(self, view: SessionView) -> None:
+        names = [o.name for o in view.objects] or ["(none)"]
+        self._mirror = True
+        try:
+            if tuple(self.selected.options) != tuple(names):
+                self.selected.options = names
+            want = view.selected or "(none)"
+            if self.selected.value != want:
+                self.selected.value = want
+            obj = next((o for o in view.objects if o.name == view.selected), None)
+            if obj is not None:
+                for handle, value in ((self.x, obj.x), (self.y, obj.y), (self.r, obj.r)):
+                    if abs(float(handle.value) - value) > 5e-5:
+                        handle.value = round(value, 4)
+        finally:
+            self._mirror = False
+        count = len(view.objects)
+        text = (f"{count} object{'s' if count != 1 else ''} on the table"
+                + (f"; selected: <b>{html.escape(view.selected)}</b>" if view.selected else ""))
+        self.info.content = f'<small data-testid="objects-info">{text}</small>'

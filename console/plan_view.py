@@ -1,0 +1,369 @@
+"""The grasp layer of the 3D view, and the pure pieces behind it, for the grasp panels.
+
+:class:`PlanScene` owns the scene nodes of grasp planning: table objects with their drag gizmos,
+approach circles (green; a failed radius red), ghost arms of the waypoints (the inspected one
+highlighted, a trail of the ones passed), palm points, the gripper's capture region at the final
+waypoint and the reachability shading. Exactly one thread may draw into it: the grasp session's
+worker (``console.panels.planner.GraspSession``). The shading (where a grasp can be planned from
+the straight arm, :mod:`core.planning.reachability`) is computed once per robot file in a
+low-priority child process (:func:`start_reach_map`, cached), so it never holds the GUI's
+threads or the GIL.
+
+Geometry comes from pure functions (``plan_geometry``, ``ghost_segments``, ``object_mesh``,
+``reach_mesh``, ``ray_to_table``), tested without a server. Scene JSON is
+``{"objects": [{"name", "x", "y", "r"}, ...]}`` in metres. :class:`Outcome` /
+:class:`SessionView` / :func:`outcome_html` are what the panels show.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import html
+import json
+import math
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import numpy.typing as npt
+
+from core.kinematics import planar as pk
+from core.planning.grasp import GraspPlan
+from core.planning.reachability import FAILS, PLANNABLE, ReachMap, from_json
+
+Array = npt.NDArray[np.float64]
+LIVE_HZ = 20.0
+Z_PLAN = 0.03                       # plan drawings float above the arm tube
+CIRCLE_COLOR, CIRCLE_SEL_COLOR, FAIL_COLOR = (40, 170, 70), (10, 230, 60), (215, 45, 45)
+GHOST_COLOR, GHOST_SEL_COLOR = (120, 140, 170), (245, 120, 20)
+PALM_COLOR, CAPTURE_COLOR = (200, 40, 60), (70, 140, 235)
+OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
+REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
+REACH_STEP, REACH_X, REACH_Y = 0.02, (-0.5, 0.5), (-0.26, 0.5)
+
+
+@dataclasses.dataclass(frozen=True)
+class TableObject:
+    """A cylinder on the table (the paper's enclosing cylinder of the object)."""
+
+    name: str
+    x: float
+    y: float
+    r: float
+
+
+def validate_object(obj: TableObject, robot) -> TableObject:
+    """Raise ValueError with an operator message if ``obj`` is not a sensible object."""
+    if not all(math.isfinite(v) for v in (obj.x, obj.y, obj.r)):
+        raise ValueError("object position and radius must be finite numbers")
+    if not 0.002 <= obj.r <= 0.2:
+        raise ValueError(f"object radius must be between 2 mm and 20 cm, got {obj.r * 1e3:.1f} mm")
+    if max(abs(obj.x), abs(obj.y)) > 2.0:
+        raise ValueError("object must lie on the table (within 2 m of the base)")
+    return obj
+
+
+def scene_to_json(objects: list[TableObject]) -> str:
+    """Scene JSON (objects in metres)."""
+    return json.dumps({"objects": [dataclasses.asdict(o) for o in objects]}, indent=1)
+
+
+def scene_from_json(text: str, robot) -> list[TableObject]:
+    """Parse and validate scene JSON; ValueError (with the reason) changes nothing."""
+    try:
+        data = json.loads(text)
+        items = data["objects"]
+        objs = [TableObject(str(o.get("name", f"Object {i + 1}")), float(o["x"]), float(o["y"]),
+                            float(o["r"])) for i, o in enumerate(items)]
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"not a scene file ({type(exc).__name__}: {exc})") from None
+    names = [o.name for o in objs]
+    if len(set(names)) != len(names):
+        raise ValueError("object names must be unique")
+    return [validate_object(o, robot) for o in objs]
+
+
+def ray_to_table(origin: npt.ArrayLike, direction: npt.ArrayLike) -> tuple[float, float] | None:
+    """Where a click ray meets the table plane z = 0 (None if it points away)."""
+    o, d = np.asarray(origin, float), np.asarray(direction, float)
+    if d[2] >= -1e-9:
+        return None
+    t = -o[2] / d[2]
+    return (float(o[0] + t * d[0]), float(o[1] + t * d[1])) if t > 0 else None
+
+
+def disk_mesh(center: npt.ArrayLike, radius: float, z: float, n: int = 48) -> tuple[Array, Any]:
+    """Triangle fan of a flat disk."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    v = np.zeros((n + 1, 3))
+    v[0] = (center[0], center[1], z)
+    v[1:, 0] = center[0] + radius * np.cos(a)
+    v[1:, 1] = center[1] + radius * np.sin(a)
+    v[:, 2] = z
+    f = np.stack([np.zeros(n, int), 1 + np.arange(n), 1 + (np.arange(n) + 1) % n], -1)
+    return v, f.astype(np.uint32)
+
+
+def object_mesh(radius: float, height: float = 0.04, n: int = 32) -> tuple[Array, Any]:
+    """Closed cylinder of ``radius`` standing on z = 0, in the object's own frame."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.stack([radius * np.cos(a), radius * np.sin(a)], -1)
+    v = np.concatenate([np.c_[ring, np.zeros(n)], np.c_[ring, np.full(n, height)],
+                        [[0, 0, 0], [0, 0, height]]])
+    i, j = np.arange(n), (np.arange(n) + 1) % n
+    side = np.concatenate([np.stack([i, j, n + j], -1), np.stack([i, n + j, n + i], -1)])
+    caps = np.concatenate([np.stack([np.full(n, 2 * n), j, i], -1),
+                           np.stack([np.full(n, 2 * n + 1), n + i, n + j], -1)])
+    return v, np.concatenate([side, caps]).astype(np.uint32)
+
+
+def circle_segments(center: npt.ArrayLike, radii: npt.ArrayLike, z: float, n: int = 72) -> Array:
+    """Line segments (len(radii) * n, 2, 3) of circles around ``center``."""
+    a = np.linspace(0, 2 * np.pi, n + 1)
+    r = np.asarray(radii, float)[:, None]
+    pts = np.stack([center[0] + r * np.cos(a), center[1] + r * np.sin(a),
+                    np.full_like(r * a, z)], -1)                     # (k, n+1, 3)
+    return np.stack([pts[:, :-1], pts[:, 1:]], 2).reshape(-1, 2, 3)
+
+
+def ghost_segments(robot, kappas: Array, z: float, per_segment: int = 8) -> Array:
+    """Backbone polyline plus straight gripper of each configuration: (k, S, 2, 3)."""
+    kappas = np.asarray(kappas, float).reshape(-1, robot.n_segments)
+    bb = pk.sample_backbone(kappas, robot.lengths, per_segment, robot.base_pose)  # (k, P, 3)
+    tip = bb[:, -1]
+    g_end = tip[:, :2] + robot.gripper.length * np.stack([np.cos(tip[:, 2]),
+                                                           np.sin(tip[:, 2])], -1)
+    pts = np.concatenate([bb[:, :, :2], g_end[:, None]], 1)             # (k, P+1, 2)
+    pts = np.concatenate([pts, np.full(pts.shape[:2] + (1,), z)], -1)
+    return np.stack([pts[:, :-1], pts[:, 1:]], 2)
+
+
+def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool) -> dict[str, Any]:
+    """Everything the plan layer draws for ``plan`` with waypoint ``index`` (0-based) inspected."""
+    ok = np.array([s == "ok" for s in plan.status])
+    circles = circle_segments(plan.center, plan.radii, Z_PLAN - 0.002)
+    per = len(circles) // max(plan.n, 1)
+    circle_colors = np.repeat(np.where(ok[:, None], [CIRCLE_COLOR], [FAIL_COLOR]), per, 0)
+    ghosts = ghost_segments(robot, plan.kappas, Z_PLAN)
+    shown = np.arange(plan.n) < index if trail else np.zeros(plan.n, bool)
+    palm = np.c_[plan.palm_poses[:, :2], np.full(plan.n, Z_PLAN)]
+    final = plan.palm_poses[-1]
+    left = np.array([-math.sin(final[2]), math.cos(final[2])])
+    aim = final[:2] + left * (robot.gripper.g_off + robot.capture.nominal_object_radius)
+    return {
+        "circles": circles, "circle_colors": np.repeat(circle_colors[:, None], 2, 1),
+        "circle_sel": circle_segments(plan.center, plan.radii[index:index + 1], Z_PLAN - 0.001),
+        "ghosts": ghosts[shown].reshape(-1, 2, 3), "ghost_sel": ghosts[index],
+        "palms": palm, "palm_sel": palm[index],
+        "capture": disk_mesh(aim, robot.capture.diameter / 2, 0.0012),
+        "capture_visible": bool(ok.all()) and index == plan.n - 1,
+    }
+
+
+def reach_mesh(reach: ReachMap, status: int, z: float = 0.0007) -> tuple[Array, Any] | None:
+    """Quads of the cells with ``status`` as one mesh (None if there are none)."""
+    iy, ix = np.nonzero(reach.status == status)
+    if len(ix) == 0:
+        return None
+    h = reach.step / 2
+    cx, cy = reach.xs[ix], reach.ys[iy]
+    corners = np.stack([np.c_[cx - h, cy - h], np.c_[cx + h, cy - h], np.c_[cx + h, cy + h],
+                        np.c_[cx - h, cy + h]], 1)                       # (k, 4, 2)
+    v = np.concatenate([corners, np.full(corners.shape[:2] + (1,), z)], -1).reshape(-1, 3)
+    b = 4 * np.arange(len(ix))[:, None]
+    f = np.concatenate([b + [0, 1, 2], b + [0, 2, 3]]).astype(np.uint32)
+    return v, f
+
+
+_REACH_CACHE: dict[tuple, ReachMap] = {}
+_REACH_LOCK = threading.Lock()
+
+
+def start_reach_map(robot, radius: float, done: Callable[[ReachMap | Exception], None]) -> None:
+    """Compute (once per robot file and radius, cached) the reachability map, then ``done``.
+
+    Runs ``python -m core.planning.reachability`` as a low-priority child process (no GIL or
+    GUI-thread contention); a small daemon thread waits for its JSON and calls ``done``.
+    """
+    key = (str(robot.source), float(radius), REACH_X, REACH_Y, REACH_STEP)
+    with _REACH_LOCK:
+        hit = _REACH_CACHE.get(key)
+    if hit is not None:
+        done(hit)
+        return
+
+    def wait() -> None:
+        cmd = [sys.executable, "-m", "core.planning.reachability", "--robot", str(robot.source),
+               "--radius", repr(float(radius)), "--x", *map(repr, REACH_X), "--y",
+               *map(repr, REACH_Y), "--step", repr(REACH_STEP), "--nice", "15",
+               "--parent", str(os.getpid())]
+        try:
+            out = subprocess.run(cmd, capture_output=True, text=True, timeout=600,
+                                 cwd=str(Path(__file__).resolve().parent.parent), check=True)
+            result: ReachMap | Exception = from_json(out.stdout)
+            with _REACH_LOCK:
+                _REACH_CACHE[key] = result
+        except (subprocess.SubprocessError, OSError, ValueError, KeyError) as exc:
+            result = RuntimeError(f"reachability map failed: {exc}")
+        done(result)
+
+    threading.Thread(target=wait, name="reachability-wait", daemon=True).start()
+
+
+def _set_lines(handle, points: Array, colors) -> None:
+    """Assign points with colours of the same length (viser keeps them as parallel arrays)."""
+    colors = np.asarray(colors, np.uint8)
+    if colors.ndim == 1:
+        colors = np.broadcast_to(colors, points.shape).copy()
+    handle.points = points
+    handle.colors = colors
+
+
+class PlanScene:
+    """The grasp layer of the 3D view. Build it once; then only one thread may call draw_*."""
+
+    def __init__(self, server, robot) -> None:
+        self.server, self.robot = server, robot
+        scene = server.scene
+        empty = np.zeros((1, 2, 3))
+        self.circles = scene.add_line_segments("/grasp/plan/circles", empty, CIRCLE_COLOR,
+                                               thickness=0.0025, visible=False)
+        self.circle_sel = scene.add_line_segments("/grasp/plan/circle_sel", empty,
+                                                  CIRCLE_SEL_COLOR, thickness=0.006,
+                                                  visible=False)
+        self.ghosts = scene.add_line_segments("/grasp/plan/ghosts", empty, GHOST_COLOR,
+                                              thickness=0.004, visible=False)
+        self.ghost_sel = scene.add_line_segments("/grasp/plan/ghost_sel", empty,
+                                                 GHOST_SEL_COLOR, thickness=0.009,
+                                                 visible=False)
+        self.palms = scene.add_point_cloud("/grasp/plan/palms", np.zeros((1, 3)), PALM_COLOR,
+                                           point_size=0.012, point_shape="circle",
+                                           visible=False)
+        self.palm_sel = scene.add_icosphere("/grasp/plan/palm_sel", radius=0.009,
+                                            color=GHOST_SEL_COLOR, visible=False,
+                                            cast_shadow=False)
+        v, f = disk_mesh((0, 0), robot.capture.diameter / 2, 0.0012)
+        self.capture = scene.add_mesh_simple("/grasp/plan/capture", v, f, color=CAPTURE_COLOR,
+                                             opacity=0.35, visible=False, cast_shadow=False,
+                                             receive_shadow=False, side="double")
+        self.reach: list = []
+        self.objects: dict[str, tuple[Any, Any, float]] = {}   # name -> (gizmo, body, radius)
+        self._made = 0
+
+    def draw_plan(self, plan: GraspPlan | None, index: int, trail: bool) -> None:
+        """Show ``plan`` (None hides the plan layer)."""
+        handles = (self.circles, self.circle_sel, self.ghosts, self.ghost_sel, self.palms,
+                   self.palm_sel, self.capture)
+        if plan is None or plan.n == 0:
+            for h in handles:
+                h.visible = False
+            return
+        g = plan_geometry(self.robot, plan, index, trail)
+        _set_lines(self.circles, g["circles"], g["circle_colors"])
+        _set_lines(self.circle_sel, g["circle_sel"], CIRCLE_SEL_COLOR)
+        if len(g["ghosts"]):
+            _set_lines(self.ghosts, g["ghosts"], GHOST_COLOR)
+        self.ghosts.visible = len(g["ghosts"]) > 0
+        _set_lines(self.ghost_sel, g["ghost_sel"], GHOST_SEL_COLOR)
+        self.palms.points = g["palms"]
+        self.palms.colors = np.tile(np.array(PALM_COLOR, np.uint8), (len(g["palms"]), 1))
+        self.palm_sel.position = tuple(g["palm_sel"])
+        self.capture.vertices = g["capture"][0]
+        self.capture.visible = g["capture_visible"]
+        for h in (self.circles, self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
+            h.visible = True
+
+    def draw_reach(self, reach: ReachMap, visible: bool) -> None:
+        """Shade the table cells where a grasp can be planned (green) or fails (amber)."""
+        if not self.reach:
+            for status, color in REACH_COLORS.items():
+                mesh = reach_mesh(reach, status)
+                if mesh is not None:
+                    self.reach.append(self.server.scene.add_mesh_simple(
+                        f"/grasp/reach/{status}", mesh[0], mesh[1], color=color, opacity=0.28,
+                        cast_shadow=False, receive_shadow=False, side="double"))
+        for h in self.reach:
+            h.visible = visible
+
+    def sync_objects(self, objects: list[TableObject], selected: str | None,
+                     on_move: Callable[[str, Any], None]) -> None:
+        """Create, move, recolour or remove the object nodes to match ``objects``."""
+        scene = self.server.scene
+        wanted = {o.name: o for o in objects}
+        for name in list(self.objects):
+            if name not in wanted:
+                gizmo, body, _ = self.objects.pop(name)
+                body.remove()
+                gizmo.remove()
+        for o in objects:
+            color = OBJECT_SEL_COLOR if o.name == selected else OBJECT_COLOR
+            entry = self.objects.get(o.name)
+            if entry is None or abs(entry[2] - o.r) > 1e-12:
+                if entry is not None:
+                    entry[1].remove()
+                    gizmo = entry[0]
+                else:
+                    self._made += 1
+                    key = f"/grasp/objects/object_{self._made}"
+                    gizmo = scene.add_transform_controls(
+                        key, scale=0.08, disable_rotations=True, active_axes=(True, True, False),
+                        depth_test=False, line_width=2.0, position=(o.x, o.y, 0.0))
+                    gizmo.on_update(lambda ev, name=o.name: on_move(name, ev))
+                v, f = object_mesh(o.r)
+                body = scene.add_mesh_simple(f"{gizmo.name}/body", v, f, color=color,
+                                             cast_shadow=False)
+                self.objects[o.name] = (gizmo, body, o.r)
+            gizmo, body, _ = self.objects[o.name]
+            if np.hypot(gizmo.position[0] - o.x, gizmo.position[1] - o.y) > 1e-9:
+                gizmo.position = (o.x, o.y, 0.0)
+            body.color = color
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """Result of the newest planning request: a plan, or the refusal in words."""
+
+    obj: TableObject | None
+    plan: GraspPlan | None
+    refusal: str | None
+    seq: int
+
+
+@dataclasses.dataclass(frozen=True)
+class SessionView:
+    """Consistent snapshot of a session for the panels."""
+
+    objects: tuple[TableObject, ...]
+    selected: str | None
+    outcome: Outcome | None
+    index: int
+    playing: bool
+    speed: float
+    trail: bool
+    reach: ReachMap | str | None
+
+
+def outcome_html(outcome: Outcome | None) -> str:
+    """The planner summary the operator reads (with test ids and a machine-readable state)."""
+    if outcome is None:
+        body, state, n, ms = "Place an object and press <b>Plan grasp</b>.", "idle", "", ""
+    elif outcome.refusal is not None:
+        body = f"<b style='color:#c92a2a'>Refused:</b> {html.escape(outcome.refusal)}"
+        state, n, ms = "refused", "", ""
+    else:
+        plan = outcome.plan
+        n, ms = str(plan.n), f"{plan.total_ms:.1f}"
+        if plan.success:
+            body, state = f"<b>{plan.n} waypoints, {plan.total_ms:.1f} ms</b>", "ok"
+        else:
+            f = plan.failures[0]
+            body = (f"<b style='color:#c92a2a'>Failed</b> at approach circle {f.index} "
+                    f"(r_a = {f.radius * 100:.1f} cm, {f.reason.replace('_', ' ')}): "
+                    f"{html.escape(f.detail)}. {plan.n} waypoints, {plan.total_ms:.1f} ms.")
+            state = "failed"
+    return (f'<div data-testid="plan-summary" data-state="{state}" data-waypoints="{n}" '
+            f'data-ms="{ms}" style="font-size:0.85em">{body}</div>')

@@ -1,0 +1,153 @@
+"""Refuse grasps that cannot work, in plain words, before (and instead of) planning them.
+
+Cheap geometric checks run first (bad numbers, object larger than the gripper opens, object on
+the base, beyond any reach, overlapping the arm or the gripper as they stand). Whether an object
+within that bound can really be reached needs the kinematics: :func:`find_final_config` looks
+for any configuration that puts the palm on the final approach circle with the arm clear of the
+object, from the current configuration and from a cached table of sampled configurations; the
+planner calls it only when its warm-started solves fail, and refuses when it finds none.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from core.planning import grasp_solver as gs
+from core.planning.arm_model import ArmModel
+from core.planning.clearance import gripper_clearance
+
+Array = npt.NDArray[np.float64]
+
+
+class GraspRefused(ValueError):
+    """The grasp cannot be planned; ``str(exc)`` tells the operator why.
+
+    Attributes:
+        reason: Short code: ``bad_input``, ``too_large``, ``on_base``, ``out_of_reach``,
+            ``on_arm``, ``on_gripper``.
+    """
+
+    def __init__(self, reason: str, message: str):
+        super().__init__(message)
+        self.reason = reason
+
+
+def _cm(v: float) -> str:
+    return f"{100.0 * v:.1f} cm"
+
+
+def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, radius: float,
+                  base_keepout: float) -> None:
+    """Geometric checks that need no optimisation; raise :class:`GraspRefused` on failure."""
+    if not (math.isfinite(center.real) and math.isfinite(center.imag) and math.isfinite(radius)):
+        raise GraspRefused("bad_input", "The object position and radius must be finite numbers.")
+    if radius <= 0.0:
+        raise GraspRefused("bad_input", f"The object radius must be positive, got {radius:g} m.")
+    g = robot.gripper
+    if radius > g.max_object_radius:
+        raise GraspRefused(
+            "too_large",
+            f"The object is too large for the gripper: its diameter is {_cm(2 * radius)}, the "
+            f"gripper closes around objects up to {_cm(2 * g.max_object_radius)} across.")
+    dist = abs(center - model.base)
+    if dist < radius + base_keepout:
+        raise GraspRefused(
+            "on_base",
+            f"The object is on the arm's base ({_cm(dist)} from it); place it at least "
+            f"{_cm(radius + base_keepout)} away.")
+    final_offset = abs(complex(g.w_off_along, 2.0 * g.g_off + radius))
+    reach = float(model.lengths.sum()) + final_offset
+    if dist > reach:
+        raise GraspRefused(
+            "out_of_reach",
+            f"The object is out of reach: it is {_cm(dist)} from the arm's base and the gripper "
+            f"can reach around objects of this size at most {_cm(reach)} away.")
+    arm_gap = model.clearance_py(kappa_meas.tolist(), center, radius)
+    if arm_gap < 0.0:
+        raise GraspRefused(
+            "on_arm",
+            f"The object overlaps the arm where it stands now (by {_cm(-arm_gap)}); move the "
+            f"object or the arm first.")
+    grip_gap = gripper_clearance(model, kappa_meas, center, radius, g.length, g.half_width)
+    if grip_gap < 0.0:
+        raise GraspRefused(
+            "on_gripper",
+            f"The object overlaps the gripper where it stands now (by {_cm(-grip_gap)}); move "
+            f"the object or the arm first.")
+
+
+@functools.lru_cache(maxsize=8)
+def _seed_table(key: tuple) -> tuple[Array, Array, Array]:
+    """Sampled configurations, their tip points and tip directions exp(i theta) (memoised)."""
+    lengths, base, theta0, lo, hi, hw, count = key
+    model = ArmModel(np.array(lengths), base, theta0, np.array(lo), np.array(hi), hw)
+    rng = np.random.default_rng(7)
+    n = len(lengths)
+    # Uniform samples plus constant-curvature arcs (the shapes the optimum tends to take).
+    uni = rng.uniform(np.array(lo), np.array(hi), size=(count, n))
+    arcs = np.linspace(lo[0], hi[0], 33)[:, None] * np.ones(n)
+    kappas = np.concatenate([arcs, uni])
+    pts, th = model.frames(kappas)
+    return kappas, pts[:, -1], np.exp(1j * th[:, -1])
+
+
+def _table(model: ArmModel, size: int) -> tuple[Array, Array, Array]:
+    key = (tuple(model.lengths.tolist()), model.base, model.theta0, tuple(model.lo.tolist()),
+           tuple(model.hi.tolist()), model.half_width, int(size))
+    return _seed_table(key)
+
+
+def seeds_near(model: ArmModel, center: complex, offset: complex, count: int,
+               table_size: int) -> Array:
+    """Table configurations whose object-centre point lies nearest ``center`` (count, N)."""
+    kappas, tips, heading = _table(model, table_size)
+    resid = np.abs(tips + offset * heading - center)
+    idx = np.argpartition(resid, count)[:count]
+    return kappas[idx[np.argsort(resid[idx])]]
+
+
+def best_start(model: ArmModel, center: complex, offset: complex, kappa_off: Array,
+               weights: Array, table_size: int, beta: float = 1e5) -> Array:
+    """Start for the first waypoint: the table configuration (or kappa_off itself) that best
+    trades the cost sum R (kappa - kappa_off)^2 against beta * (distance of its object-centre
+    point from ``center``)^2. Far cheaper than letting the SQP walk out of a straight arm."""
+    kappas, tips, heading = _table(model, table_size)
+    w = np.asarray(weights, float)
+    ko = np.asarray(kappa_off, float)
+    # sum_n w_n (k_n - ko_n)^2 = sum w k^2 - 2 k . (w ko) + const, dropping the constant.
+    r = tips + offset * heading - center
+    score = (kappas * kappas) @ w - 2.0 * (kappas @ (w * ko))
+    score += (beta * w.mean()) * (r.real * r.real + r.imag * r.imag)
+    k = int(np.argmin(score))
+    q0, _ = model.point_py(ko.tolist(), offset)
+    if beta * w.mean() * abs(q0 - center) ** 2 <= score[k] + float(w @ (ko * ko)):
+        return ko
+    return kappas[k]
+
+
+def find_final_config(model: ArmModel, center: complex, radius: float, offset: complex,
+                      kappa_meas: Array, weights: Array, margin: float, table_size: int,
+                      tries: int) -> tuple[Array | None, int]:
+    """Any configuration with the palm on the final circle and the arm body clear of the object.
+
+    Returns:
+        ``(kappa or None, solves)``: the first witness found and the number of solves run.
+    """
+    starts = [np.asarray(kappa_meas, float), np.zeros(model.n)]
+    starts += list(seeds_near(model, center, offset, tries, table_size))
+    rho = radius + model.half_width + margin
+    solves = 0
+    for x0 in starts[:tries + 2]:
+        res = gs.solve(model, center, offset, x0, kappa_meas, weights)
+        solves += 1
+        if res.ok and model.clearance_py(res.kappa.tolist(), center, radius) < margin:
+            res = gs.solve(model, center, offset, res.kappa, kappa_meas, weights, res.lam,
+                           gs.Clearance(center, rho))
+            solves += 1
+        if res.ok:
+            return res.kappa, solves
+    return None, solves

@@ -1,0 +1,410 @@
+"""Grasp Object Planner (Katzschmann 2015, Sec. 4.3, Algorithm 1) that plans in milliseconds.
+
+``plan_grasp(robot, kappa_meas, center, radius)`` follows Algorithm 1: the palm point w_t of the
+measured configuration gives d1 = |c - w_t|, d2 = d1 - r_o - g_off, numMoves =
+max(1, floor(d2 / delta_d)) and the approach radii r_a,i = d1 - i d2 / numMoves; each radius is
+solved by findOptimalConfig (min sum R (kappa - kappa_off)^2 with the palm point on the circle,
+heading phi + pi/2, |kappa| <= kappa_max) with :mod:`core.planning.grasp_solver`, warm-started
+from the previous radius, with restarts when that fails. What the paper leaves to its convexity
+argument is checked and enforced: waypoints whose optimum lets the arm body touch the object are
+re-solved with clearance constraints, and where the straight line in kappa between consecutive
+waypoints (from kappa_meas) cannot be certified clear (:mod:`core.planning.clearance`),
+waypoints are inserted between Algorithm 1's radii. Requests that cannot work raise
+:class:`GraspRefused` with a plain-words reason (:mod:`core.planning.feasibility`).
+
+CLI: ``python -m core.planning.grasp --object X Y R [--json] [--robot soft-arm]`` prints the
+plan; a refusal goes to stderr with exit code 2 (1 if planning failed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import json
+import math
+import sys
+import time
+
+import numpy as np
+import numpy.typing as npt
+
+from core.planning import grasp_solver as gs
+from core.planning.arm_model import ArmModel, wrap
+from core.planning.clearance import certify_lines
+from core.planning.feasibility import (GraspRefused, best_start, check_request, find_final_config,
+                                      seeds_near)
+from core.planning.plan_types import GraspPlan, PlannerConfig, RadiusFailure, format_plan
+
+Array = npt.NDArray[np.float64]
+
+__all__ = ["GraspPlan", "GraspPlanner", "GraspRefused", "PlannerConfig", "RadiusFailure",
+           "format_plan", "plan_grasp"]
+
+_REASONS = {
+    gs.CURVATURE_LIMIT: ("curvature_limit", "the palm cannot lie tangent on this circle within "
+                         "the curvature limits"),
+    gs.NO_CONVERGENCE: ("no_convergence", "the optimiser did not converge"),
+    gs.CLEARANCE: ("clearance", "every configuration found lets the arm touch the object"),
+}
+
+
+@dataclasses.dataclass(eq=False)
+class _Waypoint:
+    radius: float
+    kappa: Array
+    lam: tuple[float, float] | None
+    status: int
+    iterations: int
+    restarts: int
+    ms: float
+    index: int                  # Algorithm 1's i; inserted waypoints carry the next i
+    depth: int = 0              # insertion depth (0 = Algorithm 1's radius)
+    constrained: bool = False
+    clearance: float = math.nan
+    path_clearance: float = math.nan
+    cost: float = math.nan
+    violation: float = math.nan
+    error: complex = 0j         # object-centre point error q - c of the solution
+    detail: str = ""
+    dk: Array | None = None     # d kappa / d r_a at the solution (predictor)
+    dl: tuple[float, float] | None = None
+
+
+def _sweep_detail(path_clearance: float, from_start: bool) -> str:
+    where = ("the arm's current shape to the first waypoint" if from_start
+             else "the previous waypoint")
+    return (f"the motion from {where} would sweep the arm {-path_clearance * 1e3:.1f} mm into "
+            f"the object")
+
+
+class GraspPlanner:
+    """Algorithm 1 for one robot; keeps the model and settings between plans."""
+
+    def __init__(self, robot, config: PlannerConfig | None = None,
+                 solver: gs.SolverOptions = gs.SolverOptions()):
+        self.robot = robot
+        self.config = config if config is not None else PlannerConfig.from_robot(robot)
+        self.model = ArmModel.from_robot(robot)
+        self.solver = solver
+        self.w_along = robot.gripper.w_off_along
+        self.g_off = robot.gripper.g_off
+
+    def _offset(self, radius: float) -> complex:
+        """Tip-frame offset of the object centre when the palm is on a circle of ``radius``."""
+        return complex(self.w_along, self.g_off + radius)
+
+    def plan(self, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
+             delta_d: float | None = None, weights: npt.ArrayLike | None = None) -> GraspPlan:
+        """Plan the approach to a cylinder at ``center`` (x, y) of ``radius``; see the module doc.
+
+        Raises:
+            GraspRefused: the request cannot work; the message says why.
+        """
+        t_start = time.perf_counter()
+        cfg, m = self.config, self.model
+        km = np.asarray(kappa_meas, dtype=float)
+        if km.shape != (m.n,) or not np.isfinite(km).all():
+            raise GraspRefused("bad_input", f"kappa_meas must be {m.n} finite curvatures, "
+                               f"got shape {km.shape}.")
+        ctr = np.asarray(center, dtype=float)
+        if ctr.shape != (2,):
+            raise GraspRefused("bad_input", f"The object centre must be (x, y), got {ctr!r}.")
+        dd = cfg.delta_d if delta_d is None else float(delta_d)
+        if not (math.isfinite(dd) and dd > 0):
+            raise GraspRefused("bad_input", f"delta_d must be a positive distance, got {dd!r}.")
+        w = np.asarray(cfg.weights if weights is None else weights, dtype=float)
+        if w.shape != (m.n,) or not (np.isfinite(w).all() and (w > 0).all()):
+            raise GraspRefused("bad_input", f"weights must be {m.n} positive numbers.")
+        c, r_o = complex(ctr[0], ctr[1]), float(radius)
+        check_request(self.robot, m, km, c, r_o, cfg.base_keepout)
+
+        # Algorithm 1: radii of the approach circles.
+        palm0, _ = m.point_py(km.tolist(), complex(self.w_along, self.g_off))
+        d1 = abs(c - palm0)
+        d2 = d1 - r_o - self.g_off
+        num_moves = max(1, math.floor(d2 / dd))
+        radii = d1 - np.arange(1, num_moves + 1) * d2 / num_moves
+
+        # Warm starts: the first radius from the best table configuration (or kappa_meas);
+        # later radii from the previous waypoint moved along its sensitivity d kappa / d r_a
+        # (the optimal kappa(r_a) is smooth); the plain previous waypoint is the first restart.
+        wps: list[_Waypoint] = []
+        prev: _Waypoint | None = None
+        witness: Array | None = None
+        for i, ra in enumerate(radii.tolist(), start=1):
+            if prev is None:
+                x, lam = km, None
+                x0, lam0 = best_start(m, c, self._offset(ra), km, w, cfg.seed_table), None
+            else:
+                x, lam = prev.kappa, prev.lam
+                x0, lam0 = x, lam
+                if prev.dk is not None:
+                    dr = ra - prev.radius
+                    x0 = np.clip(x + dr * prev.dk, m.lo, m.hi)
+                    lam0 = (lam[0] + dr * prev.dl[0], lam[1] + dr * prev.dl[1])
+            wp = self._solve_radius(c, ra, x0, lam0, km, w, i, first_restart=x,
+                                    tangent=i < num_moves)
+            if wp.status != gs.OK:
+                if witness is None:
+                    witness = self._witness(c, r_o, km, w)
+                prev_r = wps[-1].radius if wps else d1
+                frac = (prev_r - ra) / max(prev_r - radii[-1], 1e-9)
+                wp = self._solve_radius(c, ra, x, lam, km, w, i,
+                                        [x + frac * (witness - x), witness], wp)
+            wps.append(wp)
+            if wp.status == gs.OK:
+                prev = wp
+        wps = self._secure_clearance(wps, km, d1, c, r_o, w)
+        return self._assemble(wps, km, ctr, r_o, d1, d2, num_moves, dd, w, t_start)
+
+    # ------------------------------------------------------------------ per radius
+
+    def _solve_radius(self, c: complex, ra: float, x0: Array, lam0, km: Array, w: Array,
+                      index: int, seeds: list[Array] | None = None,
+                      previous: _Waypoint | None = None,
+                      first_restart: Array | None = None, tangent: bool = True) -> _Waypoint:
+        """findOptimalConfig(r_a): from the warm start, then from restart seeds if that fails.
+
+        With ``previous`` (a failed attempt at this radius) only ``seeds`` are tried and the
+        statistics accumulate on it.
+        """
+        t0 = time.perf_counter()
+        off = self._offset(ra)
+        if previous is None:
+            res = gs.solve(self.model, c, off, x0, km, w, lam0, opts=self.solver,
+                           tangent=tangent)
+            wp = _Waypoint(ra, res.kappa, res.lam, res.status, res.iterations, 0, 0.0, index,
+                           cost=res.cost, violation=res.violation, error=res.error,
+                           dk=res.dkappa_dr, dl=res.dlam_dr)
+            if not res.ok:
+                n = self.config.max_restarts
+                seeds = [] if first_restart is None or first_restart is km else [first_restart]
+                seeds = (seeds + [km] + list(seeds_near(self.model, c, off, n,
+                                                         self.config.seed_table)))[:n]
+        else:
+            wp = previous
+        if wp.status != gs.OK:
+            for s in seeds or []:
+                wp.restarts += 1
+                res = gs.solve(self.model, c, off, s, km, w, opts=self.solver, tangent=True)
+                wp.iterations += res.iterations
+                if res.ok:
+                    wp.kappa, wp.lam, wp.status = res.kappa, res.lam, gs.OK
+                    wp.dk, wp.dl = res.dkappa_dr, res.dlam_dr
+                    wp.cost, wp.violation, wp.detail = res.cost, res.violation, ""
+                    wp.error = res.error
+                    break
+            else:
+                wp.detail = _REASONS[wp.status][1]
+        wp.ms += (time.perf_counter() - t0) * 1e3
+        return wp
+
+    def _witness(self, c: complex, r_o: float, km: Array, w: Array) -> Array:
+        """A final configuration, or GraspRefused('out_of_reach') if none can be found."""
+        cfg = self.config
+        kappa, _ = find_final_config(self.model, c, r_o, self._offset(r_o + self.g_off), km, w,
+                                     cfg.clearance_margin, cfg.seed_table, cfg.max_restarts)
+        if kappa is None:
+            raise GraspRefused(
+                "out_of_reach",
+                f"The object is out of reach: no arm shape within the curvature limit "
+                f"(|kappa| <= {self.model.hi.max():g} 1/m) puts the gripper around it (on the "
+                f"gripper's closing side) with the arm clear of it.")
+        return kappa
+
+    # ------------------------------------------------------------------ clearance
+
+    def _constrained(self, wp: _Waypoint, starts: list[Array], c: complex, r_o: float,
+                     km: Array, w: Array) -> None:
+        """Re-solve a waypoint with arm-body clearance constraints, in place."""
+        t0 = time.perf_counter()
+        clr = gs.Clearance(c, r_o + self.model.half_width + self.config.clearance_margin)
+        for s in starts:
+            res = gs.solve(self.model, c, self._offset(wp.radius), s, km, w, wp.lam, clr,
+                           self.solver)
+            wp.iterations += res.iterations
+            if res.ok:
+                wp.kappa, wp.lam, wp.cost, wp.violation = res.kappa, res.lam, res.cost, \
+                    res.violation
+                wp.error = res.error
+                break
+        else:
+            wp.status = gs.CLEARANCE
+            wp.detail = (f"no configuration on this circle keeps the arm "
+                         f"{self.config.clearance_margin * 1e3:.0f} mm clear of the object")
+        wp.constrained = True
+        wp.ms += (time.perf_counter() - t0) * 1e3
+
+    def _secure_clearance(self, wps: list[_Waypoint], km: Array, d1: float, c: complex,
+                          r_o: float, w: Array) -> list[_Waypoint]:
+        """Make every waypoint and every straight line in kappa between them clear the object.
+
+        Waypoints closer than the margin are re-solved with clearance constraints; lines whose
+        certified clearance is negative get waypoints inserted on intermediate circles.
+        """
+        cfg, m = self.config, self.model
+        cert = None
+        for _ in range(2):
+            good = [p for p in wps if p.status == gs.OK]
+            if not good:
+                return wps
+            chain = np.array([km] + [p.kappa for p in good])
+            cert = certify_lines(m, chain[:-1], chain[1:], c, r_o, 0.0, cfg.line_samples)
+            changed = False
+            prev_k = km
+            for p, gap in zip(good, cert.end_clearance.tolist()):
+                p.clearance = gap
+                if gap < cfg.clearance_margin - 1e-9 and not p.constrained:
+                    self._constrained(p, [p.kappa, prev_k], c, r_o, km, w)
+                    changed = True
+                if p.status == gs.OK:
+                    prev_k = p.kappa
+            if not changed:
+                break
+        out: list[_Waypoint] = []
+        prev_k, prev_r = km, d1
+        k = 0
+        for p in wps:
+            if p.status == gs.OK:
+                p.path_clearance = float(cert.lower_bound[k])
+                k += 1
+                if p.path_clearance < 0.0:
+                    out += self._bridge(prev_k, prev_r, p, 1, c, r_o, km, w)
+                prev_k, prev_r = p.kappa, p.radius
+            out.append(p)
+        return out
+
+    def _bridge(self, ka: Array, ra: float, p: _Waypoint, depth: int, c: complex, r_o: float,
+                km: Array, w: Array) -> list[_Waypoint]:
+        """Waypoints on circles between r_a and ``p`` so every straight line in kappa is clear.
+
+        Bisects the radius: the midpoint waypoint is solved from the midpoint of the line; the
+        two halves are certified and bisected again, up to ``max_insertions`` levels. When the
+        depth runs out, the waypoint at the end of the failing line is marked ``clearance``.
+        """
+        cfg, m = self.config, self.model
+        mid = self._solve_radius(c, 0.5 * (ra + p.radius), 0.5 * (ka + p.kappa), p.lam, km, w,
+                                 p.index)
+        mid.depth = depth
+        if mid.status == gs.OK:
+            mid.clearance = m.clearance_py(mid.kappa.tolist(), c, r_o)
+            if mid.clearance < cfg.clearance_margin - 1e-9:
+                self._constrained(mid, [mid.kappa, ka, p.kappa], c, r_o, km, w)
+                mid.clearance = m.clearance_py(mid.kappa.tolist(), c, r_o)
+        if mid.status != gs.OK:
+            p.status = gs.CLEARANCE
+            p.detail = _sweep_detail(p.path_clearance, ka is km) + (
+                ", and no waypoint in between could be found")
+            return []
+        cert = certify_lines(m, np.array([ka, mid.kappa]), np.array([mid.kappa, p.kappa]), c,
+                             r_o, 0.0, cfg.line_samples)
+        mid.path_clearance, p.path_clearance = (float(v) for v in cert.lower_bound)
+        out: list[_Waypoint] = []
+        for lo_k, lo_r, hi_wp in ((ka, ra, mid), (mid.kappa, mid.radius, p)):
+            if hi_wp.path_clearance < 0.0:
+                if depth < cfg.max_insertions:
+                    out += self._bridge(lo_k, lo_r, hi_wp, depth + 1, c, r_o, km, w)
+                else:
+                    hi_wp.status = gs.CLEARANCE
+                    hi_wp.detail = _sweep_detail(hi_wp.path_clearance, lo_k is km)
+            if hi_wp is mid:
+                out.append(mid)
+        return out
+
+    # ------------------------------------------------------------------ result
+
+    def _assemble(self, wps: list[_Waypoint], km: Array, ctr: Array, r_o: float, d1: float,
+                  d2: float, num_moves: int, dd: float, w: Array, t_start: float) -> GraspPlan:
+        m = self.model
+        kappas = np.array([p.kappa for p in wps]).reshape(len(wps), m.n)
+        radii = np.array([p.radius for p in wps])
+        # Palm point = object-centre point - r_a * (left normal): q_palm = c + (q - c) - i r e^{i th}.
+        th = kappas @ m.lengths + m.theta0
+        q = complex(ctr[0], ctr[1]) + np.array([p.error for p in wps]) - 1j * radii * np.exp(
+            1j * th)
+        failures = []
+        for p in wps:
+            if p.status != gs.OK:
+                name = _REASONS[p.status][0]
+                failures.append(RadiusFailure(p.index, p.radius, name, p.detail))
+        status = tuple("ok" if p.status == gs.OK else _REASONS[p.status][0] for p in wps)
+        arr = lambda attr, dt=float: np.array([getattr(p, attr) for p in wps], dtype=dt)  # noqa
+        return GraspPlan(
+            center=ctr.copy(), radius=r_o, kappa_meas=km.copy(), d1=d1, d2=d2,
+            num_moves=num_moves, delta_d=dd, weights=w.copy(), radii=radii,
+            phis=np.asarray(wrap(th - 0.5 * np.pi), float), kappas=kappas,
+            palm_poses=np.column_stack([q.real, q.imag, th]),
+            clearance=arr("clearance"), path_clearance=arr("path_clearance"),
+            inserted=arr("depth", int) > 0, clearance_constrained=arr("constrained", bool),
+            iterations=arr("iterations", int), restarts=arr("restarts", int),
+            solve_ms=arr("ms"), cost=arr("cost"), violation=arr("violation"), status=status,
+            failures=tuple(failures), total_ms=(time.perf_counter() - t_start) * 1e3)
+
+
+class _Identity:
+    """Hashable by identity, so a planner can be memoised per robot object."""
+
+    def __init__(self, obj):
+        self.obj = obj
+
+    def __hash__(self) -> int:
+        return id(self.obj)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, _Identity) and other.obj is self.obj
+
+
+@functools.lru_cache(maxsize=4)
+def _planner_for(key: _Identity) -> GraspPlanner:
+    return GraspPlanner(key.obj)
+
+
+def plan_grasp(robot, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
+               delta_d: float | None = None, weights: npt.ArrayLike | None = None) -> GraspPlan:
+    """Plan the approach to an object (Algorithm 1); see :class:`GraspPlanner`.
+
+    Args:
+        robot: A :class:`core.robots.SoftArm`.
+        kappa_meas: Measured curvatures (N,), also the cost's kappa_off.
+        center: Object centre (x, y) in m.
+        radius: Object radius r_o in m.
+        delta_d: Allowable incremental distance (default: the robot file's).
+        weights: Cost weights R (N,) (default: the robot file's).
+
+    Raises:
+        GraspRefused: (a ValueError) when the grasp cannot work; the message says why.
+    """
+    return _planner_for(_Identity(robot)).plan(kappa_meas, center, radius, delta_d=delta_d,
+                                               weights=weights)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit code."""
+    from core import robots
+
+    ap = argparse.ArgumentParser(prog="python -m core.planning.grasp", description=__doc__
+                                 .split("\n")[0])
+    ap.add_argument("--object", nargs=3, type=float, metavar=("X", "Y", "R"), required=True,
+                    help="object centre x, y and radius r_o (m)")
+    ap.add_argument("--robot", default="soft-arm", help="robot name or TOML path")
+    ap.add_argument("--kappa", nargs="+", type=float, help="measured curvatures (default 0)")
+    ap.add_argument("--delta-d", type=float, help="allowable incremental distance (m)")
+    ap.add_argument("--json", action="store_true", help="print the plan as JSON")
+    args = ap.parse_args(argv)
+    try:
+        robot = robots.load(args.robot)
+        km = np.zeros(robot.n_segments) if args.kappa is None else np.array(args.kappa)
+        plan = plan_grasp(robot, km, args.object[:2], args.object[2], delta_d=args.delta_d)
+    except GraspRefused as exc:
+        print(f"refused ({exc.reason}): {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(plan.to_dict(), indent=1) if args.json else format_plan(plan))
+    if not plan.success:
+        print(f"planning failed: {plan.summary()}", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

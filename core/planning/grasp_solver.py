@@ -1,0 +1,355 @@
+"""SQP for findOptimalConfig (Algorithm 1): exact Hessian, active set on the bounds, l1 merit.
+
+The paper's problem over (kappa, phi) has three equalities: palm point on the approach circle
+and palm heading ``phi + pi/2``. The heading equality fixes ``phi = theta_tip - pi/2`` exactly,
+and then "palm point = c + r_a (cos phi, sin phi)" is the same as "the tip-frame point at offset
+(w_along, g_off + r_a) equals c" (c lies r_a to the palm's left). So a waypoint solves
+
+    min_kappa  sum_n R_n (kappa_n - kappa_off_n)^2
+    s.t.       q(kappa) = c                       (2 equalities; q, c complex)
+               lo <= kappa <= hi
+               dist(arc_j(kappa), c) >= rho       (optional: arm-body clearance, per segment)
+
+with N = 6 variables. Each iteration forms the exact Lagrangian Hessian in closed form (see
+:mod:`core.planning.arm_model`), solves the QP by a primal-dual active-set method on one small
+KKT system (variables fixed at a bound and inactive clearance rows become identity rows) and
+globalises with an l1 merit, Armijo backtracking and a second-order correction; negative
+curvature along a step is removed by a diagonal shift and a re-solve.
+
+Speed: the kinematics, Jacobian and Hessian come from the scalar kernel in
+:mod:`core.planning.solver_kernel` (with N = 6, Python complex scalars beat 1-D numpy calls by
+about 3x) and only the KKT solve goes to LAPACK.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from operator import mul
+
+import numpy as np
+import numpy.typing as npt
+
+from core.planning.arm_model import ArmModel
+from core.planning.solver_kernel import Kernel, PointEval, kkt_solve, unit_rows
+
+Array = npt.NDArray[np.float64]
+
+OK, NO_CONVERGENCE, CURVATURE_LIMIT, CLEARANCE = 0, 1, 2, 3
+STATUS_NAMES = ("ok", "no_convergence", "curvature_limit", "clearance")
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """Tolerances and limits; the defaults converge far below the paper's 2e-3 tolerance."""
+
+    max_iter: int = 40
+    ctol: float = 1e-8           # m, equality violation counted as converged
+    xtol: float = 1e-8           # 1/m, last step size counted as converged
+    gtol: float = 1e-6           # relative Lagrangian-gradient norm counted as converged
+    max_qp_iter: int = 12
+    armijo: float = 1e-4
+    min_alpha: float = 1e-4
+    clearance_tol: float = 1e-9  # m
+    max_step: float = 16.0       # 1/m, longest curvature step per iteration (damping)
+
+
+@dataclasses.dataclass
+class SolveResult:
+    """Result of one waypoint solve."""
+
+    kappa: Array
+    lam: tuple[float, float]  # multipliers of the two palm-point equalities
+    status: int               # OK / NO_CONVERGENCE / CURVATURE_LIMIT / CLEARANCE
+    iterations: int
+    violation: float          # max |palm point - circle point| (m)
+    cost: float
+    active: tuple[int, ...]   # per kappa: -1 at the lower bound, +1 at the upper, 0 free
+    error: complex = 0j                    # q - c: object-centre point error (complex)
+    dkappa_dr: Array | None = None         # sensitivity of the solution to the circle radius
+    dlam_dr: tuple[float, float] | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+
+@dataclasses.dataclass(frozen=True)
+class Clearance:
+    """Arm-body clearance constraints: every segment's arc stays >= rho from ``center``."""
+
+    center: complex
+    rho: float
+
+
+def _restore(kn: Kernel, p: PointEval, Jx: list[float], Jy: list[float],
+             opts: SolverOptions) -> PointEval | None:
+    """Feasibility restoration: min-norm Gauss-Newton step on |q - c|, damped and backtracked
+    until the violation drops by 1e-4 relative; None when it cannot."""
+    axx = sum(map(mul, Jx, Jx))
+    ayy = sum(map(mul, Jy, Jy))
+    axy = sum(map(mul, Jx, Jy))
+    reg = 1e-6 * (axx + ayy) + 1e-16
+    axx, ayy = axx + reg, ayy + reg
+    det = axx * ayy - axy * axy
+    ex, ey = p.e.real, p.e.imag
+    zx = (ayy * ex - axy * ey) / det
+    zy = (axx * ey - axy * ex) / det
+    d = [-(a * zx + b * zy) for a, b in zip(Jx, Jy)]
+    big = max(map(abs, d))
+    if big > opts.max_step:
+        d = [v * opts.max_step / big for v in d]
+    alpha = 1.0
+    while alpha > 1e-3:
+        cand = PointEval(kn, [min(max(xj + alpha * dj, a), b)
+                           for xj, dj, a, b in zip(p.x, d, kn.lo, kn.hi)])
+        if cand.viol < (1.0 - 1e-4) * p.viol:
+            return cand
+        alpha *= 0.5
+    return None
+
+
+def solve(
+    model: ArmModel,
+    center: complex,
+    offset: complex,
+    kappa0: Array,
+    kappa_off: Array,
+    weights: Array,
+    lam0: tuple[float, float] | None = None,
+    clearance: Clearance | None = None,
+    opts: SolverOptions = SolverOptions(),
+    tangent: bool = False,
+) -> SolveResult:
+    """Solve one findOptimalConfig problem from ``kappa0``.
+
+    Args:
+        model: Arm model.
+        center: Object centre (complex).
+        offset: Tip-frame offset ``w_along + i (g_off + r_a)`` of the object centre.
+        kappa0: (N,) start (clipped into the bounds); e.g. the previous waypoint.
+        kappa_off: (N,) curvatures the cost pulls towards (kappa_meas at the start).
+        weights: (N,) cost weights R_n > 0.
+        lam0: Multiplier guess for the two equalities (e.g. the previous waypoint's).
+        clearance: Optional arm-body clearance constraints.
+        opts: Tolerances.
+        tangent: Also return d kappa / d r_a at the solution (a predictor for the next radius).
+
+    Returns:
+        :class:`SolveResult`.
+    """
+    kn = Kernel(model, center, offset, kappa_off, weights, clearance)
+    n, lo, hi, w2, xo = kn.n, kn.lo, kn.hi, kn.w2, kn.xo
+    wmax = max(w2)
+    nc = n if clearance is not None else 0
+    nk = n + 2 + nc
+    x = [min(max(v, a), b) for v, a, b in zip(np.asarray(kappa0, float).tolist(), lo, hi)]
+    lam = (0.0, 0.0) if lam0 is None else (float(lam0[0]), float(lam0[1]))
+    act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, lo, hi)]
+    cact = [False] * nc
+    mu = 0.0
+    status = NO_CONVERGENCE
+    p = PointEval(kn, x)
+    it = 0
+    unit = unit_rows(nk)
+    reg_x = [-1e-13, 0.0] + [0.0] * nc
+    reg_y = [0.0, -1e-13] + [0.0] * nc
+    zeros_c = [0.0] * (2 + nc)
+    G = hc = nu = None
+    W = []
+    for it in range(1, opts.max_iter + 1):
+        J = p.J
+        Jx = [v.real for v in J]
+        Jy = [v.imag for v in J]
+        ex, ey = p.e.real, p.e.imag
+        grad = [a * (b - c) for a, b, c in zip(w2, x, xo)]
+        W = kn.kkt_rows(p, lam)
+        if nc:
+            pts, Jp = model.arc_points(np.array(x)[None], p.sstar)
+            u = pts[0] - clearance.center
+            u = np.conj(u / np.maximum(np.abs(u), 1e-12))
+            G = (u[:, None] * Jp[0]).real.tolist()
+            hc = (p.dist - clearance.rho).tolist()
+            for j in range(n):
+                W[j] += [-g[j] for g in G]
+        shift = 0.0
+        for _ in range(opts.max_qp_iter):
+            if any(act) or shift:
+                rows, rhs = [], []
+                for j in range(n):
+                    if act[j]:
+                        rows.append(unit[j])
+                        rhs.append((lo[j] if act[j] < 0 else hi[j]) - x[j])
+                    else:
+                        if shift:
+                            row = list(W[j])
+                            row[j] += shift
+                            rows.append(row)
+                        else:
+                            rows.append(W[j])
+                        rhs.append(-grad[j])
+            else:
+                rows = list(W)
+                rhs = [-g for g in grad]
+            rows.append(Jx + reg_x)
+            rows.append(Jy + reg_y)
+            rhs += [-ex, -ey]
+            for i in range(nc):
+                if cact[i]:
+                    rows.append(G[i] + zeros_c)
+                    rhs.append(-hc[i])
+                else:
+                    rows.append(unit[n + 2 + i])
+                    rhs.append(0.0)
+            sol = kkt_solve(rows, rhs)
+            d = sol[:n]
+            l0, l1 = sol[n], sol[n + 1]
+            if not (nc or shift or any(act)):
+                # Common case, nothing active: the bound multipliers are all zero.
+                gd = sum(map(mul, grad, d))
+                jxd = sum(map(mul, Jx, d))
+                jyd = sum(map(mul, Jy, d))
+                dd = sum(map(mul, d, d))
+                if dd > 1e-30 and l0 * jxd + l1 * jyd - gd <= 1e-12 * wmax * dd:
+                    shift = wmax  # negative curvature along d: shift, re-solve
+                    continue
+                changed = False
+                for j in range(n):
+                    if d[j] < lo[j] - x[j] - 1e-12:
+                        act[j], changed = -1, True
+                    elif d[j] > hi[j] - x[j] + 1e-12:
+                        act[j], changed = 1, True
+                if not changed:
+                    break
+                continue
+            if nc:
+                nu = sol[n + 2:]
+            # Bound multipliers wb = (W + shift) d + grad - J^T lam - G^T nu (zero when free).
+            wb = [0.0] * n
+            for j in range(n):
+                if act[j]:
+                    Wj = W[j]
+                    v = sum(map(mul, Wj[:n], d)) + shift * d[j] + grad[j] - Jx[j] * l0 - Jy[j] * l1
+                    if nc:
+                        v -= sum(g[j] * nu_i for g, nu_i in zip(G, nu))
+                    wb[j] = v
+            gd = sum(map(mul, grad, d))
+            jxd = sum(map(mul, Jx, d))
+            jyd = sum(map(mul, Jy, d))
+            dd = sum(map(mul, d, d))
+            # Curvature along d: d^T (W + shift) d = d . wb - grad . d + J^T lam . d (+ G^T nu . d).
+            curv = sum(map(mul, d, wb)) - gd + l0 * jxd + l1 * jyd
+            if nc:
+                gdots = [sum(map(mul, g, d)) for g in G]
+                curv += sum(map(mul, nu, gdots))
+            if dd > 1e-30 and curv <= 1e-12 * wmax * dd and shift < 1e6 * wmax:
+                shift = max(2.0 * shift, wmax)  # negative curvature along d: shift, re-solve
+                continue
+            changed = False
+            for i in range(nc):
+                new = (nu[i] >= 0.0) if cact[i] else (hc[i] + gdots[i] < -opts.clearance_tol)
+                if new != cact[i]:
+                    changed = True
+                    cact[i] = new
+            for j in range(n):
+                a = act[j]
+                if a == 0:
+                    dj = d[j]
+                    if dj < lo[j] - x[j] - 1e-12:
+                        act[j], changed = -1, True
+                    elif dj > hi[j] - x[j] + 1e-12:
+                        act[j], changed = 1, True
+                elif (a < 0 and wb[j] < 0.0) or (a > 0 and wb[j] > 0.0):
+                    act[j], changed = 0, True
+            if not changed:
+                break
+        # Damping: a step longer than max_step is shortened (far from the solution the
+        # linearisation is poor and a full step lands on the bounds). Scaling keeps the step in
+        # the box and scales the model decrease D by the same factor.
+        big = max(map(abs, d))
+        scale = opts.max_step / big if big > opts.max_step else 1.0
+        if scale < 1.0:
+            d = [v * scale for v in d]
+        xt = [min(max(xj + dj, a), b) for xj, dj, a, b in zip(x, d, lo, hi)]
+        # ---- l1 merit line search
+        vlin = abs(ex + scale * jxd) + abs(ey + scale * jyd)
+        mult = max(abs(l0), abs(l1))
+        if nc:
+            vlin += sum(max(0.0, -(h + scale * gd_i)) for h, gd_i in zip(hc, gdots))
+            mult = max(mult, max(map(abs, nu)))
+        mu = max(mu, 1.5 * mult + 1e-8)
+        phi0 = p.f + mu * p.viol
+        D = min(scale * gd - mu * (p.viol - vlin), 0.0)
+        trial = PointEval(kn, xt)
+        accepted = trial.f + mu * trial.viol <= phi0 + opts.armijo * D
+        if not accepted:
+            # Second-order correction: min-norm step back onto the linearised constraints.
+            axx = sum(map(mul, Jx, Jx)) + 1e-14
+            ayy = sum(map(mul, Jy, Jy)) + 1e-14
+            axy = sum(map(mul, Jx, Jy))
+            det = axx * ayy - axy * axy
+            tx, ty = trial.e.real, trial.e.imag
+            zx = (ayy * tx - axy * ty) / det
+            zy = (axx * ty - axy * tx) / det
+            soc = [min(max(t - a * zx - b * zy, l_), h_)
+                   for t, a, b, l_, h_ in zip(xt, Jx, Jy, lo, hi)]
+            cand = PointEval(kn, soc)
+            if cand.f + mu * cand.viol <= phi0 + opts.armijo * D:
+                trial, accepted = cand, True
+            alpha = 1.0
+            while not accepted and alpha > opts.min_alpha:
+                alpha *= 0.5
+                trial = PointEval(kn, [a + alpha * (b - a) for a, b in zip(x, xt)])
+                accepted = trial.f + mu * trial.viol <= phi0 + opts.armijo * alpha * D
+        if not accepted:
+            # Restoration: a damped Gauss-Newton step on the constraint violation alone, then
+            # SQP again with fresh multipliers. If even that cannot reduce the violation, the
+            # palm cannot get closer to the circle from here within the bounds.
+            trial = _restore(kn, p, Jx, Jy, opts)
+            if trial is None:
+                status = CURVATURE_LIMIT
+                break
+            x, p, lam, mu = trial.x, trial, (0.0, 0.0), 0.0
+            act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, lo, hi)]
+            continue
+        step = max(map(abs, map(float.__sub__, trial.x, x)))
+        x, p, lam = trial.x, trial, (l0, l1)
+        e = p.e
+        if abs(e.real) <= opts.ctol and abs(e.imag) <= opts.ctol and (
+                not nc or float((p.dist - clearance.rho).min()) >= -opts.clearance_tol):
+            # KKT test at the new point with the QP's multipliers (Newton-accurate): the
+            # gradient of the Lagrangian must vanish on the free variables.
+            gmax = 0.0
+            scale = 1.0
+            for j, (wj, xj, oj, Jj) in enumerate(zip(w2, x, xo, p.J)):
+                gj = wj * (xj - oj)
+                scale = max(scale, abs(gj))
+                if not act[j]:
+                    r = gj - Jj.real * l0 - Jj.imag * l1
+                    if nc:
+                        r -= sum(g[j] * nu_i for g, nu_i in zip(G, nu))
+                    gmax = max(gmax, abs(r))
+            if gmax <= opts.gtol * scale or step <= opts.xtol:
+                status = OK
+                break
+    viol = max(abs(p.e.real), abs(p.e.imag))
+    if status == NO_CONVERGENCE and any(act) and viol > opts.ctol:
+        status = CURVATURE_LIMIT
+    result = SolveResult(np.array(x), lam, status, it, viol, p.f, tuple(act), p.e)
+    if status == OK and tangent and not nc:
+        # Solution sensitivity to r_a: differentiate the KKT conditions with the active set
+        # fixed. The offset's left part grows with r_a, so d q / d r_a = i exp(i theta) and
+        # d J_j / d r_a = i L_j (i exp(i theta)) = -L_j exp(i theta); hence
+        # W dk - J^T dlam = (dJ/dr)^T lam on the free rows and J dk = -i exp(i theta).
+        h = p.heading
+        lam_h = -(lam[0] * h.real + lam[1] * h.imag)
+        rows, rhs = [], []
+        for j in range(n):
+            rows.append(unit[j] if act[j] else W[j])
+            rhs.append(0.0 if act[j] else kn.L[j] * lam_h)
+        rows.append([v.real for v in p.J] + [-1e-13, 0.0])
+        rows.append([v.imag for v in p.J] + [0.0, -1e-13])
+        rhs += [p.heading.imag, -p.heading.real]
+        sol = kkt_solve(rows, rhs)
+        result.dkappa_dr = np.array(sol[:n])
+        result.dlam_dr = (sol[n], sol[n + 1])
+    return result

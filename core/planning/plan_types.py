@@ -1,0 +1,212 @@
+"""Data types of the grasp planner: its settings (from the robot file) and the plan it returns."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannerConfig:
+    """Planner settings, read from the robot file's ``[planner]`` table.
+
+    Attributes:
+        delta_d: Allowable incremental distance between approach circles (m) [paper].
+        constraint_tolerance: The paper's solver tolerance on the constraints (2e-3) [paper]; the
+            baselines are judged by it. This planner converges to 1e-8 m, far inside it.
+        weights: Cost weights R_n, one per segment.
+        clearance_margin: Gap the arm body keeps from the object at waypoints (m).
+        base_keepout: Objects closer than this (plus their radius) to the base are refused (m).
+        max_restarts: Extra starts tried when the warm-started solve of a radius fails.
+        max_insertions: Bisection depth of waypoints inserted where a straight line in kappa
+            between two waypoints would touch the object.
+        line_samples: Initial samples per line for the clearance certificate.
+        seed_table: Size of the cached table of sampled configurations used for restarts.
+    """
+
+    delta_d: float
+    constraint_tolerance: float
+    weights: tuple[float, ...]
+    clearance_margin: float = 0.002
+    base_keepout: float = 0.03
+    max_restarts: int = 6
+    max_insertions: int = 3
+    line_samples: int = 8
+    seed_table: int = 2048
+
+    @classmethod
+    def from_robot(cls, robot) -> "PlannerConfig":
+        """Read ``[planner]`` of a soft-arm description; unknown keys are ignored."""
+        table = dict(robot.raw.get("planner", {}))
+        n = robot.n_segments
+        weights = table.get("weights", 1.0)
+        if isinstance(weights, (int, float)) and not isinstance(weights, bool):
+            weights = [float(weights)] * n
+        kw: dict[str, Any] = {
+            "delta_d": robot.delta_d,
+            "constraint_tolerance": robot.constraint_tolerance,
+            "weights": tuple(float(v) for v in weights),
+        }
+        for f in dataclasses.fields(cls):
+            if f.name in table and f.name not in kw:
+                kw[f.name] = type(f.default)(table[f.name])
+        cfg = cls(**kw)
+        cfg.validate(n)
+        return cfg
+
+    def validate(self, n: int) -> None:
+        """Raise ValueError naming the bad setting."""
+        if len(self.weights) != n or not all(math.isfinite(w) and w > 0 for w in self.weights):
+            raise ValueError(f"planner.weights: need {n} positive numbers, got {self.weights}")
+        for name in ("delta_d", "constraint_tolerance"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"planner.{name}: must be > 0, got {v!r}")
+        for name in ("clearance_margin", "base_keepout"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"planner.{name}: must be >= 0, got {v!r}")
+        for name in ("max_restarts", "max_insertions", "line_samples", "seed_table"):
+            if getattr(self, name) < (1 if name in ("line_samples", "seed_table") else 0):
+                raise ValueError(f"planner.{name}: too small, got {getattr(self, name)!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class RadiusFailure:
+    """Why an approach radius of Algorithm 1 could not be planned.
+
+    Attributes:
+        index: Algorithm 1's i (1-based).
+        radius: r_a,i (m).
+        reason: ``curvature_limit`` (the palm cannot reach the circle tangentially within the
+            curvature limits), ``clearance`` (only configurations or motions touching the
+            object were found), or ``no_convergence`` (the solver ran out of iterations).
+        detail: One sentence for the operator.
+    """
+
+    index: int
+    radius: float
+    reason: str
+    detail: str
+
+
+@dataclasses.dataclass(frozen=True)
+class GraspPlan:
+    """Approach waypoints for one object, in execution order, with their diagnostics.
+
+    Waypoint arrays have one row per waypoint. Waypoints inserted by the planner between
+    Algorithm 1's radii (to keep the swept path clear of the object) have ``inserted`` True;
+    ``radii[~inserted]`` are exactly Algorithm 1's r_a,i = d1 - i d2 / numMoves.
+
+    Attributes:
+        center, radius: Object centre (2,) and radius.
+        kappa_meas: Start configuration (N,) (also kappa_off of the cost).
+        d1, d2, num_moves, delta_d: Algorithm 1's quantities.
+        weights: Cost weights R (N,).
+        radii: (n,) approach radii r_a.
+        phis: (n,) angle of the palm point on its circle (rad); palm heading is phi + pi/2.
+        kappas: (n, N) waypoint curvatures.
+        palm_poses: (n, 3) [x, y, theta] of the palm point w_t.
+        clearance: (n,) gap between the arm body and the object's disk at each waypoint (m).
+        path_clearance: (n,) certified lower bound of that gap along the straight line in kappa
+            from the previous waypoint (kappa_meas for the first) to this one (m).
+        inserted, clearance_constrained: (n,) flags: waypoint added by the planner; waypoint
+            re-solved with clearance constraints because the plain optimum touched the object.
+        iterations, restarts: (n,) solver iterations (all attempts) and extra starts used.
+        solve_ms, cost, violation: (n,) solve time, cost sum R (kappa - kappa_off)^2 and
+            palm-point error (m).
+        status: (n,) ``ok`` or a failure reason per waypoint.
+        failures: Failed radii with reasons.
+        total_ms: Wall time of the whole plan.
+    """
+
+    center: Array
+    radius: float
+    kappa_meas: Array
+    d1: float
+    d2: float
+    num_moves: int
+    delta_d: float
+    weights: Array
+    radii: Array
+    phis: Array
+    kappas: Array
+    palm_poses: Array
+    clearance: Array
+    path_clearance: Array
+    inserted: npt.NDArray[np.bool_]
+    clearance_constrained: npt.NDArray[np.bool_]
+    iterations: npt.NDArray[np.int64]
+    restarts: npt.NDArray[np.int64]
+    solve_ms: Array
+    cost: Array
+    violation: Array
+    status: tuple[str, ...]
+    failures: tuple[RadiusFailure, ...]
+    total_ms: float
+
+    @property
+    def n(self) -> int:
+        """Number of waypoints."""
+        return int(self.radii.shape[0])
+
+    @property
+    def success(self) -> bool:
+        """True when every waypoint was planned and every motion between them is clear."""
+        return not self.failures
+
+    @property
+    def circles(self) -> Array:
+        """(n, 3) approach circles [cx, cy, r_a]."""
+        return np.column_stack([np.broadcast_to(self.center, (self.n, 2)), self.radii])
+
+    def summary(self) -> str:
+        """One line for the operator, e.g. ``5 waypoints, 1.2 ms``."""
+        text = f"{self.n} waypoints, {self.total_ms:.1f} ms"
+        if self.failures:
+            f = self.failures[0]
+            text += f"; FAILED at radius {f.index} ({f.reason}): {f.detail}"
+        return text
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (arrays as lists)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, np.ndarray):
+                v = v.tolist()
+            elif f.name == "failures":
+                v = [dataclasses.asdict(x) for x in v]
+            elif f.name == "status":
+                v = list(v)
+            out[f.name] = v
+        out["success"] = self.success
+        out["circles"] = self.circles.tolist()
+        return out
+
+
+def format_plan(plan: GraspPlan) -> str:
+    """Human-readable table of a plan's waypoints."""
+    cx, cy = plan.center
+    lines = [f"Object at ({cx:.3f}, {cy:.3f}) m, r = {plan.radius * 100:.1f} cm: {plan.summary()}",
+             f"d1 = {plan.d1:.4f} m, d2 = {plan.d2:.4f} m, numMoves = {plan.num_moves}, "
+             f"delta_d = {plan.delta_d:.3f} m",
+             f"{'#':>2} {'r_a[m]':>7} {'phi[deg]':>8}  {'kappa [1/m]':^41}  {'palm x':>7} "
+             f"{'palm y':>7} {'th[deg]':>7} {'clr[mm]':>7} {'path[mm]':>8} {'it':>3}  status"]
+    for k in range(plan.n):
+        kap = " ".join(f"{v:6.2f}" for v in plan.kappas[k])
+        px, py, pt = plan.palm_poses[k]
+        tag = "+" if plan.inserted[k] else " "
+        lines.append(
+            f"{k + 1:>2}{tag}{plan.radii[k]:7.4f} {math.degrees(plan.phis[k]):8.1f}  {kap}  "
+            f"{px:7.4f} {py:7.4f} {math.degrees(pt):7.1f} {plan.clearance[k] * 1e3:7.1f} "
+            f"{plan.path_clearance[k] * 1e3:8.1f} {plan.iterations[k]:3d}  {plan.status[k]}")
+    if plan.inserted.any():
+        lines.append("+ inserted between Algorithm 1's radii to keep the swept path clear")
+    return "\n".join(lines)

@@ -1,0 +1,195 @@
+"""Browser tests of the grasp-planning console: click to place, plan, step through, refusals.
+
+serve.py runs in a subprocess with the grasp panels composed (a launcher adds
+``console.panels.planner.grasp_panels()`` to ``serve.ConsoleApp`` unless the app already has
+them). Chromium clicks the 3D canvas where the table point (-0.15, 0.25) appears (projected with
+the console's own camera set-up), the new object must land there (the click ray meets z = 0),
+"Plan grasp" must report Algorithm 1's number of waypoints (computed here with
+``plan_grasp``), stepping must reach the last waypoint on the final circle r_o + g_off, and an
+object moved out of reach must show the reason. Screenshots go to ``artifacts/``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from core.planning.grasp import plan_grasp
+from core.robots import load
+
+pytestmark = pytest.mark.browser
+REPO = Path(__file__).resolve().parent.parent
+ROBOT = load("soft-arm")
+LAUNCHER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {repo!r})
+    import serve
+    from console.app import ConsoleApp
+    from console.panels.planner import grasp_panels
+
+
+    class App(ConsoleApp):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            for cls in grasp_panels():
+                try:
+                    self.panel(cls)
+                except KeyError:
+                    self.add_panel(cls)
+
+
+    if __name__ == "__main__":
+        serve.ConsoleApp = App
+        sys.exit(serve.main(sys.argv[1:]))
+""")
+
+
+@pytest.fixture
+def grasp_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[Callable[[], str]]:
+    """serve.py for the soft arm with the grasp panels composed; returns its URL."""
+    procs: list[subprocess.Popen[bytes]] = []
+
+    def start() -> str:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        launcher = tmp_path / "launch_grasp.py"
+        launcher.write_text(LAUNCHER.format(repo=str(REPO)))
+        log = artifacts_dir / f"serve-grasp-{port}.log"
+        with log.open("wb") as out:
+            proc = subprocess.Popen([sys.executable, str(launcher), "--robot", "soft-arm",
+                                     "--host", "127.0.0.1", "--port", str(port)],
+                                    cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+        procs.append(proc)
+        url = f"http://127.0.0.1:{port}/"
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline:
+            if proc.poll() is not None:
+                pytest.fail(f"serve.py exited with {proc.returncode}:\n{log.read_text()}")
+            try:
+                with urllib.request.urlopen(url, timeout=1.0) as resp:
+                    if resp.status == 200:
+                        return url
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
+                time.sleep(0.1)
+        pytest.fail(f"serve.py did not serve {url}:\n{log.read_text()}")
+
+    yield start
+    for proc in procs:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+
+
+def project(point, width: float, height: float) -> tuple[float, float]:
+    """Pixel of a world point for the console's initial camera (console.app._setup_camera)."""
+    span = ROBOT.n_segments * ROBOT.segment_length + ROBOT.gripper.length
+    eye = np.array([0.55 * span, -1.25 * span, 1.75 * span])
+    look = np.array([0.3 * span, 0.32 * span, 0.0])
+    f = (look - eye) / np.linalg.norm(look - eye)
+    r = np.cross(f, [0.0, 0.0, 1.0])
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    d = np.asarray(point, float) - eye
+    t = math.tan(math.radians(50.0) / 2)
+    x, y = (d @ r) / ((d @ f) * t * width / height), (d @ u) / ((d @ f) * t)
+    return (x + 1) / 2 * width, (1 - y) / 2 * height
+
+
+def summary(page):
+    return page.locator('[data-testid="plan-summary"]')
+
+
+def wait_state(page, states: tuple[str, ...], timeout: float = 15.0) -> str:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        state = summary(page).get_attribute("data-state")
+        if state in states:
+            return state
+        time.sleep(0.05)
+    raise AssertionError(f"summary state {summary(page).get_attribute('data-state')!r} "
+                         f"not in {states}: {summary(page).inner_text()}")
+
+
+def number(page, label: str):
+    return page.get_by_label(label, exact=True)
+
+
+def open_console(page, url: str) -> None:
+    page.goto(url)
+    page.get_by_text("Grasp planner", exact=True).wait_for(timeout=20_000)
+    wait_state(page, ("ok",), timeout=20)          # the demo object is planned at start
+    # Close notifications (they can cover the canvas); some close on their own meanwhile.
+    for notice in page.locator(".mantine-Notification-root").all():
+        try:
+            notice.locator("button").first.click(timeout=2_000)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+
+
+def test_click_to_place_plan_step_to_the_last_waypoint_and_refusal(
+        page, grasp_console, artifacts_dir: Path) -> None:
+    open_console(page, grasp_console())
+    info = page.locator('[data-testid="objects-info"]')
+    assert info.inner_text().startswith("1 object")
+    box = page.locator("canvas").first.bounding_box()
+    target = (-0.15, 0.25)
+    page.mouse.click(*project((*target, 0.0), box["width"], box["height"]))
+    page.wait_for_function(
+        "() => document.querySelector('[data-testid=\"objects-info\"]')"
+        ".innerText.startsWith('2 objects')", timeout=10_000)
+    x, y = float(number(page, "x (m)").input_value()), float(number(page, "y (m)").input_value())
+    assert math.hypot(x - target[0], y - target[1]) < 0.01, (x, y)
+    radius = float(number(page, "radius (m)").input_value())
+
+    page.get_by_role("button", name="Plan grasp").click()
+    wait_state(page, ("ok",))
+    expected = plan_grasp(ROBOT, np.zeros(6), (x, y), radius)
+    text = summary(page).inner_text()
+    m = re.fullmatch(r"(\d+) waypoints, ([\d.]+) ms", text.strip())
+    assert m, text
+    assert int(m.group(1)) == expected.n == expected.num_moves
+    page.screenshot(path=str(artifacts_dir / "grasp-planned.png"))
+
+    wp = page.locator('[data-testid="waypoint-info"]')
+    assert wp.get_attribute("data-index") == "1"
+    for _ in range(expected.n - 1):
+        page.get_by_role("button", name="Next waypoint").click()
+    page.wait_for_function(
+        "n => document.querySelector('[data-testid=\"waypoint-info\"]').dataset.index == n",
+        arg=str(expected.n), timeout=10_000)
+    assert wp.get_attribute("data-count") == str(expected.n)
+    assert float(wp.get_attribute("data-ra")) == pytest.approx(radius + ROBOT.gripper.g_off,
+                                                               abs=2e-6)
+    assert f"Waypoint {expected.n} of {expected.n}" in wp.inner_text()
+    page.get_by_role("button", name="Previous waypoint").click()
+    page.wait_for_function(
+        "n => document.querySelector('[data-testid=\"waypoint-info\"]').dataset.index == n",
+        arg=str(expected.n - 1), timeout=10_000)
+    page.screenshot(path=str(artifacts_dir / "grasp-waypoint.png"))
+
+    # Typing a position out of reach re-plans the selected object and says why it cannot work.
+    for label, value in (("x (m)", "0.6"), ("y (m)", "0.6")):
+        box = number(page, label)
+        box.fill(value)
+        box.press("Enter")
+    wait_state(page, ("refused",))
+    text = summary(page).inner_text()
+    assert "Refused" in text and "out of reach" in text and "cm from the arm's base" in text
+    assert wp.get_attribute("data-index") == ""          # nothing left to inspect
+    page.screenshot(path=str(artifacts_dir / "grasp-refused.png"))
