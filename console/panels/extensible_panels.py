@@ -1,0 +1,19 @@
+"""The extensible arm's console panels, in one list for ``ConsoleApp`` to compose.
+
+``EXTENSIBLE_PANELS`` = tip target (gizmo / typed, IK), paths (preview, execute, stop, error
+plot) and repeatability (Table I). Each has ``kinds = ("delta",)``, so composing them for the
+soft arm adds nothing. Execution goes through ``ExtensibleRunner.from_app(app)``: the runner the
+app carries as ``app.extensible_runner`` (set it before the first Execute to use the emulator or
+the board), else one on ``app.hardware_factory``, else an in-process MockHardware.
+"""
+
+from __future__ import annotations
+
+from console.panels.base import Panel
+from console.panels.paths import PathsPanel
+from console.panels.repeatability import RepeatabilityPanel
+from console.panels.target import TargetPanel
+
+EXTENSIBLE_PANELS: list[type[Panel]] = [TargetPanel, PathsPanel, RepeatabilityPanel]
+
+__all__ = ["EXTENSIBLE_PANELS", "PathsPanel", "RepeatabilityPanel", "TargetPanel"]

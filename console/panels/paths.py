@@ -1,0 +1,344 @@
+"""Path panel: pick a Fig. 9 path, preview its tip trace and ghost arms, execute it on the motors.
+
+The path (linear / diagonal traverse, four corners; size, plane, tip speed <= the robot's
+``tip_speed``) is centred on the arm's current tip and planned from the commanded posture by
+``core.planning.paths.plan_path`` in a worker *process* (planning takes seconds of CPU; in this
+process it would hold the GIL against the 100 Hz loop). The preview draws the planned tip trace
+and a few translucent ghost arms. Execute streams the path through the
+:class:`~hw_bridge.extensible_runner.ExtensibleRunner` (``ExtensibleRunner.from_app``, started
+on first use; it first joins the path from where the motors are). While it runs the panel shows
+the progress, the measured tip trace and a plot of the commanded and the measured tip's
+distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
+console-wide STOP (any client), whose hook makes the runner hold position, as does a lost lease.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import html
+import multiprocessing
+import os
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import viser
+import viser.uplot as uplot
+
+from console.arm_view import DeltaArmView
+from console.panels.base import Panel
+from console.state import ArmState
+from core.kinematics import delta as dk
+from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
+from hw_bridge.extensible_runner import ExtensibleRunner, JobResult
+
+Array = npt.NDArray[np.float64]
+N_GHOSTS = 5
+MAX_EXECUTE_ERROR = 0.002  # m: refuse a path whose planned tip leaves its target by more
+PLOT_HZ = 5.0
+TRACE_COLOR = (150, 60, 200)
+WAYPOINT_COLOR = (150, 60, 200)
+MEASURED_COLOR = (235, 130, 30)
+GHOST_COLOR = (90, 140, 220)
+
+
+@dataclasses.dataclass(frozen=True)
+class PathRequest:
+    """What the operator asked for (lengths in m, speed in m/s)."""
+
+    kind: str
+    plane: str
+    size: float
+    speed: float
+    start: tuple[float, ...]  # flattened commanded posture the path starts from
+
+
+def _exit_with_parent(parent: int) -> None:
+    """Planner worker initializer: leave when the console process is gone, even SIGKILLed
+    (a spawned worker holds its own queue's write end, so it would wait forever)."""
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(0)
+    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+
+
+def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:
+    """One mesh (vertices, faces) of backbone, racks and platforms at ``q`` for a ghost arm."""
+    g = view.geometry(q)
+    parts = [(g["backbone"], view.backbone_topology.faces)]
+    parts += [(r, view.rack_topology.faces) for r in g["racks"]]
+    parts.append((g["platforms"], view.platform_topology.faces))
+    verts, faces, offset = [], [], 0
+    for v, f in parts:
+        verts.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+    return np.vstack(verts), np.vstack(faces).astype(np.uint32)
+
+
+class PathsPanel(Panel):
+    """Path choice, preview, execute / stop, progress and tip-error plot."""
+
+    title = "Paths"
+    order = 30.0
+    kinds = ("delta",)
+
+    def build(self) -> None:
+        robot = self.app.robot
+        v_max = robot.tip_speed * 1e3  # type: ignore[union-attr]
+        gui = self.gui
+        self.kind = gui.add_dropdown(
+            "Path", PATH_KINDS, initial_value="linear",
+            hint="Fig. 9: linear traverse, diagonal traverse, four corners.")
+        self.plane = gui.add_dropdown("Plane", ("xy", "xz", "yz"), initial_value="xy")
+        self.size = gui.add_number(
+            "Size (mm)", 80.0, min=5.0, max=400.0, step=1.0,
+            hint="Traverse length / square side, centred on the current tip.")
+        self.speed = gui.add_slider(
+            "Tip speed (mm/s)", min=5.0, max=v_max, step=1.0, initial_value=min(50.0, v_max),
+            hint=f"At most the tip speed limit, {v_max:.0f} mm/s (Table I).")
+        self.preview_btn = gui.add_button("Preview", icon=viser.Icon.EYE)
+        self.execute_btn = gui.add_button("Execute", color="green", icon=viser.Icon.PLAYER_PLAY)
+        self.stop_btn = gui.add_button("Stop (hold)", color="red", icon=viser.Icon.PLAYER_STOP)
+        self.reconnect_btn = gui.add_button(
+            "Reconnect hardware", icon=viser.Icon.PLUG_CONNECTED,
+            hint="Connect (after a fault: reconnect) and arm the motors; the arm holds still.")
+        self.hardware = gui.add_html(self._hardware_html(None))
+        self.progress = gui.add_progress_bar(0.0, color="blue")
+        self.status = gui.add_html(self._status("Preview a path, then Execute.", "idle"))
+        self.plot = gui.add_uplot(
+            data=(np.zeros(2), np.zeros(2), np.zeros(2)),
+            series=(uplot.Series(label="t (s)"),
+                    uplot.Series(label="commanded (mm)", stroke="#1c7ed6", width=2),
+                    uplot.Series(label="measured (mm)", stroke="#e8590c", width=2)),
+            scales={"x": uplot.Scale(time=False)},
+            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="mm")),
+            title="Tip distance to the path target", aspect=1.6)
+        scene = self.app.server.scene
+        self.trace = scene.add_line_segments("/path/trace", np.zeros((1, 2, 3)), TRACE_COLOR,
+                                             thickness=5.0, thickness_units="screen", visible=False)
+        self.measured = scene.add_line_segments("/path/measured", np.zeros((1, 2, 3)),
+                                                MEASURED_COLOR, thickness=3.0,
+                                                thickness_units="screen", visible=False)
+        self.waypoints = scene.add_point_cloud("/path/waypoints", np.zeros((1, 3)), WAYPOINT_COLOR,
+                                               point_size=0.014, point_shape="circle",
+                                               precision="float32", visible=False)
+        self.ghosts: list[viser.MeshHandle] = []
+        self._lock = threading.Lock()
+        self._pool: cf.ProcessPoolExecutor | None = None
+        self._planned: tuple[PathRequest, MotionPath] | None = None
+        self._planning: PathRequest | None = None
+        self._execute_after_plan = False
+        self._job = 0
+        self._plot_at = 0.0
+        self.preview_btn.on_click(self.operator_only(
+            lambda _: self._request_plan(execute=False), "preview a path"))
+        self.execute_btn.on_click(self.operator_only(self._on_execute, "execute a path"))
+        # Stop is everyone's: the console-wide STOP, which calls _on_stop among its hooks.
+        self.stop_btn.on_click(lambda e: self.app.stop_motion("Stop (Paths panel)", e.client))
+        self.reconnect_btn.on_click(self.operator_only(lambda _: self._reconnect(),
+                                                       "connect the hardware"))
+        self.app.add_stop_hook(self._on_stop)
+
+    @property
+    def runner(self) -> ExtensibleRunner:
+        """The console's runner (see ``ExtensibleRunner.from_app``)."""
+        return ExtensibleRunner.from_app(self.app)
+
+    # -- callbacks -------------------------------------------------------------------------
+    def _current_request(self) -> PathRequest:
+        q = np.asarray(self.app.store.command.q, dtype=float)
+        return PathRequest(str(self.kind.value), str(self.plane.value),
+                           float(self.size.value) / 1e3, float(self.speed.value) / 1e3,
+                           tuple(np.round(q.ravel(), 9)))
+
+    def _request_plan(self, execute: bool) -> None:
+        try:
+            req = self._current_request()
+            robot: Any = self.app.robot
+            q = np.array(req.start).reshape(robot.n_segments, 3)
+            kind: Any = req.kind
+            plane: Any = req.plane
+            waypoints = build_path(kind, dk.tip_position(robot, q), req.size, plane)
+        except ValueError as exc:
+            self._set_status(f"⚠ {exc}", "error")
+            return
+        with self._lock:
+            self._execute_after_plan = execute
+            if self._planning == req:
+                return
+            self._planning = req
+        self._set_status("Planning…", "planning")
+        future = self._plan_pool().submit(plan_path, self.app.robot, waypoints, speed=req.speed,
+                                          start_delta=q)
+        future.add_done_callback(lambda f: self._on_planned(req, waypoints, f))
+
+    def _on_execute(self, event: viser.GuiEvent) -> None:
+        req = self._current_request()
+        self.app.recorder.action("execute path", event.client, kind=req.kind, plane=req.plane,
+                                 size_m=req.size, speed_mps=req.speed)
+        planned = self._planned
+        if planned is not None and planned[0] == req:
+            self._execute(planned[1])
+        else:
+            self._request_plan(execute=True)
+
+    def _on_stop(self, reason: str) -> None:
+        """Stop hook (STOP, a lost lease, shutdown): no pending execute, motors hold."""
+        with self._lock:
+            self._execute_after_plan = False
+        runner = getattr(self.app, "extensible_runner", None)
+        if runner is not None and runner.started:
+            runner.stop()
+
+    def _reconnect(self) -> None:
+        runner = self.runner
+        future = runner.connect() if runner.started else runner.start().connecting
+        self.hardware.content = self._hardware_html(None, "connecting…")
+
+        def show() -> None:
+            try:
+                future.result(timeout=10.0)  # type: ignore[union-attr]
+                time.sleep(3 * runner.period_s)  # the snapshot trails by a tick
+            finally:
+                self.hardware.content = self._hardware_html(runner)
+        threading.Thread(target=show, daemon=True, name="hw-connect").start()
+
+    # -- workers ---------------------------------------------------------------------------
+    def _plan_pool(self) -> cf.ProcessPoolExecutor:
+        with self._lock:
+            if self._pool is None:
+                self._pool = cf.ProcessPoolExecutor(
+                    1, mp_context=multiprocessing.get_context("spawn"),
+                    initializer=_exit_with_parent, initargs=(os.getpid(),))
+            return self._pool
+
+    def _on_planned(self, req: PathRequest, waypoints: Array, future: cf.Future) -> None:
+        with self._lock:
+            if self._planning == req:
+                self._planning = None
+            execute, self._execute_after_plan = self._execute_after_plan, False
+        try:
+            path: MotionPath = future.result()
+        except Exception as exc:  # noqa: BLE001 - bad input or a broken worker: say so
+            self._set_status(f"⚠ Planning failed: {exc}", "error")
+            return
+        self._planned = (req, path)
+        self._draw_preview(path, waypoints)
+        ok = path.max_error <= MAX_EXECUTE_ERROR
+        summary = (f"{req.kind} {req.size * 1e3:.0f} mm in {req.plane} at "
+                   f"{req.speed * 1e3:.0f} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
+                   f"max planned tip error {path.max_error * 1e3:.2f} mm, {path.jumps} jumps")
+        if not ok:
+            self._set_status(f"⚠ {summary}. The path leaves the reachable workspace: shrink it "
+                             "or move the arm.", "infeasible")
+        elif execute:
+            self._execute(path)
+        else:
+            self._set_status(f"Preview: {summary}.", "previewed")
+
+    def _execute(self, path: MotionPath) -> None:
+        if path.max_error > MAX_EXECUTE_ERROR:
+            self._set_status("⚠ This path leaves the reachable workspace; not executed.", "error")
+            return
+        runner = self.runner.start()
+        if runner.snapshot.busy:
+            self._set_status("⚠ A job is running: stop it first.", "error")
+            return
+        self._job = job = runner.execute(path, "path")
+        self.hardware.content = self._hardware_html(runner)
+        self._set_status(f"Executing ({path.duration:.1f} s)…", "running")
+        # Frames come while the arm moves; this shows the end even if nothing is redrawn then.
+        threading.Thread(target=self._watch, args=(runner, job), daemon=True,
+                         name="path-watch").start()
+
+    # -- display ---------------------------------------------------------------------------
+    def _draw_preview(self, path: MotionPath, waypoints: Array) -> None:
+        self.waypoints.points = np.asarray(waypoints, dtype=np.float32)
+        self.waypoints.visible = True
+        tips = path.tips
+        self.trace.points = np.stack([tips[:-1], tips[1:]], axis=1) if len(tips) > 1 \
+            else np.stack([tips, tips], axis=1)
+        self.trace.visible = True
+        self.measured.visible = False
+        view = self.app.view
+        if not isinstance(view, DeltaArmView):
+            return
+        picks = np.linspace(0, len(path.times) - 1, N_GHOSTS).round().astype(int)
+        for i, k in enumerate(picks):
+            verts, faces = ghost_vertices(view, path.deltas[k])
+            if i < len(self.ghosts):
+                self.ghosts[i].vertices = verts
+                self.ghosts[i].visible = True
+            else:
+                self.ghosts.append(self.app.server.scene.add_mesh_simple(
+                    f"/path/ghost_{i}", verts, faces, color=GHOST_COLOR, opacity=0.22,
+                    cast_shadow=False, receive_shadow=False))
+
+    @staticmethod
+    def _hardware_html(runner: ExtensibleRunner | None, text: str | None = None) -> str:
+        if text is None and runner is None:
+            text = "not connected (connects on the first Execute)"
+        elif text is None:
+            snap = runner.snapshot  # type: ignore[union-attr]
+            port = getattr(runner.device.hw, "port", "")  # type: ignore[union-attr]
+            text = f"{snap.state} · {port}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
+        return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
+                f"Hardware: {html.escape(text)}</div>")
+
+    def _set_status(self, text: str, state: str) -> None:
+        self.status.content = self._status(text, state)
+
+    @staticmethod
+    def _status(text: str, state: str) -> str:
+        return (f'<div data-testid="path-status" data-state="{state}" style="font-size:0.85em">'
+                f"{html.escape(text)}</div>")
+
+    def on_state(self, state: ArmState) -> None:
+        runner = getattr(self.app, "extensible_runner", None)
+        if runner is not None:
+            self._show_job(runner)
+
+    def _show_job(self, runner: ExtensibleRunner, result: JobResult | None = None) -> None:
+        """Progress, plot and measured trace of the panel's job; its outcome once ``result``."""
+        job = self._job
+        if job == 0:
+            return
+        snap = runner.snapshot
+        n, trace = snap.trace_count, snap.trace
+        now = time.perf_counter()
+        if snap.job_id == job:
+            self.progress.value = round(100.0 * snap.progress, 1)
+            if trace is not None and n >= 2 and (now - self._plot_at >= 1.0 / PLOT_HZ or result):
+                self._plot_at = now
+                target = trace.targets[:n]
+                self.plot.data = (trace.times[:n],
+                                  np.linalg.norm(trace.commanded[:n] - target, axis=1) * 1e3,
+                                  np.linalg.norm(trace.measured[:n] - target, axis=1) * 1e3)
+                m = trace.measured[:n]
+                self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
+                self.measured.visible = True
+        if result is None:
+            return
+        self._job = 0
+        self.hardware.content = self._hardware_html(runner)
+        if result.ok:
+            self._set_status(f"Done: final tip {(result.error or 0.0) * 1e3:.2f} mm from the "
+                             "path's end.", "done")
+        elif snap.fault:
+            self._set_status(f"⚠ Hardware fault: {snap.fault}. Commanding stopped.", "fault")
+        else:
+            self._set_status(f"⚠ {result.message}.", "stopped")
+
+    def _watch(self, runner: ExtensibleRunner, job: int) -> None:
+        """Worker: wait for the job's end, then show it (no frame may follow it)."""
+        result = runner.wait(job)
+        deadline = time.perf_counter() + 1.0
+        while runner.snapshot.busy and time.perf_counter() < deadline:
+            time.sleep(runner.period_s)  # the snapshot trails the result by a tick
+        if result is not None:
+            self._show_job(runner, result)

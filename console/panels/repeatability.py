@@ -1,0 +1,192 @@
+"""Repeatability panel: move to a point from the retracted pose N times and report the spread.
+
+As in Hughes 2020, Table I ("reliability in positioning", +-19 mm / +-29 mm): the arm retracts,
+moves to the rack lengths the tip IK gives for the point, and the tip is measured (from the
+encoders, through forward kinematics) once the motors settle; N times. Per axis the panel shows
+the mean, the spread +-(max - min) / 2, the standard deviation and the mean's offset from the
+point. Moves are joint-space straight lines within the rack and tip speed limits, streamed by
+the :class:`~hw_bridge.extensible_runner.ExtensibleRunner`. On the emulator the encoders are
+exact, so the spread is only encoder quantisation; a real arm adds its backlash and friction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import html
+import threading
+from typing import Any, Callable
+
+import numpy as np
+import numpy.typing as npt
+import viser
+
+from console.panels.base import Panel
+from console.state import ArmState
+from core.kinematics import delta as dk
+from core.kinematics.delta_ik import solve_tip_ik
+from core.robots import ExtensibleArm
+from hw_bridge.extensible_runner import ExtensibleRunner
+
+Array = npt.NDArray[np.float64]
+_AXES = ("x", "y", "z")
+
+
+@dataclasses.dataclass(frozen=True)
+class RepeatabilityResult:
+    """Tips reached (k, 3) for a point; ``message`` says why fewer than asked, if so."""
+
+    point: Array
+    tips: Array
+    requested: int
+    message: str = ""
+
+    @property
+    def mean(self) -> Array:
+        return self.tips.mean(axis=0)
+
+    @property
+    def spread(self) -> Array:
+        """Per axis +-(max - min) / 2 (m), Table I's "+-"."""
+        return 0.5 * np.ptp(self.tips, axis=0)
+
+    @property
+    def std(self) -> Array:
+        return self.tips.std(axis=0, ddof=1) if len(self.tips) > 1 else np.zeros(3)
+
+    @property
+    def offset(self) -> Array:
+        """Mean reached tip minus the point (m)."""
+        return self.mean - self.point
+
+
+def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt.ArrayLike,
+                      n: int, *, on_progress: Callable[[int, str], None] | None = None,
+                      should_stop: Callable[[], bool] = lambda: False,
+                      timeout: float = 120.0) -> RepeatabilityResult:
+    """Retract, move to ``point``, measure; ``n`` times. Blocks (run it on a worker thread).
+
+    Raises:
+        ValueError: ``n`` < 1, a bad point, or a point the arm cannot reach (nothing moves).
+    """
+    p = np.asarray(point, dtype=float)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"point must be 3 finite numbers (m), got {point!r}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"repetitions must be an integer >= 1, got {n!r}")
+    ik = solve_tip_ik(robot, p)
+    if not ik.reachable:
+        raise ValueError(f"point is unreachable: the closest feasible tip is "
+                         f"{ik.error * 1e3:.1f} mm away")
+    home = dk.robot_rack_lengths(robot, np.zeros((robot.n_segments, 3)))
+    runner.start()
+    tips: list[Array] = []
+    progress = on_progress or (lambda i, s: None)
+    for i in range(n):
+        for goal, label in ((home, "retract"), (ik.lengths, "to point")):
+            if should_stop():
+                return RepeatabilityResult(p, np.array(tips).reshape(-1, 3), n, "stopped")
+            progress(i, f"{label} {i + 1}/{n}")
+            result = runner.wait(runner.move_to(goal, f"{label} {i + 1}/{n}"), timeout)
+            if result is None or not result.ok:
+                why = "timed out" if result is None else result.message
+                return RepeatabilityResult(p, np.array(tips).reshape(-1, 3), n, why)
+        tips.append(np.asarray(result.final_tip, dtype=float))
+    progress(n, "done")
+    return RepeatabilityResult(p, np.array(tips), n)
+
+
+def result_html(r: RepeatabilityResult) -> str:
+    """Per-axis table in mm, cells tagged ``data-testid="rep-<stat>-<axis>"``."""
+    cell = "padding:1px 6px;text-align:right"
+    rows = [("mean", "mean", r.mean - 0.0), ("spread", "± spread", r.spread),
+            ("std", "std", r.std), ("offset", "mean − point", r.offset)]
+    head = "".join(f'<th style="{cell}">{a} (mm)</th>' for a in _AXES)
+    body = "".join(
+        f'<tr><td style="{cell};text-align:left">{label}</td>'
+        + "".join(f'<td style="{cell}" data-testid="rep-{key}-{a}">{v * 1e3:.2f}</td>'
+                  for a, v in zip(_AXES, values)) + "</tr>"
+        for key, label, values in rows)
+    note = f" · {html.escape(r.message)}" if r.message else ""
+    return (f'<div data-testid="rep-result" style="font-size:0.85em">'
+            f"<b>{len(r.tips)}/{r.requested} runs</b> to "
+            f"({', '.join(f'{v * 1e3:.1f}' for v in r.point)}) mm{note}"
+            f"<table style='border-collapse:collapse'><tr><th></th>{head}</tr>{body}"
+            "</table><span style='opacity:.6'>tip from the encoders; spread = ±(max − min)/2 "
+            "as in Table I</span></div>")
+
+
+class RepeatabilityPanel(Panel):
+    """Point, repetitions, run / stop, progress and the per-axis spread."""
+
+    title = "Repeatability"
+    order = 40.0
+    kinds = ("delta",)
+    expand_by_default = False
+
+    def build(self) -> None:
+        tip = self._tip()
+        self.inputs = [self.gui.add_number(f"Point {a} (mm)", round(float(v) * 1e3, 1), step=0.1)
+                       for a, v in zip(_AXES, tip)]
+        self.use_tip = self.gui.add_button("Point ← current tip")
+        self.count = self.gui.add_number("Repetitions", 5, min=1, max=50, step=1,
+                                         hint="Table I: five moves per point.")
+        self.run_btn = self.gui.add_button("Run", color="green", icon=viser.Icon.PLAYER_PLAY)
+        self.stop_btn = self.gui.add_button("Stop (hold)", color="red", icon=viser.Icon.PLAYER_STOP)
+        self.progress = self.gui.add_progress_bar(0.0, color="blue")
+        self.status = self.gui.add_html("")
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.use_tip.on_click(lambda _: self._use_tip())
+        self.run_btn.on_click(self.operator_only(lambda _: self._start(),
+                                                 "run a repeatability test"))
+        self.stop_btn.on_click(lambda e: self.app.stop_motion("Stop (Repeatability panel)",
+                                                              e.client))
+        self.app.add_stop_hook(self._halt)
+
+    def _use_tip(self) -> None:
+        for h, v in zip(self.inputs, self._tip()):
+            h.value = round(float(v) * 1e3, 1)
+
+    def _tip(self) -> Array:
+        robot: Any = self.app.robot
+        return dk.tip_position(robot, np.asarray(self.app.store.command.q))
+
+    def _start(self) -> None:
+        if self._thread is not None and self._thread.is_alive():
+            self._say("⚠ A run is in progress: stop it first.")
+            return
+        point = np.array([float(h.value) for h in self.inputs]) / 1e3
+        n = int(self.count.value)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._work, args=(point, n), daemon=True,
+                                        name="repeatability")
+        self._thread.start()
+
+    def _halt(self, reason: str = "") -> None:
+        """Stop hook: end the run after the current move, which the runner stops now."""
+        self._stop.set()
+        runner = getattr(self.app, "extensible_runner", None)
+        if runner is not None and runner.started:
+            runner.stop()
+
+    def _work(self, point: Array, n: int) -> None:
+        runner = ExtensibleRunner.from_app(self.app)
+        self.progress.value = 0.0
+
+        def progress(i: int, text: str) -> None:
+            self.progress.value = round(100.0 * i / n, 1)
+            self._say(f"Running: {text}…")
+        try:
+            result = run_repeatability(runner, self.app.robot, point, n,  # type: ignore[arg-type]
+                                       on_progress=progress, should_stop=self._stop.is_set)
+        except ValueError as exc:
+            self._say(f"⚠ {exc}")
+            return
+        self.status.content = result_html(result)
+
+    def _say(self, text: str) -> None:
+        self.status.content = (f'<div data-testid="rep-status" style="font-size:0.85em">'
+                               f"{html.escape(text)}</div>")
+
+    def on_state(self, state: ArmState) -> None:
+        """Nothing per frame: the worker reports progress and results itself."""

@@ -1,0 +1,256 @@
+"""Tip-target panel: drag a gizmo (or type x, y, z) and the extensible arm's tip follows by IK.
+
+A transform control in the 3D view holds the tip target. While the operator drags it, a worker
+thread solves the tip IK (``core.kinematics.delta.solve_tip_ik``) warm-started from the
+posture being moved to, without restarts, at most ``LIVE_HZ`` times a second on the newest
+target only; on release (and for typed targets) it solves once more with restarts. The solution
+is a set-point for ``app.hold`` (``console.hold_to_run``: speed-capped, stops on STOP or a lost
+lease), like the jog sliders; on arrival the panel re-commands it as ``"target"`` so the Δ jog
+sliders show it. With the hardware runner started, the motors follow the command. An
+unreachable target leaves the arm at the closest feasible configuration; the panel says how far
+the tip is from the target and a red line in the view joins them. Only the operator may move
+the target (``operator_only``).
+"""
+
+from __future__ import annotations
+
+import html
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import viser
+
+from console.panels.base import Panel, operator_only
+from console.state import ArmState
+from core.kinematics import delta as dk
+from core.kinematics.delta_ik import IKSettings, TipIKResult, solve_tip_ik
+
+Array = npt.NDArray[np.float64]
+LIVE_HZ = 30.0
+TARGET_COLOR = (235, 130, 30)
+MISS_COLOR = (210, 40, 40)
+ARRIVAL_POLL_S = 0.05
+_AXES = ("x", "y", "z")
+
+
+class _IKWorker:
+    """Latest-value mailbox + one daemon thread: solves only the newest target."""
+
+    def __init__(self, panel: "TargetPanel") -> None:
+        self.panel = panel
+        self._cond = threading.Condition()
+        self._request: tuple[Array, bool, int] | None = None
+        self.generation = 0  # bumped by cancel(): results of older requests are dropped
+        threading.Thread(target=self._run, name="target-ik", daemon=True).start()
+
+    def submit(self, target: Array, final: bool, client_id: int) -> None:
+        with self._cond:
+            # A pending final solve is not downgraded by a live one.
+            final = final or (self._request is not None and self._request[1])
+            self._request = (np.array(target, dtype=float), final, client_id)
+            self._cond.notify()
+
+    def cancel(self) -> None:
+        with self._cond:
+            self._request = None
+            self.generation += 1
+
+    def _run(self) -> None:
+        last = 0.0
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._request is not None, ARRIVAL_POLL_S)
+                request, self._request = self._request, None
+                generation = self.generation
+            self.panel.check_arrival()
+            if request is None:
+                continue
+            target, final, client_id = request
+            if not final:  # throttle live solves; a newer target replaces this one meanwhile
+                wait = last + 1.0 / LIVE_HZ - time.perf_counter()
+                if wait > 0:
+                    time.sleep(wait)
+                    with self._cond:
+                        if self._request is not None:
+                            continue
+            last = time.perf_counter()
+            try:
+                self.panel.solve(target, final, client_id, generation)
+            except Exception as exc:  # noqa: BLE001 - report, keep the worker alive
+                self.panel.report_error(str(exc))
+
+
+class TargetPanel(Panel):
+    """Gizmo and typed tip target, solved by the tip IK within the rack limits."""
+
+    title = "Tip target"
+    order = 12.0
+    kinds = ("delta",)
+
+    def build(self) -> None:
+        self.settings = IKSettings.from_robot(self.app.robot)  # type: ignore[arg-type]
+        tip = self._tip(self.app.store.command.q)
+        scene = self.app.server.scene
+        self.gizmo = scene.add_transform_controls(
+            "/target", scale=0.12, disable_rotations=True, depth_test=False, line_width=3.0,
+            position=tuple(tip))
+        self.ball = scene.add_icosphere("/target/ball", radius=0.012, color=TARGET_COLOR,
+                                        cast_shadow=False)
+        self.miss = scene.add_line_segments("/target_miss", np.zeros((1, 2, 3)), MISS_COLOR,
+                                            thickness=3.0, thickness_units="screen",
+                                            visible=False)
+        self.follow = self.gui.add_checkbox(
+            "Follow while dragging", True,
+            hint="Solve the IK live while the gizmo moves (else only on release).")
+        self.inputs = [self.gui.add_number(f"Target {a} (mm)", round(float(v) * 1e3, 1), step=0.1,
+                                           hint=f"Tip target {a} in mm; the arm moves on change.")
+                       for a, v in zip(_AXES, tip)]
+        self.to_tip = self.gui.add_button("Target ← current tip",
+                                          hint="Put the target back on the arm's tip.")
+        self.status = self.gui.add_html(self._status_html(None, None))
+        self._target = tip.copy()
+        self._dragging = False
+        self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
+        # (n, target, result, message): replaced whole by the worker, shown by on_state.
+        self._latest: tuple[int, Array, TipIKResult | None, str | None] = (0, tip, None, None)
+        self._shown = 0
+        self._synced_seq = self.app.store.command.seq
+        self.worker = _IKWorker(self)
+        self.gizmo.on_update(self._on_gizmo)
+        for handle in self.inputs:
+            handle.on_update(self._on_typed)
+        self.to_tip.on_click(lambda _: self._reset_to_tip())
+        self.app.add_stop_hook(self._on_stop)
+
+    # -- callbacks (thin) ------------------------------------------------------------------
+    @operator_only(action="move the tip target")
+    def _on_gizmo(self, event: viser.TransformControlsEvent) -> None:
+        if event.client is None:
+            return
+        target = np.asarray(event.target.position, dtype=float)
+        self._target = target
+        self._dragging = event.phase != "end"
+        if event.phase == "end" or self.follow.value:
+            self.worker.submit(target, event.phase == "end", event.client.client_id)
+
+    @operator_only(action="move the tip target")
+    def _on_typed(self, event: viser.GuiEvent) -> None:
+        if event.client is None:  # our own mirror of the target into the inputs
+            return
+        target = np.array([float(h.value) for h in self.inputs]) / 1e3
+        if not np.all(np.isfinite(target)):
+            self.report_error("target must be three finite numbers (mm)")
+            return
+        self._target = target
+        self.gizmo.position = tuple(target)
+        self.worker.submit(target, True, event.client.client_id)
+
+    def on_refused(self, event: Any) -> None:
+        """A viewer moved the gizmo or an input: put them back where the target is."""
+        self.gizmo.position = tuple(self._target)
+        self._set_inputs(self._target)
+
+    def _reset_to_tip(self) -> None:
+        tip = self._tip(self.app.store.command.q)
+        self._target = tip
+        self.gizmo.position = tuple(tip)
+        self._publish(tip, None, None)
+        self._show()  # nothing else changes, so no frame would show it
+
+    def _on_stop(self, reason: str) -> None:
+        """STOP / lost lease: drop pending solves (app.hold stops the motion itself)."""
+        self.worker.cancel()
+        self._moving_to = None
+
+    # -- worker ----------------------------------------------------------------------------
+    def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
+        """Worker thread: IK to ``target``, then move there (unless a job runs or STOP came)."""
+        runner = getattr(self.app, "extensible_runner", None)
+        if runner is not None and runner.snapshot.busy:
+            self.report_error("A path is running: stop it before moving the target.")
+            return
+        moving = self.app.hold.target()
+        q0 = np.asarray(self.app.store.command.q if moving is None else moving)
+        result = solve_tip_ik(self.app.robot, target, q0, restarts=final,  # type: ignore[arg-type]
+                              settings=self.settings)
+        if generation != self.worker.generation:
+            return
+        self._publish(target, result, None)
+        if self.app.hold.move_to(client_id, result.delta):
+            self._moving_to = result.delta
+        else:
+            self.report_error("Not moved: you no longer hold control.")
+
+    def check_arrival(self) -> None:
+        """Worker thread: once ``app.hold`` reached the set-point, command it as ``"target"``
+        (the jog sliders do not mirror ``"jog"`` moves, this makes them show the posture)."""
+        goal = self._moving_to
+        if goal is None or self.app.hold.target() is not None:
+            return
+        command = self.app.store.command
+        if command.source == "jog" and np.allclose(command.q, goal, atol=1e-9):
+            self.app.store.edit(lambda q: q, "target")
+        self._moving_to = None  # after the edit: on_state must not take the arrival for a jog
+
+    def report_error(self, message: str) -> None:
+        """Show ``message`` now (no state change follows that would trigger a frame)."""
+        self._publish(self._target, None, message)
+        self._show()
+
+    def _publish(self, target: Array, result: TipIKResult | None, message: str | None) -> None:
+        self._latest = (self._latest[0] + 1, np.asarray(target, dtype=float), result, message)
+
+    # -- display (render thread) -----------------------------------------------------------
+    def on_state(self, state: ArmState) -> None:
+        command = self.app.store.command
+        if command.seq != self._synced_seq:
+            self._synced_seq = command.seq
+            mine = command.source == "target" or (command.source == "jog"
+                                                  and self._moving_to is not None)
+            if not mine and not self._dragging:
+                # Moved by jog / path / runner / STOP: the target rides on the tip.
+                self._target = self._tip(command.q)
+                self.gizmo.position = tuple(self._target)
+                self._publish(self._target, None, None)
+        self._show()
+
+    def _show(self) -> None:
+        n, target, result, error = self._latest
+        if n == self._shown:
+            return
+        self._shown = n
+        self._set_inputs(target)
+        self.status.content = self._status_html(result, error)
+        if result is not None and not result.reachable:
+            self.miss.points = np.stack([result.tip, target])[None]
+            self.miss.visible = True
+        else:
+            self.miss.visible = False
+
+    def _set_inputs(self, target: Array) -> None:
+        for handle, value in zip(self.inputs, target):
+            mm = round(float(value) * 1e3, 1)
+            if abs(float(handle.value) - mm) > 0.05:
+                handle.value = mm
+
+    def _status_html(self, result: TipIKResult | None, error: str | None) -> str:
+        if error is not None:
+            body, state = f"⚠ {html.escape(error)}", "error"
+        elif result is None:
+            body, state = "Drag the gizmo (orange ball) or type x, y, z.", "idle"
+        elif result.reachable:
+            body, state = f"Tip on target (IK error {result.error * 1e3:.2f} mm).", "reachable"
+        else:
+            body = (f"<b style='color:#c92a2a'>⚠ Unreachable:</b> the closest feasible tip is "
+                    f"<b>{result.error * 1e3:.1f} mm</b> from the target (arm shown there; "
+                    "red line to the target).")
+            state = "unreachable"
+        distance = "" if result is None else f"{result.error * 1e3:.3f}"
+        return (f'<div data-testid="target-status" data-state="{state}" '
+                f'data-error-mm="{distance}" style="font-size:0.85em">{body}</div>')
+
+    def _tip(self, q: npt.ArrayLike) -> Array:
+        return dk.tip_position(self.app.robot, np.asarray(q))  # type: ignore[arg-type]
