@@ -1,0 +1,281 @@
+"""Control panel (soft arm): the 100 Hz closed loop on the simulated arm, grasp-and-place, STOP.
+
+:class:`~console.panels.control_process.ControlProcess` runs the seeded simulated arm, the
+control stack, the planner process and the real-time :class:`hw_bridge.loop.LoopRunner` thread
+in a child process (the console's own threads would delay a loop thread here); the app keeps one
+as ``app.soft_control``. The panel only sends commands (applied by the loop at its next tick)
+and reads the newest published view, never locks.
+
+Widgets: Arm / Disarm, object x, y, r and *Place object*, *Execute* (the full grasp-and-place
+for the placed object: settle, plan in the planner process, approach, grasp, carry, release),
+*Click to grasp* (one click on the table places the object there and runs it all), STOP (any
+client, also the Session panel's hotkey: it runs ``app.stop_motion``, whose hook freezes the
+arm), the state machine's state and reason, and live uPlots of kappa target vs measured per
+segment and of the loop's period and tick time. While armed the 3D view shows the measured
+(simulated) arm; jog commands from other panels are forwarded as moves when no task runs.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import threading
+import time
+from typing import Any
+
+import numpy as np
+import viser
+import viser.uplot as uplot
+
+from console.panels.base import Panel, operator_only
+from console.state import ArmState
+from console.panels.control_process import ControlProcess
+
+SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")
+OBJECT_COLOR = (60, 170, 90)
+FINGER_COLOR = (235, 130, 30)
+PUMP_HZ = 20.0
+PLOT_HZ = 4.0
+HISTORY_S = 10.0
+STATS_TICKS = 1000
+IDLE_PHASES = ("idle", "released", "stopped")
+FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
+
+
+def control_for(app: Any) -> ControlProcess:
+    """``app.soft_control``, the app's control process, started on first use."""
+    ctl = getattr(app, "soft_control", None)
+    if ctl is None or not ctl.alive:
+        ctl = ControlProcess(app.robot)
+        app.soft_control = ctl
+    return ctl
+
+
+def table_point(origin: Any, direction: Any) -> tuple[float, float] | None:
+    """Where a click ray meets the table plane z = 0 (None if it does not)."""
+    o, d = np.asarray(origin, float), np.asarray(direction, float)
+    if abs(d[2]) < 1e-9:
+        return None
+    s = -o[2] / d[2]
+    return None if s <= 0 else (float(o[0] + s * d[0]), float(o[1] + s * d[1]))
+
+
+class ControlPanel(Panel):
+    """Arm, Execute, STOP, click-to-grasp, state and live plots for the soft arm."""
+
+    title = "Control"
+    order = 15.0
+    kinds = ("planar",)
+
+    def build(self) -> None:
+        gui = self.gui
+        r0 = self.app.robot.capture.nominal_object_radius
+        self.state_md = gui.add_markdown("**State:** –")
+        self.loop_md = gui.add_markdown("<small>loop: –</small>")
+        self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
+        self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
+        self.stop_btn = gui.add_button("STOP", color="red", icon=viser.Icon.HAND_STOP)
+        self.obj_x = gui.add_number("Object x (m)", -0.16, step=0.005)
+        self.obj_y = gui.add_number("Object y (m)", 0.28, step=0.005)
+        self.obj_r = gui.add_number("Object r (m)", r0, min=0.005, max=0.05, step=0.0005)
+        self.place_btn = gui.add_button("Place object", icon=viser.Icon.CIRCLE_PLUS)
+        self.execute_btn = gui.add_button("Execute grasp-and-place", icon=viser.Icon.PLAYER_PLAY)
+        self.plan_btn = gui.add_button("Execute current plan", icon=viser.Icon.ROUTE,
+                                       hint="the Grasp planner panel's plan for its object")
+        self.click_mode = gui.add_checkbox("Click to grasp", False,
+                                           hint="one click on the table places the object there "
+                                                "and runs the whole grasp-and-place")
+        n = self.app.robot.n_segments
+        series = [uplot.Series(label="t (s)")]
+        for i in range(n):
+            c = SEGMENT_COLORS[i % len(SEGMENT_COLORS)]
+            series.append(uplot.Series(label=f"κ{i + 1} target", stroke=c, width=1, dash=(6, 4)))
+            series.append(uplot.Series(label=f"κ{i + 1} measured", stroke=c, width=2))
+        self.kappa_plot = gui.add_uplot(
+            data=tuple(np.zeros(2) for _ in range(1 + 2 * n)), series=tuple(series),
+            scales={"x": uplot.Scale(time=False)},
+            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="1/m")),
+            title="Curvature: target (dashed) vs measured", aspect=1.4)
+        self.loop_plot = gui.add_uplot(
+            data=(np.zeros(2), np.zeros(2), np.zeros(2)),
+            series=(uplot.Series(label="t (s)"),
+                    uplot.Series(label="period (ms)", stroke="#1c7ed6", width=2),
+                    uplot.Series(label="tick work (ms)", stroke="#e8590c", width=2)),
+            scales={"x": uplot.Scale(time=False)},
+            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="ms")),
+            title="Control loop (100 Hz)", aspect=2.0)
+        scene = self.app.server.scene
+        self.obj_mesh = scene.add_cylinder("/control/object", radius=r0, height=0.03,
+                                           color=OBJECT_COLOR, position=(0.0, 0.0, 0.015),
+                                           visible=False)
+        self.finger = scene.add_line_segments("/control/finger", np.zeros((1, 2, 3)),
+                                              FINGER_COLOR, thickness=0.012, visible=False)
+
+        self.ctl = control_for(self.app)
+        self.arm_btn.on_click(operator_only(lambda e: self._arm(), panel=self, action="arm the arm"))
+        self.disarm_btn.on_click(operator_only(lambda e: self.ctl.disarm(), panel=self,
+                                               action="disarm the arm"))
+        self.stop_btn.on_click(self._on_stop)  # STOP: any client
+        self.place_btn.on_click(operator_only(lambda e: self._place(), panel=self,
+                                              action="place the object"))
+        self.execute_btn.on_click(operator_only(lambda e: self._execute(e), panel=self,
+                                                action="run grasp-and-place"))
+        self.plan_btn.on_click(operator_only(lambda e: self._execute_plan(e), panel=self,
+                                             action="execute the plan"))
+        scene.on_click()(self._on_scene_click)
+        self.app.add_stop_hook(self._stop_hook)
+
+        self._hist: collections.deque = collections.deque(maxlen=int(HISTORY_S * PUMP_HZ))
+        self._plot_at = 0.0
+        self._fwd_seq = self.app.store.command.seq
+        self._stopped = False
+        self._pump_stop = threading.Event()
+        self._pump = threading.Thread(target=self._pump_loop, name="control-pump", daemon=True)
+        self._pump.start()
+
+    # -- callbacks (thin: enqueue to the loop) -----------------------------------------------
+    def _arm(self) -> None:
+        self._fwd_seq = self.app.store.command.seq  # forward only later jog commands
+        self._stopped = False
+        self.ctl.arm()
+
+    def _place(self) -> None:
+        self.ctl.place_object(float(self.obj_x.value), float(self.obj_y.value), float(self.obj_r.value))
+
+    def _execute(self, event: Any) -> None:
+        self._stopped = False
+        fut = self.ctl.grasp_at(float(self.obj_x.value), float(self.obj_y.value),
+                                float(self.obj_r.value))
+        fut.add_done_callback(lambda f: self._report(event, f))
+
+    def _execute_plan(self, event: Any) -> None:
+        from console.panels.planner import session_for
+        out = session_for(self.app).view().outcome
+        client = getattr(event, "client", None)
+        if out is None or out.plan is None or out.obj is None or len(out.plan.kappas) == 0:
+            if client is not None:
+                client.add_notification("No plan", "Plan a grasp in the Grasp planner panel first.",
+                                        color="orange", auto_close_seconds=6.0)
+            return
+        self._stopped = False
+        fut = self.ctl.execute(out.plan, out.obj.x, out.obj.y, out.obj.r)
+        fut.add_done_callback(lambda f: self._report(event, f))
+
+    def _on_stop(self, event: Any) -> None:
+        client = getattr(event, "client", None)
+        self.app.stop_motion("STOP pressed in the Control panel", client)
+
+    def _stop_hook(self, reason: str) -> None:
+        self._stopped = True  # no forwarded jog may undo a STOP (race with the view)
+        self.ctl.stop_arm(reason)
+
+    def _on_scene_click(self, event: Any) -> None:
+        if not self.click_mode.value:
+            return
+        try:
+            self.app.access.check(event.client, "click to grasp")
+        except Exception as exc:  # NotOperator: tell this viewer only
+            self.app.refuse(event.client, str(exc), "click to grasp")
+            return
+        p = table_point(event.ray_origin, event.ray_direction)
+        if p is None:
+            return
+        self.obj_x.value, self.obj_y.value = round(p[0], 4), round(p[1], 4)
+        self._stopped = False
+        fut = self.ctl.grasp_at(p[0], p[1], float(self.obj_r.value))
+        fut.add_done_callback(lambda f: self._report(event, f))
+
+    @staticmethod
+    def _report(event: Any, fut: Any) -> None:
+        exc = fut.exception()
+        client = getattr(event, "client", None)
+        if exc is not None and client is not None:
+            client.add_notification("Refused", str(exc), color="red", auto_close_seconds=8.0)
+
+    # -- the pump: loop snapshot -> view, history, forwarded jog commands ----------------------
+    def _pump_loop(self) -> None:
+        period = 1.0 / PUMP_HZ
+        while not self._pump_stop.wait(period):
+            try:
+                self._pump_once()
+            except Exception:  # never let a display hiccup end the pump
+                time.sleep(0.5)
+
+    def _pump_once(self) -> None:
+        view = self.ctl.view
+        c = None if view is None else view.snapshot.control
+        if c is None:
+            return
+        snap = view.snapshot
+        meas = c.kappa_meas if c.kappa_meas is not None else np.full(len(c.kappa_ref), np.nan)
+        self._hist.append((c.t, c.kappa_ref.copy(), meas, snap.period_ms, snap.work_ms))
+        store = self.app.store
+        if c.armed and c.kappa_meas is not None:
+            cmd = store.command
+            if cmd.seq != self._fwd_seq and cmd.source != "control":
+                self._fwd_seq = cmd.seq
+                # Never after STOP: only Arm / Execute clear a stop (jogging does not).
+                if c.phase in FORWARD_PHASES and not self._stopped:
+                    self.ctl.goto(np.asarray(cmd.q))
+            store.report(c.kappa_meas, "control")
+
+    def on_state(self, state: ArmState) -> None:
+        now = time.monotonic()
+        if now - self._plot_at < 1.0 / PLOT_HZ:
+            return
+        self._plot_at = now
+        view = self.ctl.view
+        if view is None:
+            self.state_md.content = "**State:** starting the control process…"
+            return
+        c = view.snapshot.control
+        if c is not None:
+            wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
+            why = f"  \n**Reason:** {c.reason}" if c.reason else ""
+            self.state_md.content = (
+                f"**State:** {c.phase}{wp} · re-plans {c.replans} · "
+                f"{'ARMED' if c.armed else 'disarmed'} · tracking {'ok' if c.tracking_ok else 'LOST'}"
+                f" · gripper {'closed' if c.gripper_closed else 'open'}{why}")
+            busy = c.phase not in IDLE_PHASES + ("settling",)
+            self.execute_btn.disabled = self.plan_btn.disabled = busy
+        st = view.stats
+        self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
+                                f"ticks · overruns "
+                                f"{st.overruns} · last {STATS_TICKS // 100} s: period error p99 "
+                                f"{st.period_error_ms_p99:.3f} ms · tick work p99 "
+                                f"{st.work_ms_p99:.3f} ms</small>")
+        self._draw_scene(view)
+        self._draw_plots()
+
+    def _draw_scene(self, view: Any) -> None:
+        c = view.snapshot.control
+        if view.object_xy is not None:
+            self.obj_mesh.position = (view.object_xy[0], view.object_xy[1], 0.015)
+            self.obj_mesh.radius = float(view.object_radius)
+        self.obj_mesh.visible = view.object_xy is not None
+        if view.finger is not None and c is not None and c.armed:
+            line = view.finger[1:]
+            pts = np.column_stack([line, np.full(len(line), self.app.robot.half_width)])
+            self.finger.points = np.stack([pts[:-1], pts[1:]], axis=1)
+            self.finger.visible = True
+        else:
+            self.finger.visible = False
+
+    def _draw_plots(self) -> None:
+        hist = list(self._hist)
+        if len(hist) < 2:
+            return
+        t = np.array([h[0] for h in hist])
+        ref = np.array([h[1] for h in hist])
+        meas = np.array([h[2] for h in hist])
+        cols: list[np.ndarray] = [t]
+        for i in range(ref.shape[1]):
+            cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
+        self.kappa_plot.data = tuple(cols)
+        self.loop_plot.data = (t, np.array([h[3] for h in hist]), np.array([h[4] for h in hist]))
+
+    def close(self) -> None:
+        self._pump_stop.set()
+        self.ctl.close()
+        self.app.remove_stop_hook(self._stop_hook)
+        super().close()

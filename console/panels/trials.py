@@ -1,0 +1,104 @@
+"""Trials panel (soft arm): run the paper's grasp-and-place experiment headless, with progress.
+
+*Run trials* starts a batch (spots A-E of :func:`core.control.trials.paper_locations` x repeats,
+or one custom spot) on the simulated clock in a spawned worker process
+(:func:`core.control.trials.run_trials`), so the console's 100 Hz loop and render thread keep
+their interpreter. A progress bar follows the finished trials; the results table lists each
+trial (spot, success, failure reason, approach and return times) and the total.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+import viser
+
+from console.panels.base import Panel, operator_only
+from core.control.trials import TrialResult, paper_locations, run_trials
+
+SPOTS = ("A-E (paper)", "custom")
+
+
+def results_markdown(results: list[TrialResult], loop: dict | None = None) -> str:
+    """Markdown table of trial results."""
+    if not results:
+        return "<small>no results yet</small>"
+    rows = ["| # | spot | ok | approach s | return s | failure |", "|---|---|---|---|---|---|"]
+    for i, r in enumerate(results, 1):
+        rows.append(f"| {i} | {r.label} | {'✓' if r.success else '✗'} | {r.approach_s:.1f} | "
+                    f"{r.return_s:.1f} | {r.failure or ''} |")
+    ok = sum(r.success for r in results)
+    tail = f"\n\n**{ok}/{len(results)} successes**"
+    if loop:
+        tail += (f" · simulated {loop['sim_s']:.0f} s in {loop['wall_s']:.1f} s "
+                 f"({loop['speedup_vs_real_time']}x real time)")
+    return "\n".join(rows) + tail
+
+
+class TrialsPanel(Panel):
+    """Batch of headless grasp-and-place trials with a progress bar and a results table."""
+
+    title = "Trials"
+    order = 60.0
+    kinds = ("planar",)
+    expand_by_default = False
+
+    def build(self) -> None:
+        gui = self.gui
+        r0 = self.app.robot.capture.nominal_object_radius
+        self.spots = gui.add_dropdown("Spots", SPOTS, initial_value=SPOTS[0])
+        self.x = gui.add_number("Custom x (m)", -0.16, step=0.005)
+        self.y = gui.add_number("Custom y (m)", 0.28, step=0.005)
+        self.r = gui.add_number("Object r (m)", r0, min=0.005, max=0.05, step=0.0005)
+        self.repeats = gui.add_slider("Repeats", min=1, max=10, step=1, initial_value=5)
+        self.seed = gui.add_number("Seed", 0, step=1)
+        self.run_btn = gui.add_button("Run trials", icon=viser.Icon.PLAYER_PLAY)
+        self.progress = gui.add_progress_bar(0.0, visible=False)
+        self.status = gui.add_markdown("<small>idle</small>")
+        self.table = gui.add_markdown(results_markdown([]))
+        self.run_btn.on_click(operator_only(lambda e: self._start(), panel=self, action="run trials"))
+        self._thread: threading.Thread | None = None
+        self.results: list[TrialResult] = []
+
+    def objects(self) -> list[tuple[str, tuple[float, float, float]]]:
+        r = float(self.r.value)
+        if self.spots.value == SPOTS[0]:
+            return [(k, (x, y, r)) for k, (x, y) in paper_locations().items()]
+        return [("custom", (float(self.x.value), float(self.y.value), r))]
+
+    def _start(self) -> None:
+        if self._thread is not None and self._thread.is_alive():
+            return
+        objects, repeats, seed = self.objects(), int(self.repeats.value), int(self.seed.value)
+        self.run_btn.disabled = True
+        self.progress.value, self.progress.visible = 0.0, True
+        self.status.content = f"<small>running {len(objects) * repeats} trials…</small>"
+        self._thread = threading.Thread(target=self._run, args=(objects, repeats, seed),
+                                        name="trials-batch", daemon=True)
+        self._thread.start()
+
+    def _run(self, objects: list, repeats: int, seed: int) -> None:
+        import time
+        from core.control.trials import summary
+        done: list[TrialResult] = []
+
+        def progress(k: int, n: int, r: TrialResult) -> None:
+            done.append(r)
+            self.progress.value = 100.0 * k / n
+            self.status.content = f"<small>{k}/{n} trials done</small>"
+            self.table.content = results_markdown(sorted(done, key=lambda x: x.seed))
+
+        t0 = time.perf_counter()
+        try:
+            src = str(self.app.robot.source)
+            self.results = run_trials(src, objects, repeats, seed, workers=1, progress=progress,
+                                      mp_context="spawn")
+            loop: dict[str, Any] = summary(self.results, time.perf_counter() - t0, 1)
+            self.table.content = results_markdown(self.results, loop)
+            self.status.content = "<small>done</small>"
+        except Exception as exc:  # report, never kill the console
+            self.status.content = f"**Trials failed:** {exc}"
+        finally:
+            self.run_btn.disabled = False
+            self.progress.visible = False

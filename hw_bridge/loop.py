@@ -1,0 +1,448 @@
+"""The 100 Hz loop runner: read -> update -> write, in real time or on a simulated clock.
+
+* **Real time** (:meth:`LoopRunner.start`): a thread with absolute deadlines ``t0 + k period``
+  (``time.perf_counter_ns``; sleep to ``deadline - spin``, then spin); deadlines missed by a
+  long tick are counted as overruns and skipped, never caught up; optional ``SCHED_FIFO``.
+* **Simulated clock** (:meth:`LoopRunner.run_sim`): one period per tick as fast as the CPU
+  allows (sim-as-real; deterministic for a seeded device).
+
+The loop thread is the only caller of the device and the stack. Commands from other threads go
+through a queue (:meth:`LoopRunner.submit`) and run at the next tick; :attr:`LoopRunner.snapshot`
+is swapped each tick (readers take no lock). Planning runs in another process
+(:class:`ProcessPlanner`). Devices: :class:`SimDevice`, :class:`HardwareDevice`.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import multiprocessing
+import os
+import queue
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from core.control.grasp_place import PlanRequest
+from core.control.sim import MocapReading
+from core.control.stack import Telemetry
+
+Array = npt.NDArray[np.float64]
+_STATS_WINDOW = 65536  # ticks kept for percentiles (~11 min at 100 Hz)
+
+
+class Stack(Protocol):
+    """What the loop updates (:class:`core.control.stack.ControlStack` or another runner)."""
+
+    armed: bool
+
+    def update(self, reading: Any, t: float, periods: int = 1) -> tuple[Any | None, Any]: ...
+
+    def stop(self, t: float, reason: str) -> None: ...
+
+
+class Device(Protocol):
+    """What the loop drives. ``t`` is the loop's time in seconds (ignored by real hardware)."""
+
+    def read(self, t: float) -> Any | None: ...
+
+    def write(self, commands: Array, t: float) -> bool: ...
+
+    def cylinders(self) -> Array | None: ...
+
+
+class SimDevice:
+    """The simulated arm: ``read(t)`` steps the physics to ``t`` (sub-steps <= ``max_step``)
+    under the last written demands, then measures; works on either clock."""
+
+    def __init__(self, sim: Any, max_step: float = 0.01):
+        self.sim = sim
+        self.max_step = max_step
+        self.demands = sim.demands.copy()
+        self._t: float | None = None
+
+    def read(self, t: float) -> Any:
+        if self._t is None:
+            self._t = t
+        while t - self._t > 1e-12:
+            h = min(self.max_step, t - self._t)
+            self.sim.step(self.demands, h)
+            self._t += h
+        return self.sim.measure()
+
+    def write(self, commands: Array, t: float) -> bool:
+        self.demands = np.asarray(commands, dtype=float).copy()
+        return True
+
+    def cylinders(self) -> Array | None:
+        return self.sim.cylinders.copy()
+
+
+class HardwareDevice:
+    """``hw_bridge`` hardware (MockHardware / SerialHardware) plus a motion-capture source.
+
+    The mocap frame's points are [x, y, theta] of the base and the N segment ends; a further
+    point, if present, is the object centre (its radius is ``object_radius``). A stale or
+    invalid frame gives NaN markers, which the stack treats as tracking lost.
+    """
+
+    def __init__(self, hardware: Any, mocap: Any, n_segments: int, object_radius: float | None = None):
+        self.hw, self.mocap, self.n = hardware, mocap, n_segments
+        self.object_radius = object_radius
+        self.fault: str | None = None
+
+    def read(self, t: float) -> MocapReading | None:
+        from hw_bridge.interface import ReturnType
+        from hw_bridge.mocap import frame_health
+        if self.hw.read() is not ReturnType.OK:
+            self.fault = self.hw.fault
+            return None
+        frame = self.mocap.latest()
+        if frame_health(frame) != "ok" or frame.points.shape[0] < self.n + 1:
+            return MocapReading(t, np.full((self.n, 2), np.nan), None, self.object_radius)
+        obj = frame.points[self.n + 1, :2].copy() if frame.points.shape[0] > self.n + 1 else None
+        return MocapReading(t, frame.points[1:self.n + 1, :2].copy(), obj, self.object_radius)
+
+    def write(self, commands: Array, t: float) -> bool:
+        from hw_bridge.interface import ReturnType
+        ok = self.hw.write(commands) is ReturnType.OK
+        if not ok:
+            self.fault = self.hw.fault
+        return ok
+
+    def cylinders(self) -> Array | None:
+        pos = self.hw.positions()
+        return None if pos is None else np.asarray(pos, dtype=float)
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopStats:
+    """Timing figures in milliseconds over the kept window; counts since start."""
+
+    ticks: int
+    overruns: int
+    read_failures: int
+    write_failures: int
+    period_error_ms_p50: float
+    period_error_ms_p99: float
+    period_error_ms_max: float
+    latency_ms_p99: float
+    work_ms_p50: float
+    work_ms_p99: float
+    read_ms_p99: float
+    update_ms_p99: float
+    write_ms_p99: float
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopSnapshot:
+    """What the GUI reads: the last tick's control telemetry and timings (ms)."""
+
+    tick: int
+    t: float
+    control: Telemetry | None
+    period_ms: float
+    work_ms: float
+    read_ms: float
+    update_ms: float
+    write_ms: float
+    overruns: int
+    fault: str | None
+
+
+class SimClock:
+    """A nanosecond clock that only moves when told (sim-as-real and tests)."""
+
+    def __init__(self, start_ns: int = 0):
+        self.now_ns = start_ns
+
+    def __call__(self) -> int:
+        return self.now_ns
+
+    def sleep_until(self, deadline_ns: int) -> None:
+        self.now_ns = max(self.now_ns, deadline_ns)
+
+
+class LoopRunner:
+    """Runs ``device.read -> stack.update -> device.write`` every period.
+
+    Args:
+        device: A :class:`Device`.
+        stack: The control stack (``update(reading, t, periods)``).
+        period_s: Control period.
+        clock_ns: Scheduling clock in ns: deadlines, lateness, overruns (real time:
+            ``time.perf_counter_ns``; :class:`SimClock` for sim-as-real; tests inject one).
+        sleep_until: ``deadline_ns -> None`` waiting until the clock reaches it (default: sleep
+            to ``deadline - spin_ns`` then spin).
+        spin_ns: Busy-wait margin before each deadline in real time.
+        timer_ns: Clock for the read/update/write work timings (always real CPU time by
+            default, also on the simulated clock, so sim runs report their real tick cost).
+    """
+
+    def __init__(self, device: Device, stack: Stack, period_s: float = 0.01,
+                 clock_ns: Callable[[], int] = time.perf_counter_ns,
+                 sleep_until: Callable[[int], None] | None = None, spin_ns: int = 300_000,
+                 timer_ns: Callable[[], int] = time.perf_counter_ns):
+        self.device, self.stack = device, stack
+        self.timer_ns = timer_ns
+        self.period_ns = round(period_s * 1e9)
+        self.clock_ns = clock_ns
+        self.spin_ns = spin_ns
+        self._sleep_until = sleep_until or self._default_sleep
+        self._commands: queue.SimpleQueue[tuple[Callable[[Any, float], Any], cf.Future]] = \
+            queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._t0: int | None = None
+        self._k = 0  # deadline index of the current tick
+        self._last_start: int | None = None
+        self._skipped = 0
+        self.ticks = 0
+        self.overruns = 0
+        self.read_failures = 0
+        self.write_failures = 0
+        self.fault: str | None = None
+        self.scheduling = "not started"
+        self._buf = np.zeros((6, _STATS_WINDOW))  # period err, latency, read, update, write, work
+        self.snapshot = LoopSnapshot(0, 0.0, None, 0.0, 0.0, 0.0, 0.0, 0.0, 0, None)
+
+    # -- commands ------------------------------------------------------------------------------
+    def submit(self, fn: Callable[[Any, float], Any]) -> cf.Future:
+        """Queue ``fn(stack, t)`` for the loop thread; the future gets its result or error."""
+        fut: cf.Future = cf.Future()
+        self._commands.put((fn, fut))
+        return fut
+
+    def arm(self) -> cf.Future:
+        return self.submit(lambda s, t: s.arm(self.device.cylinders()))
+
+    def start_task(self) -> cf.Future:
+        return self.submit(lambda s, t: s.start(t))
+
+    def execute(self, plan: Any, center: npt.ArrayLike) -> cf.Future:
+        return self.submit(lambda s, t: s.execute(plan, center, t))
+
+    def goto(self, kappa: npt.ArrayLike) -> cf.Future:
+        return self.submit(lambda s, t: s.goto(kappa, t))
+
+    def stop_arm(self, reason: str = "operator STOP") -> cf.Future:
+        return self.submit(lambda s, t: s.stop(t, reason))
+
+    def disarm(self) -> cf.Future:
+        return self.submit(lambda s, t: s.disarm())
+
+    def _drain(self, t: float) -> None:
+        while True:
+            try:
+                fn, fut = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            if not fut.set_running_or_notify_cancel():
+                continue
+            try:
+                fut.set_result(fn(self.stack, t))
+            except Exception as exc:  # noqa: BLE001 - reported to the caller through the future
+                fut.set_exception(exc)
+
+    # -- one tick ------------------------------------------------------------------------------
+    def tick(self) -> None:
+        """One read -> update -> write at the current deadline."""
+        clock, timer = self.clock_ns, self.timer_ns
+        start = clock()
+        w0 = timer()
+        if self._t0 is None:
+            self._t0 = start
+        deadline = self._t0 + self._k * self.period_ns
+        t = (deadline - self._t0) / 1e9
+        periods = 1 + self._skipped
+        self._skipped = 0
+        self._drain(t)
+        t_read = timer()
+        reading = self.device.read(t)
+        t_upd = timer()
+        commands = None
+        if reading is None:
+            self.read_failures += 1
+            self.fault = getattr(self.device, "fault", None) or "device read failed"
+            if self.stack.armed:
+                self.stack.stop(t, f"device: {self.fault}")
+            control = self.snapshot.control
+        else:
+            commands, control = self.stack.update(reading, t, periods)
+        t_write = timer()
+        if commands is not None and not self.device.write(commands, t):
+            self.write_failures += 1
+            self.fault = getattr(self.device, "fault", None) or "device write failed"
+            self.stack.stop(t, f"device: {self.fault}")
+        end = timer()
+        i = self.ticks % _STATS_WINDOW
+        period = 0.0 if self._last_start is None else (start - self._last_start) / 1e6
+        b = self._buf
+        b[0, i] = 0.0 if self._last_start is None else period - periods * self.period_ns / 1e6
+        b[1, i] = (start - deadline) / 1e6
+        b[2, i] = (t_upd - t_read) / 1e6
+        b[3, i] = (t_write - t_upd) / 1e6
+        b[4, i] = (end - t_write) / 1e6
+        b[5, i] = (end - w0) / 1e6
+        self._last_start = start
+        self.ticks += 1
+        self.snapshot = LoopSnapshot(self.ticks, t, control, period, b[5, i], b[2, i], b[3, i],
+                                     b[4, i], self.overruns, self.fault)
+        # Next deadline; deadlines already passed are overruns, skipped rather than caught up.
+        self._k += 1
+        next_deadline = self._t0 + self._k * self.period_ns
+        now = clock()
+        if now > next_deadline:
+            missed = (now - next_deadline) // self.period_ns + 1
+            self.overruns += int(missed)
+            self._skipped = int(missed)
+            self._k += int(missed)
+
+    def next_deadline_ns(self) -> int:
+        t0 = self.clock_ns() if self._t0 is None else self._t0
+        return t0 + self._k * self.period_ns
+
+    # -- simulated clock -----------------------------------------------------------------------
+    def run_sim(self, seconds: float, until: Callable[[LoopSnapshot], bool] | None = None) -> int:
+        """Tick on a simulated clock for ``seconds`` (or until ``until(snapshot)``); returns ticks.
+
+        Requires ``clock_ns`` to be a :class:`SimClock`; the clock jumps to each deadline.
+        """
+        clock = self.clock_ns
+        if not isinstance(clock, SimClock):
+            raise TypeError("run_sim needs the runner built with clock_ns=SimClock()")
+        n = round(seconds * 1e9 / self.period_ns)
+        for i in range(n):
+            clock.sleep_until(self.next_deadline_ns())
+            self.tick()
+            if until is not None and until(self.snapshot):
+                return i + 1
+        return n
+
+    # -- real time -----------------------------------------------------------------------------
+    def _default_sleep(self, deadline_ns: int) -> None:
+        clock = self.clock_ns
+        remaining = deadline_ns - clock() - self.spin_ns
+        if remaining > 0:
+            time.sleep(remaining / 1e9)
+        while clock() < deadline_ns:
+            pass
+
+    def start(self, sched_priority: int | None = None) -> None:
+        """Run ticks on a background thread at absolute deadlines until :meth:`stop`.
+
+        ``sched_priority`` (1-99) asks Linux to run the loop thread under ``SCHED_FIFO`` so
+        other processes cannot delay its deadlines; without the permission it runs normally.
+        :attr:`scheduling` says which one it got.
+        """
+        if self._thread is not None:
+            raise RuntimeError("loop already running")
+        if isinstance(self.clock_ns, SimClock) and self._sleep_until == self._default_sleep:
+            raise RuntimeError("a SimClock never advances by itself: use run_sim(), or give "
+                               "sleep_until=clock.sleep_until")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, args=(sched_priority,),
+                                        name="control-loop-100Hz", daemon=True)
+        self._thread.start()
+
+    def _run(self, sched_priority: int | None = None) -> None:
+        self.scheduling = "default (SCHED_OTHER)"
+        if sched_priority:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(sched_priority))
+                self.scheduling = f"SCHED_FIFO {sched_priority}"
+            except (OSError, AttributeError) as exc:
+                self.scheduling = f"default (SCHED_FIFO refused: {exc})"
+        self._t0 = None
+        self._k = 0
+        while not self._stop.is_set():
+            if self._t0 is not None:
+                self._sleep_until(self.next_deadline_ns())
+            self.tick()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        """Stop the loop thread (the last demands stay with the device)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def stats(self, last: int | None = None) -> LoopStats:
+        """Percentiles over the kept window, or the ``last`` ticks only (cheaper: GUIs).
+
+        Safe to call from any thread; values may be a tick old.
+        """
+        n = min(self.ticks, _STATS_WINDOW)
+        if last is not None and last < n:
+            end = self.ticks % _STATS_WINDOW
+            idx = (np.arange(end - last, end)) % _STATS_WINDOW
+            b = self._buf[:, idx]
+            n = last
+        else:
+            b = self._buf[:, :n].copy()
+        if n == 0:
+            return LoopStats(0, 0, 0, 0, *([0.0] * 9))
+        err = np.abs(b[0, 1:]) if n > 1 else np.zeros(1)
+        pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731
+        return LoopStats(self.ticks, self.overruns, self.read_failures, self.write_failures,
+                         pct(err, 50), pct(err, 99), float(err.max()), pct(b[1], 99),
+                         pct(b[5], 50), pct(b[5], 99), pct(b[2], 99), pct(b[3], 99), pct(b[4], 99))
+
+
+# -- planning in another process ---------------------------------------------------------------
+_WORKER_ROBOT: Any = None  # per worker process: the robot loaded once by the initializer
+
+
+_WORKER_PLAN: Any = None
+
+
+def resolve(spec: str) -> Callable[..., Any]:
+    """``"package.module:function"`` -> the function."""
+    import importlib
+    module, _, name = spec.partition(":")
+    if not module or not name:
+        raise ValueError(f"expected 'module:function', got {spec!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+def _worker_init(robot_source: str, plan_spec: str) -> None:
+    global _WORKER_ROBOT, _WORKER_PLAN
+    from core import robots
+    _WORKER_ROBOT = robots.load(robot_source)
+    _WORKER_PLAN = resolve(plan_spec)
+
+
+def _worker_plan(req: PlanRequest) -> Any:
+    return _WORKER_PLAN(_WORKER_ROBOT, req.kappa, req.center, req.radius)
+
+
+class ProcessPlanner:
+    """Planner for the state machine that runs ``plan_grasp`` in a worker process.
+
+    ``plan_spec`` names the planning function (``module:function`` taking
+    ``(robot, kappa, center, radius)``). Calling it returns a :class:`concurrent.futures.Future`; the state machine polls ``done()``
+    each tick, so planning never blocks the loop (nor holds its GIL). Uses ``spawn`` so no
+    loop thread or GUI state is forked.
+    """
+
+    def __init__(self, robot_source: str | Path, workers: int = 1,
+                 plan_spec: str = "core.planning.grasp:plan_grasp"):
+        ctx = multiprocessing.get_context("spawn")
+        self.pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
+                                           initargs=(str(robot_source), plan_spec))
+        self.warm = self.pool.submit(int)  # start the worker now (without waiting for it)
+
+    def __call__(self, req: PlanRequest) -> cf.Future:
+        return self.pool.submit(_worker_plan, req)
+
+    def close(self) -> None:
+        """Cancel pending plans and end the worker (waits for a plan in progress, ~ms)."""
+        self.pool.shutdown(wait=True, cancel_futures=True)
