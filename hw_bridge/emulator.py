@@ -1,7 +1,8 @@
 """Device emulator on a pseudo-terminal, so the whole serial stack runs without hardware.
 
 ``python -m hw_bridge.emulator --robot extensible|soft-arm [--baud B] [--drop P] [--corrupt P]
-[--stall-after S] [--disconnect-after S [--disconnect-for D]] [--motors N] [--mocap-port P]``
+[--stall-after S] [--disconnect-after S [--disconnect-for D]] [--motors N] [--mocap-port P]
+[--seed S] [--object X Y R] [--control-port P]``
 
 * stdout line 1: the pty slave path (open it with pyserial); later lines: JSON events
   (``{"event": "watchdog_tripped", "t": ..., "positions": [...]}``, armed, disarmed,
@@ -13,13 +14,25 @@
   like a hung MCU); ``--disconnect-after S`` cuts the wire (bytes lost both ways, the device
   keeps running so its watchdog acts) for ``--disconnect-for D`` s (default: for good).
 * SIGUSR2 toggles the hardware e-stop input. SIGTERM/SIGINT exit cleanly.
+
+Soft arm: the plant is :class:`core.control.sim.EmulatorPlant` (the console's seeded soft-arm
+sim: stick-slip, pre-pressure stiffening, object and gripper, marker noise and occlusions)
+driven by the encoder positions; every tick one UDP motion-capture frame goes to
+``127.0.0.1:--mocap-port``: base, segment ends (NaN while occluded, ``valid`` false), then the
+object centre while an object is present. ``--object X Y R`` places a disc at start.
+``--control-port P`` (0: any free port) opens a scene channel on ``127.0.0.1:P`` (stdout event
+``{"event": "control", "port": N}``); datagrams are JSON, each answered to the sender with
+``{"ok": true, ...}`` or ``{"ok": false, "error": ...}``:
+``{"cmd": "place_object", "x": X, "y": Y, "r": R}``, ``{"cmd": "remove_object"}``,
+``{"cmd": "scene"}`` (answer: ``object`` [x, y, r] or null, ``captured``, ``finger`` polyline
+or null). It stands in for moving the real object by hand.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import json
+import math
 import os
 import queue
 import random
@@ -36,7 +49,7 @@ from core.robots import ExtensibleArm, Robot, load
 from hw_bridge.config import BridgeConfig, EmulatorConfig
 from hw_bridge.device import DeviceCore
 from hw_bridge.mocap import encode_mocap_packet
-from hw_bridge.plants import CurvaturePlant, MotorBank
+from hw_bridge.plants import MotorBank
 
 
 def _emit(event: str, **fields: Any) -> None:
@@ -51,14 +64,6 @@ class _Writer(threading.Thread):
         self.fd, self.baud, self.connected = fd, baud, connected
         self.q: queue.Queue[bytes | None] = queue.Queue()
         self.dropped_overflow = 0
-
-    def _serve_requests(self, now: float) -> None:
-        requests, self.requests = self.requests, set()
-        if "status" in requests:
-            self.status()
-        if "estop" in requests:
-            self.core.set_estop(not self.core.estop, now)
-            _emit("estop", pressed=self.core.estop)
 
     def run(self) -> None:
         while (data := self.q.get()) is not None:
@@ -95,17 +100,23 @@ class Emulator:
         self.t0 = now
         self.core = DeviceCore(MotorBank(self.bridge.n_motors, emu.motor_speed_counts),
                                self.bridge.watchdog_s, self.bridge.period_s, now=now)
-        self.plant: CurvaturePlant | None = None
+        self.plant: Any = None  # core.control.sim.EmulatorPlant for the soft arm
         self.udp: socket.socket | None = None
+        self.control: socket.socket | None = None
         if not isinstance(robot, ExtensibleArm):
-            from core.kinematics.planar import forward_kinematics
-            fk = functools.partial(forward_kinematics, lengths=robot.lengths,
-                                   base_pose=robot.base_pose)
-            self.plant = CurvaturePlant(robot.n_segments, emu.counts_per_kappa, emu.tau,
-                                        robot.kappa_max, fk)
+            from core.control.sim import EmulatorPlant
+            self.plant = EmulatorPlant(robot, seed=0 if args.seed is None else args.seed)
+            if args.object is not None:
+                self.plant.sim.place_object(*args.object)
             self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.mocap_addr = ("127.0.0.1", args.mocap_port or emu.mocap_port)
             self.mocap_seq = 0
+            if args.control_port is not None:
+                self.control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                self.control.bind(("127.0.0.1", args.control_port))
+                self.control.setblocking(False)
+        elif args.object is not None or args.control_port is not None:
+            raise ValueError("--object and --control-port need the soft arm")
         self.writer = _Writer(self.master, self.baud, lambda: self.host_present)
         self.rx_pending: list[tuple[float, bytes]] = []
         self.rx_busy_until = now
@@ -194,12 +205,53 @@ class Emulator:
         if self.plant is not None and self.udp is not None:
             self.plant.step(self.core.motors.position, self.bridge.period_s)
             self.mocap_seq += 1
+            pts, valid = self.plant.mocap_frame()
             try:
-                self.udp.sendto(encode_mocap_packet(self.mocap_seq, now, self.plant.shape(), True),
+                self.udp.sendto(encode_mocap_packet(self.mocap_seq, now, pts, valid),
                                 self.mocap_addr)
             except OSError:
                 pass
         self._flush_output()
+
+    # -- scene channel (soft arm) --------------------------------------------------------------
+    def _serve_control(self) -> None:
+        """Answer waiting scene datagrams (non-blocking; see the module docstring)."""
+        assert self.control is not None
+        while True:
+            try:
+                data, addr = self.control.recvfrom(4096)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError:
+                return
+            try:
+                reply = self._scene_command(json.loads(data))
+            except Exception as exc:  # noqa: BLE001 - bad input: answer, change nothing
+                reply = {"ok": False, "error": str(exc)}
+            try:
+                self.control.sendto(json.dumps(reply).encode(), addr)
+            except OSError:
+                pass
+
+    def _scene_command(self, msg: dict[str, Any]) -> dict[str, Any]:
+        sim = self.plant.sim
+        cmd = msg.get("cmd") if isinstance(msg, dict) else None
+        if cmd == "place_object":
+            x, y, r = (float(msg[k]) for k in ("x", "y", "r"))
+            if not all(map(math.isfinite, (x, y, r))):
+                raise ValueError("object x, y, r must be finite")
+            sim.place_object(x, y, r)
+            _emit("object_placed", xy=[x, y], r=r)
+            return {"ok": True}
+        if cmd == "remove_object":
+            sim.remove_object()
+            return {"ok": True}
+        if cmd == "scene":
+            obj = sim.obj
+            finger = sim.gripper_polyline().tolist() if sim.turn > 1e-3 else None
+            return {"ok": True, "captured": sim.captured, "finger": finger,
+                    "object": None if obj is None else [*map(float, obj.xy), obj.radius]}
+        raise ValueError(f"unknown scene command {cmd!r}")
 
     def status(self) -> None:
         """Print a status event (SIGUSR1)."""
@@ -236,6 +288,8 @@ class Emulator:
                 self._deliver(now)
             if self.requests:
                 self._serve_requests(now)
+            if self.control is not None:
+                self._serve_control()
             if now >= next_tick:
                 self._tick(now)
                 next_tick += period
@@ -247,6 +301,9 @@ class Emulator:
             os.close(self.master)
         except OSError:
             pass
+        for sock in (self.udp, self.control):
+            if sock is not None:
+                sock.close()
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -261,8 +318,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--disconnect-for", type=float, default=None, metavar="D")
     ap.add_argument("--motors", type=int, default=None, help="override the channel count")
     ap.add_argument("--mocap-port", type=int, default=None, help="UDP port (soft arm)")
-    ap.add_argument("--seed", type=int, default=None, help="fault-injection random seed")
+    ap.add_argument("--seed", type=int, default=None,
+                    help="random seed of fault injection and of the soft-arm sim (default 0)")
+    ap.add_argument("--object", type=float, nargs=3, default=None, metavar=("X", "Y", "R"),
+                    help="soft arm: place a disc of radius R (m) at (X, Y) on the table")
+    ap.add_argument("--control-port", type=int, default=None, metavar="P",
+                    help="soft arm: UDP scene channel on 127.0.0.1:P (0: any free port)")
     args = ap.parse_args(argv)
+    if args.object is not None and (not all(map(math.isfinite, args.object))
+                                    or not args.object[2] > 0):
+        ap.error("--object needs finite X Y and a radius R > 0")
+    if args.control_port is not None and not 0 <= args.control_port <= 65535:
+        ap.error("--control-port must be in 0..65535")
     for name in ("drop", "corrupt"):
         if not 0.0 <= getattr(args, name) <= 1.0:
             ap.error(f"--{name} must be a probability in [0, 1]")
@@ -282,6 +349,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"emulator: {exc}", file=sys.stderr)
         return 2
     print(emu.path, flush=True)
+    if emu.control is not None:
+        _emit("control", port=emu.control.getsockname()[1])
 
     def _stop(signum: int, frame: object) -> None:
         emu.stop = True

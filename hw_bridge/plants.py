@@ -1,8 +1,10 @@
 """Simple device-side plants for the emulator: speed-limited motors and a soft-arm curvature lag.
 
 These are deliberately small stand-ins for real hardware so the serial stack can be exercised
-end to end. :class:`CurvaturePlant` may be replaced by a richer soft-arm simulation later; the
-emulator only relies on ``step(cylinder_counts, dt)`` and ``kappa``.
+end to end. The device emulator's soft arm now runs the richer
+:class:`core.control.sim.EmulatorPlant`; :class:`CurvaturePlant` stays as the minimal
+closed-form lag (``step(cylinder_counts, dt)``, ``kappa``, ``shape()``) for unit tests of the
+mocap path.
 """
 
 from __future__ import annotations

@@ -5,7 +5,11 @@ milliseconds at a time (mesh updates, plot serialisation): a 100 Hz loop *thread
 deadlines (measured: hundreds of overruns per minute, p99 period error tens of ms on 2 cores).
 :class:`ControlProcess` therefore runs the simulated arm, the control stack and the real-time
 :class:`hw_bridge.loop.LoopRunner` thread in a spawned child process (planning in a further
-:class:`hw_bridge.loop.ProcessPlanner` process). The console talks to it with small messages:
+:class:`hw_bridge.loop.ProcessPlanner` process). The loop drives either the in-process sim
+(``device="sim"``) or hardware through the serial stack (:mod:`hw_bridge.soft_arm_link`): the
+device emulator on a pty with its UDP mocap and scene channel (``"emulator"``), MockHardware
+with the same plant (``"mock"``), or a real controller (``port_path``). The console talks to it
+with small messages:
 
 * commands go down a queue (``("arm",)``, ``("goto", q)``, ``("grasp_at", x, y, r)``, ...), are
   applied by the child's loop thread at its next tick, and each returns a Future that the reply
@@ -24,7 +28,7 @@ import itertools
 import multiprocessing
 import queue
 import threading
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -33,7 +37,11 @@ from hw_bridge.loop import LoopSnapshot, LoopStats
 
 @dataclasses.dataclass(frozen=True)
 class ControlView:
-    """What the console draws: loop snapshot, stats and the simulated scene."""
+    """What the console draws: loop snapshot, stats and the simulated scene.
+
+    ``device`` says what the loop drives; with hardware, ``link`` is the link health and
+    ``fault`` the hardware fault that stopped commanding (cleared by the operator's Arm).
+    """
 
     snapshot: LoopSnapshot
     stats: LoopStats
@@ -42,54 +50,179 @@ class ControlView:
     object_radius: float | None
     captured: bool
     finger: np.ndarray | None  # (M, 2) gripper centreline in the world while closing
+    device: str = "sim"
+    link: Any = None  # hw_bridge.interface.LinkHealth with hardware
+    fault: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviceOptions:
+    """Which device the child's loop drives (see :class:`ControlProcess`)."""
+
+    kind: str = "sim"
+    port_path: str | None = None
+    emulator_args: tuple[str, ...] = ()
+
+
+class _SimWorld:
+    """device="sim": SoftArmSim stepped by the loop itself (SimDevice)."""
+
+    kind = "sim"
+
+    def __init__(self, robot: Any, seed: int):
+        from core.control.sim import SoftArmSim
+        from hw_bridge.loop import SimDevice
+        self.sim = SoftArmSim(robot, seed=seed)
+        self.device = SimDevice(self.sim)
+
+    def configure(self) -> None:
+        pass
+
+    def arm(self, stack: Any) -> None:  # loop thread
+        stack.arm(self.sim.cylinders.copy())
+
+    def disarm(self, stack: Any) -> None:  # loop thread
+        stack.disarm()
+
+    def scene(self, runner: Any) -> tuple[Any, Any, bool, Any, Any, str | None]:
+        sim = self.sim
+        obj = sim.obj
+        finger = sim.gripper_polyline() if sim.turn > 1e-3 else None
+        return (None if obj is None else (float(obj.xy[0]), float(obj.xy[1])),
+                None if obj is None else obj.radius, sim.captured, finger, None, None)
+
+    def close(self) -> None:
+        pass
+
+
+class _HardwareWorld:
+    """device="emulator" / "port" / "mock": SerialHardware (or MockHardware) + mocap."""
+
+    def __init__(self, robot: Any, seed: int, opts: DeviceOptions):
+        from hw_bridge.soft_arm_link import open_link
+        self.kind = opts.kind
+        self.link = open_link(robot, opts.kind, port_path=opts.port_path, seed=seed,  # type: ignore[arg-type]
+                              emulator_args=opts.emulator_args)
+        self.device = self.link.device
+        self.radius: float | None = None
+
+    def configure(self) -> None:
+        """Before the loop starts: open the port, handshake (a failure shows as the fault)."""
+        from hw_bridge.interface import ReturnType
+        if self.link.hw.configure() is not ReturnType.OK:
+            self.device.fault = self.link.hw.fault
+
+    def place_object(self, x: float, y: float, r: float) -> None:
+        """Command thread: put the object into the simulated world (none for a real device)."""
+        if self.link.scene is not None:
+            self.link.scene.place_object(x, y, r)
+        self.radius = r
+        self.device.object_radius = r
+
+    def arm(self, stack: Any) -> None:
+        """Loop thread (an operator action, so it may block ~100 ms): (re)connect, ARM, arm."""
+        from hw_bridge.interface import LifecycleState, ReturnType
+        hw = self.link.hw
+        if hw.state is LifecycleState.UNCONFIGURED and hw.configure() is not ReturnType.OK:
+            raise RuntimeError(f"arm refused: {hw.fault}")
+        if hw.state is LifecycleState.INACTIVE and hw.activate() is not ReturnType.OK:
+            raise RuntimeError(f"arm refused: {hw.fault}")
+        self.device.fault = None
+        stack.arm(self.device.cylinders())
+
+    def disarm(self, stack: Any) -> None:  # loop thread
+        from hw_bridge.interface import LifecycleState
+        stack.disarm()
+        if self.link.hw.state is LifecycleState.ACTIVE:
+            self.link.hw.deactivate()
+
+    def scene(self, runner: Any) -> tuple[Any, Any, bool, Any, Any, str | None]:
+        hw = self.link.hw
+        fault = hw.fault if hw.state.value == "unconfigured" else None
+        health = hw.health()
+        sc = self.link.scene
+        emu = self.link.emulator
+        if emu is not None and emu.proc.poll() is not None:
+            sc = None  # the emulator is gone: do not wait on its scene channel
+        if sc is not None:
+            try:
+                s = sc.scene()
+            except (RuntimeError, OSError):
+                s = None
+            if s is not None:
+                obj, finger = s["object"], s["finger"]
+                return (None if obj is None else (obj[0], obj[1]),
+                        None if obj is None else obj[2], bool(s["captured"]),
+                        None if finger is None else np.asarray(finger, float), health, fault)
+        c = runner.snapshot.control
+        xy = None if c is None or c.object_xy is None else (float(c.object_xy[0]),
+                                                             float(c.object_xy[1]))
+        return xy, self.radius if xy is not None else None, False, None, health, fault
+
+    def close(self) -> None:
+        self.link.close()
 
 
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,
-           stats_ticks: int, sched_priority: int | None) -> None:
-    from core.control.sim import SoftArmSim
+           stats_ticks: int, sched_priority: int | None, opts: DeviceOptions = DeviceOptions()) -> None:
     from core.control.stack import ControlStack
     from core.robots import load
-    from hw_bridge.loop import LoopRunner, ProcessPlanner, SimDevice
+    from hw_bridge.loop import LoopRunner, ProcessPlanner
 
     robot = load(robot_source)
-    sim = SoftArmSim(robot, seed=seed)
+    try:
+        world: Any = _SimWorld(robot, seed) if opts.kind == "sim" else _HardwareWorld(robot, seed, opts)
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which shows it
+        replies.put(("failed", f"{opts.kind} device: {exc}"))
+        return
+    world.configure()
     planner = ProcessPlanner(robot_source)
     stack = ControlStack(robot, 0.01, planner)
-    runner = LoopRunner(SimDevice(sim), stack, 0.01)
+    runner = LoopRunner(world.device, stack, 0.01)
+
+    def place(x: float, y: float, r: float) -> None:
+        if world.kind == "sim":
+            world.sim.place_object(x, y, r)
+
+    def arm(s: ControlStack) -> None:
+        world.arm(s)
+        runner.fault = None
 
     def grasp_at(s: ControlStack, t: float, x: float, y: float, r: float) -> None:
-        sim.place_object(x, y, r)
+        place(x, y, r)
         if not s.armed:
-            s.arm(sim.cylinders.copy())
+            arm(s)
         s.start(t)
 
     def execute(s: ControlStack, t: float, kappas: list, palms: list, x: float, y: float,
                 r: float) -> None:
         from core.control.grasp_place import WaypointPlan
-        sim.place_object(x, y, r)
+        place(x, y, r)
         if not s.armed:
-            s.arm(sim.cylinders.copy())
+            arm(s)
         s.execute(WaypointPlan(np.asarray(kappas, float), np.asarray(palms, float)), (x, y), t)
 
     actions = {
         "execute": execute,
-        "arm": lambda s, t: s.arm(sim.cylinders.copy()),
-        "disarm": lambda s, t: s.disarm(),
+        "arm": lambda s, t: arm(s),
+        "disarm": lambda s, t: world.disarm(s),
         "goto": lambda s, t, q: s.goto(np.asarray(q, float), t),
         "stop": lambda s, t, reason: s.stop(t, reason),
         "start": lambda s, t: s.start(t),
-        "place_object": lambda s, t, x, y, r: sim.place_object(x, y, r),
+        "place_object": lambda s, t, x, y, r: place(x, y, r),
         "grasp_at": grasp_at,
     }
+    # With hardware the simulated object lives in the emulator / mock plant: placed from this
+    # (command) thread before the loop's part runs, so the loop never waits on the scene channel.
+    scene_first = {"place_object", "grasp_at", "execute"} if world.kind != "sim" else set()
     stop = threading.Event()
 
     def publish() -> None:
         while not stop.wait(1.0 / publish_hz):
-            obj = sim.obj
-            finger = sim.gripper_polyline() if sim.turn > 1e-3 else None
+            obj_xy, radius, captured, finger, link, fault = world.scene(runner)
+            fault = fault or runner.fault
             view = ControlView(runner.snapshot, runner.stats(last=stats_ticks), runner.scheduling,
-                               None if obj is None else (float(obj.xy[0]), float(obj.xy[1])),
-                               None if obj is None else obj.radius, sim.captured, finger)
+                               obj_xy, radius, captured, finger, world.kind, link, fault)
             replies.put(("view", view))
 
     runner.start(sched_priority=sched_priority)
@@ -111,6 +244,16 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             if fn is None:
                 replies.put(("reply", cid, f"unknown command {name!r}"))
                 continue
+            if name in scene_first:
+                x, y, r = args[-3:]
+                try:
+                    world.place_object(x, y, r)
+                except (RuntimeError, OSError, ValueError) as exc:
+                    replies.put(("reply", cid, str(exc)))
+                    continue
+                if name == "place_object":
+                    replies.put(("reply", cid, None))
+                    continue
             fut = runner.submit(lambda s, t, fn=fn, args=args: fn(s, t, *args))
             fut.add_done_callback(lambda f, cid=cid: replies.put(
                 ("reply", cid, None if f.exception() is None else str(f.exception()))))
@@ -118,6 +261,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         stop.set()
         runner.stop()
         pub.join(2.0)
+        world.close()
         planner.close()
         del runner, stack, actions  # free ruckig objects before interpreter teardown
 
@@ -131,10 +275,28 @@ class ControlProcess:
         publish_hz: How often the child sends a :class:`ControlView`.
         sched_priority: ``SCHED_FIFO`` priority for the loop thread (None: normal scheduling;
             refused without the permission, which the view's ``scheduling`` reports).
+        device: What the loop drives: ``"sim"`` (SoftArmSim in the loop, the default),
+            ``"emulator"`` (the child spawns ``python -m hw_bridge.emulator`` on a pty and
+            talks DEMAND/STATE to it; arm shape from its UDP mocap stream), ``"mock"``
+            (MockHardware with the same sim in-process). Giving ``port_path`` selects a real
+            controller on that serial device (mocap on the robot's ``[emulator].mocap_port``).
+        port_path: Serial device of a real controller (no emulator is spawned).
+        emulator_args: Extra emulator arguments (fault injection: ``("--drop", "0.01")``).
+
+    With hardware, Arm (and grasp_at/execute while disarmed) configures and activates the
+    link in the loop thread; a link fault stops commanding and shows in ``view.fault``, and
+    nothing re-arms until the operator arms again.
     """
 
     def __init__(self, robot: Any, seed: int = 0, publish_hz: float = 30.0,
-                 stats_ticks: int = 1000, sched_priority: int | None = 50):
+                 stats_ticks: int = 1000, sched_priority: int | None = 50,
+                 device: Literal["sim", "emulator", "mock"] = "sim",
+                 port_path: str | None = None, emulator_args: tuple[str, ...] = ()):
+        if device not in ("sim", "emulator", "mock"):
+            raise ValueError(f"device must be 'sim', 'emulator' or 'mock', got {device!r}")
+        opts = DeviceOptions("port" if port_path else device, port_path, tuple(emulator_args))
+        self.device = opts.kind
+        self.failure: str | None = None
         ctx = multiprocessing.get_context("spawn")
         self.robot = robot
         self._commands = ctx.Queue()
@@ -142,7 +304,7 @@ class ControlProcess:
         # Not a daemon: it starts its own planner process. close() (also at exit) ends it.
         self._proc = ctx.Process(target=_child, name="soft-arm-control",
                                  args=(str(robot.source), seed, self._commands, self._replies,
-                                       publish_hz, stats_ticks, sched_priority))
+                                       publish_hz, stats_ticks, sched_priority, opts))
         self._proc.start()
         self._ids = itertools.count(1)
         self._pending: dict[int, cf.Future] = {}
@@ -164,6 +326,8 @@ class ControlProcess:
                 return
             if msg[0] == "view":
                 self.view = msg[1]
+            elif msg[0] == "failed":
+                self.failure = msg[1]
             elif msg[0] == "reply":
                 with self._lock:
                     fut = self._pending.pop(msg[1], None)

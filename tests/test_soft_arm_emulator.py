@@ -1,0 +1,153 @@
+"""The soft arm's control process driving the device emulator over a real pty + UDP mocap.
+
+Independent expectations: the curvature fitted from the emulator's mocap markers (the same
+frames the loop sees) must reach the commanded goto target; after STOP the demands written to
+the device stay frozen; an object placed through grasp_at appears in the emulator's world (its
+mocap stream); closing ends the emulator process (checked in /proc, not through our handles).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from console.panels.control_process import ControlProcess
+from core.robots import load
+
+SOFT = load("soft-arm")
+
+
+def wait_for(pred, timeout=20.0, what="condition"):
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            if pred():
+                return
+        except (AttributeError, TypeError):
+            pass  # view not there yet
+        if time.monotonic() > end:
+            raise AssertionError(f"{what} not reached within {timeout} s")
+        time.sleep(0.02)
+
+
+def emulator_children(pid: int) -> list[int]:
+    """Pids of ``hw_bridge.emulator`` processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            cmd = (d / "cmdline").read_bytes().split(b"\0")
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        if ppid == pid and b"hw_bridge.emulator" in cmd:
+            out.append(int(d.name))
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def test_goto_stop_and_grasp_object_through_the_emulator():
+    ctl = ControlProcess(SOFT, seed=2, device="emulator", sched_priority=None)
+    emu_pids: list[int] = []
+    try:
+        wait_for(lambda: ctl.view.link.state == "inactive", what="configured link")
+        emu_pids = emulator_children(ctl._proc.pid)
+        assert len(emu_pids) == 1
+        assert ctl.view.device == "emulator" and ctl.view.fault is None
+        ctl.arm().result(10)
+        wait_for(lambda: ctl.view.link.state == "active" and ctl.view.link.armed, what="ARMED")
+        wait_for(lambda: ctl.view.snapshot.control.prepressurised, what="pre-pressure")
+
+        target = np.array([4.0, -3.0, 3.0, 2.0, -2.0, 5.0])
+        ctl.goto(target).result(10)
+        # Measured curvature (fit to the mocap markers) converges to the target.
+        wait_for(lambda: np.max(np.abs(ctl.view.snapshot.control.kappa_meas - target)) < 0.3,
+                 timeout=15.0, what="curvature convergence")
+        c = ctl.view.snapshot.control
+        assert c.armed and c.tracking_ok and c.phase in ("idle", "released")
+        h = ctl.view.link
+        assert h.received > 100 and h.crc_errors == 0 and h.rtt_ms_p50 is not None
+
+        # STOP holds: the demands on the wire stay frozen while the loop keeps running.
+        ctl.stop_arm("test STOP").result(10)
+        wait_for(lambda: ctl.view.snapshot.control.phase == "stopped", what="stopped")
+        held = ctl.view.snapshot.control.commands.copy()
+        t0, sent0 = ctl.view.snapshot.t, ctl.view.link.sent
+        wait_for(lambda: ctl.view.snapshot.t > t0 + 0.5, what="loop running")
+        v = ctl.view
+        assert np.array_equal(v.snapshot.control.commands, held)
+        assert v.link.sent > sent0 + 30 and v.link.armed  # still streaming the held demands
+        assert v.snapshot.control.reason == "test STOP" and v.fault is None
+
+        # grasp_at puts the object into the emulator's world: it appears in its mocap stream.
+        ctl.grasp_at(-0.16, 0.28, 0.0165).result(10)
+        wait_for(lambda: ctl.view.snapshot.control.object_xy is not None, what="object tracked")
+        xy = ctl.view.snapshot.control.object_xy
+        assert np.hypot(xy[0] + 0.16, xy[1] - 0.28) < 0.003
+        assert ctl.view.object_xy is not None and ctl.view.object_radius == pytest.approx(0.0165)
+        wait_for(lambda: ctl.view.snapshot.control.phase not in ("stopped", "idle"),
+                 what="grasp task running")
+        ctl.stop_arm("second STOP").result(10)
+        wait_for(lambda: ctl.view.snapshot.control.phase == "stopped", what="stopped again")
+    finally:
+        ctl.close()
+    assert not ctl.alive
+    assert emu_pids and not any(alive(p) for p in emu_pids)  # no orphan emulator
+
+
+def test_bad_device_is_refused():
+    with pytest.raises(ValueError, match="device"):
+        ControlProcess(SOFT, device="serial")  # type: ignore[arg-type]
+
+
+def test_link_fault_stops_commanding_and_does_not_rearm():
+    ctl = ControlProcess(SOFT, seed=3, device="emulator", sched_priority=None)
+    try:
+        wait_for(lambda: ctl.view.link.state == "inactive", what="configured link")
+        (emu,) = emulator_children(ctl._proc.pid)
+        ctl.arm().result(10)
+        ctl.goto(np.full(6, 3.0)).result(10)
+        wait_for(lambda: ctl.view.snapshot.control.kappa_ref[0] > 0.5, what="moving")
+        os.kill(emu, signal.SIGKILL)  # the device vanishes mid-motion
+        wait_for(lambda: ctl.view.fault is not None, timeout=5.0, what="fault shown")
+        v = ctl.view
+        assert v.link.state == "unconfigured" and "link lost" in v.fault
+        sent = v.link.sent
+        time.sleep(0.5)
+        assert ctl.view.link.sent == sent and ctl.view.link.state == "unconfigured"  # no re-arm
+        assert ctl.view.stats.read_failures > 0
+        with pytest.raises(RuntimeError, match="arm refused"):
+            ctl.arm().result(10)  # the operator's Arm tries to reconnect: the port is gone
+    finally:
+        ctl.close()
+    assert not ctl.alive
+
+
+def test_mock_device_runs_the_same_plant_in_process():
+    ctl = ControlProcess(SOFT, seed=4, device="mock", sched_priority=None)
+    try:
+        wait_for(lambda: ctl.view.link.state == "inactive", what="configured mock link")
+        assert emulator_children(ctl._proc.pid) == []
+        ctl.arm().result(10)
+        target = np.array([-3.0, 2.0, 4.0, 0.0, 3.0, -2.0])
+        ctl.goto(target).result(10)
+        wait_for(lambda: np.max(np.abs(ctl.view.snapshot.control.kappa_meas - target)) < 0.3,
+                 timeout=15.0, what="curvature convergence")
+        ctl.place_object(0.25, 0.02, 0.02).result(10)
+        wait_for(lambda: ctl.view.object_xy is not None, what="object in the mock world")
+        assert ctl.view.object_xy == pytest.approx((0.25, 0.02), abs=1e-6)
+    finally:
+        ctl.close()
