@@ -1,6 +1,15 @@
 """Entry point: serve the operator console for one robot until Ctrl-C.
 
-    .venv/bin/python serve.py --robot soft-arm --host 127.0.0.1 --port 8080
+    .venv/bin/python serve.py --robot soft-arm                    # this machine only (desk)
+    .venv/bin/python serve.py --robot soft-arm --host 0.0.0.0     # the lab network
+
+Network: ``--host`` is the address to bind (default 127.0.0.1: only this machine can connect;
+``0.0.0.0`` serves every interface and prints the URL(s) to open from other machines) and
+``--port`` the HTTP/websocket port. viser's share tunnel is off (button hidden, request
+ignored). Control: every browser starts as a viewer; "Take control" in the Session panel needs
+the operator token printed here (``--no-token`` for a closed lab). On a loopback-only console
+(a single desk) the first browser gets control without the token unless ``--lab`` is given.
+Files: recordings and exports are written only under ``--data-dir`` (default ``./runs``).
 
 ``--hardware emulator|mock`` and ``--port-path`` are accepted for the serial bridge; until the
 bridge lands they are only reported and the console runs the kinematic simulation.
@@ -9,11 +18,17 @@ bridge lands they are only reported and the console runs the kinematic simulatio
 from __future__ import annotations
 
 import argparse
+import ipaddress
+import secrets
 import signal
+import socket
 import sys
 import threading
+from pathlib import Path
+from typing import Any
 
-from console.app import ConsoleApp
+from console.access import AccessControl
+from console.app import DEFAULT_PANELS, ConsoleApp
 from core.robots import RobotFileError, available, load
 
 
@@ -24,12 +39,83 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--robot", default="soft-arm",
                    help=f"robot name ({', '.join(available())}) or path to a robot .toml")
     p.add_argument("--host", default="127.0.0.1",
-                   help="address to bind (default 127.0.0.1; use 0.0.0.0 to serve the lab)")
+                   help="address to bind (default 127.0.0.1: this machine only; 0.0.0.0 serves "
+                        "the lab network and prints the URLs to open)")
     p.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
+    p.add_argument("--data-dir", default="runs",
+                   help="the only folder the console reads or writes (recordings, exports); "
+                        "default ./runs")
+    p.add_argument("--no-token", action="store_true",
+                   help="closed lab: 'Take control' needs no operator token")
+    p.add_argument("--lab", action="store_true",
+                   help="every browser starts as a viewer even on 127.0.0.1 (the default for "
+                        "any other --host)")
+    p.add_argument("--demo", action="store_true",
+                   help="add a 'Run demo motion' button (operator only) for demos and tests")
     p.add_argument("--hardware", choices=("emulator", "mock"), default=None,
                    help="hardware bridge to attach (not available yet: noted and ignored)")
     p.add_argument("--port-path", default=None, help="serial device for --hardware")
     return p.parse_args(argv)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether binding ``host`` serves this machine only."""
+    if host in ("localhost",):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def lan_addresses() -> list[str]:
+    """This machine's non-loopback IPv4 addresses (best effort, no packets sent)."""
+    found: list[str] = []
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("192.0.2.1", 9))  # TEST-NET-1: picks the outgoing interface, sends nothing
+            found.append(s.getsockname()[0])
+    except OSError:
+        pass
+    try:
+        for info in socket.getaddrinfo(socket.gethostname(), None, socket.AF_INET):
+            found.append(str(info[4][0]))
+    except OSError:
+        pass
+    out = []
+    for a in found:
+        if a not in out and not ipaddress.ip_address(a).is_loopback:
+            out.append(a)
+    return out
+
+
+def urls(host: str, port: int) -> list[str]:
+    """The URL(s) to open for a console bound to ``host``."""
+    if host in ("0.0.0.0", "", "::"):
+        return [f"http://127.0.0.1:{port}/"] + [f"http://{a}:{port}/" for a in lan_addresses()]
+    shown = f"[{host}]" if ":" in host else host
+    return [f"http://{shown}:{port}/"]
+
+
+def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, ConsoleApp, str | None]:
+    """Create the viser server and the console app; returns (server, app, token)."""
+    import viser  # after argument checks, so --help and bad input stay fast
+
+    from console.demo_motion import DemoMotion
+    from console.panels.session import SessionPanel
+
+    token = None if args.no_token else secrets.token_urlsafe(9)
+    desk = is_loopback(args.host) and not args.lab
+    access = AccessControl(token, first_client_takes_control=desk)
+    server = viser.ViserServer(host=args.host, port=args.port, verbose=False)
+    app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
+                     panels=())
+    if args.demo:
+        app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
+        app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
+    for panel_cls in (*DEFAULT_PANELS, SessionPanel):
+        app.add_panel(panel_cls)
+    return server, app, token
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -43,6 +129,11 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 < args.port < 65536:
         print(f"serve.py: --port must be in 1..65535, got {args.port}", file=sys.stderr)
         return 2
+    try:
+        Path(args.data_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"serve.py: --data-dir {args.data_dir}: {exc}", file=sys.stderr)
+        return 2
     status = "Kinematic simulation (no hardware connected)"
     if args.hardware is not None:
         where = f" on {args.port_path}" if args.port_path else ""
@@ -50,21 +141,33 @@ def main(argv: list[str] | None = None) -> int:
                   "available yet: kinematic simulation")
         print(f"serve.py: {status}", file=sys.stderr)
 
-    import viser  # after argument checks, so --help and bad input stay fast
-
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
-    server = viser.ViserServer(host=args.host, port=args.port, verbose=False)
-    app = ConsoleApp(robot, server, status=status).start()
-    shown = "127.0.0.1" if args.host in ("0.0.0.0", "") else args.host
-    print(f"Console for '{robot.name}' at http://{shown}:{args.port}/  (Ctrl-C to stop)",
-          flush=True)
+    server, app, token = build(args, robot, status)
+    app.start()
+    port = server.get_port()  # viser moves to the next free port if --port is taken
+    if port != args.port:
+        print(f"serve.py: port {args.port} is busy, serving on {port}", file=sys.stderr)
+    found = urls(args.host, port)
+    print(f"Console for '{robot.name}' at {found[0]}  (Ctrl-C to stop)", flush=True)
+    for url in found[1:]:
+        print(f"  on the lab network: {url}", flush=True)
+    if token is not None:
+        print(f"Operator token: {token}   (Session panel -> Operator token -> Take control)",
+              flush=True)
+    else:
+        print("No operator token (--no-token): any browser can take control.", flush=True)
+    if app.access.first_client_takes_control:
+        print("Desk mode: the first browser to connect gets control (--lab to disable).",
+              flush=True)
+    print(f"Data folder: {app.data.root}", flush=True)
     try:
         while not done.wait(0.5):
             pass
     except KeyboardInterrupt:
         pass
     finally:
+        app.stop_motion("console shutting down")
         app.stop()
         server.stop()
     return 0

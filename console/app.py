@@ -19,6 +19,15 @@ below (``kinds`` keeps it off the other robot), pass ``panels=`` to the construc
 Plugging in hardware: build the app with ``mirror_commands=False``; the bridge's control thread
 reads ``app.store.wait_command(seq, timeout)`` and reports measurements with
 ``app.store.report(q, "hardware")``; the view then draws what the robot measured.
+
+Sharing the console (issue 6): ``app.access`` is the operator lock (``console.access``): gate
+every callback that moves the arm with ``console.panels.base.operator_only`` (or
+``app.access.check(event.client, "jog")``). ``app.stop_motion(reason, client)`` is STOP: it
+calls every hook registered with ``app.add_stop_hook(fn)`` (``fn(reason)``; the control loop
+registers its controlled stop there) and ends all jogging (``app.hold``, hold-to-run with speed
+caps, ``console.hold_to_run``). It also runs when the operator's lease is lost, control is
+released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
+recording (``console.recording``); files live under ``app.data`` (``console.datadir``).
 """
 
 from __future__ import annotations
@@ -26,17 +35,22 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Sequence, TypeVar
+from pathlib import Path
+from typing import Any, Callable, Sequence, TypeVar
 
 import numpy as np
 import numpy.typing as npt
 import viser
 
+from console.access import AccessControl, LeaseMonitor, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
+from console.datadir import DataDir
+from console.hold_to_run import HoldToRun
 from console.model import ArmModel, model_for
 from console.panels.base import Panel
 from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel
+from console.recording import Recorder
 from console.state import ArmState, StateStore
 from core.robots import Robot
 
@@ -61,13 +75,17 @@ class ConsoleApp:
         render_hz: Upper bound on redraws per second; only the newest state is drawn.
         status: One line shown at the top of the control panel (e.g. the hardware mode).
         initial: Initial configuration (default: straight / retracted).
+        access: The operator lock (default: no token, every browser starts as a viewer).
+        data_dir: The only folder the console reads or writes files in (default ``./runs``,
+            created when first used).
     """
 
     def __init__(self, robot: Robot, server: viser.ViserServer, *,
                  panels: Sequence[type[Panel]] | None = None,
                  mirror_commands: bool = True, render_hz: float = 30.0,
                  status: str = "Kinematic simulation (no hardware connected)",
-                 initial: npt.ArrayLike | None = None) -> None:
+                 initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
+                 data_dir: str | Path | None = None) -> None:
         if render_hz <= 0:
             raise ValueError(f"render_hz must be > 0, got {render_hz}")
         self.robot = robot
@@ -77,10 +95,25 @@ class ConsoleApp:
         self.render_period = 1.0 / render_hz
         self.frames_drawn = 0
         self.last_drawn_seq = -1
+        self.stops = 0
+        self.refusals = 0
+        self.last_stop: tuple[float, str] | None = None
+        self._refused_at: dict[tuple[Any, str], float] = {}
         self._panels: list[Panel] = []
         self._panel_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._stop_hooks: list[Callable[[str], Any]] = []
+        self._hook_lock = threading.Lock()
+
+        self.data_root = Path("runs" if data_dir is None else data_dir)
+        self._data: DataDir | None = None
+        self.access = access if access is not None else AccessControl()
+        self.lease = LeaseMonitor(server, self.access)
+        self.hold = HoldToRun(self.store, allowed=self.access.is_operator)
+        self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
+        self.access.add_listener(self._on_control_change)
+        server.on_client_connect(self.access.grant_if_free)
 
         self._setup_theme(status)
         self._setup_table()
@@ -115,23 +148,105 @@ class ConsoleApp:
         with self._panel_lock:
             return tuple(self._panels)
 
+    # -- sharing: data folder, STOP, who may act ----------------------------------------------
+
+    @property
+    def data(self) -> DataDir:
+        """The console's data folder (created on first use)."""
+        if self._data is None:
+            self._data = DataDir(self.data_root)
+        return self._data
+
+    def add_stop_hook(self, fn: Callable[[str], Any]) -> Callable[[str], Any]:
+        """Call ``fn(reason)`` on every STOP / lost lease / release; returns ``fn``.
+
+        Hooks must return quickly (command a controlled stop, do not wait for it); one that
+        raises is logged and the others still run.
+        """
+        with self._hook_lock:
+            self._stop_hooks.append(fn)
+        return fn
+
+    def remove_stop_hook(self, fn: Callable[[str], Any]) -> None:
+        with self._hook_lock:
+            if fn in self._stop_hooks:
+                self._stop_hooks.remove(fn)
+
+    def stop_motion(self, reason: str, client: Any = None) -> None:
+        """STOP: run every stop hook, then end all jogging (allowed from any client)."""
+        with self._hook_lock:
+            hooks = tuple(self._stop_hooks)
+        for fn in hooks:
+            try:
+                fn(reason)
+            except Exception:
+                log.exception("stop hook %r failed", fn)
+        self.hold.cancel(latch=True)
+        self.stops += 1
+        self.last_stop = (time.time(), reason)
+        self.recorder.action(f"STOP: {reason}", client)
+
+    def refuse(self, client: Any, exc: NotOperator | str, action: str = "") -> None:
+        """Tell ``client`` why it may not act (a notification only it sees); logs the refusal."""
+        reason = exc.reason if isinstance(exc, NotOperator) else str(exc)
+        key = (getattr(client, "client_id", client), action or reason)
+        now = time.monotonic()
+        with self._hook_lock:  # a held button refuses 20 times a second: tell them once
+            if now - self._refused_at.get(key, -1e9) < 2.0:
+                return
+            self._refused_at[key] = now
+            if len(self._refused_at) > 1000:
+                self._refused_at.clear()
+        self.refusals += 1
+        self.recorder.action(f"refused: {action or reason}", client)
+        if client is not None and hasattr(client, "add_notification"):
+            client.add_notification("Not allowed", reason, color="red", auto_close_seconds=8.0)
+
+    def notify_all(self, title: str, body: str, color: str = "blue") -> None:
+        """A notification on every connected browser."""
+        for client in self.server.get_clients().values():
+            try:
+                client.add_notification(title, body, color=color, auto_close_seconds=8.0)
+            except Exception:  # a client that just left
+                log.debug("notification to client %s failed", client.client_id)
+
+    def _on_control_change(self, new: Operator | None, previous: Operator | None,
+                           reason: str) -> None:
+        who = new if new is not None else previous
+        self.recorder.action(reason, None if who is None else who.client_id)
+        if previous is not None:  # the operator left or changed: the arm makes a controlled stop
+            self.stop_motion(reason)
+            if new is None:
+                self.notify_all("Control released", f"{reason}. The arm was stopped; nobody "
+                                "holds control.", color="orange")
+
     # -- lifecycle ---------------------------------------------------------------------------
 
     def start(self) -> ConsoleApp:
-        """Start the render thread (idempotent)."""
+        """Start the render, jog and lease threads (idempotent)."""
         if self._thread is None or not self._thread.is_alive():
             self._stop.clear()
             self._thread = threading.Thread(target=self._render_loop, name="console-render",
                                             daemon=True)
             self._thread.start()
+        self.hold.start()
+        self.lease.start()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
-        """Stop the render thread; the viser server keeps running (its owner stops it)."""
+        """Stop the threads (and any recording); the viser server keeps running."""
         self._stop.set()
+        self.lease.stop(timeout)
+        self.hold.stop(timeout)
+        self.recorder.stop()
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None
+
+    @property
+    def stopped(self) -> bool:
+        """Whether :meth:`stop` has run (panels skip GUI updates while shutting down)."""
+        return self._stop.is_set()
 
     def __enter__(self) -> ConsoleApp:
         return self.start()
@@ -152,6 +267,7 @@ class ConsoleApp:
                     log.exception("panel %s failed in on_state", type(panel).__name__)
         self.frames_drawn += 1
         self.last_drawn_seq = state.seq
+        self.recorder.on_state(state)
 
     def _render_loop(self) -> None:
         last_seq = -1
@@ -173,8 +289,20 @@ class ConsoleApp:
 
     # -- scene setup -------------------------------------------------------------------------
 
+    def _disable_share_tunnel(self) -> None:
+        # Hiding the share button is not enough: any websocket client can still send viser's
+        # ShareUrlRequest, which would open a public tunnel to the internet. Drop the handlers
+        # and make the method a no-op on this server (viser 1.1.1 internals, checked by tests).
+        from viser import _messages
+
+        handlers = getattr(self.server._websock_server, "_incoming_handlers", {})
+        for cls in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
+            handlers.pop(cls, None)
+        self.server.request_share_url = lambda *a, **k: None  # type: ignore[method-assign]
+
     def _setup_theme(self, status: str) -> None:
         gui = self.server.gui
+        self._disable_share_tunnel()
         gui.configure_theme(show_share_button=False, show_logo=False, brand_color=BRAND_COLOR,
                             control_width="medium")
         gui.set_panel_label(f"Arm console · {self.robot.name}")

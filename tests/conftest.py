@@ -4,6 +4,7 @@ Browser tests take ``browser`` (session-wide Chromium from /usr/bin/chromium; sk
 missing, except under CI=true where that fails) and ``console_server`` (a factory that starts
 ``serve.py --robot NAME`` on a free 127.0.0.1 port, waits until it serves, returns its URL and
 kills it at teardown). Screenshots go to ``artifacts/`` (gitignored) via ``artifacts_dir``.
+``serve_module`` is ``serve.py`` imported as a module (its ``build`` makes an in-process console).
 """
 
 from __future__ import annotations
@@ -115,6 +116,18 @@ def console_server() -> Iterator[Callable[..., str]]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout=5)
+
+
+@pytest.fixture(scope="session")
+def serve_module() -> object:
+    """``serve.py`` imported as a module (it is a script at the repository root)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("serve", REPO / "serve.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def pytest_configure(config: pytest.Config) -> None:

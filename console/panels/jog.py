@@ -1,27 +1,44 @@
-"""Jog panel: one slider per configuration coordinate, reshaping the arm live within its limits.
+"""Jog panel: hold-to-run buttons and set-point sliders per coordinate, operator only.
 
-Planar arm: a curvature slider per segment (+-kappa_max, 1/m). Extensible arm: dx, dy, dL per
+Planar arm: a curvature per segment (+-kappa_max, 1/m). Extensible arm: dx, dy, dL per
 segment (m); a move that would push a rack outside [rack_min, rack_max] is clamped to the
 feasible interval of that coordinate, the slider snaps to the value applied and the panel says
 which rack hit which limit. "Straighten" removes all bending; on the extensible arm "Retract"
 returns to delta = 0.
+
+All motion goes through ``app.hold`` (``console.hold_to_run.HoldToRun``), capped at 250 mm/s
+for every arm point and clamped to the soft limits:
+
+* "Hold to jog" buttons (``κ₁ −`` / ``κ₁ +`` ...): the arm moves only while the button is held
+  (viser's ``on_hold`` renews the jog 20 times a second; a jog expires 300 ms after its last
+  renewal; letting go ends it at once). The browser sends the renewals from its main thread: a
+  software-rendered tab busy drawing the moving arm was measured sending them 0.5-0.8 s apart,
+  so there a held jog advances in 300 ms bursts (safe, but jerky); with a GPU it is smooth.
+* Sliders, Straighten, Retract: a set-point; the arm moves towards it at the capped speed while
+  the operator keeps the lease (a closed tab stops it), STOP ends it.
+
+Every callback is wrapped with ``operator_only``: viewers are told who holds control.
 """
 
 from __future__ import annotations
 
 import contextlib
+import threading
 from functools import partial
+from typing import Any
 
 import numpy as np
 import viser
 
 from console.model import Coordinate
-from console.panels.base import Panel
+from console.panels.base import Panel, operator_only
 from console.state import ArmState
+
+HOLD_HZ = 20.0
 
 
 class JogPanel(Panel):
-    """Sliders for every coordinate plus straighten / retract buttons."""
+    """Hold-to-run buttons, set-point sliders for every coordinate, straighten / retract."""
 
     title = "Jog"
     order = 10.0
@@ -29,7 +46,9 @@ class JogPanel(Panel):
     def build(self) -> None:
         model = self.app.model
         q = self.app.store.command.q
+        self._target_lock = threading.Lock()
         self.sliders: dict[str, viser.GuiSliderHandle[float]] = {}
+        self.jog_buttons: dict[tuple[str, int], viser.GuiButtonHandle] = {}
         current_segment = -1
         container = None
         for coord in model.coordinates:
@@ -41,12 +60,24 @@ class JogPanel(Panel):
             handle.on_update(partial(self._on_slider, coord))
             self.sliders[coord.key] = handle
         self.straighten = self.gui.add_button("Straighten", hint="Remove all bending.")
-        self.straighten.on_click(lambda _: self.app.store.edit(model.straightened, "straighten"))
+        self.straighten.on_click(self.operator_only(
+            lambda e: self._go(e, model.straightened), "straighten the arm"))
         self.retract = None
         if model.kind == "delta":
             self.retract = self.gui.add_button("Retract (Δ = 0)",
                                                hint="Straight and fully retracted.")
-            self.retract.on_click(lambda _: self.app.store.edit(lambda q: model.zero(), "retract"))
+            self.retract.on_click(self.operator_only(
+                lambda e: self._go(e, lambda q: model.zero()), "retract the arm"))
+        with self.gui.add_folder("Hold to jog"):
+            for coord in model.coordinates:
+                for direction, sign in ((-1, "−"), (1, "+")):
+                    button = self.gui.add_button(
+                        f"{coord.label} {sign}",
+                        hint=f"Hold to move {coord.label} {sign} (stops when released).")
+                    button.on_hold(self.operator_only(partial(self._on_hold, coord, direction),
+                                                      "jog"), callback_hz=HOLD_HZ)
+                    button.on_click(partial(self._on_release, coord))
+                    self.jog_buttons[(coord.key, direction)] = button
         self.note = self.gui.add_markdown("")
         self._synced_seq = self.app.store.command.seq
 
@@ -55,19 +86,54 @@ class JogPanel(Panel):
         return self.gui.add_slider(f"{coord.label} ({coord.unit})", min=coord.lo, max=coord.hi,
                                    step=coord.step, initial_value=value, hint=coord.hint)
 
+    def _base(self) -> np.ndarray:
+        target = self.app.hold.target()
+        return np.array(self.app.store.command.q) if target is None else target
+
+    @operator_only(action="jog")
     def _on_slider(self, coord: Coordinate, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own mirror of the state into the slider
             return
         handle = self.sliders[coord.key]
         model = self.app.model
-        # Read the handle inside the locked edit: of concurrent callbacks the last to run
-        # applies the newest slider value, whatever order the thread pool ran them in.
-        state = self.app.store.edit(
-            lambda q: model.set_coordinate(q, coord, float(handle.value)), "jog")
-        applied = float(state.q[coord.index])
+        # Read the handle under the lock: of concurrent callbacks the last to run applies the
+        # newest slider value, whatever order the thread pool ran them in.
+        with self._target_lock:
+            target, note = model.set_coordinate(self._base(), coord, float(handle.value))
+            self.app.hold.move_to(event.client.client_id, target)
+        applied = float(target[coord.index])
         if abs(applied - float(handle.value)) > 1e-9:
             handle.value = round(applied, 6)  # snap back to what the racks allow
-        self._show_notes(state)
+        self.note.content = f"⚠ {note}" if note else ""
+
+    def _go(self, event: viser.GuiEvent, fn: Any) -> None:
+        if event.client is None:
+            return
+        with self._target_lock:
+            self.app.hold.move_to(event.client.client_id, fn(self._base()))
+        self._sync_sliders(self.app.hold.target())
+
+    def _on_hold(self, coord: Coordinate, direction: int, event: viser.GuiEvent) -> None:
+        if event.client is not None:
+            self.app.hold.hold(event.client.client_id, coord, direction)
+
+    def _on_release(self, coord: Coordinate, event: viser.GuiEvent) -> None:
+        if event.client is not None:  # letting go is always allowed: it only stops
+            self.app.hold.release(event.client.client_id, coord)
+
+    def on_refused(self, event: Any) -> None:
+        # viser already showed the viewer's slider value to everyone: put the arm's back.
+        if isinstance(getattr(event, "target", None), viser.GuiSliderHandle):
+            self._sync_sliders(self._base())
+
+    def _sync_sliders(self, q: np.ndarray | None) -> None:
+        if q is None:
+            return
+        for coord in self.app.model.coordinates:
+            value = round(min(max(float(q[coord.index]), coord.lo), coord.hi), 6)
+            handle = self.sliders[coord.key]
+            if not np.isclose(handle.value, value, atol=1e-9):
+                handle.value = value
 
     def _show_notes(self, state: ArmState) -> None:
         self.note.content = "\n\n".join(f"⚠ {n}" for n in state.notes)
@@ -78,10 +144,6 @@ class JogPanel(Panel):
             return
         self._synced_seq = command.seq
         if command.source == "jog":
-            return  # the sliders are the source; re-setting them would fight the operator
-        for coord in self.app.model.coordinates:
-            value = round(min(max(float(command.q[coord.index]), coord.lo), coord.hi), 6)
-            handle = self.sliders[coord.key]
-            if not np.isclose(handle.value, value, atol=1e-9):
-                handle.value = value
+            return  # moving to the sliders' set-point: they show where it is going
+        self._sync_sliders(np.asarray(command.q))
         self._show_notes(command)

@@ -1,0 +1,341 @@
+"""Control lock for a shared console: one operator, many viewers, a lease that a dead tab loses.
+
+Every browser starts as a viewer. ``take(client, token)`` makes it the operator (the token is
+printed by ``serve.py``; ``token=None`` is a closed lab where none is needed); only the operator
+may move the arm. Panels never check roles themselves: they call :meth:`AccessControl.check`
+(or wrap their callbacks in ``console.panels.base.operator_only``), which raises
+:class:`NotOperator` carrying the sentence to show the refused user.
+
+The lock is a lease. :class:`LeaseMonitor` (the viser side) keeps it alive by a small GUI
+round trip to the operator's tab every ``probe_period`` s (a localStorage read: the browser's
+JavaScript must answer, so a frozen or throttled tab fails it as well as a closed one or a
+dropped network) and revokes it when the tab disconnects or has not answered for
+``lease_s`` s. Every change of holder is reported to the listeners (the app stops the arm when
+an operator goes away, see ``ConsoleApp.stop_motion``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hmac
+import logging
+import re
+import threading
+import time
+from typing import Any, Callable
+
+import viser
+
+log = logging.getLogger(__name__)
+
+NAME_MAX = 32
+_NAME_OK = re.compile(r"[^\w .@'()-]+", re.UNICODE)
+
+
+class NotOperator(PermissionError):
+    """An action that needs control was attempted without it; ``reason`` says why, for users."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclasses.dataclass(frozen=True)
+class Operator:
+    """Who holds control: the viser client id, the name they gave, and since when (epoch s)."""
+
+    client_id: int
+    name: str
+    since: float
+
+
+# listener(new holder, previous holder, reason: a sentence naming who did what)
+Listener = Callable[["Operator | None", "Operator | None", str], None]
+
+
+def client_id_of(client: Any) -> int | None:
+    """``client`` as an id: a viser ``ClientHandle``, an int, or None (the server itself)."""
+    if client is None:
+        return None
+    if isinstance(client, int):
+        return client
+    return int(client.client_id)
+
+
+def clean_name(name: str, client_id: int) -> str:
+    """A display name: printable, at most :data:`NAME_MAX` characters, never empty."""
+    text = _NAME_OK.sub("", str(name)).strip()[:NAME_MAX]
+    return text or f"client {client_id}"
+
+
+class AccessControl:
+    """The single operator lock (thread-safe; no viser, so it is testable without a browser).
+
+    Args:
+        token: Secret a client must present to take control; None needs none (closed lab).
+        lease_s: A holder silent for longer than this loses control (see :class:`LeaseMonitor`).
+        first_client_takes_control: Desk mode: a client that connects while nobody holds
+            control gets it without a token (only for a console bound to the loopback address).
+        max_failures: Wrong tokens accepted per ``failure_window`` s (all clients together)
+            before further attempts are refused outright, to make guessing slow.
+        clock: Monotonic time source (tests pass a fake one).
+    """
+
+    def __init__(self, token: str | None = None, *, lease_s: float = 2.0,
+                 first_client_takes_control: bool = False, max_failures: int = 5,
+                 failure_window: float = 10.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if token is not None and not token:
+            raise ValueError("token must be a non-empty string or None")
+        if lease_s <= 0:
+            raise ValueError(f"lease_s must be > 0, got {lease_s}")
+        self.token = token
+        self.lease_s = lease_s
+        self.first_client_takes_control = first_client_takes_control
+        self.max_failures = max_failures
+        self.failure_window = failure_window
+        self._clock = clock
+        self._lock = threading.RLock()
+        self._holder: Operator | None = None
+        self._last_seen = 0.0
+        self._names: dict[int, str] = {}
+        self._failures: list[float] = []
+        self._listeners: list[Listener] = []
+
+    # -- queries -----------------------------------------------------------------------------
+
+    @property
+    def holder(self) -> Operator | None:
+        """The current operator, or None."""
+        with self._lock:
+            return self._holder
+
+    @property
+    def needs_token(self) -> bool:
+        return self.token is not None
+
+    def is_operator(self, client: Any) -> bool:
+        """Whether ``client`` (handle or id) holds control now."""
+        cid = client_id_of(client)
+        with self._lock:
+            return cid is not None and self._holder is not None and self._holder.client_id == cid
+
+    def name_of(self, client: Any) -> str:
+        """The name ``client`` gave (or ``client N``); "server" for None."""
+        cid = client_id_of(client)
+        if cid is None:
+            return "server"
+        with self._lock:
+            return self._names.get(cid, f"client {cid}")
+
+    def set_name(self, client: Any, name: str) -> str:
+        """Record the name ``client`` gave; returns the cleaned name."""
+        cid = client_id_of(client)
+        if cid is None:
+            raise ValueError("the server has no name to set")
+        cleaned = clean_name(name, cid)
+        with self._lock:
+            self._names[cid] = cleaned
+            if self._holder is not None and self._holder.client_id == cid:
+                self._holder = dataclasses.replace(self._holder, name=cleaned)
+        return cleaned
+
+    def refusal(self, action: str) -> str:
+        """The sentence a viewer sees when ``action`` (e.g. "jog") is refused."""
+        holder = self.holder
+        how = "take control with the token" if self.needs_token else "take control"
+        if holder is None:
+            return (f"Only the operator can {action} — nobody holds control; {how} "
+                    "(Session panel).")
+        return (f"Only the operator can {action} — {holder.name} holds control; ask them or "
+                f"{how} (Session panel).")
+
+    def check(self, client: Any, action: str = "do that") -> None:
+        """Allow ``action`` for ``client`` only if it holds control.
+
+        ``client`` None means the server itself (programmatic calls), which is always allowed.
+
+        Raises:
+            NotOperator: with the reason to show the user.
+        """
+        if client is None or self.is_operator(client):
+            return
+        raise NotOperator(self.refusal(action))
+
+    # -- changes -----------------------------------------------------------------------------
+
+    def add_listener(self, fn: Listener) -> None:
+        """Call ``fn(new, previous, reason)`` after every change of holder (outside the lock)."""
+        with self._lock:
+            self._listeners.append(fn)
+
+    def _notify(self, new: Operator | None, previous: Operator | None, reason: str) -> None:
+        for fn in list(self._listeners):
+            try:
+                fn(new, previous, reason)
+            except Exception:  # one broken listener must not keep the others from stopping
+                log.exception("access listener failed")
+
+    def take(self, client: Any, token: str | None = None, name: str | None = None) -> Operator:
+        """Make ``client`` the operator (taking over from any other holder).
+
+        Raises:
+            NotOperator: wrong or missing token, or too many wrong tokens recently.
+        """
+        cid = client_id_of(client)
+        if cid is None:
+            raise ValueError("the server cannot take control")
+        now = self._clock()
+        with self._lock:
+            if self.token is not None:
+                self._failures = [t for t in self._failures if now - t < self.failure_window]
+                if len(self._failures) >= self.max_failures:
+                    raise NotOperator("Too many wrong tokens in the last "
+                                      f"{self.failure_window:.0f} s; wait and try again.")
+                given = (token or "").strip()
+                if not hmac.compare_digest(given.encode(), self.token.encode()):
+                    self._failures.append(now)
+                    raise NotOperator("Wrong operator token: copy it from the terminal "
+                                      "where serve.py runs.")
+            if name is not None:
+                self._names[cid] = clean_name(name, cid)
+            previous = self._holder
+            if previous is not None and previous.client_id == cid:
+                self._last_seen = now
+                return previous
+            self._holder = Operator(cid, self._names.get(cid, f"client {cid}"), time.time())
+            self._last_seen = now
+            new = self._holder
+        reason = (f"{new.name} took control" if previous is None
+                  else f"{new.name} took control from {previous.name}")
+        self._notify(new, previous, reason)
+        return new
+
+    def grant_if_free(self, client: Any) -> Operator | None:
+        """Desk mode: give control to ``client`` if nobody holds it (no token needed)."""
+        cid = client_id_of(client)
+        with self._lock:
+            if not self.first_client_takes_control or self._holder is not None or cid is None:
+                return None
+            self._holder = Operator(cid, self._names.get(cid, f"client {cid}"), time.time())
+            self._last_seen = self._clock()
+            new = self._holder
+        self._notify(new, None, f"{new.name} took control (first browser on a desk console)")
+        return new
+
+    def release(self, client: Any) -> bool:
+        """Give up control if ``client`` holds it; returns whether it did."""
+        cid = client_id_of(client)
+        with self._lock:
+            previous = self._holder
+            if previous is None or previous.client_id != cid:
+                return False
+            self._holder = None
+        self._notify(None, previous, f"{previous.name} released control")
+        return True
+
+    def revoke(self, reason: str, client: Any = None) -> Operator | None:
+        """Take control away (lease lost); only from ``client`` if given. Returns who lost it."""
+        cid = client_id_of(client)
+        with self._lock:
+            previous = self._holder
+            if previous is None or (cid is not None and previous.client_id != cid):
+                return None
+            self._holder = None
+        self._notify(None, previous, reason)
+        return previous
+
+    def forget(self, client: Any) -> None:
+        """Drop what is known about a disconnected client (its name)."""
+        cid = client_id_of(client)
+        with self._lock:
+            self._names.pop(cid, None)  # type: ignore[arg-type]
+
+    # -- lease -------------------------------------------------------------------------------
+
+    def heartbeat(self, client: Any) -> bool:
+        """Record that the holder answered; False if ``client`` is not the holder."""
+        cid = client_id_of(client)
+        with self._lock:
+            if self._holder is None or self._holder.client_id != cid:
+                return False
+            self._last_seen = self._clock()
+            return True
+
+    def silent_for(self) -> float:
+        """Seconds since the holder last answered (0 when nobody holds control)."""
+        with self._lock:
+            return 0.0 if self._holder is None else self._clock() - self._last_seen
+
+    def expire_if_silent(self) -> Operator | None:
+        """Revoke the lease if the holder has been silent for ``lease_s``; returns who lost it."""
+        with self._lock:
+            holder = self._holder
+            if holder is None or self._clock() - self._last_seen < self.lease_s:
+                return None
+        return self.revoke(f"{holder.name}'s tab went silent for {self.lease_s:g} s",
+                           holder.client_id)
+
+
+class LeaseMonitor:
+    """Keeps the operator's lease alive by probing their tab; revokes it on silence or close.
+
+    A thread probes the holder's tab every ``probe_period`` s with a localStorage read (a
+    JavaScript round trip) bounded so that the lease expires at most ``lease_s`` after the last
+    answer; a closed tab is also caught at once by ``server.on_client_disconnect``.
+    """
+
+    def __init__(self, server: viser.ViserServer, access: AccessControl,
+                 probe_period: float = 0.25) -> None:
+        self.server = server
+        self.access = access
+        self.probe_period = probe_period
+        self.probes = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        server.on_client_disconnect(self._on_disconnect)
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        holder = self.access.holder
+        if holder is not None and holder.client_id == client.client_id:
+            self.access.revoke(f"{holder.name}'s tab closed or lost its connection",
+                               client.client_id)
+        self.access.forget(client)
+
+    def start(self) -> None:
+        if self._thread is None or not self._thread.is_alive():
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="console-lease", daemon=True)
+            self._thread.start()
+
+    def stop(self, timeout: float = 3.0) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+            self._thread = None
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.probe_period):
+            holder = self.access.holder
+            if holder is None:
+                continue
+            client = self.server.get_clients().get(holder.client_id)
+            if client is None:
+                self.access.revoke(f"{holder.name}'s tab is gone", holder.client_id)
+                continue
+            budget = self.access.lease_s - self.access.silent_for()
+            if budget <= 0:
+                self.access.expire_if_silent()
+                continue
+            try:
+                client.local_storage.get_item("console-lease", timeout=budget)
+            except TimeoutError:
+                self.access.expire_if_silent()
+                continue
+            except RuntimeError as exc:
+                if "Failed to read localStorage" not in str(exc):  # that one is an answer
+                    self.access.revoke(f"{holder.name}'s tab closed or lost its connection",
+                                       holder.client_id)
+                    continue
+            self.probes += 1
+            self.access.heartbeat(holder.client_id)

@@ -1,0 +1,100 @@
+"""A plan or a recorded run as one self-contained HTML file for students (no server, no net).
+
+Both exports use viser's scene serializer (``ViserServer.get_scene_serializer().as_html()``):
+the viewer's client bundle with the scene embedded as base64, opened straight from disk.
+
+* :func:`scene_html` -- the live scene as it is now: table, arm and whatever panels drew into
+  ``server.scene`` (objects, a planned path). Per-client nodes (replay ghosts) are not included.
+* :func:`recording_html` -- a recorded run, animated: a private viser server on 127.0.0.1 (an
+  ephemeral port, stopped again) draws the same scene and steps the arm through the recording's
+  states with ``insert_sleep`` between frames, so the file plays back with viser's timeline.
+
+:func:`external_urls` lists the http(s) URLs in a file, to check it needs nothing online.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import viser
+
+from console.recording import Recording
+
+if TYPE_CHECKING:
+    from core.robots import Robot
+
+# Namespace identifiers inside SVG/XML are names, not resources a browser fetches.
+_NAMESPACES = ("http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink",
+               "http://www.w3.org/1999/xhtml", "http://www.w3.org/XML/1998/namespace")
+_URL = re.compile(r"https?://[A-Za-z0-9.\-]+(?::\d+)?[^\s\"'<>)]*")
+
+
+def external_urls(html: str) -> list[str]:
+    """http(s) URLs in ``html`` other than XML namespace names (empty for a standalone file)."""
+    return sorted({u for u in _URL.findall(html) if not u.startswith(_NAMESPACES)})
+
+
+def scene_html(server: viser.ViserServer, dark_mode: bool = False) -> str:
+    """The live scene of ``server`` as a standalone HTML document."""
+    return server.get_scene_serializer().as_html(dark_mode=dark_mode)
+
+
+def draw_overlay(scene: viser.SceneApi, data: dict[str, Any], root: str = "/overlays") -> Any:
+    """Draw an ``overlay`` record (``name``, ``points`` (k, 3), ``color``) as a polyline."""
+    pts = np.asarray(data.get("points", ()), dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.all(np.isfinite(pts)):
+        return None
+    name = re.sub(r"[^A-Za-z0-9_-]+", "_", str(data.get("name", "overlay")))[:40]
+    color = tuple(int(c) for c in data.get("color", (200, 40, 160)))[:3]
+    segments = np.stack([pts[:-1], pts[1:]], axis=1)
+    return scene.add_line_segments(f"{root}/{name}", segments, color, thickness=0.004)
+
+
+def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
+                   max_frames: int = 900, dark_mode: bool = False) -> str:
+    """A recorded run as a standalone, animated HTML document.
+
+    Args:
+        robot: The robot the recording is of (its kind and shape match, see load_recording).
+        rec: The loaded recording.
+        fps: Frames per second of the animation (fewer when the run is long).
+        max_frames: Upper bound on animation frames (bounds the file size).
+    """
+    from console.app import ConsoleApp  # the same scene set-up as the live console
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        app = ConsoleApp(robot, server, panels=(), status=f"Recording {rec.name}",
+                         initial=rec.qs[0])
+        serializer = server.get_scene_serializer()
+        duration = rec.duration
+        rate = fps if duration <= 0 else min(fps, max_frames / duration)
+        grid = np.arange(0.0, duration + 1e-9, 1.0 / rate) if duration > 0 else np.zeros(1)
+        last_q: np.ndarray | None = None
+        drawn: dict[str, int] = {}
+        pending = 0.0
+        prev_t = 0.0
+        for t in grid:
+            pending += float(t) - prev_t
+            prev_t = float(t)
+            q = rec.q_at(float(t))
+            overlays = rec.overlays_until(float(t))
+            changed_overlays = {k: v for k, v in overlays.items() if drawn.get(k) != id(v)}
+            if last_q is not None and np.array_equal(q, last_q) and not changed_overlays:
+                continue
+            if pending > 0:
+                serializer.insert_sleep(pending)
+                pending = 0.0
+            with server.atomic():
+                app.view.update(q)
+                for name, data in changed_overlays.items():
+                    draw_overlay(server.scene, data)
+                    drawn[name] = id(data)
+            last_q = q
+        if pending > 0:
+            serializer.insert_sleep(pending)
+        return serializer.as_html(dark_mode=dark_mode)
+    finally:
+        server.stop()

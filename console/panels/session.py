@@ -1,0 +1,214 @@
+"""Session panel: who holds control, take/release it, STOP for everyone, record, replay, export.
+
+Shared widgets (every browser sees the same): STOP (always enabled, for viewers too, also the
+``Escape`` hotkey through viser's command palette), the control/connection status, recording
+start/stop (operator only) and "Export scene (HTML)" (anyone: a plan to hand to students).
+
+Per-browser widgets (``client.gui``, added on connect inside this panel's folder, so what one
+browser types is never shown to another -- the operator token least of all): the user's role,
+name, the token field, Take control / Release control, and the replay section
+(``console.replay``).
+"""
+
+from __future__ import annotations
+
+import html
+import logging
+import threading
+import time
+from typing import Any
+
+import viser
+
+from console.access import NotOperator, Operator
+from console.export import scene_html
+from console.panels.base import Panel, operator_only
+from console.replay import ReplayPlayer, ReplaySession
+
+log = logging.getLogger(__name__)
+STOP_HOTKEY = "escape"
+
+
+class _ClientWidgets:
+    """The per-browser widgets of one client."""
+
+    def __init__(self, role: Any, name: Any, token: Any, take: Any, release: Any) -> None:
+        self.role, self.name, self.token, self.take, self.release = role, name, token, take, release
+
+
+class SessionPanel(Panel):
+    """Control lock, STOP, recording, replay and export (see the module docstring)."""
+
+    title = "Session"
+    order = 1.0
+
+    def build(self) -> None:
+        gui = self.gui
+        self._lock = threading.Lock()
+        self.clients: dict[int, _ClientWidgets] = {}
+        self.player = ReplayPlayer()
+        self.stop_btn = gui.add_button("STOP", color="red", icon=viser.Icon.HAND_STOP,
+                                       hint="Stops the arm. Works for everyone (hotkey: Esc).",
+                                       order=0.0)
+        self.stop_btn.on_click(self._on_stop)
+        self.stop_cmd = gui.add_command("STOP the arm", description="Stops all motion",
+                                        hotkey=STOP_HOTKEY)
+        self.stop_cmd.on_trigger(self._on_stop)
+        self.status = gui.add_html("", order=1.0)
+        self.demo_btn = None
+        if getattr(self.app, "demo", None) is not None:
+            self.demo_btn = gui.add_button("Run demo motion", order=20.0,
+                                           hint="A slow looping motion (STOP ends it).")
+            self.demo_btn.on_click(self._on_demo)
+        self.rec_name = gui.add_text("Recording name", "", order=30.0,
+                                     hint="Optional; letters, digits, - and _ are kept.")
+        self.rec_btn = gui.add_button("Start recording", order=31.0, icon=viser.Icon.PLAYER_RECORD)
+        self.rec_btn.on_click(self._on_record)
+        self.export_btn = gui.add_button("Export scene (HTML)", order=40.0,
+                                         hint="The 3D scene as one file that opens offline.")
+        self.export_btn.on_click(self._on_export_scene)
+        self.app.access.add_listener(self._on_control_change)
+        self.app.server.on_client_connect(self._on_connect)
+        self.app.server.on_client_disconnect(self._on_disconnect)
+        self.refresh()
+
+    # -- per-client widgets ------------------------------------------------------------------
+
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        gui = client.gui
+        access = self.app.access
+        with self.folder:
+            role = gui.add_html("", order=2.0)
+            name = gui.add_text("Your name", access.name_of(client), order=3.0,
+                                hint="Shown to everyone when you hold control.")
+            token = None
+            if access.needs_token:
+                token = gui.add_text("Operator token", "", order=4.0,
+                                     hint="Printed in the terminal where serve.py runs.")
+            take = gui.add_button("Take control", order=5.0, icon=viser.Icon.LOCK)
+            release = gui.add_button("Release control", order=6.0, icon=viser.Icon.LOCK_OPEN)
+            replay = ReplaySession(self.app, client, order=50.0)
+        widgets = _ClientWidgets(role, name, token, take, release)
+        name.on_update(lambda e: self._on_name(client, widgets))
+        take.on_click(lambda e: self._on_take(client, widgets))
+        release.on_click(lambda e: self._on_release(client))
+        with self._lock:
+            self.clients[client.client_id] = widgets
+        self.player.add(client.client_id, replay)
+        self.refresh()
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self.clients.pop(client.client_id, None)
+        self.player.remove(client.client_id)
+        self.refresh()
+
+    def _on_name(self, client: viser.ClientHandle, w: _ClientWidgets) -> None:
+        self.app.access.set_name(client, str(w.name.value))
+        self.refresh()
+
+    def _on_take(self, client: viser.ClientHandle, w: _ClientWidgets) -> None:
+        token = None if w.token is None else str(w.token.value)
+        try:
+            op = self.app.access.take(client, token, str(w.name.value))
+        except NotOperator as exc:
+            self.app.refuse(client, exc, "take control")
+            return
+        if w.token is not None:
+            w.token.value = ""
+        client.add_notification("You have control", f"You are the operator, {op.name}. "
+                                "Keep this tab open: closing it stops the arm.",
+                                color="green", auto_close_seconds=6.0)
+
+    def _on_release(self, client: viser.ClientHandle) -> None:
+        if not self.app.access.release(client):
+            client.add_notification("Not the operator", "You do not hold control.",
+                                    auto_close_seconds=5.0)
+
+    def _on_control_change(self, new: Operator | None, previous: Operator | None,
+                           reason: str) -> None:
+        if new is not None:
+            self.app.notify_all("Control", f"{reason}.", color="blue")
+        self.refresh()
+
+    # -- shared actions ----------------------------------------------------------------------
+
+    def _on_stop(self, event: Any) -> None:
+        client = event.client
+        who = self.app.access.name_of(client)
+        self.app.stop_motion(f"STOP pressed by {who}", client)
+        self.app.notify_all("STOP", f"{who} stopped the arm.", color="red")
+
+    @operator_only(action="run the demo motion")
+    def _on_demo(self, event: viser.GuiEvent) -> None:
+        self.app.recorder.action("started the demo motion", event.client)
+        self.app.demo.start()  # type: ignore[attr-defined]
+
+    @operator_only(action="start or stop a recording")
+    def _on_record(self, event: viser.GuiEvent) -> None:
+        rec = self.app.recorder
+        if rec.recording:
+            path = rec.stop()
+            self.rec_btn.label = "Start recording"
+            if event.client is not None and path is not None:
+                event.client.add_notification("Recording saved", path.name,
+                                              auto_close_seconds=6.0)
+            for session in self.player.all():
+                session.refresh_files()
+        else:
+            path = rec.start(str(self.rec_name.value), event.client)
+            self.rec_btn.label = "Stop recording"
+            rec.action("started recording", event.client)
+        self.refresh()
+
+    def _on_export_scene(self, event: viser.GuiEvent) -> None:
+        client = event.client
+        if client is None:
+            return
+        data = self.app.data
+        name = data.new_name("exports", "scene", ".html")
+        path = data.path("exports", name, ".html")
+        page = scene_html(self.app.server)
+        path.write_text(page, encoding="utf-8")
+        self.app.recorder.action(f"exported the scene as {name}", client)
+        client.send_file_download(name, page.encode("utf-8"))
+
+    # -- display -----------------------------------------------------------------------------
+
+    def refresh(self) -> None:
+        """Re-render the shared status and every browser's role line."""
+        if self.app.stopped:  # shutting down: the connections are closing
+            return
+        access = self.app.access
+        holder = access.holder
+        with self._lock:
+            clients = dict(self.clients)
+        if holder is None:
+            who = "nobody — take control below"
+        else:
+            since = time.strftime("%H:%M:%S", time.localtime(holder.since))
+            who = f"{html.escape(holder.name)} (since {since})"
+        rec = self.app.recorder
+        recording = (f' · <span data-testid="recording">● recording {rec.path.name}</span>'
+                     if rec.recording and rec.path is not None else "")
+        self.status.content = (
+            f'<div data-testid="control-status"><b>Control:</b> '
+            f'<span data-testid="holder">{who}</span> · {len(clients)} browser'
+            f'{"s" if len(clients) != 1 else ""}{recording}</div>')
+        connected = self.app.server.get_clients()
+        for cid, w in clients.items():
+            if cid not in connected:
+                continue
+            is_op = holder is not None and holder.client_id == cid
+            role = "operator" if is_op else "viewer"
+            text = ("You hold control: only you can move the arm." if is_op else
+                    "You are watching; STOP, replay and export work for you too.")
+            try:
+                w.role.content = (f'<div data-testid="role" data-role="{role}"><b>You:</b> '
+                                  f'{role} — {text}</div>')
+            except Exception:  # the client just left
+                log.debug("role update for client %s failed", cid)
+
+    def close(self) -> None:
+        self.player.stop()
+        super().close()

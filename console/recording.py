@@ -1,0 +1,284 @@
+"""Session recording and replay, so a lab session can be kept, reviewed and shared.
+
+A recording is a gzip'd JSON-lines file in ``<data-dir>/recordings/``. The first line is a
+header (robot, configuration shape, who started it, wall-clock start); every other line has
+``t`` (s since the start), ``kind`` and, for things people did, ``who`` and ``client``:
+
+* ``state`` -- the displayed configuration once per render tick: ``q``, ``seq``, ``source``.
+* ``action`` -- an operator action or a refusal (``what``), e.g. "took control", "STOP".
+* anything else panels log with ``app.recorder.log(kind, payload, client)`` -- ``plan``,
+  ``objects``, ``telemetry``, ... -- stored as ``data`` (numpy arrays become lists). Records of
+  kind ``overlay`` with ``data = {"name": str, "points": [[x, y, z], ...], "color": [r, g, b]}``
+  are also drawn as polylines when the run is replayed or exported.
+
+:class:`Recorder` is cheap to call from any thread (``log`` only enqueues; a writer thread
+encodes and writes); :func:`load_recording` reads a file back into a :class:`Recording` with a
+timeline for the replay panel and the HTML export.
+"""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+import gzip
+import json
+import logging
+import queue
+import threading
+import time
+import zlib
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import numpy.typing as npt
+
+from console.datadir import DataDir
+from console.model import ArmModel
+from console.state import ArmState
+
+log = logging.getLogger(__name__)
+
+Array = npt.NDArray[np.float64]
+SUFFIX = ".jsonl.gz"
+FORMAT = "softarm-console-recording/1"
+MAX_DECOMPRESSED = 512 * 1024 * 1024
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return dataclasses.asdict(obj)
+    if isinstance(obj, (Path, set, tuple)):
+        return list(obj) if not isinstance(obj, Path) else str(obj)
+    return repr(obj)
+
+
+class Recorder:
+    """Writes one recording at a time (see the module docstring); thread-safe.
+
+    Args:
+        data: The console's data folder (or a function returning it, called on start).
+        model: The arm model (header: robot name, kind, configuration shape).
+        name_of: ``name_of(client)`` -> display name of a viser client (or None).
+        max_queue: Lines buffered for the writer before new ones are dropped (and counted).
+    """
+
+    def __init__(self, data: DataDir | Callable[[], DataDir], model: ArmModel,
+                 name_of: Callable[[Any], str] = lambda c: "server" if c is None else str(c),
+                 max_queue: int = 20000) -> None:
+        self.data = data
+        self.model = model
+        self.name_of = name_of
+        self.dropped = 0
+        self.lines = 0
+        self._max_queue = max_queue
+        self._lock = threading.Lock()
+        self._queue: queue.Queue[dict[str, Any] | None] | None = None
+        self._thread: threading.Thread | None = None
+        self._t0 = 0.0
+        self.path: Path | None = None
+
+    @property
+    def recording(self) -> bool:
+        return self._queue is not None
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self._t0 if self.recording else 0.0
+
+    def start(self, stem: str = "", client: Any = None) -> Path:
+        """Start a new recording named from ``stem`` (cleaned) and the time; returns its path.
+
+        Raises:
+            RuntimeError: a recording is already running.
+        """
+        with self._lock:
+            if self._queue is not None:
+                name = self.path.name if self.path is not None else "?"
+                raise RuntimeError(f"already recording to {name}")
+            data = self.data if isinstance(self.data, DataDir) else self.data()
+            name = data.new_name("recordings", stem, SUFFIX)
+            path = data.path("recordings", name, SUFFIX)
+            q: queue.Queue[dict[str, Any] | None] = queue.Queue(self._max_queue)
+            robot = self.model.robot
+            q.put({"kind": "header", "format": FORMAT, "robot": robot.name,
+                   "robot_kind": self.model.kind, "shape": list(self.model.shape),
+                   "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                   "by": self.name_of(client), "t": 0.0})
+            self._t0 = time.perf_counter()
+            self.path, self._queue, self.dropped, self.lines = path, q, 0, 0
+            self._thread = threading.Thread(target=self._write, args=(path, q),
+                                            name="console-recorder", daemon=True)
+            self._thread.start()
+        return path
+
+    def stop(self) -> Path | None:
+        """Finish the recording (flushes and closes the file); returns its path."""
+        with self._lock:
+            q, thread, path = self._queue, self._thread, self.path
+            self._queue = self._thread = None
+        if q is None:
+            return None
+        q.put(None)
+        if thread is not None:
+            thread.join(10.0)
+        return path
+
+    def log(self, kind: str, payload: Any = None, client: Any = None) -> None:
+        """Append a record of ``kind`` (no-op when not recording); ``payload`` JSON-able."""
+        if kind in ("header", "state"):
+            raise ValueError(f"kind {kind!r} is reserved")
+        cid = None if client is None else getattr(client, "client_id", client)
+        self._put({"kind": kind, "who": self.name_of(client), "client": cid, "data": payload})
+
+    def action(self, what: str, client: Any = None, **extra: Any) -> None:
+        """Record something a person did (or was refused): ``what`` in words."""
+        cid = None if client is None else getattr(client, "client_id", client)
+        self._put({"kind": "action", "who": self.name_of(client), "client": cid, "what": what,
+                   **extra})
+
+    def on_state(self, state: ArmState) -> None:
+        """Record a drawn state (the render thread calls this every frame)."""
+        if self._queue is not None:
+            self._put({"kind": "state", "q": np.asarray(state.q).tolist(), "seq": state.seq,
+                       "source": state.source})
+
+    def _put(self, record: dict[str, Any]) -> None:
+        q = self._queue
+        if q is None:
+            return
+        record["t"] = round(time.perf_counter() - self._t0, 4)
+        try:
+            q.put_nowait(record)
+        except queue.Full:
+            self.dropped += 1
+
+    def _write(self, path: Path, q: queue.Queue[dict[str, Any] | None]) -> None:
+        last_flush = time.monotonic()
+        with gzip.open(path, "wt", encoding="utf-8", compresslevel=6) as f:
+            while True:
+                try:
+                    record = q.get(timeout=0.5)
+                except queue.Empty:
+                    record = {}
+                if record is None:
+                    break
+                if record:
+                    f.write(json.dumps(record, default=_json_default, separators=(",", ":")))
+                    f.write("\n")
+                    self.lines += 1
+                if time.monotonic() - last_flush > 1.0:  # a crash loses at most ~1 s
+                    f.flush()
+                    last_flush = time.monotonic()
+
+
+@dataclasses.dataclass(frozen=True)
+class Event:
+    """A non-state record of a recording, at time ``t``."""
+
+    t: float
+    kind: str
+    who: str
+    text: str
+    data: Any = None
+
+
+@dataclasses.dataclass
+class Recording:
+    """A loaded recording: the configuration timeline plus events and overlays."""
+
+    name: str
+    header: dict[str, Any]
+    times: Array
+    qs: Array
+    sources: list[str]
+    events: list[Event]
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1]) if len(self.times) else 0.0
+
+    def index_at(self, t: float) -> int:
+        """Index of the last state at or before ``t`` (0 before the first)."""
+        return max(0, int(np.searchsorted(self.times, t, side="right")) - 1)
+
+    def q_at(self, t: float) -> Array:
+        return self.qs[self.index_at(t)]
+
+    def events_until(self, t: float, k: int = 5) -> list[Event]:
+        """The last ``k`` events at or before ``t``."""
+        i = bisect.bisect_right([e.t for e in self.events], t)
+        return self.events[max(0, i - k):i]
+
+    def overlays_until(self, t: float) -> dict[str, dict[str, Any]]:
+        """Newest ``overlay`` record per name at or before ``t``."""
+        out: dict[str, dict[str, Any]] = {}
+        for e in self.events:
+            if e.t > t:
+                break
+            if e.kind == "overlay" and isinstance(e.data, dict) and "name" in e.data:
+                out[str(e.data["name"])] = e.data
+        return out
+
+
+def _describe(rec: dict[str, Any]) -> str:
+    if rec.get("kind") == "action":
+        return str(rec.get("what", ""))
+    data = rec.get("data")
+    text = json.dumps(data, default=str) if data is not None else ""
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def load_recording(path: Path, model: ArmModel) -> Recording:
+    """Read a recording for ``model``'s robot.
+
+    Raises:
+        ValueError: not a console recording, or one of another robot; the message says which.
+    """
+    states_t: list[float] = []
+    states_q: list[Any] = []
+    sources: list[str] = []
+    events: list[Event] = []
+    header: dict[str, Any] | None = None
+    size = 0
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as f:
+            for n, line in enumerate(f):
+                size += len(line)
+                if size > MAX_DECOMPRESSED:
+                    raise ValueError(f"{path.name}: larger than {MAX_DECOMPRESSED >> 20} MB")
+                rec = json.loads(line)
+                if not isinstance(rec, dict):
+                    raise ValueError(f"{path.name}: line {n + 1} is not an object")
+                if n == 0:
+                    if rec.get("kind") != "header" or rec.get("format") != FORMAT:
+                        raise ValueError(f"{path.name} is not a console recording")
+                    header = rec
+                    continue
+                t = float(rec.get("t", 0.0))
+                if rec.get("kind") == "state":
+                    states_t.append(t)
+                    states_q.append(rec["q"])
+                    sources.append(str(rec.get("source", "")))
+                else:
+                    events.append(Event(t, str(rec.get("kind")), str(rec.get("who", "")),
+                                        _describe(rec), rec.get("data")))
+    except (OSError, EOFError, zlib.error, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path.name}: cannot read ({exc})") from None
+    if header is None:
+        raise ValueError(f"{path.name} is empty")
+    if header.get("robot_kind") != model.kind or tuple(header.get("shape", ())) != model.shape:
+        raise ValueError(f"{path.name} was recorded on '{header.get('robot')}' "
+                         f"({header.get('robot_kind')}), not on this console's "
+                         f"'{model.robot.name}'")
+    if not states_t:
+        raise ValueError(f"{path.name} holds no arm states")
+    qs = np.array(states_q, dtype=float)
+    if qs.shape[1:] != model.shape or not np.all(np.isfinite(qs)):
+        raise ValueError(f"{path.name}: states have the wrong shape or are not finite")
+    order = np.argsort(np.array(states_t), kind="stable")
+    return Recording(path.name, header, np.array(states_t)[order], qs[order],
+                     [sources[i] for i in order], sorted(events, key=lambda e: e.t))

@@ -1,0 +1,322 @@
+"""Two browsers on one console: an operator and a viewer (two Chromium contexts, one in-process
+console built by ``serve.build`` in lab mode with a token, so the test sees the server side).
+
+Checked: a viewer's jog and "Run demo motion" (the Execute stand-in until the control loop is
+wired) are refused with the reason shown to them and move nothing; STOP from the viewer (button
+and Esc hotkey) stops the operator's motion through the stop hooks; a held jog stops within
+300 ms of letting go and a STOP latches it; closing (or freezing) the operator's tab stops the
+arm and releases the lock within 2 s; record -> replay -> export works from the GUI; exported
+HTML files open from disk (file://) with no network request and show the arm and the plan.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import numpy as np
+import pytest
+
+from console.hold_to_run import HOLD_SOURCE
+from core.robots import load
+
+pytestmark = pytest.mark.browser
+SOFT = load("soft-arm")
+
+
+class Lab:
+    """The in-process console plus helpers to drive pages."""
+
+    def __init__(self, server: Any, app: Any, token: str, browser: Any) -> None:
+        self.server, self.app, self.token, self.browser = server, app, token, browser
+        self.url = f"http://127.0.0.1:{server.get_port()}/"
+        self.stops: list[tuple[float, str]] = []
+        app.add_stop_hook(lambda reason: self.stops.append((time.monotonic(), reason)))
+        self.contexts: list[Any] = []
+
+    def page(self) -> Any:
+        context = self.browser.new_context(viewport={"width": 1280, "height": 900})
+        self.contexts.append(context)
+        page = context.new_page()
+        n = len(self.server.get_clients())
+        page.goto(self.url)
+        page.get_by_text("Session", exact=True).wait_for(timeout=20_000)
+        page.locator('[data-testid="role"]').wait_for(timeout=10_000)
+        wait_for(lambda: len(self.server.get_clients()) > n)
+        notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+        if notice.count():
+            notice.locator("button").first.click()
+        return page
+
+    def take_control(self, page: Any, name: str) -> None:
+        field(page, "Your name").fill(name)
+        field(page, "Operator token").fill(self.token)
+        page.get_by_role("button", name="Take control").click()
+        wait_for(lambda: self.app.access.holder is not None
+                 and self.app.access.holder.name == name)
+        wait_for(lambda: page.locator('[data-testid="role"]').get_attribute("data-role")
+                 == "operator")
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 5.0) -> Any:
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError("condition not reached")
+        time.sleep(0.02)
+
+
+def field(page: Any, label: str) -> Any:
+    """The input next to a viser text field's label."""
+    return page.locator(f'xpath=//label[normalize-space()="{label}"]/ancestor::div'
+                        '[contains(@class,"mantine-Flex-root")][1]//input')
+
+
+def notifications(page: Any) -> list[str]:
+    return [n.inner_text() for n in page.locator(".mantine-Notification-root").all()]
+
+
+def press(page: Any, name: str) -> Any:
+    """Mouse down on the button labelled ``name``; returns the mouse to release."""
+    button = page.get_by_role("button", name=name, exact=True)
+    button.scroll_into_view_if_needed()
+    box = button.bounding_box()
+    assert box is not None
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    return page.mouse
+
+
+@pytest.fixture
+def lab(browser, serve_module, tmp_path: Path) -> Iterator[Lab]:
+    args = serve_module.parse_args(["--port", "0", "--lab", "--demo",
+                                    "--data-dir", str(tmp_path / "runs")])
+    server, app, token = serve_module.build(args, SOFT, "lab test")
+    app.start()
+    lab = Lab(server, app, token, browser)
+    try:
+        yield lab
+    finally:
+        for context in lab.contexts:
+            context.close()
+        app.stop_motion("test over")
+        app.stop()
+        server.stop()
+
+
+def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
+        lab, artifacts_dir: Path) -> None:
+    app = lab.app
+    alice, bob = lab.page(), lab.page()
+    field(alice, "Operator token").fill("typed-by-alice")
+    time.sleep(0.5)
+    assert field(bob, "Operator token").input_value() == ""  # per-browser: never shown to Bob
+    lab.take_control(alice, "Alice")
+    assert field(alice, "Operator token").input_value() == ""  # cleared once used
+    assert bob.locator('[data-testid="role"]').get_attribute("data-role") == "viewer"
+    wait_for(lambda: "Alice" in bob.locator('[data-testid="holder"]').inner_text())
+
+    before = app.store.command
+    press(bob, "κ₁ +")
+    time.sleep(0.5)
+    bob.mouse.up()
+    bob.get_by_role("button", name="Run demo motion").click()
+    wait_for(lambda: any("Only the operator can run the demo motion" in n
+                         for n in notifications(bob)))
+    texts = notifications(bob)
+    assert any("Only the operator can jog — Alice holds control; ask them or take control "
+               "with the token" in n for n in texts), texts
+    assert app.store.command is before and not app.demo.running
+
+    alice.get_by_role("button", name="Run demo motion").click()
+    wait_for(lambda: app.demo.running and app.store.command.source == "demo")
+    wait_for(lambda: app.store.command.seq > before.seq + 10)
+    bob.get_by_role("button", name="STOP", exact=True).click()
+    wait_for(lambda: lab.stops)
+    who = re.fullmatch(r"STOP pressed by client (\d+)", lab.stops[-1][1])
+    assert who and int(who.group(1)) != app.access.holder.client_id  # Bob, not Alice
+    stopped = app.store.command
+    time.sleep(0.5)
+    assert not app.demo.running and app.store.command.seq == stopped.seq
+    assert app.access.holder is not None and app.access.holder.name == "Alice"
+    wait_for(lambda: any("stopped the arm" in n for n in notifications(alice)))
+    bob.screenshot(path=str(artifacts_dir / "browser_lab_viewer.png"))
+    alice.screenshot(path=str(artifacts_dir / "browser_lab_operator.png"))
+
+    # The hotkey: Esc in the viewer's page stops the motion too.
+    n_stops = len(lab.stops)
+    alice.get_by_role("button", name="Run demo motion").click()
+    wait_for(lambda: app.demo.running)
+    bob.mouse.click(300, 700)  # focus the 3D view, not a text field
+    bob.keyboard.press("Escape")
+    wait_for(lambda: len(lab.stops) > n_stops, timeout=3.0)
+    assert not app.demo.running
+
+
+def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> None:
+    app = lab.app
+    alice, bob = lab.page(), lab.page()
+    lab.take_control(alice, "Alice")
+    mouse = press(alice, "κ₂ +")
+    wait_for(lambda: app.store.command.source == HOLD_SOURCE, timeout=3.0)
+    time.sleep(0.8)
+    mouse.up()
+    released = time.perf_counter()
+    time.sleep(0.6)
+    last = app.store.command
+    assert last.q[1] > 0.5, "the held jog should have bent segment 2"
+    assert last.stamp - released < 0.3 + 0.05  # expiry, or the release click ended it sooner
+    time.sleep(0.3)
+    assert app.store.command.seq == last.seq
+
+    mouse = press(alice, "κ₂ +")
+    wait_for(lambda: app.store.command.seq > last.seq + 3, timeout=3.0)
+    bob.get_by_role("button", name="STOP", exact=True).click()
+    wait_for(lambda: app.store.command.source == "stop", timeout=3.0)
+    frozen = app.store.command
+    time.sleep(1.0)  # Alice is still holding the button
+    assert app.store.command.seq == frozen.seq
+    mouse.up()
+
+
+def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(lab) -> None:
+    app = lab.app
+    alice, bob = lab.page(), lab.page()
+    lab.take_control(alice, "Alice")
+    alice.get_by_role("button", name="Run demo motion").click()
+    wait_for(lambda: app.demo.running)
+    closed = time.monotonic()
+    alice.context.close()
+    wait_for(lambda: lab.stops, timeout=3.0)
+    assert lab.stops[-1][0] - closed < 2.0 and "Alice's tab" in lab.stops[-1][1]
+    assert app.access.holder is None and not app.demo.running
+    wait_for(lambda: "nobody" in bob.locator('[data-testid="holder"]').inner_text())
+
+    carol = lab.page()
+    lab.take_control(carol, "Carol")
+    time.sleep(0.8)  # a few lease round trips succeed
+    assert app.access.holder is not None and app.lease.probes > 0
+    n_stops = len(lab.stops)
+    frozen = time.monotonic()
+    carol.evaluate("() => { const end = Date.now() + 3500; while (Date.now() < end) {} }")
+    wait_for(lambda: len(lab.stops) > n_stops, timeout=2.0)
+    assert "silent" in lab.stops[-1][1] and lab.stops[-1][0] - frozen <= 2.0 + 0.3
+    assert app.access.holder is None
+
+
+def pixels(png: bytes) -> np.ndarray:
+    """RGB array of a PNG screenshot (Pillow comes with viser, through imageio)."""
+    import io
+
+    from PIL import Image
+
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=np.int32)
+
+
+def near(img: np.ndarray, rgb: tuple[int, int, int], tol: int = 40) -> int:
+    return int(np.sum(np.all(np.abs(img - np.array(rgb)) <= tol, axis=-1)))
+
+
+def open_offline(browser: Any, path: Path) -> tuple[Any, list[str]]:
+    """Open ``path`` from disk with every http(s) request recorded and refused."""
+    context = browser.new_context(viewport={"width": 1000, "height": 700})
+    requested: list[str] = []
+
+    def refuse(route: Any) -> None:
+        requested.append(route.request.url)
+        route.abort()
+
+    context.route(re.compile(r"^https?://"), refuse)
+    page = context.new_page()
+    page.goto(path.as_uri())
+    page.locator("canvas").first.wait_for(timeout=20_000)
+    return page, requested
+
+
+def test_exported_scene_opens_from_disk_and_shows_the_arm_and_the_plan(
+        lab, artifacts_dir: Path) -> None:
+    app = lab.app
+    q = np.array([6.0, 4.0, 2.0, 0.0, -3.0, -5.0])
+    state = app.store.request(q, "planner")
+    wait_for(lambda: app.last_drawn_seq >= state.seq)
+    pts = np.array([[0.25, 0.05, 0.001], [0.20, 0.20, 0.001], [0.05, 0.35, 0.001]])
+    app.server.scene.add_line_segments("/plan/path", np.stack([pts[:-1], pts[1:]], axis=1),
+                                       (255, 0, 255), thickness=0.015)
+    app.server.scene.add_icosphere("/plan/target", radius=0.03, color=(255, 0, 255),
+                                   position=(0.25, 0.05, 0.03))
+    viewer = lab.page()
+    viewer.get_by_role("button", name="Export scene (HTML)").click()
+    files = wait_for(lambda: list(app.data.folder("exports").glob("scene-*.html")))
+    page, requested = open_offline(lab.browser, files[0])
+    try:
+        canvas = page.locator("canvas").first
+        shots: list[np.ndarray] = []
+
+        def plan_drawn() -> bool:  # the software renderer takes a while
+            shots.append(pixels(canvas.screenshot()))
+            return near(shots[-1], (255, 0, 255), 60) > 200
+
+        wait_for(plan_drawn, timeout=10.0)
+        img = shots[-1]
+        page.screenshot(path=str(artifacts_dir / "browser_lab_exported_scene.png"))
+        assert requested == []
+        assert near(img, (255, 0, 255), 60) > 200, "plan (magenta) not visible"
+        assert near(img, (96, 178, 204), 45) > 200, "arm body not visible"
+        assert near(img, (226, 222, 214), 20) > 5000, "table not visible"
+    finally:
+        page.context.close()
+
+
+def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -> None:
+    app = lab.app
+    alice, bob = lab.page(), lab.page()  # Bob, a viewer, will replay and export
+    lab.take_control(alice, "Alice")
+    alice.get_by_role("button", name="Start recording").click()
+    wait_for(lambda: app.recorder.recording)
+    alice.get_by_role("button", name="Run demo motion").click()
+    wait_for(lambda: app.demo.running)
+    time.sleep(0.8)
+    alice.get_by_role("button", name="STOP", exact=True).click()
+    alice.get_by_role("button", name="Stop recording").click()
+    wait_for(lambda: not app.recorder.recording)
+    names = app.data.list("recordings", ".jsonl.gz")
+    assert len(names) == 1
+
+    bob.get_by_text("Replay", exact=True).click()
+    bob.get_by_role("button", name="Load recording").wait_for()
+    bob.get_by_role("button", name="Load recording").click()
+    info = bob.locator('[data-testid="replay-info"]')
+    wait_for(lambda: names[0] in info.inner_text())
+    session = wait_for(lambda: next((s for s in app.panels[-1].player.all()
+                                     if s.rec is not None), None))
+    rec = session.rec
+    assert rec.duration > 0.5 and any("STOP" in e.text for e in rec.events)
+    assert any(e.who == "Alice" and "demo" in e.text for e in rec.events)
+    bob.get_by_role("button", name="Play").click()
+    wait_for(lambda: float(info.get_attribute("data-t") or 0) > 0.3)
+    ghost = session.ghost
+    t = session.pos
+    from core.kinematics import planar as pk
+    tip = pk.forward_kinematics(rec.q_at(t), SOFT.lengths, SOFT.base_pose)[-1]
+    body = np.asarray(ghost.body.vertices, dtype=float)
+    k, m = ghost.body_topology.sides, ghost.body_topology.n_rings
+    drawn_tip = body[: m * k].reshape(m, k, 3).mean(axis=1)[-1]
+    assert np.linalg.norm(drawn_tip[:2] - tip[:2]) < 0.03  # played on between read and draw
+    assert app.store.command.source == "stop"  # replay never commands the arm
+
+    bob.get_by_role("button", name="Export run (HTML)").click()
+    files = wait_for(lambda: list(app.data.folder("exports").glob("*.html")), timeout=15.0)
+    page, requested = open_offline(lab.browser, files[0])
+    try:
+        canvas = page.locator("canvas").first
+        wait_for(lambda: near(pixels(canvas.screenshot()), (96, 178, 204), 45) > 200,
+                 timeout=10.0)  # the arm is drawn
+        page.screenshot(path=str(artifacts_dir / "browser_lab_exported_run.png"))
+        assert requested == []
+    finally:
+        page.context.close()

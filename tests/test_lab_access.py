@@ -1,0 +1,252 @@
+"""Control lock: token, takeover, lease expiry, the central operator_only gate, STOP hooks, and
+the share tunnel staying off even for a client that asks for it on the wire."""
+
+from __future__ import annotations
+
+import time
+from typing import Iterator
+
+import numpy as np
+import pytest
+import viser
+
+from console.access import AccessControl, NotOperator
+from console.app import ConsoleApp
+from console.panels.base import Panel, operator_only
+from console.panels.jog import JogPanel
+from core.robots import load
+
+SOFT = load("soft-arm")
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+class FakeClient:
+    """What operator_only and the app use of a viser ClientHandle."""
+
+    def __init__(self, cid: int) -> None:
+        self.client_id = cid
+        self.notes: list[tuple[str, str]] = []
+
+    def add_notification(self, title: str, body: str, **_: object) -> None:
+        self.notes.append((title, body))
+
+
+@pytest.fixture
+def server() -> Iterator[viser.ViserServer]:
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def test_only_the_right_token_gives_control_and_refusals_name_the_holder() -> None:
+    changes = []
+    access = AccessControl("s3cret")
+    access.add_listener(lambda new, prev, why: changes.append((new, prev, why)))
+    with pytest.raises(NotOperator, match="nobody holds control"):
+        access.check(7, "jog")
+    with pytest.raises(NotOperator, match="Wrong operator token"):
+        access.take(7, "guess")
+    assert access.holder is None and changes == []
+    alice = access.take(7, "s3cret", name="Alice")
+    assert access.is_operator(7) and not access.is_operator(8) and alice.name == "Alice"
+    access.check(7, "jog")  # no exception
+    access.check(None, "jog")  # the server itself
+    with pytest.raises(NotOperator) as info:
+        access.check(8, "execute a plan")
+    assert info.value.reason.startswith("Only the operator can execute a plan — Alice holds "
+                                        "control; ask them or take control with the token")
+    bob = access.take(8, " s3cret ", name="Bob")  # a pasted token with spaces still works
+    assert access.holder == bob and not access.is_operator(7)
+    assert changes[-1][1] == alice and "took control from Alice" in changes[-1][2]
+    assert not access.release(7)  # Alice no longer holds it
+    assert access.release(8) and access.holder is None
+
+
+def test_wrong_tokens_are_throttled_across_clients() -> None:
+    clock = FakeClock()
+    access = AccessControl("tok", max_failures=3, failure_window=10.0, clock=clock)
+    for cid in range(3):
+        with pytest.raises(NotOperator, match="Wrong"):
+            access.take(cid, "nope")
+    with pytest.raises(NotOperator, match="Too many"):
+        access.take(9, "tok")  # even the right token waits
+    clock.t += 10.5
+    assert access.take(9, "tok").client_id == 9
+
+
+def test_lease_expires_after_two_silent_seconds_and_heartbeats_renew_it() -> None:
+    clock = FakeClock()
+    access = AccessControl(None, lease_s=2.0, clock=clock)
+    lost = []
+    access.add_listener(lambda new, prev, why: lost.append(why) if new is None else None)
+    access.take(3)
+    for _ in range(10):  # answering every 0.5 s keeps it for 5 s
+        clock.t += 0.5
+        assert access.heartbeat(3)
+        assert access.expire_if_silent() is None
+    assert not access.heartbeat(4)  # not the holder: no effect
+    clock.t += 1.99
+    assert access.expire_if_silent() is None and access.is_operator(3)
+    clock.t += 0.02
+    assert access.expire_if_silent() is not None
+    assert access.holder is None and "silent for 2 s" in lost[-1]
+
+
+def test_desk_mode_grants_only_when_enabled_and_free() -> None:
+    assert AccessControl(None).grant_if_free(1) is None
+    desk = AccessControl("tok", first_client_takes_control=True)
+    assert desk.grant_if_free(1).client_id == 1
+    assert desk.grant_if_free(2) is None and desk.is_operator(1)
+
+
+def test_names_are_cleaned() -> None:
+    access = AccessControl(None)
+    assert access.set_name(5, "  <b>Eve</b>\n") == "bEveb"  # no markup, no line breaks
+    assert access.name_of(5) == "bEveb"
+    assert access.set_name(5, "x" * 100) == "x" * 32
+    assert access.set_name(5, "   ") == "client 5"
+
+
+def event(client: FakeClient | None, target: object) -> viser.GuiEvent:
+    return viser.GuiEvent(client=client, client_id=None if client is None else client.client_id,
+                          target=target)  # type: ignore[arg-type]
+
+
+def test_jog_from_a_viewer_is_refused_with_the_reason_and_moves_nothing(server) -> None:
+    app = ConsoleApp(SOFT, server, access=AccessControl("tok"))
+    jog = app.panel(JogPanel)
+    coord = app.model.coordinates[1]
+    slider = jog.sliders[coord.key]
+    viewer, operator = FakeClient(11), FakeClient(12)
+    app.access.take(operator.client_id, "tok", name="Alice")
+    before = app.store.command
+    slider.value = 6.0  # what viser does with the viewer's drag before calling back
+    jog._on_slider(coord, event(viewer, slider))
+    assert viewer.notes and viewer.notes[0][0] == "Not allowed"
+    assert "Only the operator can jog — Alice holds control" in viewer.notes[0][1]
+    assert app.store.command is before and app.hold.target() is None and not app.hold.active
+    assert slider.value == 0.0  # snapped back for everyone
+    # The same callback for the operator sets a target the jog thread moves to.
+    slider.value = 6.0
+    jog._on_slider(coord, event(operator, slider))
+    assert operator.notes == []
+    np.testing.assert_allclose(app.hold.target(), [0, 6.0, 0, 0, 0, 0])
+    for _ in range(400):
+        if app.hold.tick() is None:
+            break
+        time.sleep(0.001)
+    np.testing.assert_allclose(app.store.command.q, [0, 6.0, 0, 0, 0, 0], atol=1e-9)
+
+
+class GatedPanel(Panel):
+    title = "Gated"
+
+    def build(self) -> None:
+        self.calls: list[str] = []
+        self.button = self.gui.add_button("Arm")
+        self.button.on_click(operator_only(lambda e: self.calls.append("lambda"), panel=self,
+                                           action="arm the robot"))
+
+    @operator_only
+    def _on_execute(self, event: viser.GuiEvent) -> None:
+        self.calls.append("method")
+
+    @operator_only(action="do it async")
+    async def _on_async(self, event: viser.GuiEvent) -> None:
+        self.calls.append("async")
+
+
+def test_operator_only_gates_methods_lambdas_and_coroutines(server) -> None:
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    def run_async(coro) -> None:  # its own thread: Playwright may own this thread's loop
+        with ThreadPoolExecutor(1) as pool:
+            pool.submit(asyncio.run, coro).result()
+
+    app = ConsoleApp(SOFT, server, panels=[GatedPanel], access=AccessControl(None))
+    panel = app.panel(GatedPanel)
+    viewer, operator = FakeClient(1), FakeClient(2)
+    app.access.take(operator.client_id)
+    wrapped_lambda = panel.button._impl.update_cb[0]
+    for client in (viewer, operator):
+        wrapped_lambda(event(client, panel.button))
+        panel._on_execute(event(client, panel.button))
+        run_async(panel._on_async(event(client, panel.button)))
+    assert panel.calls == ["lambda", "method", "async"]  # the operator's only
+    assert [body.split(" — ")[0] for _, body in viewer.notes] == [
+        "Only the operator can arm the robot", "Only the operator can execute",
+        "Only the operator can do it async"]
+    panel._on_execute(event(None, panel.button))  # a server-side mirror passes through
+    assert panel.calls[-1] == "method"
+    assert app.refusals == 3
+
+
+def test_stop_runs_every_hook_even_after_a_failing_one_and_lease_loss_stops(server) -> None:
+    app = ConsoleApp(SOFT, server, access=AccessControl(None))
+    reasons: list[str] = []
+
+    def broken(reason: str) -> None:
+        raise RuntimeError("boom")
+
+    app.add_stop_hook(broken)
+    app.add_stop_hook(reasons.append)
+    app.stop_motion("STOP pressed by Bob", FakeClient(3))
+    assert reasons == ["STOP pressed by Bob"]
+    app.access.take(4, name="Alice")
+    app.access.revoke("Alice's tab went silent for 2 s", 4)
+    assert "silent" in reasons[-1] and app.access.holder is None
+    app.access.take(5, name="Carol")
+    app.access.take(6, name="Dan")  # takeover: the arm stops before Dan moves it
+    assert "Carol" in reasons[-1] and "Dan" in reasons[-1]
+    app.remove_stop_hook(reasons.append)
+    app.stop_motion("again")
+    assert reasons[-1] != "again"
+
+
+def test_share_tunnel_request_from_the_wire_is_ignored(monkeypatch, server) -> None:
+    import msgspec
+    from websockets.sync.client import connect
+
+    import viser._viser as vv
+
+    created: list[object] = []
+
+    class SpyTunnel:
+        def __init__(self, *args: object) -> None:
+            created.append(args)
+            raise RuntimeError("no tunnels in tests")
+
+    monkeypatch.setattr(vv, "ViserTunnel", SpyTunnel)
+    request = msgspec.msgpack.encode({"type": "ShareUrlRequest"})
+
+    def ask(srv: viser.ViserServer) -> None:
+        with connect(f"ws://127.0.0.1:{srv.get_port()}",
+                     subprotocols=[f"viser-v{viser.__version__}"]) as ws:  # type: ignore[list-item]
+            ws.send(request)
+            time.sleep(0.5)
+
+    ask(server)  # a plain viser server opens the tunnel: the probe works
+    deadline = time.monotonic() + 3
+    while not created and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert created, "control: a plain viser server should have tried to open a tunnel"
+    created.clear()
+    guarded = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        ConsoleApp(SOFT, guarded)
+        ask(guarded)
+        time.sleep(0.5)
+        assert created == [] and guarded._share_tunnel is None
+        assert guarded.request_share_url() is None
+    finally:
+        guarded.stop()

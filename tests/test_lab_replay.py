@@ -1,0 +1,101 @@
+"""Replay without a browser: a session refuses file names that leave the data folder, loads a
+recording, draws the ghost arm at the seeked time (checked against the planar FK), plays at the
+chosen speed, never commands the arm, and exports the run inside the data folder only."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+import viser
+
+from console.app import ConsoleApp
+from console.recording import Recorder
+from console.replay import ReplaySession
+from core.kinematics import planar as pk
+from core.robots import load
+
+SOFT = load("soft-arm")
+
+
+class FakeClient:
+    """A ClientHandle stand-in whose widgets and nodes live in the server's own scope."""
+
+    def __init__(self, server: viser.ViserServer) -> None:
+        self.client_id = 99
+        self.gui, self.scene, self.atomic = server.gui, server.scene, server.atomic
+        self.notes: list[tuple[str, str]] = []
+        self.downloads: list[tuple[str, int]] = []
+
+    def add_notification(self, title: str, body: str, **_: Any) -> None:
+        self.notes.append((title, body))
+
+    def send_file_download(self, name: str, content: bytes) -> None:
+        self.downloads.append((name, len(content)))
+
+
+@pytest.fixture
+def app(tmp_path: Path) -> Iterator[ConsoleApp]:
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        yield ConsoleApp(SOFT, srv, data_dir=tmp_path / "runs")
+    finally:
+        srv.stop()
+
+
+def record(app: ConsoleApp) -> tuple[str, list[np.ndarray]]:
+    rec = Recorder(app.data, app.model)
+    path = rec.start("replay")
+    qs = [np.full(6, k) for k in (0.0, 3.0, 6.0, 9.0)]
+    for q in qs:
+        rec.on_state(app.store.report(q, "hardware"))
+        time.sleep(0.05)
+    rec.stop()
+    return path.name, qs
+
+
+def tip_of(session: ReplaySession) -> np.ndarray:
+    ghost = session.ghost
+    body = np.asarray(ghost.body.vertices, dtype=float)  # type: ignore[union-attr]
+    k, m = ghost.body_topology.sides, ghost.body_topology.n_rings  # type: ignore[union-attr]
+    return body[: m * k].reshape(m, k, 3).mean(axis=1)[-1, :2]
+
+
+@pytest.mark.parametrize("name", ["../../../etc/passwd", "/etc/passwd",
+                                  "../exports/x.jsonl.gz", "missing.jsonl.gz"])
+def test_loading_refuses_names_outside_or_missing(app, name: str) -> None:
+    client = FakeClient(app.server)
+    session = ReplaySession(app, client, order=50.0)  # type: ignore[arg-type]
+    assert not session.load(name)
+    assert session.rec is None and session.ghost is None
+    assert client.notes and client.notes[-1][0] == "Cannot load recording"
+
+
+def test_seek_play_and_export_a_recording(app) -> None:
+    name, qs = record(app)
+    client = FakeClient(app.server)
+    session = ReplaySession(app, client, order=50.0)  # type: ignore[arg-type]
+    assert name in session.files.options
+    command = app.store.command
+    assert session.load(name)
+    rec = session.rec
+    assert rec is not None and len(rec.times) == 4
+    for i in (2, 1, 3):
+        session.seek(float(rec.times[i]))
+        tip = pk.forward_kinematics(qs[i], SOFT.lengths, SOFT.base_pose)[-1, :2]
+        np.testing.assert_allclose(tip_of(session), tip, atol=1e-5)
+    session.seek(0.0)
+    session.speed = 2.0
+    session.toggle()
+    session.advance(float(rec.times[2]) / 2.0)  # half the time at double speed
+    assert session.pos == pytest.approx(float(rec.times[2]))
+    session.advance(10.0)
+    assert session.pos == rec.duration and not session.playing  # stops at the end
+    assert app.store.command is command  # replay never commands the arm
+    session.export()
+    exports = list(app.data.folder("exports").glob("*.html"))
+    assert len(exports) == 1 and exports[0].name.startswith("replay-")
+    assert client.downloads == [(exports[0].name, exports[0].stat().st_size)]
