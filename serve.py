@@ -11,8 +11,9 @@ the operator token printed here (``--no-token`` for a closed lab). On a loopback
 (a single desk) the first browser gets control without the token unless ``--lab`` is given.
 Files: recordings and exports are written only under ``--data-dir`` (default ``./runs``).
 
-``--hardware emulator|mock`` and ``--port-path`` are accepted for the serial bridge; until the
-bridge lands they are only reported and the console runs the kinematic simulation.
+Hardware: ``--hardware emulator`` (default) starts the device emulator on a pseudo-terminal, so
+the demo runs through the real serial stack; ``--hardware mock`` keeps the device in-process;
+``--port-path PATH`` talks to a real controller (see ``console.hardware_setup``).
 """
 
 from __future__ import annotations
@@ -52,9 +53,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         "any other --host)")
     p.add_argument("--demo", action="store_true",
                    help="add a 'Run demo motion' button (operator only) for demos and tests")
-    p.add_argument("--hardware", choices=("emulator", "mock"), default=None,
-                   help="hardware bridge to attach (not available yet: noted and ignored)")
-    p.add_argument("--port-path", default=None, help="serial device for --hardware")
+    p.add_argument("--hardware", choices=("emulator", "mock"), default="emulator",
+                   help="emulator (default): the device emulator on a pseudo-terminal, through "
+                        "the real serial stack; mock: an in-process device, no serial")
+    p.add_argument("--port-path", default=None,
+                   help="serial device or pyserial URL of a real controller (overrides "
+                        "--hardware)")
     return p.parse_args(argv)
 
 
@@ -101,19 +105,30 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     """Create the viser server and the console app; returns (server, app, token)."""
     import viser  # after argument checks, so --help and bad input stay fast
 
+    from console import hardware_setup
     from console.demo_motion import DemoMotion
+    from console.panels.capture import CapturePanel
+    from console.panels.control import ControlPanel
+    from console.panels.extensible_panels import EXTENSIBLE_PANELS
+    from console.panels.planner import grasp_panels
     from console.panels.session import SessionPanel
+    from console.panels.trials import TrialsPanel
 
     token = None if args.no_token else secrets.token_urlsafe(9)
     desk = is_loopback(args.host) and not args.lab
     access = AccessControl(token, first_client_takes_control=desk)
     server = viser.ViserServer(host=args.host, port=args.port, verbose=False)
+    mode = getattr(args, "hardware", "mock")
+    port_path = getattr(args, "port_path", None)
     app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
-                     panels=())
+                     panels=(),
+                     mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
+    app.hardware = hardware_setup.attach(app, mode, port_path)  # type: ignore[attr-defined]
     if args.demo:
         app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
         app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
-    for panel_cls in (*DEFAULT_PANELS, SessionPanel):
+    for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
+                      *EXTENSIBLE_PANELS, SessionPanel):
         app.add_panel(panel_cls)
     return server, app, token
 
@@ -134,12 +149,9 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"serve.py: --data-dir {args.data_dir}: {exc}", file=sys.stderr)
         return 2
-    status = "Kinematic simulation (no hardware connected)"
-    if args.hardware is not None:
-        where = f" on {args.port_path}" if args.port_path else ""
-        status = (f"Hardware '{args.hardware}'{where} requested, but the bridge is not "
-                  "available yet: kinematic simulation")
-        print(f"serve.py: {status}", file=sys.stderr)
+    from console.hardware_setup import describe
+    status = describe(robot, args.hardware, args.port_path)
+    print(f"serve.py: hardware: {status}", file=sys.stderr)
 
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
@@ -168,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         app.stop_motion("console shutting down")
+        app.hardware.close()  # type: ignore[attr-defined]
         app.stop()
         server.stop()
     return 0

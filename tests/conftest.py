@@ -90,7 +90,7 @@ def console_server() -> Iterator[Callable[..., str]]:
         out = log.open("wb")
         proc = subprocess.Popen(
             [sys.executable, str(REPO / "serve.py"), "--robot", robot, "--host", "127.0.0.1",
-             "--port", str(port), *extra],
+             "--port", str(port), "--hardware", "mock", *extra],
             cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
         out.close()
         procs.append(proc)

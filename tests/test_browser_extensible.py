@@ -1,8 +1,6 @@
 """Browser tests of the extensible arm's console: typed tip target -> IK -> arm, and a path run.
 
-serve.py runs in a subprocess with the extensible panels composed (a launcher adds
-``EXTENSIBLE_PANELS`` to ``serve.ConsoleApp`` unless the app already has them, so the test does
-not depend on how they get registered). Chromium types a target; the readout must show a tip
+serve.py runs in a subprocess (conftest's ``console_server``). Chromium types a target; the readout must show a tip
 within 1 mm of it, which the test checks against its own IK (``solve_tip_ik`` /
 ``tip_position``), the Δ jog boxes must hold a posture whose tip is there too, and an
 unreachable target must be reported with the distance the readout shows. The path test previews
@@ -32,69 +30,10 @@ pytestmark = pytest.mark.browser
 REPO = Path(__file__).resolve().parent.parent
 ROBOT = load("extensible")
 READOUT_MM = 0.051  # the readout shows 0.1 mm
-LAUNCHER = textwrap.dedent("""
-    import sys
-    sys.path.insert(0, {repo!r})
-    import serve
-    from console.app import ConsoleApp
-    from console.panels.extensible_panels import EXTENSIBLE_PANELS
-
-
-    class App(ConsoleApp):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            for cls in EXTENSIBLE_PANELS:
-                try:
-                    self.panel(cls)
-                except KeyError:
-                    self.add_panel(cls)
-
-
-    if __name__ == "__main__":  # the path planner's spawned worker imports this file too
-        serve.ConsoleApp = App
-        sys.exit(serve.main(sys.argv[1:]))
-""")
-
-
 @pytest.fixture
-def extensible_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[Callable[[], str]]:
-    """Like conftest's ``console_server("extensible")``, with the extensible panels composed."""
-    procs: list[subprocess.Popen[bytes]] = []
-
-    def start() -> str:
-        import socket
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-        launcher = tmp_path / "launch_extensible.py"
-        launcher.write_text(LAUNCHER.format(repo=str(REPO)))
-        log = artifacts_dir / f"serve-extensible-panels-{port}.log"
-        with log.open("wb") as out:
-            proc = subprocess.Popen([sys.executable, str(launcher), "--robot", "extensible",
-                                     "--host", "127.0.0.1", "--port", str(port)],
-                                    cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-        procs.append(proc)
-        url = f"http://127.0.0.1:{port}/"
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline:
-            if proc.poll() is not None:
-                pytest.fail(f"serve.py exited with {proc.returncode}:\n{log.read_text()}")
-            try:
-                with urllib.request.urlopen(url, timeout=1.0) as resp:
-                    if resp.status == 200:
-                        return url
-            except (urllib.error.URLError, ConnectionError, TimeoutError):
-                time.sleep(0.1)
-        pytest.fail(f"serve.py did not serve {url}:\n{log.read_text()}")
-
-    yield start
-    for proc in procs:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+def extensible_console(console_server: Callable[..., str]) -> Callable[[], str]:
+    """serve.py for the extensible (it composes every panel of that robot), on the mock device."""
+    return lambda: console_server("extensible")
 
 
 def open_console(page, url: str) -> None:

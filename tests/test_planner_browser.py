@@ -1,8 +1,6 @@
 """Browser tests of the grasp-planning console: click to place, plan, step through, refusals.
 
-serve.py runs in a subprocess with the grasp panels composed (a launcher adds
-``console.panels.planner.grasp_panels()`` to ``serve.ConsoleApp`` unless the app already has
-them). Chromium clicks the 3D canvas where the table point (-0.15, 0.25) appears (projected with
+serve.py runs in a subprocess (conftest's ``console_server``). Chromium clicks the 3D canvas where the table point (-0.15, 0.25) appears (projected with
 the console's own camera set-up), the new object must land there (the click ray meets z = 0),
 "Plan grasp" must report Algorithm 1's number of waypoints (computed here with
 ``plan_grasp``), stepping must reach the last waypoint on the final circle r_o + g_off, and an
@@ -32,68 +30,10 @@ from core.robots import load
 pytestmark = pytest.mark.browser
 REPO = Path(__file__).resolve().parent.parent
 ROBOT = load("soft-arm")
-LAUNCHER = textwrap.dedent("""
-    import sys
-    sys.path.insert(0, {repo!r})
-    import serve
-    from console.app import ConsoleApp
-    from console.panels.planner import grasp_panels
-
-
-    class App(ConsoleApp):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            for cls in grasp_panels():
-                try:
-                    self.panel(cls)
-                except KeyError:
-                    self.add_panel(cls)
-
-
-    if __name__ == "__main__":
-        serve.ConsoleApp = App
-        sys.exit(serve.main(sys.argv[1:]))
-""")
-
-
 @pytest.fixture
-def grasp_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[Callable[[], str]]:
-    """serve.py for the soft arm with the grasp panels composed; returns its URL."""
-    procs: list[subprocess.Popen[bytes]] = []
-
-    def start() -> str:
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-        launcher = tmp_path / "launch_grasp.py"
-        launcher.write_text(LAUNCHER.format(repo=str(REPO)))
-        log = artifacts_dir / f"serve-grasp-{port}.log"
-        with log.open("wb") as out:
-            proc = subprocess.Popen([sys.executable, str(launcher), "--robot", "soft-arm",
-                                     "--host", "127.0.0.1", "--port", str(port)],
-                                    cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-        procs.append(proc)
-        url = f"http://127.0.0.1:{port}/"
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline:
-            if proc.poll() is not None:
-                pytest.fail(f"serve.py exited with {proc.returncode}:\n{log.read_text()}")
-            try:
-                with urllib.request.urlopen(url, timeout=1.0) as resp:
-                    if resp.status == 200:
-                        return url
-            except (urllib.error.URLError, ConnectionError, TimeoutError):
-                time.sleep(0.1)
-        pytest.fail(f"serve.py did not serve {url}:\n{log.read_text()}")
-
-    yield start
-    for proc in procs:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+def grasp_console(console_server: Callable[..., str]) -> Callable[[], str]:
+    """serve.py for the soft-arm (it composes every panel of that robot), on the mock device."""
+    return lambda: console_server("soft-arm")
 
 
 def project(point, width: float, height: float) -> tuple[float, float]:

@@ -74,7 +74,7 @@ class ControlPanel(Panel):
         self.loop_md = gui.add_markdown("<small>loop: –</small>")
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
-        self.stop_btn = gui.add_button("STOP", color="red", icon=viser.Icon.HAND_STOP)
+        self.stop_btn = gui.add_button("STOP arm", color="red", icon=viser.Icon.HAND_STOP)
         self.obj_x = gui.add_number("Object x (m)", -0.16, step=0.005)
         self.obj_y = gui.add_number("Object y (m)", 0.28, step=0.005)
         self.obj_r = gui.add_number("Object r (m)", r0, min=0.005, max=0.05, step=0.0005)
