@@ -48,7 +48,7 @@ class ReplaySession:
         with self.folder:
             self.files = gui.add_dropdown("Recording", self._file_options())
             self.load_btn = gui.add_button("Load recording")
-            self.play_btn = gui.add_button("Play", disabled=True)
+            self.play_btn = gui.add_button("Play replay", disabled=True)
             self.timeline = gui.add_slider("Time (s)", min=0.0, max=1.0, step=0.05,
                                            initial_value=0.0, disabled=True)
             self.speed_dd = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
@@ -97,7 +97,7 @@ class ReplaySession:
             self.timeline.disabled = False
             self.play_btn.disabled = False
             self.export_btn.disabled = False
-            self.play_btn.label = "Play"
+            self.play_btn.label = "Play replay"
         self.draw()
         return True
 
@@ -108,7 +108,7 @@ class ReplaySession:
             if not self.playing and self.pos >= self.rec.duration:
                 self.pos = 0.0
             self.playing = not self.playing
-            self.play_btn.label = "Pause" if self.playing else "Play"
+            self.play_btn.label = "Pause replay" if self.playing else "Play replay"
 
     def seek(self, t: float) -> None:
         with self._lock:
@@ -133,7 +133,7 @@ class ReplaySession:
             if self.pos >= self.rec.duration:
                 self.pos = self.rec.duration
                 self.playing = False
-                self.play_btn.label = "Play"
+                self.play_btn.label = "Play replay"
         self.draw()
 
     def draw(self, move_slider: bool = True) -> None:

@@ -1,0 +1,389 @@
+"""Console under load: N headless Chromium clients watching while the arm moves.
+
+``python benchmarks/bench_load.py [--clients 5] [--seconds 60] [--robot soft-arm]``
+(goal run: ``--clients 20 --seconds 600``; soak: ``--seconds 3600``, memory growth <= 10 %).
+
+Each phase runs the whole console in its own child process (``serve.build``: every panel, lab
+mode, the hardware ``serve.py`` attaches, a port on 127.0.0.1) with the arm moving:
+
+* soft arm (``--motion loop``, default): grasp-and-place trials back to back over the paper's
+  spots on the console's control process (``app.soft_control``: the 100 Hz loop in its own
+  process, planning in another); the Control panel draws what it measures. Otherwise (or with
+  ``--motion demo``) the demo motion in the console process.
+* baseline phase: the same for ``--baseline-seconds`` with 0 clients; load phase: N clients --
+  Playwright contexts of one headless Chromium (``--client-kind browser``), or websocket-only
+  viewers that receive the stream without rendering (``--client-kind ws``: the console's own
+  serving cost, without 2 cores' worth of software WebGL competing with it).
+
+Reported side by side: console process CPU (% of one core, from /proc/<pid>/stat) and memory
+(VmRSS from /proc/<pid>/status; growth from the first sample after warm-up to the last, and an
+RSS trace), frames drawn per second, the control process's CPU and memory, and its loop p99
+period error (worst 10 s window it published), max and overruns over the phase. The browsers
+share this machine's cores with the console; on the lab network they would not, so by default
+they run at ``nice 19`` (``--browser-nice 0`` to compete at equal priority).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--no-first-run"]
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+# -- the console child ---------------------------------------------------------------------------
+
+def _serve_module() -> Any:
+    spec = importlib.util.spec_from_file_location("serve", REPO / "serve.py")
+    module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
+    spec.loader.exec_module(module)  # type: ignore[union-attr]
+    return module
+
+
+def start_trials(app: Any, robot: Any, stop: threading.Event) -> Any:
+    """Grasp-and-place trials back to back on the console's control process; None if absent.
+
+    The soft arm's 100 Hz loop runs in ``app.soft_control`` (a ``ControlProcess``: its own
+    process, attached by ``serve.build``); the Control panel draws what it measures.
+    """
+    ctl = getattr(app, "soft_control", None)
+    if ctl is None:
+        return None
+    from core.control.trials import paper_locations
+
+    spots = list(paper_locations().values())
+    r0 = robot.capture.nominal_object_radius
+    ctl.arm().result(30)
+
+    def trials() -> None:
+        i = 0
+        while not stop.is_set():
+            x, y = spots[i % len(spots)]
+            i += 1
+            try:
+                ctl.grasp_at(x, y, r0).result(30)
+            except Exception as exc:  # noqa: BLE001 - a refused trial: note it, go on
+                print(f"trial refused: {exc}", file=sys.stderr)
+            while not stop.wait(0.1):
+                view = ctl.view
+                c = None if view is None else view.snapshot.control
+                if c is not None and c.phase in ("released", "stopped"):
+                    break
+            ctl.goto([0.0] * robot.n_segments).result(30)
+            stop.wait(1.0)
+
+    threading.Thread(target=trials, name="bench-trials", daemon=True).start()
+    return ctl
+
+
+def child(a: argparse.Namespace) -> int:
+    """Serve the console (``serve.build``) and answer ``mark`` / ``stats`` / ``quit``."""
+    from console.demo_motion import DemoMotion
+    from core.robots import load
+
+    serve = _serve_module()
+    robot = load(a.robot)
+    argv = ["--robot", a.robot, "--port", str(a.port), "--lab", "--no-token",
+            "--data-dir", a.data_dir]
+    if a.hardware:
+        argv += ["--hardware", a.hardware]
+    args = serve.parse_args(argv)
+    server, app, _ = serve.build(args, robot, "load benchmark")
+    app.start()
+    stop = threading.Event()
+    ctl = start_trials(app, robot, stop) if a.motion == "loop" else None
+    demo = None
+    if ctl is None:
+        demo = DemoMotion(app.store)
+        app.add_stop_hook(demo.stop)
+        demo.start()
+    loop_pid = ctl._proc.pid if ctl is not None and hasattr(ctl, "_proc") else 0
+    print(f"READY http://127.0.0.1:{server.get_port()}/ {'loop' if ctl else 'demo'} {loop_pid}",
+          flush=True)
+    base_overruns = 0
+    for line in sys.stdin:
+        cmd = line.strip()
+        view = None if ctl is None else ctl.view
+        if cmd == "mark" and view is not None:  # start of the measured window
+            base_overruns = view.stats.overruns
+        elif cmd == "stats":
+            out: dict[str, Any] = {"clients": len(server.get_clients()),
+                                   "frames_drawn": app.frames_drawn, "loop": None}
+            if view is not None:  # the control process publishes stats of its last 1000 ticks
+                st = view.stats
+                out["loop"] = {"overruns": st.overruns - base_overruns,
+                               "p99_ms": st.period_error_ms_p99, "max_ms": st.period_error_ms_max,
+                               "work_p99_ms": st.work_ms_p99, "scheduling": view.scheduling}
+            print(json.dumps(out), flush=True)
+        elif cmd == "quit":
+            break
+    stop.set()
+    if demo is not None:
+        demo.stop()
+    app.stop()
+    hardware = getattr(app, "hardware", None)
+    if hardware is not None:
+        hardware.close()
+    server.stop()
+    return 0
+
+
+# -- the measuring parent ------------------------------------------------------------------------
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of ``pid`` and its threads, seconds (fields 14, 15 of /proc/pid/stat)."""
+    text = Path(f"/proc/{pid}/stat").read_text()
+    fields = text[text.rindex(")") + 2:].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+class Console:
+    """A console child process."""
+
+    def __init__(self, a: argparse.Namespace) -> None:
+        cmd = [sys.executable, __file__, "--child", "--robot", a.robot, "--motion", a.motion,
+               "--data-dir", a.data_dir]
+        if a.hardware:
+            cmd += ["--hardware", a.hardware]
+        self.proc = subprocess.Popen(cmd, cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.DEVNULL, text=True)
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith("READY "):
+                _, self.url, self.motion, loop_pid = line.split()
+                self.loop_pid = int(loop_pid)
+                break
+        else:
+            raise RuntimeError("console child did not start")
+
+    def mark(self) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write("mark\n")
+        self.proc.stdin.flush()
+
+    def stats(self) -> dict[str, Any]:
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        self.proc.stdin.write("stats\n")
+        self.proc.stdin.flush()
+        while True:
+            line = self.proc.stdout.readline()
+            if line.startswith("{"):
+                return json.loads(line)
+
+    def close(self) -> None:
+        try:
+            assert self.proc.stdin is not None
+            self.proc.stdin.write("quit\n")
+            self.proc.stdin.flush()
+            self.proc.wait(timeout=15)
+        except (BrokenPipeError, subprocess.TimeoutExpired):
+            self.proc.kill()
+            self.proc.wait()
+
+
+def measure(console: Console, seconds: float, warmup: float, sample_every: float) -> dict[str, Any]:
+    """CPU, memory and loop figures of the console over ``seconds`` after ``warmup``.
+
+    The control process publishes loop stats of its last 1000 ticks (10 s); they are sampled
+    every ``sample_every`` s (<= 10 s) and the worst window is reported.
+    """
+    pid, lpid = console.proc.pid, console.loop_pid
+    time.sleep(warmup)
+    console.mark()
+    s0, c0, t0 = console.stats(), cpu_seconds(pid), time.monotonic()
+    l0 = cpu_seconds(lpid) if lpid else 0.0
+    rss, loops = [rss_mb(pid)], []
+    end = t0 + seconds
+    while time.monotonic() < end:
+        time.sleep(min(sample_every, max(0.0, end - time.monotonic())))
+        rss.append(rss_mb(pid))
+        loops.append(console.stats()["loop"])
+    s1, c1, t1 = console.stats(), cpu_seconds(pid), time.monotonic()
+    out = {"cpu_pct": 100.0 * (c1 - c0) / (t1 - t0), "rss_mb": rss[-1], "rss_trace": rss,
+           "rss_growth_pct": 100.0 * (rss[-1] - rss[0]) / rss[0], "rss_peak_mb": max(rss),
+           "fps": (s1["frames_drawn"] - s0["frames_drawn"]) / (t1 - t0),
+           "clients": s1["clients"], "loop": None, "loop_cpu_pct": None, "loop_rss_mb": None}
+    windows = [w for w in loops + [s1["loop"]] if w]
+    if windows:
+        out["loop"] = {"p99_ms": max(w["p99_ms"] for w in windows),
+                       "max_ms": max(w["max_ms"] for w in windows),
+                       "work_p99_ms": max(w["work_p99_ms"] for w in windows),
+                       "overruns": s1["loop"]["overruns"], "scheduling": s1["loop"]["scheduling"]}
+    if lpid:
+        out["loop_cpu_pct"] = 100.0 * (cpu_seconds(lpid) - l0) / (t1 - t0)
+        out["loop_rss_mb"] = rss_mb(lpid)
+    return out
+
+
+def chromium_path(a: argparse.Namespace) -> str:
+    """Chromium, or a wrapper running it at ``nice 19`` so that on this shared machine the
+    browsers take the cores the console does not need (on the lab network they are elsewhere)."""
+    if a.browser_nice == 0:
+        return "/usr/bin/chromium"
+    wrapper = Path(a.data_dir) / "chromium-nice.sh"
+    wrapper.parent.mkdir(parents=True, exist_ok=True)
+    wrapper.write_text(f'#!/bin/sh\nexec nice -n {a.browser_nice} /usr/bin/chromium "$@"\n')
+    wrapper.chmod(0o755)
+    return str(wrapper)
+
+
+def ws_viewer(url: str, stop: threading.Event, received: list[int], i: int) -> None:
+    """A websocket-only viewer: registers like a browser (one camera message), then receives
+    everything the console streams and throws it away (no decoding, no rendering)."""
+    import msgspec
+    import viser
+    from viser import _messages
+    from websockets.sync.client import connect
+
+    cam = _messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, 0.01, 100.0,
+                                        480, 640, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    hello = msgspec.msgpack.encode(cam.as_serializable_dict())
+    with connect(url.replace("http://", "ws://"), max_size=None,
+                 subprotocols=[f"viser-v{viser.__version__}"]) as ws:  # type: ignore[list-item]
+        ws.send(hello)
+        while not stop.is_set():
+            try:
+                received[i] += len(ws.recv(timeout=0.5))
+            except TimeoutError:
+                continue
+
+
+def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str, Any]:
+    console = Console(a)
+    pages: list[Any] = []
+    try:
+        if n_clients == 0:
+            return measure(console, seconds, a.warmup, a.sample_every)
+        if a.client_kind == "ws":
+            stop = threading.Event()
+            received = [0] * n_clients
+            threads = [threading.Thread(target=ws_viewer, args=(console.url, stop, received, i),
+                                        daemon=True) for i in range(n_clients)]
+            for th in threads:
+                th.start()
+            try:
+                result = measure(console, seconds, a.warmup, a.sample_every)
+            finally:
+                stop.set()
+                for th in threads:
+                    th.join(2.0)
+            result["mb_per_client_s"] = sum(received) / n_clients / 1e6 / (seconds + a.warmup)
+            return result
+        from playwright.sync_api import sync_playwright
+
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium_path(a), headless=True,
+                                         args=CHROMIUM_ARGS)
+            for _ in range(n_clients):
+                ctx = browser.new_context(viewport={"width": a.width, "height": a.height})
+                page = ctx.new_page()
+                page.goto(console.url)
+                pages.append(page)
+            for page in pages:
+                page.get_by_text("Session", exact=True).wait_for(timeout=120_000)
+            result = measure(console, seconds, a.warmup, a.sample_every)
+            browser.close()
+        return result
+    finally:
+        console.close()
+
+
+def fmt(v: Any, spec: str) -> str:
+    return "n/a" if v is None else format(v, spec)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--clients", type=int, default=5)
+    p.add_argument("--seconds", type=float, default=60.0, help="load phase length")
+    p.add_argument("--baseline-seconds", type=float, default=None,
+                   help="0-client phase length (default: min(--seconds, 60))")
+    p.add_argument("--robot", default="soft-arm")
+    p.add_argument("--motion", choices=("loop", "demo"), default="loop",
+                   help="loop: grasp-and-place trials on the console's control process; demo: "
+                        "the demo motion in the console process")
+    p.add_argument("--hardware", choices=("emulator", "mock"), default=None,
+                   help="passed to serve.py (default: serve.py's default)")
+    p.add_argument("--warmup", type=float, default=10.0)
+    p.add_argument("--sample-every", type=float, default=5.0)
+    p.add_argument("--client-kind", choices=("browser", "ws"), default="browser",
+                   help="browser: headless Chromium pages; ws: websocket-only viewers (the "
+                        "console's own serving cost, without rendering on this machine)")
+    p.add_argument("--browser-nice", type=int, default=19,
+                   help="niceness of the Chromium processes (0: same priority as the console)")
+    p.add_argument("--width", type=int, default=800)
+    p.add_argument("--height", type=int, default=500)
+    p.add_argument("--data-dir", default=str(REPO / "artifacts" / "bench_load_runs"))
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    p.add_argument("--port", type=int, default=0, help=argparse.SUPPRESS)
+    a = p.parse_args()
+    if a.child:
+        return child(a)
+    if a.clients < 0 or a.seconds <= 0:
+        p.error("--clients must be >= 0 and --seconds > 0")
+    base_s = a.baseline_seconds if a.baseline_seconds is not None else min(a.seconds, 60.0)
+    print(f"console under load: {a.robot}, motion={a.motion}, {a.clients} {a.client_kind} "
+          f"clients for "
+          f"{a.seconds:g} s (baseline 0 clients for {base_s:g} s), {os.cpu_count()} cores, "
+          f"browsers at nice {a.browser_nice}",
+          flush=True)
+    base = run_phase(a, 0, base_s)
+    load = run_phase(a, a.clients, a.seconds)
+    rows = [
+        ("clients connected", "d", base["clients"], load["clients"]),
+        ("console CPU, % of one core", ".1f", base["cpu_pct"], load["cpu_pct"]),
+        ("console RSS at end, MB", ".1f", base["rss_mb"], load["rss_mb"]),
+        ("RSS growth over the phase, %", "+.1f", base["rss_growth_pct"], load["rss_growth_pct"]),
+        ("frames drawn per s", ".1f", base["fps"], load["fps"]),
+        ("control process CPU, % of one core", ".1f", base["loop_cpu_pct"],
+         load["loop_cpu_pct"]),
+        ("control process RSS, MB", ".1f", base["loop_rss_mb"], load["loop_rss_mb"]),
+        ("loop p99 period error (worst 10 s), ms", ".3f", (base["loop"] or {}).get("p99_ms"),
+         (load["loop"] or {}).get("p99_ms")),
+        ("loop max period error, ms", ".3f", (base["loop"] or {}).get("max_ms"),
+         (load["loop"] or {}).get("max_ms")),
+        ("loop overruns in the phase", "d", (base["loop"] or {}).get("overruns"),
+         (load["loop"] or {}).get("overruns")),
+        ("loop tick work p99 (worst 10 s), ms", ".3f", (base["loop"] or {}).get("work_p99_ms"),
+         (load["loop"] or {}).get("work_p99_ms")),
+    ]
+    if "mb_per_client_s" in load:
+        rows.append(("MB/s streamed to each client", ".2f", None, load["mb_per_client_s"]))
+    print(f"\n{'figure':40s} {'0 clients':>12s} {f'{a.clients} clients':>12s}")
+    for name, spec, b, l in rows:
+        print(f"{name:40s} {fmt(b, spec):>12s} {fmt(l, spec):>12s}")
+    if load["loop"]:
+        print(f"loop thread scheduling: {load['loop']['scheduling']}")
+    trace = load["rss_trace"]
+    picks = [trace[round(i * (len(trace) - 1) / 9)] for i in range(10)] if len(trace) > 10 else trace
+    half = trace[len(trace) // 2]
+    print(f"\nRSS under load, MB, evenly over the phase: {' '.join(f'{v:.1f}' for v in picks)}")
+    print(f"growth over the second half: {100.0 * (trace[-1] - half) / half:+.1f} %")
+    growth = load["rss_growth_pct"]
+    print(f"memory growth under load: {growth:+.1f} % over {a.seconds:g} s "
+          f"(soak goal: <= 10 % over 3600 s){'' if growth <= 10 else '  ** above goal **'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
