@@ -127,17 +127,22 @@ def _get(table: Mapping[str, Any], dotted: str) -> Any:
     return node
 
 
-def _num(table: Mapping[str, Any], dotted: str, *, lo: float | None = None,
-         hi: float | None = None, strict_lo: bool = False) -> float:
-    value = _get(table, dotted)
+def check_number(value: Any, field: str, *, lo: float | None = None, hi: float | None = None,
+                 strict_lo: bool = False) -> float:
+    """``value`` as a finite float within bounds, or :class:`RobotFileError` naming ``field``."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise RobotFileError(f"{dotted}: must be a finite number, got {value!r}")
+        raise RobotFileError(f"{field}: must be a finite number, got {value!r}")
     value = float(value)
     if lo is not None and (value <= lo if strict_lo else value < lo):
-        raise RobotFileError(f"{dotted}: must be {'>' if strict_lo else '>='} {lo:g}, got {value:g}")
+        raise RobotFileError(f"{field}: must be {'>' if strict_lo else '>='} {lo:g}, got {value:g}")
     if hi is not None and value > hi:
-        raise RobotFileError(f"{dotted}: must be <= {hi:g}, got {value:g}")
+        raise RobotFileError(f"{field}: must be <= {hi:g}, got {value:g}")
     return value
+
+
+def _num(table: Mapping[str, Any], dotted: str, *, lo: float | None = None,
+         hi: float | None = None, strict_lo: bool = False) -> float:
+    return check_number(_get(table, dotted), dotted, lo=lo, hi=hi, strict_lo=strict_lo)
 
 
 def _int(table: Mapping[str, Any], dotted: str, *, lo: int = 1) -> int:

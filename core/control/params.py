@@ -15,7 +15,7 @@ from typing import Any, Literal, Mapping
 import numpy as np
 import numpy.typing as npt
 
-from core.robots import RobotFileError, SoftArm
+from core.robots import RobotFileError, SoftArm, check_number
 
 Array = npt.NDArray[np.float64]
 
@@ -31,15 +31,7 @@ def _section(robot: SoftArm, dotted: str) -> Mapping[str, Any]:
 
 def _num(t: Mapping[str, Any], sec: str, key: str, *, lo: float | None = 0.0,
          strict: bool = False, hi: float | None = None) -> float:
-    v = t.get(key)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise RobotFileError(f"{sec}.{key}: must be a finite number, got {v!r}")
-    v = float(v)
-    if lo is not None and (v <= lo if strict else v < lo):
-        raise RobotFileError(f"{sec}.{key}: must be {'>' if strict else '>='} {lo:g}, got {v:g}")
-    if hi is not None and v > hi:
-        raise RobotFileError(f"{sec}.{key}: must be <= {hi:g}, got {v:g}")
-    return v
+    return check_number(t.get(key), f"{sec}.{key}", lo=lo, hi=hi, strict_lo=strict)
 
 
 def _pair(t: Mapping[str, Any], sec: str, key: str) -> tuple[float, float]:
