@@ -165,8 +165,11 @@ class Console:
                "--data-dir", a.data_dir]
         if a.hardware:
             cmd += ["--hardware", a.hardware]
+        log = Path(a.data_dir) / "console-child.log"  # the console's stderr, for a post-mortem
+        log.parent.mkdir(parents=True, exist_ok=True)
+        self._log = log.open("w")
         self.proc = subprocess.Popen(cmd, cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.DEVNULL, text=True)
+                                     stderr=self._log, text=True)
         assert self.proc.stdout is not None
         for line in self.proc.stdout:
             if line.startswith("READY "):
@@ -201,7 +204,8 @@ class Console:
             self.proc.wait()
 
 
-def measure(console: Console, seconds: float, warmup: float, sample_every: float) -> dict[str, Any]:
+def measure(console: Console, seconds: float, warmup: float, sample_every: float,
+            progress_every: float = 0.0) -> dict[str, Any]:
     """CPU, memory and loop figures of the console over ``seconds`` after ``warmup``.
 
     The control process publishes loop stats of its last 1000 ticks (10 s); they are sampled
@@ -214,10 +218,22 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
     l0 = cpu_seconds(lpid) if lpid else 0.0
     rss, loops = [rss_mb(pid)], []
     end = t0 + seconds
+    next_report = t0 + progress_every if progress_every > 0 else float("inf")
     while time.monotonic() < end:
         time.sleep(min(sample_every, max(0.0, end - time.monotonic())))
         rss.append(rss_mb(pid))
         loops.append(console.stats()["loop"])
+        now = time.monotonic()
+        if now >= next_report:  # running figures, so a long soak shows its first 10 min too
+            next_report += progress_every
+            w = [x for x in loops if x]
+            loop_txt = (f"loop p99 worst {max(x['p99_ms'] for x in w):.3f} ms, max "
+                        f"{max(x['max_ms'] for x in w):.3f} ms, overruns {w[-1]['overruns']}, "
+                        f"work p99 worst {max(x['work_p99_ms'] for x in w):.3f} ms"
+                        if w else "loop n/a")
+            print(f"  [{now - t0:6.0f} s] console CPU "
+                  f"{100.0 * (cpu_seconds(pid) - c0) / (now - t0):.1f} %, RSS {rss[-1]:.1f} MB "
+                  f"({100.0 * (rss[-1] - rss[0]) / rss[0]:+.1f} %), {loop_txt}", flush=True)
     s1, c1, t1 = console.stats(), cpu_seconds(pid), time.monotonic()
     out = {"cpu_pct": 100.0 * (c1 - c0) / (t1 - t0), "rss_mb": rss[-1], "rss_trace": rss,
            "rss_growth_pct": 100.0 * (rss[-1] - rss[0]) / rss[0], "rss_peak_mb": max(rss),
@@ -282,7 +298,7 @@ def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str
             for th in threads:
                 th.start()
             try:
-                result = measure(console, seconds, a.warmup, a.sample_every)
+                result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every)
             finally:
                 stop.set()
                 for th in threads:
@@ -299,9 +315,11 @@ def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str
                 page = ctx.new_page()
                 page.goto(console.url)
                 pages.append(page)
-            for page in pages:
-                page.get_by_text("Session", exact=True).wait_for(timeout=120_000)
-            result = measure(console, seconds, a.warmup, a.sample_every)
+            deadline = time.monotonic() + a.connect_timeout
+            for page in pages:  # software WebGL at nice 19 on a loaded machine can take minutes
+                left_ms = max(1_000.0, 1000.0 * (deadline - time.monotonic()))
+                page.get_by_text("Session", exact=True).wait_for(timeout=left_ms)
+            result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every)
             browser.close()
         return result
     finally:
@@ -331,6 +349,10 @@ def main() -> int:
                         "console's own serving cost, without rendering on this machine)")
     p.add_argument("--browser-nice", type=int, default=19,
                    help="niceness of the Chromium processes (0: same priority as the console)")
+    p.add_argument("--connect-timeout", type=float, default=600.0,
+                   help="seconds for all browser pages to show the console")
+    p.add_argument("--progress-every", type=float, default=60.0,
+                   help="print running figures of the load phase this often (s; 0: never)")
     p.add_argument("--width", type=int, default=800)
     p.add_argument("--height", type=int, default=500)
     p.add_argument("--data-dir", default=str(REPO / "artifacts" / "bench_load_runs"))

@@ -16,20 +16,17 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
-import multiprocessing
-import os
 import queue
 import threading
 import time
-from pathlib import Path
 from typing import Any, Callable, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from core.control.grasp_place import PlanRequest
 from core.control.sim import MocapReading
 from core.control.stack import Telemetry
+from hw_bridge.realtime import set_fifo
 
 Array = npt.NDArray[np.float64]
 _STATS_WINDOW = 65536  # ticks kept for percentiles (~11 min at 100 Hz)
@@ -352,11 +349,7 @@ class LoopRunner:
     def _run(self, sched_priority: int | None = None) -> None:
         self.scheduling = "default (SCHED_OTHER)"
         if sched_priority:
-            try:
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(sched_priority))
-                self.scheduling = f"SCHED_FIFO {sched_priority}"
-            except (OSError, AttributeError) as exc:
-                self.scheduling = f"default (SCHED_FIFO refused: {exc})"
+            self.scheduling = set_fifo(sched_priority)
         self._t0 = None
         self._k = 0
         while not self._stop.is_set():
@@ -397,52 +390,5 @@ class LoopRunner:
                          pct(b[5], 50), pct(b[5], 99), pct(b[2], 99), pct(b[3], 99), pct(b[4], 99))
 
 
-# -- planning in another process ---------------------------------------------------------------
-_WORKER_ROBOT: Any = None  # per worker process: the robot loaded once by the initializer
-
-
-_WORKER_PLAN: Any = None
-
-
-def resolve(spec: str) -> Callable[..., Any]:
-    """``"package.module:function"`` -> the function."""
-    import importlib
-    module, _, name = spec.partition(":")
-    if not module or not name:
-        raise ValueError(f"expected 'module:function', got {spec!r}")
-    return getattr(importlib.import_module(module), name)
-
-
-def _worker_init(robot_source: str, plan_spec: str) -> None:
-    global _WORKER_ROBOT, _WORKER_PLAN
-    from core import robots
-    _WORKER_ROBOT = robots.load(robot_source)
-    _WORKER_PLAN = resolve(plan_spec)
-
-
-def _worker_plan(req: PlanRequest) -> Any:
-    return _WORKER_PLAN(_WORKER_ROBOT, req.kappa, req.center, req.radius)
-
-
-class ProcessPlanner:
-    """Planner for the state machine that runs ``plan_grasp`` in a worker process.
-
-    ``plan_spec`` names the planning function (``module:function`` taking
-    ``(robot, kappa, center, radius)``). Calling it returns a :class:`concurrent.futures.Future`; the state machine polls ``done()``
-    each tick, so planning never blocks the loop (nor holds its GIL). Uses ``spawn`` so no
-    loop thread or GUI state is forked.
-    """
-
-    def __init__(self, robot_source: str | Path, workers: int = 1,
-                 plan_spec: str = "core.planning.grasp:plan_grasp"):
-        ctx = multiprocessing.get_context("spawn")
-        self.pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                                           initargs=(str(robot_source), plan_spec))
-        self.warm = self.pool.submit(int)  # start the worker now (without waiting for it)
-
-    def __call__(self, req: PlanRequest) -> cf.Future:
-        return self.pool.submit(_worker_plan, req)
-
-    def close(self) -> None:
-        """Cancel pending plans and end the worker (waits for a plan in progress, ~ms)."""
-        self.pool.shutdown(wait=True, cancel_futures=True)
+# Planning in another process lives in hw_bridge.planner_process; re-exported here.
+from hw_bridge.planner_process import ProcessPlanner, resolve  # noqa: E402,F401

@@ -45,6 +45,9 @@ class SessionPanel(Panel):
     def build(self) -> None:
         gui = self.gui
         self._lock = threading.Lock()
+        # viser runs connect callbacks concurrently, and a folder handle can be entered by one
+        # thread at a time: per-client widgets are built one client after the other.
+        self._build_lock = threading.Lock()
         self.clients: dict[int, _ClientWidgets] = {}
         self.player = ReplayPlayer()
         self.stop_btn = gui.add_button("STOP", color="red", icon=viser.Icon.HAND_STOP,
@@ -77,7 +80,7 @@ class SessionPanel(Panel):
     def _on_connect(self, client: viser.ClientHandle) -> None:
         gui = client.gui
         access = self.app.access
-        with self.folder:
+        with self._build_lock, self.folder:
             role = gui.add_html("", order=2.0)
             name = gui.add_text("Your name", access.name_of(client), order=3.0,
                                 hint="Shown to everyone when you hold control.")

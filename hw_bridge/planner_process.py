@@ -1,0 +1,64 @@
+"""Grasp planning in a worker process, so a plan never holds the 100 Hz loop's GIL.
+
+The state machine asks for a plan with a :class:`core.control.grasp_place.PlanRequest`;
+:class:`ProcessPlanner` runs the planning function in a ``spawn``-ed worker and returns a
+:class:`concurrent.futures.Future` that the loop polls each tick.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+from pathlib import Path
+from typing import Any, Callable
+
+from core.control.grasp_place import PlanRequest
+
+_WORKER_ROBOT: Any = None  # per worker process: the robot loaded once by the initializer
+
+
+_WORKER_PLAN: Any = None
+
+
+def resolve(spec: str) -> Callable[..., Any]:
+    """``"package.module:function"`` -> the function."""
+    import importlib
+    module, _, name = spec.partition(":")
+    if not module or not name:
+        raise ValueError(f"expected 'module:function', got {spec!r}")
+    return getattr(importlib.import_module(module), name)
+
+
+def _worker_init(robot_source: str, plan_spec: str) -> None:
+    global _WORKER_ROBOT, _WORKER_PLAN
+    from core import robots
+    _WORKER_ROBOT = robots.load(robot_source)
+    _WORKER_PLAN = resolve(plan_spec)
+
+
+def _worker_plan(req: PlanRequest) -> Any:
+    return _WORKER_PLAN(_WORKER_ROBOT, req.kappa, req.center, req.radius)
+
+
+class ProcessPlanner:
+    """Planner for the state machine that runs ``plan_grasp`` in a worker process.
+
+    ``plan_spec`` names the planning function (``module:function`` taking
+    ``(robot, kappa, center, radius)``). Calling it returns a :class:`concurrent.futures.Future`; the state machine polls ``done()``
+    each tick, so planning never blocks the loop (nor holds its GIL). Uses ``spawn`` so no
+    loop thread or GUI state is forked.
+    """
+
+    def __init__(self, robot_source: str | Path, workers: int = 1,
+                 plan_spec: str = "core.planning.grasp:plan_grasp"):
+        ctx = multiprocessing.get_context("spawn")
+        self.pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
+                                           initargs=(str(robot_source), plan_spec))
+        self.warm = self.pool.submit(int)  # start the worker now (without waiting for it)
+
+    def __call__(self, req: PlanRequest) -> cf.Future:
+        return self.pool.submit(_worker_plan, req)
+
+    def close(self) -> None:
+        """Cancel pending plans and end the worker (waits for a plan in progress, ~ms)."""
+        self.pool.shutdown(wait=True, cancel_futures=True)
