@@ -20,7 +20,9 @@ Reported side by side: console process CPU (% of one core, from /proc/<pid>/stat
 RSS trace), frames drawn per second, the control process's CPU and memory, and its loop p99
 period error (worst 10 s window it published), max and overruns over the phase. The browsers
 share this machine's cores with the console; on the lab network they would not, so by default
-they run at ``nice 19`` (``--browser-nice 0`` to compete at equal priority).
+they run in Linux's idle scheduling class (``--browser-sched idle``, the default: they get only
+the CPU nothing else wants; ``nice 19`` is not enough because Chromium re-nices its renderers
+itself, to 0 and -8), or ``--browser-sched normal`` to compete at equal priority.
 """
 
 from __future__ import annotations
@@ -252,13 +254,15 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
 
 
 def chromium_path(a: argparse.Namespace) -> str:
-    """Chromium, or a wrapper running it at ``nice 19`` so that on this shared machine the
-    browsers take the cores the console does not need (on the lab network they are elsewhere)."""
-    if a.browser_nice == 0:
+    """Chromium, or a wrapper starting it in the idle scheduling class (``chrt --idle 0``) so
+    that on this shared machine the browsers take only the CPU the console does not need (on
+    the lab network they run elsewhere). Children inherit the class; Chromium's own re-nicing
+    of its renderers does not leave it."""
+    if a.browser_sched == "normal":
         return "/usr/bin/chromium"
-    wrapper = Path(a.data_dir) / "chromium-nice.sh"
+    wrapper = Path(a.data_dir) / "chromium-idle.sh"
     wrapper.parent.mkdir(parents=True, exist_ok=True)
-    wrapper.write_text(f'#!/bin/sh\nexec nice -n {a.browser_nice} /usr/bin/chromium "$@"\n')
+    wrapper.write_text('#!/bin/sh\nexec chrt --idle 0 /usr/bin/chromium "$@"\n')
     wrapper.chmod(0o755)
     return str(wrapper)
 
@@ -316,7 +320,7 @@ def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str
                 page.goto(console.url)
                 pages.append(page)
             deadline = time.monotonic() + a.connect_timeout
-            for page in pages:  # software WebGL at nice 19 on a loaded machine can take minutes
+            for page in pages:  # software WebGL in the idle class on a loaded machine can take minutes
                 left_ms = max(1_000.0, 1000.0 * (deadline - time.monotonic()))
                 page.get_by_text("Session", exact=True).wait_for(timeout=left_ms)
             result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every)
@@ -347,8 +351,8 @@ def main() -> int:
     p.add_argument("--client-kind", choices=("browser", "ws"), default="browser",
                    help="browser: headless Chromium pages; ws: websocket-only viewers (the "
                         "console's own serving cost, without rendering on this machine)")
-    p.add_argument("--browser-nice", type=int, default=19,
-                   help="niceness of the Chromium processes (0: same priority as the console)")
+    p.add_argument("--browser-sched", choices=("idle", "normal"), default="idle",
+                   help="scheduling class of the Chromium processes (normal: same as the console)")
     p.add_argument("--connect-timeout", type=float, default=600.0,
                    help="seconds for all browser pages to show the console")
     p.add_argument("--progress-every", type=float, default=60.0,
@@ -367,7 +371,7 @@ def main() -> int:
     print(f"console under load: {a.robot}, motion={a.motion}, {a.clients} {a.client_kind} "
           f"clients for "
           f"{a.seconds:g} s (baseline 0 clients for {base_s:g} s), {os.cpu_count()} cores, "
-          f"browsers at nice {a.browser_nice}",
+          f"browsers in the {a.browser_sched} scheduling class",
           flush=True)
     base = run_phase(a, 0, base_s)
     load = run_phase(a, a.clients, a.seconds)

@@ -11,6 +11,11 @@ Two hosts run against the same emulator in one run, one after the other:
 Round trip = DEMAND written -> STATE echoing its seq decoded. Usage:
 ``python benchmarks/bench_serial_link.py [--seconds 20] [--motors 16] [--baud 1000000]``
 (``--baud 0`` disables the emulator's wire-time model, like the Due's native USB port).
+
+Scheduling (``--rt P``, default 50): each host runs under ``SCHED_FIFO`` P, as the console's
+control loop does, and the emulator under P + 10, standing in for a microcontroller that nothing
+on the machine can delay; ``--rt 0`` runs everything at normal priority (then other load on
+this 2-core machine shows in the tail). What each side got is printed.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ sys.path.insert(0, str(ROOT))
 
 from hw_bridge import protocol as p  # noqa: E402
 from hw_bridge.link import Link  # noqa: E402
+from hw_bridge.realtime import set_fifo  # noqa: E402
 from hw_bridge.transport import open_serial  # noqa: E402
 
 
@@ -117,10 +123,16 @@ def main() -> int:
     ap.add_argument("--motors", type=int, default=16)
     ap.add_argument("--baud", type=int, default=1_000_000)
     ap.add_argument("--robot", default="extensible")
+    ap.add_argument("--rt", type=int, default=50, metavar="P",
+                    help="SCHED_FIFO priority of the hosts (emulator: P + 10); 0: normal")
     args = ap.parse_args()
+    if not 0 <= args.rt <= 89:
+        ap.error("--rt must be in 0..89")
+    emu_rt = ["--sched-priority", str(args.rt + 10)] if args.rt else []
     emu = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", "--robot", args.robot,
-                            "--motors", str(args.motors), "--baud", str(args.baud)],
+                            "--motors", str(args.motors), "--baud", str(args.baud), *emu_rt],
                            cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    host_sched = set_fifo(args.rt) if args.rt else "default (SCHED_OTHER)"
     try:
         assert emu.stdout is not None
         port = emu.stdout.readline().strip()
@@ -130,7 +142,8 @@ def main() -> int:
         emu.terminate()
         emu.wait(timeout=5)
     print(f"{args.motors} motors @ 100 Hz, emulator wire model {args.baud or 'off'} baud, "
-          f"{args.seconds:g} s")
+          f"{args.seconds:g} s; hosts {host_sched}, emulator "
+          f"{'SCHED_FIFO ' + str(args.rt + 10) if args.rt else 'default'}")
     print(f"{'':10s}{'sent':>8s}{'lost':>7s}{'crc':>6s}{'rtt p50 ms':>12s}{'rtt p99 ms':>12s}")
     for name, r in (("ours", a), ("baseline", b)):
         print(f"{name:10s}{r['sent']:8d}{r['lost']:7d}{r['crc_errors']:6d}"

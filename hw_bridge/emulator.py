@@ -270,6 +270,12 @@ class Emulator:
 
     def run(self) -> None:
         self.writer.start()
+        priority = getattr(self.args, "sched_priority", 0)
+        if priority:  # a dedicated MCU is never preempted: neither is its stand-in
+            from hw_bridge.realtime import promote_threads, thread_policy
+            promote_threads(priority)
+            _emit("scheduling", policy="SCHED_FIFO" if thread_policy() == os.SCHED_FIFO
+                  else "default", priority=priority)
         period = self.bridge.period_s
         next_tick = time.monotonic() + period
         while not self.stop:
@@ -324,7 +330,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                     help="soft arm: place a disc of radius R (m) at (X, Y) on the table")
     ap.add_argument("--control-port", type=int, default=None, metavar="P",
                     help="soft arm: UDP scene channel on 127.0.0.1:P (0: any free port)")
+    ap.add_argument("--sched-priority", type=int, default=0, metavar="P",
+                    help="run the device under SCHED_FIFO at priority P (1-99; 0: normal), like "
+                         "a dedicated microcontroller that nothing else on the machine delays")
     args = ap.parse_args(argv)
+    if not 0 <= args.sched_priority <= 99:
+        ap.error("--sched-priority must be in 0..99")
     if args.object is not None and (not all(map(math.isfinite, args.object))
                                     or not args.object[2] > 0):
         ap.error("--object needs finite X Y and a radius R > 0")

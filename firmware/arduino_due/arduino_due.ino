@@ -2,8 +2,9 @@
 // quadrature encoders on interrupts, a position loop to the streamed demand, a 50 ms watchdog
 // and a hardware e-stop input. The wire protocol core is plain C (protocol.c/.h, tested on the
 // host by tests/test_hw_firmware.py); behaviour mirrors hw_bridge/device.py.
-// NOT compiled or run on hardware in this repository's CI (no arduino-cli here). Pin numbers
-// below are placeholders: set them to the wiring of your board.
+// CI compiles it for the Due's Cortex-M3 with arm-none-eabi-g++ -Werror against declarations
+// of the Arduino API (target/check_cross_compile.sh); it is not linked with the Arduino core
+// nor run on hardware here. Pin numbers below are placeholders: set them to your wiring.
 #include "protocol.h"
 
 #define N_MOTORS 6
