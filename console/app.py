@@ -52,7 +52,10 @@ from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel
 from console.recording import Recorder
 from console.state import ArmState, StateStore
+from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
+
+_install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
 
 log = logging.getLogger(__name__)
 

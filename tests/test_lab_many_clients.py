@@ -8,6 +8,8 @@ real websocket clients of a real server (the same handshake a browser does), wit
 
 from __future__ import annotations
 
+import asyncio
+import collections
 import threading
 import time
 
@@ -20,6 +22,7 @@ from websockets.sync.client import connect
 from console.access import AccessControl
 from console.app import ConsoleApp
 from console.panels.session import SessionPanel
+from console.viser_fixes import LoopSafeEvent, install
 from core.robots import load
 
 SOFT = load("soft-arm")
@@ -65,5 +68,74 @@ def test_clients_connecting_together_all_get_session_widgets(n_clients: int) -> 
         while session.clients and time.monotonic() < deadline:
             time.sleep(0.05)
         assert session.clients == {}  # disconnects clean up every client's widgets
+    finally:
+        server.stop()
+
+
+class _WatchedWaiters(collections.deque):
+    """A waiter deque that records which threads iterate it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.iterated_by: set[int] = set()
+
+    def __iter__(self):  # type: ignore[no-untyped-def]
+        self.iterated_by.add(threading.get_ident())
+        return super().__iter__()
+
+
+def _loop_in_thread() -> tuple[asyncio.AbstractEventLoop, threading.Thread]:
+    loop = asyncio.new_event_loop()
+    th = threading.Thread(target=loop.run_forever, daemon=True)
+    th.start()
+    return loop, th
+
+
+@pytest.mark.parametrize("event_kind", ["asyncio.Event", "LoopSafeEvent"])
+def test_setting_the_message_event_from_another_thread(event_kind: str) -> None:
+    """viser sets its buffers' events from our threads: only LoopSafeEvent leaves the waiter
+    list to the loop's thread (a plain asyncio.Event iterates it from ours: the race)."""
+    loop, th = _loop_in_thread()
+    try:
+        async def make() -> asyncio.Event:
+            return asyncio.Event() if event_kind == "asyncio.Event" else LoopSafeEvent(loop)
+
+        event = asyncio.run_coroutine_threadsafe(make(), loop).result(5)
+        event._waiters = _WatchedWaiters()  # type: ignore[attr-defined]
+        woke = asyncio.run_coroutine_threadsafe(event.wait(), loop)
+        time.sleep(0.05)  # the waiter is parked
+        event.set()  # from this (non-loop) thread, then through the loop: as viser's push()
+        loop.call_soon_threadsafe(event.set)
+        assert woke.result(5) is True
+        foreign = event._waiters.iterated_by - {th.ident}  # type: ignore[attr-defined]
+        if event_kind == "asyncio.Event":
+            assert foreign == {threading.get_ident()}  # the bug this module works around
+        else:
+            assert foreign == set()
+    finally:
+        loop.call_soon_threadsafe(loop.stop)
+        th.join(5)
+
+
+def test_console_servers_use_loop_safe_message_events() -> None:
+    """Installed by importing console.app: the broadcast buffer and every client's buffer."""
+    assert install() is False  # already installed at import
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        ws_server = server._websock_server
+        assert isinstance(ws_server._broadcast_buffer.message_event, LoopSafeEvent)
+        stop = threading.Event()
+        th = threading.Thread(target=_viewer, daemon=True,
+                              args=(f"ws://127.0.0.1:{server.get_port()}", threading.Barrier(1),
+                                    stop))
+        th.start()
+        deadline = time.monotonic() + 10.0
+        while not ws_server._client_state_from_id and time.monotonic() < deadline:
+            time.sleep(0.02)
+        states = list(ws_server._client_state_from_id.values())
+        assert states and all(isinstance(s.message_buffer.message_event, LoopSafeEvent)
+                              for s in states)
+        stop.set()
+        th.join(5)
     finally:
         server.stop()
