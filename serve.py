@@ -13,7 +13,8 @@ Files: recordings and exports are written only under ``--data-dir`` (default ``.
 
 Hardware: ``--hardware emulator`` (default) starts the device emulator on a pseudo-terminal, so
 the demo runs through the real serial stack; ``--hardware mock`` keeps the device in-process;
-``--port-path PATH`` talks to a real controller (see ``console.hardware_setup``).
+``--port-path PATH`` talks to a real controller (see ``console.hardware_setup``). The Hardware
+panel (both robots) picks the port, connects, arms the device and shows the link's health.
 """
 
 from __future__ import annotations
@@ -110,6 +111,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     from console.panels.capture import CapturePanel
     from console.panels.control import ControlPanel
     from console.panels.extensible_panels import EXTENSIBLE_PANELS
+    from console.panels.hardware import HardwarePanel
     from console.panels.planner import grasp_panels
     from console.panels.session import SessionPanel
     from console.panels.trials import TrialsPanel
@@ -128,7 +130,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
         app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
         app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
     for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
-                      *EXTENSIBLE_PANELS, SessionPanel):
+                      *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel):
         app.add_panel(panel_cls)
     return server, app, token
 

@@ -74,6 +74,9 @@ class AccessControl:
     Args:
         token: Secret a client must present to take control; None needs none (closed lab).
         lease_s: A holder silent for longer than this loses control (see :class:`LeaseMonitor`).
+        first_answer_s: ... except before their tab has answered at all: a page still loading
+            (a software-rendered browser was measured taking over 2 s to build the console)
+            gets this long for its first answer, then ``lease_s`` applies.
         first_client_takes_control: Desk mode: a client that connects while nobody holds
             control gets it without a token (only for a console bound to the loopback address).
         max_failures: Wrong tokens accepted per ``failure_window`` s (all clients together)
@@ -82,6 +85,7 @@ class AccessControl:
     """
 
     def __init__(self, token: str | None = None, *, lease_s: float = 2.0,
+                 first_answer_s: float = 10.0,
                  first_client_takes_control: bool = False, max_failures: int = 5,
                  failure_window: float = 10.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
@@ -89,8 +93,11 @@ class AccessControl:
             raise ValueError("token must be a non-empty string or None")
         if lease_s <= 0:
             raise ValueError(f"lease_s must be > 0, got {lease_s}")
+        if first_answer_s < lease_s:
+            raise ValueError(f"first_answer_s must be >= lease_s, got {first_answer_s}")
         self.token = token
         self.lease_s = lease_s
+        self.first_answer_s = first_answer_s
         self.first_client_takes_control = first_client_takes_control
         self.max_failures = max_failures
         self.failure_window = failure_window
@@ -98,6 +105,8 @@ class AccessControl:
         self._lock = threading.RLock()
         self._holder: Operator | None = None
         self._last_seen = 0.0
+        self._answered = False  # has the holder's tab answered a probe yet?
+        self._lapsed: int | None = None  # desk mode: whose lease lapsed by silence
         self._names: dict[int, str] = {}
         self._failures: list[float] = []
         self._listeners: list[Listener] = []
@@ -205,6 +214,8 @@ class AccessControl:
                 return previous
             self._holder = Operator(cid, self._names.get(cid, f"client {cid}"), time.time())
             self._last_seen = now
+            self._answered = False
+            self._lapsed = None
             new = self._holder
         reason = (f"{new.name} took control" if previous is None
                   else f"{new.name} took control from {previous.name}")
@@ -219,6 +230,8 @@ class AccessControl:
                 return None
             self._holder = Operator(cid, self._names.get(cid, f"client {cid}"), time.time())
             self._last_seen = self._clock()
+            self._answered = False
+            self._lapsed = None
             new = self._holder
         self._notify(new, None, f"{new.name} took control (first browser on a desk console)")
         return new
@@ -250,6 +263,8 @@ class AccessControl:
         cid = client_id_of(client)
         with self._lock:
             self._names.pop(cid, None)  # type: ignore[arg-type]
+            if self._lapsed == cid:
+                self._lapsed = None
 
     # -- lease -------------------------------------------------------------------------------
 
@@ -260,7 +275,14 @@ class AccessControl:
             if self._holder is None or self._holder.client_id != cid:
                 return False
             self._last_seen = self._clock()
+            self._answered = True
             return True
+
+    def lease_limit(self) -> float:
+        """How long the holder may stay silent: ``lease_s``, or ``first_answer_s`` until the
+        holder's tab has answered once."""
+        with self._lock:
+            return self.lease_s if self._answered else self.first_answer_s
 
     def silent_for(self) -> float:
         """Seconds since the holder last answered (0 when nobody holds control)."""
@@ -271,10 +293,36 @@ class AccessControl:
         """Revoke the lease if the holder has been silent for ``lease_s``; returns who lost it."""
         with self._lock:
             holder = self._holder
-            if holder is None or self._clock() - self._last_seen < self.lease_s:
+            limit = self.lease_limit()
+            if holder is None or self._clock() - self._last_seen < limit:
                 return None
-        return self.revoke(f"{holder.name}'s tab went silent for {self.lease_s:g} s",
-                           holder.client_id)
+            what = "went silent for" if self._answered else "did not answer within"
+            self._lapsed = holder.client_id
+        return self.revoke(f"{holder.name}'s tab {what} {limit:g} s", holder.client_id)
+
+    @property
+    def lapsed(self) -> int | None:
+        """Desk mode: the client whose lease lapsed by silence (not by release or close) and
+        that may get control back once its tab answers again; None otherwise."""
+        with self._lock:
+            if not self.first_client_takes_control or self._holder is not None:
+                return None
+            return self._lapsed
+
+    def regrant(self, client: Any) -> Operator | None:
+        """Desk mode: give control back to the :attr:`lapsed` client whose tab answered again
+        (the arm stopped when the lease lapsed; getting control back moves nothing)."""
+        cid = client_id_of(client)
+        with self._lock:
+            if cid is None or cid != self.lapsed:
+                return None
+            self._holder = Operator(cid, self._names.get(cid, f"client {cid}"), time.time())
+            self._last_seen = self._clock()
+            self._answered = True
+            self._lapsed = None
+            new = self._holder
+        self._notify(new, None, f"{new.name} has control again (their tab answers again)")
+        return new
 
 
 class LeaseMonitor:
@@ -282,7 +330,10 @@ class LeaseMonitor:
 
     A thread probes the holder's tab every ``probe_period`` s with a localStorage read (a
     JavaScript round trip) bounded so that the lease expires at most ``lease_s`` after the last
-    answer; a closed tab is also caught at once by ``server.on_client_disconnect``.
+    answer; a closed tab is also caught at once by ``server.on_client_disconnect``. On a desk
+    console (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-
+    rendered page busy for seconds -- is probed too and gets control back when it answers (the
+    arm stopped when the lease lapsed and stays stopped).
     """
 
     def __init__(self, server: viser.ViserServer, access: AccessControl,
@@ -318,12 +369,13 @@ class LeaseMonitor:
         while not self._stop.wait(self.probe_period):
             holder = self.access.holder
             if holder is None:
+                self._probe_lapsed()
                 continue
             client = self.server.get_clients().get(holder.client_id)
             if client is None:
                 self.access.revoke(f"{holder.name}'s tab is gone", holder.client_id)
                 continue
-            budget = self.access.lease_s - self.access.silent_for()
+            budget = self.access.lease_limit() - self.access.silent_for()
             if budget <= 0:
                 self.access.expire_if_silent()
                 continue
@@ -339,3 +391,19 @@ class LeaseMonitor:
                     continue
             self.probes += 1
             self.access.heartbeat(holder.client_id)
+
+    def _probe_lapsed(self) -> None:
+        """Desk mode: a tab whose lease lapsed while it was busy gets control back when it
+        answers a probe again (see :meth:`AccessControl.regrant`)."""
+        cid = self.access.lapsed
+        client = None if cid is None else self.server.get_clients().get(cid)
+        if client is None:
+            return
+        try:
+            client.local_storage.get_item("console-lease", timeout=self.access.lease_s)
+        except TimeoutError:
+            return
+        except RuntimeError as exc:
+            if "Failed to read localStorage" not in str(exc):
+                return
+        self.access.regrant(cid)

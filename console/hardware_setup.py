@@ -6,6 +6,11 @@ device in-process (no serial); ``--port-path PATH`` talks to a real controller. 
 100 Hz loop runs in :class:`console.panels.control_process.ControlProcess` (its own process,
 which starts the emulator itself); the extensible arm's loop is
 :class:`hw_bridge.extensible_runner.ExtensibleRunner` on a :class:`hw_bridge.interface.SerialHardware`.
+
+:func:`attach` also sets ``app.bridge_controls``: the loop's
+:class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm / health, all
+enqueue-only) for the Hardware panel (``console.panels.hardware``), or None when the loop has
+none to offer (the extensible arm's lazily built in-process mock; a loop without the property).
 """
 
 from __future__ import annotations
@@ -14,13 +19,27 @@ import dataclasses
 from typing import Any, Literal
 
 HardwareMode = Literal["emulator", "mock"]
+LinkKind = Literal["emulator", "mock", "port"]
 
 
 @dataclasses.dataclass
 class HardwareAttachment:
-    """What :func:`attach` started, so :meth:`close` can stop it in order."""
+    """What :func:`attach` started, so :meth:`close` can stop it in order.
+
+    Attributes:
+        description: One line for the status bar and the terminal.
+        kind: ``"emulator"`` (device emulator on a pty), ``"mock"`` (in-process device, no
+            serial) or ``"port"`` (a real controller).
+        port_path: The serial device the console uses, when known here: ``--port-path``, or the
+            extensible arm's emulator pty. None for the soft arm's emulator (its control process
+            starts it; the Hardware panel takes the path from the link health) and for the mock.
+        baud: The link's baud rate (``[bridge] baud`` of the robot file).
+    """
 
     description: str
+    kind: LinkKind = "mock"
+    port_path: str | None = None
+    baud: int = 1_000_000
     closers: list[Any] = dataclasses.field(default_factory=list)
 
     def close(self) -> None:
@@ -47,24 +66,37 @@ def mirrors_commands(robot: Any, mode: HardwareMode, port_path: str | None) -> b
     return not (robot.kind == "delta" and (mode == "emulator" or port_path))
 
 
+def link_kind(mode: HardwareMode, port_path: str | None) -> LinkKind:
+    """What the link is: a real port (``--port-path`` wins), the emulator, or the mock."""
+    return "port" if port_path else mode
+
+
 def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttachment:
     """Connect ``app`` to its hardware before the panels are built (they find it on ``app``).
 
-    Sets ``app.soft_control`` (soft arm) or ``app.extensible_runner`` (extensible arm).
+    Sets ``app.soft_control`` (soft arm) or ``app.extensible_runner`` (extensible arm), and
+    ``app.bridge_controls`` (the loop's ``bridge_controls``, or None when it has none).
     """
+    from hw_bridge.config import BridgeConfig
+
     robot = app.robot
-    out = HardwareAttachment(describe(robot, mode, port_path))
+    out = HardwareAttachment(describe(robot, mode, port_path), kind=link_kind(mode, port_path),
+                             port_path=port_path or None,
+                             baud=BridgeConfig.from_robot(robot).baud)
+    app.bridge_controls = None
     if robot.kind == "planar":
         from console.panels.control_process import ControlProcess
 
         device = "emulator" if port_path or mode == "emulator" else "mock"
         ctl = ControlProcess(robot, device=device, port_path=port_path)
         app.soft_control = ctl
+        app.bridge_controls = getattr(ctl, "bridge_controls", None)
         out.closers.append(ctl.close)
         return out
     if mode == "mock" and not port_path:
-        return out  # ExtensibleRunner.from_app falls back to an in-process MockHardware
-    from hw_bridge.config import BridgeConfig
+        # ExtensibleRunner.from_app builds an in-process MockHardware runner on first use: no
+        # serial link to manage, the Hardware panel says so.
+        return out
     from hw_bridge.extensible_runner import ExtensibleRunner, StoreLink
     from hw_bridge.interface import SerialHardware
 
@@ -75,9 +107,11 @@ def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttac
         emulator = EmulatorProcess(["--robot", str(robot.source)])
         out.closers.append(emulator.stop)
         path = emulator.path
+        out.port_path = path
     hardware = SerialHardware(BridgeConfig.from_robot(robot), path)
     runner = ExtensibleRunner(robot, lambda: hardware, link=StoreLink(app.store), follow=False)
     app.extensible_runner = runner
+    app.bridge_controls = getattr(runner, "bridge_controls", None)
     out.closers.insert(0, runner.close)
     runner.start()
     return out

@@ -45,9 +45,16 @@ def _die_with_parent() -> None:  # runs in the emulator child between fork and e
 
 
 class EmulatorProcess:
-    """``python -m hw_bridge.emulator`` as a subprocess with its stdout events pumped."""
+    """``python -m hw_bridge.emulator`` as a subprocess with its stdout events pumped.
 
-    def __init__(self, args: list[str], start_timeout: float = 10.0):
+    The emulator stands in for a microcontroller, which nothing on the host can delay: it runs
+    under ``SCHED_FIFO`` at ``sched_priority`` (below the control loop's 50; ignored without the
+    permission), so a loaded machine does not make the link look lost (> 40 ms silent).
+    """
+
+    def __init__(self, args: list[str], start_timeout: float = 10.0, sched_priority: int = 45):
+        if sched_priority and "--sched-priority" not in args:
+            args = [*args, "--sched-priority", str(sched_priority)]
         self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", *args],
                                      cwd=_ROOT, stdout=subprocess.PIPE, text=True,
                                      preexec_fn=_die_with_parent)

@@ -83,7 +83,8 @@ def stop_button(page: Any) -> Any:
 
 
 def notifications(page: Any) -> list[str]:
-    return [n.inner_text() for n in page.locator(".mantine-Notification-root").all()]
+    # One snapshot: reading them one by one waits 30 s for one that closed in between.
+    return page.locator(".mantine-Notification-root").all_inner_texts()
 
 
 def press(page: Any, name: str) -> Any:
@@ -358,3 +359,90 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
         assert requested == []
     finally:
         page.context.close()
+
+
+@pytest.fixture
+def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
+    """A lab console with the grasp panels (Objects, Grasp planner, Waypoints), the Hardware
+    panel on queued bridge controls (nothing drains them here) and Session; no reachability
+    map (CPU), no control process."""
+    import secrets
+
+    import viser
+
+    from console.access import AccessControl
+    from console.app import ConsoleApp
+    from console.hardware_setup import HardwareAttachment
+    from console.panels import planner
+    from console.panels.hardware import HardwarePanel
+    from console.panels.session import SessionPanel
+    from hw_bridge.controls import QueuedBridgeControls
+
+    planner.GraspSession.compute_reach = False
+    token = secrets.token_urlsafe(9)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(token),
+                     data_dir=tmp_path / "runs", status="lab test")
+    app.bridge_controls = QueuedBridgeControls()  # type: ignore[attr-defined]
+    app.hardware = HardwareAttachment("test", kind="emulator",  # type: ignore[attr-defined]
+                                      port_path="/dev/pts/99")
+    for panel_cls in (*planner.grasp_panels(), HardwarePanel, SessionPanel):
+        app.add_panel(panel_cls)
+    app.start()
+    lab = Lab(server, app, token, browser)
+    try:
+        yield lab
+    finally:
+        for context in lab.contexts:
+            context.close()
+        app.stop()
+        app.panel(HardwarePanel).close()
+        app.grasp_session.close()  # type: ignore[attr-defined]
+        app.grasp_session._thread.join(5)  # type: ignore[attr-defined]
+        server.stop()
+        planner.GraspSession.compute_reach = True
+
+
+def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
+        grasp_lab, artifacts_dir: Path) -> None:
+    app = grasp_lab.app
+    session = app.grasp_session  # type: ignore[attr-defined]
+    alice, bob = grasp_lab.page(), grasp_lab.page()
+    grasp_lab.take_control(alice, "Alice")
+    planned = wait_for(lambda: session.view().outcome, timeout=10.0)
+    objects = session.view().objects
+    x_box = bob.get_by_label("x (m)", exact=True)
+    shown = x_box.input_value()
+
+    def refused(action: str) -> bool:  # (who holds control is checked in other tests)
+        return any(f"Only the operator can {action} — " in n for n in notifications(bob))
+
+    bob.get_by_role("button", name="Add object").click()
+    wait_for(lambda: refused("add an object"), timeout=15.0)
+    x_box.fill("0.05")
+    x_box.press("Enter")
+    wait_for(lambda: refused("edit an object"), timeout=15.0)
+    wait_for(lambda: x_box.input_value() == shown, timeout=15.0)  # snapped back for Bob
+    bob.get_by_role("button", name="Plan grasp").click()
+    wait_for(lambda: refused("plan a grasp"), timeout=15.0)
+    box = bob.locator("canvas").first.bounding_box()
+    assert box is not None
+    bob.mouse.click(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.6)  # the table
+    wait_for(lambda: refused("place or select an object"), timeout=15.0)
+    connect = bob.get_by_role("button", name="Connect", exact=True)
+    connect.scroll_into_view_if_needed()
+    connect.click()
+    wait_for(lambda: refused("connect the hardware"), timeout=15.0)
+    bob.screenshot(path=str(artifacts_dir / "browser_lab_viewer_refused.png"))
+    time.sleep(0.3)
+    assert session.view().objects == objects and session.view().outcome.seq == planned.seq
+    assert app.bridge_controls.commands.empty()  # type: ignore[attr-defined]
+    assert alice.get_by_label("x (m)", exact=True).input_value() == shown
+    assert not any("Only the operator" in n for n in notifications(alice))
+
+    if app.access.holder is None:  # a loaded machine can starve a tab past its 2 s lease
+        grasp_lab.take_control(alice, "Alice")
+    alice.get_by_role("button", name="Add object").click()  # the operator may
+    wait_for(lambda: len(session.view().objects) == len(objects) + 1, timeout=15.0)
+    wait_for(lambda: bob.locator('[data-testid="objects-info"]').inner_text()
+             .startswith(f"{len(objects) + 1} objects"), timeout=15.0)

@@ -1,20 +1,29 @@
-"""Bridge controls (queued operator commands) with MockHardware, and the Hardware panel widgets."""
+"""Bridge controls (queued operator commands) with MockHardware; the console's Hardware panel
+(operator-only actions, viewers' edits snapped back, faults notified once to every browser, the
+mock / no-controls explanation); and hardware_setup.attach wiring ``app.bridge_controls``."""
 
 from __future__ import annotations
 
-import socket
+import dataclasses
 import time
+from typing import Any, Iterator
 
 import numpy as np
+import pytest
 import viser
 
-from console.panels.hardware import OTHER, HardwarePanel, format_health
+from console.access import AccessControl
+from console.app import ConsoleApp
+from console.hardware_setup import HardwareAttachment, attach
+from console.panels.hardware import (OTHER, FaultTracker, HardwarePanel, format_health,
+                                     no_controls_text)
 from core.robots import load
 from hw_bridge.controls import QueuedBridgeControls
-from hw_bridge.interface import LifecycleState
+from hw_bridge.interface import LifecycleState, LinkHealth
 from hw_bridge.mock import MockHardware
 
 ROBOT = load("extensible")
+SOFT = load("soft-arm")
 
 
 def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> None:
@@ -52,45 +61,331 @@ def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> Non
             m.shutdown()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def test_panel_builds_and_shows_health() -> None:
-    server = viser.ViserServer(host="127.0.0.1", port=_free_port(), verbose=False)
-    try:
-        ctl = QueuedBridgeControls()
-        panel = HardwarePanel(server, ctl, default_port="")
-        expected = "" if panel.port_list.value == OTHER else panel.port_list.value
-        assert panel.selected_port() == expected
-        panel.port_text.value = "/dev/pts/7"
-        assert panel.selected_port() == "/dev/pts/7"
-        panel.refresh()
-        assert "not connected" in panel.readout.content
-        hw = MockHardware(ROBOT)
-        try:
-            hw.configure()
-            ctl.publish(hw.health())
-            panel.refresh()
-            assert "inactive" in panel.readout.content and not panel.arm_btn.disabled
-            assert panel.disarm_btn.disabled
-            hw.on_error("test fault")
-            ctl.publish(hw.health())
-            panel.refresh()
-            assert "test fault" in panel.readout.content
-        finally:
-            hw.shutdown()
-    finally:
-        server.stop()
-
-
 def test_health_text_marks_watchdog_and_estop() -> None:
     hw = MockHardware(ROBOT)
     try:
         hw.configure()
         h = hw.health()
         assert "watchdog ok" in format_health(h) and "e-stop released" in format_health(h)
+        tripped = dataclasses.replace(h, watchdog_tripped=True, estop=True, fault="boom")
+        text = format_health(tripped)
+        assert "watchdog **TRIPPED**" in text and "e-stop **PRESSED**" in text
+        assert "**Fault:** boom" in text and "inactive" in text
     finally:
         hw.shutdown()
+
+
+# -- the console panel ------------------------------------------------------------------------
+
+HEALTH = LinkHealth(state="inactive", port="/dev/pts/9", fault=None, armed=False,
+                    watchdog_tripped=False, estop=False, rtt_ms_p50=1.5, rtt_ms_p99=3.0,
+                    rtt_ms_last=1.4, sent=10, received=10, lost=0, crc_errors=0, bad_frames=0,
+                    device_rx_errors=0, state_age_ms=4.0)
+
+
+class FakeControls:
+    """A BridgeControls that records what the panel enqueued."""
+
+    def __init__(self, health: LinkHealth | None = None) -> None:
+        self.calls: list[tuple[Any, ...]] = []
+        self.h = health
+
+    def connect(self, port: str, baud: int) -> None:
+        self.calls.append(("connect", port, baud))
+
+    def disconnect(self) -> None:
+        self.calls.append(("disconnect",))
+
+    def arm(self) -> None:
+        self.calls.append(("arm",))
+
+    def disarm(self) -> None:
+        self.calls.append(("disarm",))
+
+    def health(self) -> LinkHealth | None:
+        return self.h
+
+
+class FakeClient:
+    """What operator_only, app.refuse and app.notify_all use of a viser ClientHandle."""
+
+    def __init__(self, cid: int) -> None:
+        self.client_id = cid
+        self.notes: list[tuple[str, str]] = []
+
+    def add_notification(self, title: str, body: str, **_: object) -> None:
+        self.notes.append((title, body))
+
+
+def user(handle: Any, client: FakeClient, value: Any = None) -> None:
+    """What viser does with a browser's click / edit: store the value, then call back."""
+    if value is not None:
+        handle._impl.value = type(handle._impl.value)(value)
+    for cb in list(handle._impl.update_cb):
+        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))  # type: ignore[arg-type]
+
+
+@pytest.fixture
+def server() -> Iterator[viser.ViserServer]:
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def make_panel(server: viser.ViserServer, controls: Any, kind: str | None = "emulator",
+               port_path: str | None = "/dev/pts/9", robot: Any = ROBOT) -> HardwarePanel:
+    app = ConsoleApp(robot, server, panels=(), access=AccessControl("tok"))
+    app.bridge_controls = controls  # type: ignore[attr-defined]
+    if kind is not None:
+        app.hardware = HardwareAttachment("test", kind=kind,  # type: ignore[attr-defined]
+                                          port_path=port_path, baud=1_000_000)
+    panel = app.add_panel(HardwarePanel)
+    assert panel is not None
+    return panel
+
+
+def test_operator_actions_enqueue_exactly_those_commands_and_viewers_none(server) -> None:
+    ctl = FakeControls(HEALTH)
+    panel = make_panel(server, ctl)
+    app = panel.app
+    try:
+        viewer, operator = FakeClient(11), FakeClient(12)
+        app.access.take(operator.client_id, "tok", name="Alice")
+        assert panel.port_text.value == "/dev/pts/9" and panel.baud.value == "1000000"
+
+        for button in (panel.connect_btn, panel.arm_btn, panel.disarm_btn,
+                       panel.disconnect_btn):
+            user(button, viewer)
+        user(panel.port_text, viewer, "/dev/ttyEVIL")
+        user(panel.baud, viewer, "115200")
+        assert ctl.calls == []
+        refusals = [body for title, body in viewer.notes if title == "Not allowed"]
+        for action in ("connect the hardware", "arm the device", "disarm the device",
+                       "disconnect the hardware", "change the serial port",
+                       "change the baud rate"):
+            assert any(b.startswith(f"Only the operator can {action} — Alice holds control")
+                       for b in refusals), (action, refusals)
+        assert panel.port_text.value == "/dev/pts/9"  # snapped back for everyone
+        assert panel.baud.value == "1000000"
+
+        user(panel.connect_btn, operator)
+        user(panel.arm_btn, operator)
+        assert ctl.calls == [("connect", "/dev/pts/9", 1_000_000), ("arm",)]
+        user(panel.baud, operator, "115200")
+        user(panel.port_text, operator, " /dev/ttyACM0 ")
+        user(panel.connect_btn, operator)
+        user(panel.disarm_btn, operator)
+        user(panel.disconnect_btn, operator)
+        assert ctl.calls[2:] == [("connect", "/dev/ttyACM0", 115_200), ("disarm",),
+                                 ("disconnect",)]
+        user(panel.port_text, operator, "")  # no port: a clear message, nothing enqueued
+        user(panel.connect_btn, operator)
+        assert len(ctl.calls) == 5
+        assert any("Type the controller's port" in body for _, body in operator.notes)
+        assert not any(title == "Not allowed" for title, _ in operator.notes)
+    finally:
+        panel.close()
+
+
+def test_picking_a_listed_port_fills_the_path_and_typing_leaves_the_list(server) -> None:
+    ctl = FakeControls(HEALTH)
+    panel = make_panel(server, ctl)
+    try:
+        operator = FakeClient(3)
+        panel.app.access.take(operator.client_id, "tok")
+        panel.port_list.options = (OTHER, "/dev/ttyUSB0")  # as if the machine listed one
+        user(panel.port_list, operator, "/dev/ttyUSB0")
+        assert panel.port_text.value == "/dev/ttyUSB0" and panel.selected_port() == "/dev/ttyUSB0"
+        user(panel.port_text, operator, "socket://10.0.0.2:5000")
+        assert panel.port_list.value == OTHER
+        assert panel.selected_port() == "socket://10.0.0.2:5000"
+    finally:
+        panel.close()
+
+
+def test_a_new_fault_is_notified_once_to_every_browser(server, monkeypatch) -> None:
+    ctl = FakeControls(dataclasses.replace(HEALTH, state="active", armed=True))
+    panel = make_panel(server, ctl)
+    try:
+        clients = {1: FakeClient(1), 2: FakeClient(2), 3: FakeClient(3)}
+        monkeypatch.setattr(server, "get_clients", lambda: dict(clients))
+
+        def faults(c: FakeClient) -> list[str]:
+            return [body for title, body in c.notes if title == "Hardware fault"]
+
+        panel.refresh()
+        assert all(faults(c) == [] for c in clients.values())
+        lost = dataclasses.replace(HEALTH, state="unconfigured", fault="link lost: no valid "
+                                   "STATE for 45 ms")
+        ctl.h = lost
+        # The idle thread notices without any call here (a disarmed arm draws no frames) ...
+        deadline = time.monotonic() + 2.0
+        while not all(faults(c) for c in clients.values()) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert all(faults(c) for c in clients.values()), "the idle refresh missed the fault"
+        for _ in range(3):  # ... and further refreshes do not repeat it
+            panel.refresh()
+            panel.on_state(panel.app.store.display)
+        time.sleep(0.6)
+        for c in clients.values():
+            assert len(faults(c)) == 1 and "link lost: no valid STATE for 45 ms" in faults(c)[0]
+        assert "**Fault:** link lost" in panel.readout.content
+        assert not panel.connect_btn.disabled and panel.arm_btn.disabled  # reconnect first
+
+        ctl.h = dataclasses.replace(HEALTH, watchdog_tripped=True)  # the next fault: new
+        panel.refresh()
+        ctl.h = dataclasses.replace(HEALTH, watchdog_tripped=True, estop=True)
+        panel.refresh()
+        panel.refresh()
+        for c in clients.values():
+            assert len(faults(c)) == 3
+            assert "device watchdog tripped" in faults(c)[1]
+            assert "hardware e-stop pressed" in faults(c)[2]
+    finally:
+        panel.close()
+
+
+def test_fault_tracker_reports_edges_once_and_a_recurrence_again() -> None:
+    t = FaultTracker()
+    assert t.update(None) == [] and t.update(HEALTH) == []
+    wd = dataclasses.replace(HEALTH, fault="device watchdog tripped", watchdog_tripped=True)
+    assert t.update(wd) == ["device watchdog tripped"]  # one item, not two for one trip
+    assert t.update(wd) == [] and t.update(None) == []
+    assert t.update(HEALTH) == []  # cleared by the operator's Arm
+    assert t.update(wd) == ["device watchdog tripped"]  # it happened again
+
+
+def test_buttons_follow_the_link_state(server) -> None:
+    ctl = FakeControls(None)
+    panel = make_panel(server, ctl, port_path=None)  # e.g. the soft arm's emulator pty
+    try:
+        panel.refresh()
+        assert "not connected" in panel.readout.content and panel.readout.visible
+        assert not panel.note.visible and not panel.connect_btn.disabled
+        assert panel.arm_btn.disabled and panel.disarm_btn.disabled
+        assert panel.disconnect_btn.disabled and panel.port_text.value == ""
+        ctl.h = HEALTH
+        panel.refresh()
+        assert panel.port_text.value == "/dev/pts/9"  # the port the loop reports
+        assert not panel.arm_btn.disabled and panel.disarm_btn.disabled
+        assert not panel.disconnect_btn.disabled
+        assert not panel.plot.visible  # one round-trip sample: nothing to plot yet
+        ctl.h = dataclasses.replace(HEALTH, state="active", armed=True, port="/dev/pts/4",
+                                    received=25, rtt_ms_p50=2.5, rtt_ms_p99=7.0)
+        panel.refresh()
+        assert panel.arm_btn.disabled and not panel.disarm_btn.disabled
+        assert "ARMED" in panel.readout.content
+        assert panel.port_text.value == "/dev/pts/9"  # filled once, never overwritten
+        panel.refresh()  # no new telemetry: no new sample
+        t, p50, p99 = panel.plot.data
+        assert panel.plot.visible and len(t) == 2 and t[1] >= t[0]
+        np.testing.assert_allclose(p50, [1.5, 2.5])
+        np.testing.assert_allclose(p99, [3.0, 7.0])
+    finally:
+        panel.close()
+
+
+@pytest.mark.parametrize("kind, words", [
+    ("mock", "in-process mock device — no serial link to manage"),
+    (None, "none attached"),
+    ("emulator", "no link controls here; it connects and arms from the Paths panel")])
+def test_without_controls_the_panel_says_why_and_disables_everything(
+        server, kind: str | None, words: str) -> None:
+    panel = make_panel(server, None, kind=kind, port_path=None)
+    try:
+        operator = FakeClient(5)
+        panel.app.access.take(operator.client_id, "tok")
+        assert words in panel.note.content and panel.note.visible
+        assert not panel.readout.visible and not panel.plot.visible
+        assert all(h.disabled for h in (*panel._buttons, panel.port_text, panel.baud,
+                                        panel.port_list))
+        assert no_controls_text(kind, "Paths") == panel.note.content
+        user(panel.connect_btn, operator)  # a stale page's click: told, nothing breaks
+        assert any(words in body for _, body in operator.notes)
+    finally:
+        panel.close()
+
+
+# -- hardware_setup.attach --------------------------------------------------------------------
+
+class FakeApp:
+    def __init__(self, robot: Any) -> None:
+        self.robot = robot
+        self.store = object()
+
+
+def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
+    import console.panels.control_process as cp
+    import hw_bridge.extensible_runner as er
+    import hw_bridge.soft_arm_link as sal
+
+    made: dict[str, Any] = {}
+
+    class FakeControlProcess:
+        def __init__(self, robot: Any, device: str, port_path: str | None) -> None:
+            made["soft"] = (device, port_path)
+            self.bridge_controls = FakeControls()
+
+        def close(self) -> None:
+            made["soft_closed"] = True
+
+    class FakeEmulator:
+        path = "/dev/pts/77"
+
+        def __init__(self, args: list[str]) -> None:
+            made["emulator_args"] = args
+
+        def stop(self) -> None:
+            made["emulator_stopped"] = True
+
+    class FakeRunner:
+        def __init__(self, robot: Any, factory: Any, **_: Any) -> None:
+            made["hardware"] = factory()
+            self.bridge_controls = FakeControls()
+
+        def start(self) -> None:
+            made["started"] = True
+
+        def close(self) -> None:
+            made["runner_closed"] = "emulator_stopped" not in made  # loop before emulator
+
+    monkeypatch.setattr(cp, "ControlProcess", FakeControlProcess)
+    monkeypatch.setattr(sal, "EmulatorProcess", FakeEmulator)
+    monkeypatch.setattr(er, "ExtensibleRunner", FakeRunner)
+
+    soft = FakeApp(SOFT)
+    out = attach(soft, "emulator", None)
+    assert made["soft"] == ("emulator", None) and out.kind == "emulator"
+    assert soft.bridge_controls is soft.soft_control.bridge_controls
+    assert out.port_path is None and out.baud == 1_000_000  # the child knows the pty
+    out = attach(FakeApp(SOFT), "mock", "/dev/ttyACM3")
+    assert made["soft"] == ("emulator", "/dev/ttyACM3") and out.kind == "port"
+    assert out.port_path == "/dev/ttyACM3"
+
+    ext = FakeApp(ROBOT)
+    out = attach(ext, "emulator", None)
+    assert out.kind == "emulator" and out.port_path == "/dev/pts/77" and made["started"]
+    assert ext.bridge_controls is ext.extensible_runner.bridge_controls
+    assert made["hardware"].port == "/dev/pts/77"
+    out.close()
+    assert made["runner_closed"] and made["emulator_stopped"]
+
+    mock = FakeApp(ROBOT)
+    out = attach(mock, "mock", None)  # the runner comes later, lazily, with MockHardware
+    assert out.kind == "mock" and mock.bridge_controls is None
+    assert not hasattr(mock, "extensible_runner")
+
+
+def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path) -> None:
+    args = serve_module.parse_args(["--robot", "extensible", "--hardware", "mock", "--port", "0",
+                                    "--data-dir", str(tmp_path)])
+    server, app, _ = serve_module.build(args, load("extensible"), "test")
+    try:
+        panel = app.panel(HardwarePanel)
+        assert "in-process mock device" in panel.note.content and panel.connect_btn.disabled
+    finally:
+        app.hardware.close()
+        app.stop()
+        server.stop()

@@ -101,6 +101,51 @@ def test_lease_expires_after_two_silent_seconds_and_heartbeats_renew_it() -> Non
     assert access.holder is None and "silent for 2 s" in lost[-1]
 
 
+def test_a_new_lease_waits_longer_for_the_first_answer_of_a_loading_tab() -> None:
+    """Until the holder's tab answers once it has first_answer_s (a page still loading), then
+    the 2 s rule; a new holder starts the grace again."""
+    clock = FakeClock()
+    access = AccessControl(None, lease_s=2.0, first_answer_s=10.0, clock=clock,
+                           first_client_takes_control=True)
+    lost = []
+    access.add_listener(lambda new, prev, why: lost.append(why) if new is None else None)
+    access.grant_if_free(3)  # desk mode: granted on connect, while the page loads
+    assert access.lease_limit() == 10.0
+    clock.t += 9.9
+    assert access.expire_if_silent() is None and access.is_operator(3)
+    assert access.heartbeat(3) and access.lease_limit() == 2.0  # answered: the 2 s rule
+    clock.t += 2.01
+    assert access.expire_if_silent() is not None and "silent for 2 s" in lost[-1]
+    access.take(4)  # a new holder that never answers loses control after 10 s
+    clock.t += 10.01
+    assert access.expire_if_silent() is not None and "did not answer within 10 s" in lost[-1]
+    with pytest.raises(ValueError, match="first_answer_s"):
+        AccessControl(None, lease_s=2.0, first_answer_s=1.0)
+
+
+def test_desk_mode_gives_a_lapsed_lease_back_only_to_its_own_tab() -> None:
+    clock = FakeClock()
+    desk = AccessControl(None, lease_s=2.0, first_client_takes_control=True, clock=clock)
+    lab = AccessControl(None, lease_s=2.0, clock=clock)
+    for access in (desk, lab):
+        access.take(5)
+        access.heartbeat(5)
+        clock.t += 2.5
+        assert access.expire_if_silent() is not None and access.holder is None
+    assert lab.lapsed is None and lab.regrant(5) is None  # never outside desk mode
+    assert desk.lapsed == 5
+    assert desk.regrant(6) is None and desk.holder is None  # another tab: no
+    assert desk.regrant(5).client_id == 5 and desk.lapsed is None
+    desk.release(5)  # a voluntary release is not a lapse
+    assert desk.lapsed is None and desk.regrant(5) is None
+    desk.take(5)
+    desk.heartbeat(5)
+    clock.t += 2.5
+    desk.expire_if_silent()
+    desk.forget(5)  # the tab closed: nothing to give back
+    assert desk.lapsed is None
+
+
 def test_desk_mode_grants_only_when_enabled_and_free() -> None:
     assert AccessControl(None).grant_if_free(1) is None
     desk = AccessControl("tok", first_client_takes_control=True)
@@ -250,3 +295,36 @@ def test_share_tunnel_request_from_the_wire_is_ignored(monkeypatch, server) -> N
         assert guarded.request_share_url() is None
     finally:
         guarded.stop()
+
+
+def test_every_callback_of_the_shared_scene_panels_is_operator_only(server) -> None:
+    """Objects, Grasp planner, Waypoints and Hardware: every widget callback that changes what
+    everyone sees or drives the hardware is gated (only "Save scene", a download, is not)."""
+    from console.panels import planner
+    from console.panels.hardware import HardwarePanel
+
+    planner.GraspSession.compute_reach = False
+    try:
+        app = ConsoleApp(SOFT, server, panels=(*planner.grasp_panels(), HardwarePanel),
+                         access=AccessControl("tok"))
+        try:
+            objects = app.panels[0]
+            allowed = {id(objects.save_button)}
+            checked = 0
+            for panel in app.panels:
+                for handle in vars(panel).values():
+                    callbacks = getattr(getattr(handle, "_impl", None), "update_cb", None)
+                    if not callbacks or id(handle) in allowed:
+                        continue
+                    for cb in callbacks:
+                        assert getattr(cb, "operator_only", None), (type(panel).__name__, handle)
+                        checked += 1
+            assert checked >= 25
+            session = app.grasp_session  # type: ignore[attr-defined]
+            assert session.gizmo_handler.operator_only == "move an object"
+            assert objects._place_at.operator_only == "place or select an object"
+        finally:
+            app.panel(HardwarePanel).close()
+            app.grasp_session.close()  # type: ignore[attr-defined]
+    finally:
+        planner.GraspSession.compute_reach = True

@@ -175,3 +175,177 @@ def test_live_replanning_is_throttled_to_the_newest_position(console):
     plans = out.seq - seq0
     assert plans <= 2 + elapsed * 20.0 * 1.5              # LIVE_HZ = 20, plus the final plan
     assert out.plan is not None and out.plan.success
+
+
+# -- sharing: only the operator changes the objects, the plan and the inspected waypoint ------
+
+class FakeClient:
+    """What operator_only and app.refuse use of a viser ClientHandle."""
+
+    def __init__(self, cid: int) -> None:
+        self.client_id = cid
+        self.notes: list[tuple[str, str]] = []
+
+    def add_notification(self, title: str, body: str, **_: object) -> None:
+        self.notes.append((title, body))
+
+
+def user(handle, client, value=None):
+    """What viser does with a browser's click / edit: store the value, then call back."""
+    import viser
+
+    if value is not None:
+        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
+            handle._impl.value)(value)
+    for cb in list(handle._impl.update_cb):
+        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
+
+
+def click_at(panel, client, x: float, y: float) -> None:
+    """A click on the table at (x, y), seen from straight above."""
+    import viser
+
+    panel._on_scene_click(viser.SceneClickEvent(client, client.client_id, (x, y, 1.0),
+                                                (0.0, 0.0, -1.0), (0.5, 0.5), None))
+
+
+def drag(session, name: str, client, x: float, y: float, phase: str = "end") -> None:
+    """What viser does with a browser's gizmo drag: store the pose, then call back."""
+    import viser
+
+    gizmo = wait_for(lambda: session.scene.objects.get(name))[0]  # drawn by the worker
+    gizmo._impl.position = np.array([x, y, 0.0])
+    session.on_gizmo(name, viser.TransformControlsEvent(client, client.client_id, gizmo, phase))
+
+
+@pytest.fixture
+def gated():
+    """A console with the grasp panels, an operator token and its own session."""
+    import viser
+
+    from console.access import AccessControl
+    from console.app import ConsoleApp
+    from console.panels import planner
+
+    planner.GraspSession.compute_reach = False
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels(), access=AccessControl("tok"))
+    try:
+        yield app
+    finally:
+        app.grasp_session.close()
+        app.grasp_session._thread.join(5)  # no drawing into a stopped server
+        server.stop()
+        planner.GraspSession.compute_reach = True
+
+
+def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
+    import viser
+
+    from console.panels.objects import ObjectsPanel
+    from console.panels.planner import PlannerPanel
+    from console.panels.waypoints import WaypointsPanel
+
+    app, s = gated, gated.grasp_session
+    op, pp, wp = app.panel(ObjectsPanel), app.panel(PlannerPanel), app.panel(WaypointsPanel)
+    viewer, operator = FakeClient(21), FakeClient(22)
+    app.access.take(operator.client_id, "tok", name="Alice")
+    user(op.add_button, operator)  # two objects, so selecting is possible
+    wait_for(lambda: len(s.view().objects) == 2 and s.view().outcome
+             and s.view().outcome.obj.name == "Object 2")
+    user(op.selected, operator, "Object 1")
+    out = wait_for(lambda: (o := s.view().outcome) and o.obj.name == "Object 1" and o.plan
+                   and o)
+    time.sleep(0.2)
+    before, settings = s.view(), (s.delta_d, s.weights, s.live, s.show_reach)
+    command = app.store.command
+    obj = before.objects[0]
+    scene = scene_to_json([TableObject("Cup", -0.1, 0.3, 0.02)]).encode()
+
+    user(op.add_button, viewer)
+    user(op.remove_button, viewer)
+    user(op.x, viewer, 0.05)
+    user(op.r, viewer, 0.03)
+    user(op.selected, viewer, "Object 2")
+    user(op.click_place, viewer, False)
+    user(op.load_button, viewer, viser.UploadedFile("cup.json", scene))
+    click_at(op, viewer, -0.1, 0.3)
+    drag(s, "Object 1", viewer, 0.0, 0.35, phase="update")
+    user(pp.plan_button, viewer)
+    user(pp.delta_d, viewer, 0.05)
+    user(pp.weights, viewer, "1, 1, 1, 1, 1, 1")
+    user(pp.live, viewer, False)
+    user(pp.reach, viewer, False)
+    for button in (wp.next_button, wp.prev_button, wp.play_button, wp.move_button):
+        user(button, viewer)
+    user(wp.slider, viewer, out.plan.n)
+    user(wp.speed, viewer, 8.0)
+    user(wp.trail, viewer, False)
+    time.sleep(0.3)  # a wrongly accepted request would be planned / drawn by now
+
+    after = s.view()
+    assert after.objects == before.objects and after.selected == "Object 1"
+    assert after.outcome.seq == before.outcome.seq and after.index == before.index
+    assert not after.playing and after.speed == before.speed and after.trail == before.trail
+    assert (s.delta_d, s.weights, s.live, s.show_reach) == settings
+    assert app.store.command is command
+    # What the viewer's browser showed everyone is put back.
+    assert (op.x.value, op.r.value) == (round(obj.x, 4), round(obj.r, 4))
+    assert op.selected.value == "Object 1" and op.click_place.value is True
+    assert pp.delta_d.value == s.delta_d and pp.live.value and pp.reach.value
+    assert pp.weights.value == ", ".join(f"{w:g}" for w in s.weights)
+    assert wp.slider.value == before.index + 1 and wp.speed.value == 2.0 and wp.trail.value
+    gizmo = s.scene.objects["Object 1"][0]
+    wait_for(lambda: np.allclose(gizmo.position[:2], (obj.x, obj.y)))
+    refused = {body.split(" — ")[0].removeprefix("Only the operator can ")
+               for title, body in viewer.notes if title == "Not allowed"}
+    assert refused == {
+        "add an object", "remove an object", "edit an object", "select an object",
+        "change how clicks on the table act", "load a scene", "place or select an object",
+        "move an object", "plan a grasp", "change the planner", "change the shading",
+        "step through the waypoints", "play the waypoints", "change the playback speed",
+        "change the trail", "move the arm"}
+    assert all("Alice holds control" in body for _, body in viewer.notes)
+
+
+def test_the_operator_changes_objects_plan_and_waypoints(gated):
+    import viser
+
+    from console.panels.objects import ObjectsPanel
+    from console.panels.planner import PlannerPanel
+    from console.panels.waypoints import WaypointsPanel
+
+    app, s = gated, gated.grasp_session
+    op, pp, wp = app.panel(ObjectsPanel), app.panel(PlannerPanel), app.panel(WaypointsPanel)
+    operator = FakeClient(7)
+    app.access.take(operator.client_id, "tok")
+    first = wait_for(lambda: s.view().outcome)
+    click_at(op, operator, -0.12, 0.28)
+    wait_for(lambda: [o.name for o in s.view().objects] == ["Object 1", "Object 2"])
+    placed = s.view().objects[1]
+    assert (placed.x, placed.y) == pytest.approx((-0.12, 0.28))
+    drag(s, "Object 2", operator, -0.15, 0.25)
+    wait_for(lambda: s.view().objects[1].x == pytest.approx(-0.15))
+    wait_for(lambda: (op.x.value, op.y.value) == (-0.15, 0.25))  # mirrored into the fields
+    user(op.r, operator, 0.02)
+    wait_for(lambda: s.view().objects[1].r == pytest.approx(0.02))
+    assert (s.view().objects[1].x, s.view().objects[1].y) == pytest.approx((-0.15, 0.25))
+    user(pp.delta_d, operator, 0.03)
+    assert s.delta_d == pytest.approx(0.03)
+    user(pp.delta_d, operator, 0.0)  # bad input: a clear message, the setting stays
+    assert s.delta_d == pytest.approx(0.03) and pp.delta_d.value == pytest.approx(0.03)
+    assert any("Δd must be a positive distance" in body for _, body in operator.notes)
+    seq = s.view().outcome.seq
+    user(pp.plan_button, operator)
+    out = wait_for(lambda: (o := s.view().outcome) and o.seq > seq and o.plan and o)
+    assert out.obj.name == "Object 2" and out.seq > first.seq
+    user(wp.next_button, operator)
+    wait_for(lambda: s.view().index == min(1, out.plan.n - 1))
+    user(wp.slider, operator, out.plan.n)
+    wait_for(lambda: s.view().index == out.plan.n - 1)
+    user(wp.move_button, operator)
+    np.testing.assert_allclose(app.store.command.q, out.plan.kappas[-1])
+    user(op.load_button, operator, viser.UploadedFile(
+        "cup.json", scene_to_json([TableObject("Cup", -0.1, 0.3, 0.02)]).encode()))
+    wait_for(lambda: [o.name for o in s.view().objects] == ["Cup"])
+    assert not any(title == "Not allowed" for title, _ in operator.notes)

@@ -6,13 +6,22 @@ planner re-plans live while it moves, see ``console.panels.planner``). The numbe
 edit the selected object; "Add object" places one at the typed x, y, r. The scene is saved as a
 JSON download and loaded from an uploaded file (``console.plan_view.scene_from_json``; a bad
 file is refused with its reason and changes nothing).
+
+Sharing: the objects and the selection are the same for every browser and drive the plan, so
+every change -- a click on the table, a gizmo drag, typing x / y / r, selecting, adding,
+removing, loading, the click-placement toggle -- is :func:`~console.panels.base.operator_only`.
+A viewer's edit snaps back (fields, selection, and a dragged object returns to its place);
+"Save scene" (a download that changes nothing) works for everyone.
 """
 
 from __future__ import annotations
 
 import html
+from typing import Any
 
-from console.panels.base import Panel
+import viser
+
+from console.panels.base import Panel, operator_only
 from console.panels.planner import SessionView, session_for
 from console.plan_view import ray_to_table, scene_from_json, scene_to_json
 
@@ -45,6 +54,9 @@ class ObjectsPanel(Panel):
                                                       hint="Upload a scene JSON file.")
         self.info = self.gui.add_html("")
         self._mirror = False
+        self._click_mode = bool(self.click_place.value)
+        self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
+        self.click_place.on_update(self._on_click_mode)
         self.selected.on_update(self._on_select)
         for handle in (self.x, self.y, self.r):
             handle.on_update(self._on_typed)
@@ -53,6 +65,7 @@ class ObjectsPanel(Panel):
         self.save_button.on_click(self._on_save)
         self.load_button.on_upload(self._on_load)
         self.app.server.scene.on_click()(self._on_scene_click)
+        self.session.gizmo_handler = self._on_gizmo
         self.session.add_listener(self.refresh)
 
     # -- callbacks (thin) ------------------------------------------------------------------
@@ -64,13 +77,28 @@ class ObjectsPanel(Panel):
         if not self.click_place.value:
             return
         hit = ray_to_table(event.ray_origin, event.ray_direction)
-        if hit is None:
-            return
+        if hit is not None:
+            self._place_at(event, hit)
+
+    @operator_only(action="place or select an object")
+    def _place_at(self, event, hit: tuple[float, float]) -> None:
         try:
             self.session.place(*hit, r=float(self.r.value))
         except ValueError as exc:
             self._error(event, str(exc))
 
+    @operator_only(action="move an object")
+    def _on_gizmo(self, name: str, event: viser.TransformControlsEvent) -> None:
+        if event.client is None:
+            return
+        x, y = (float(v) for v in event.target.position[:2])
+        self.session.drag(name, x, y, live=event.phase != "end")
+
+    @operator_only(action="change how clicks on the table act")
+    def _on_click_mode(self, event) -> None:
+        self._click_mode = bool(self.click_place.value)
+
+    @operator_only(action="select an object")
     def _on_select(self, event) -> None:
         if event.client is None or self.selected.value == "(none)":
             return
@@ -79,7 +107,9 @@ class ObjectsPanel(Panel):
         except ValueError as exc:
             self._error(event, str(exc))
 
+    @operator_only(action="edit an object")
     def _on_typed(self, event) -> None:
+        self._fields[id(event.target)] = event.target.value  # accepted (or a mirror)
         if event.client is None or self._mirror:
             return
         name = self.session.view().selected
@@ -91,6 +121,7 @@ class ObjectsPanel(Panel):
         except ValueError as exc:
             self._error(event, str(exc))
 
+    @operator_only(action="add an object")
     def _on_add(self, event) -> None:
         view = self.session.view()
         x, y = float(self.x.value), float(self.y.value)
@@ -101,16 +132,30 @@ class ObjectsPanel(Panel):
         except ValueError as exc:
             self._error(event, str(exc))
 
+    @operator_only(action="remove an object")
     def _on_remove(self, event) -> None:
         name = self.session.view().selected
         if name is not None:
             self.session.remove(name)
+
+    def on_refused(self, event: Any) -> None:
+        """Undo what a refused viewer's edit shows everyone."""
+        target = getattr(event, "target", None)
+        if isinstance(event, viser.TransformControlsEvent):
+            self.session.redraw_objects()  # the gizmo goes back to the object
+        elif target is self.click_place:
+            self.click_place.value = self._click_mode
+        elif target is self.selected:
+            self.selected.value = self.session.view().selected or "(none)"
+        elif target is not None and id(target) in self._fields:
+            target.value = self._fields[id(target)]
 
     def _on_save(self, event) -> None:
         if event.client is not None:
             text = scene_to_json(list(self.session.view().objects))
             event.client.send_file_download("grasp_scene.json", text.encode())
 
+    @operator_only(action="load a scene")
     def _on_load(self, event) -> None:
         upload = self.load_button.value
         try:

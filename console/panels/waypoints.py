@@ -3,8 +3,12 @@
 Previous / Next, a slider, play / pause with a speed, and a trail toggle (ghost arms of the
 waypoints already passed). The inspected waypoint is highlighted in the 3D view (orange ghost
 arm, bright circle, palm point, and the capture region at the final one) and listed here with
-its kappa, phi, r_a and clearances. "Move arm here" commands the waypoint's configuration
-(operator only).
+its kappa, phi, r_a and clearances. "Move arm here" commands the waypoint's configuration.
+
+Everything here is operator-only, browsing included: the inspected waypoint, playback, speed
+and trail are drawn in the 3D view every browser shares, so a viewer stepping through the
+waypoints would change what everyone (the operator included) sees. A viewer's slider / speed /
+trail edit snaps back; viewers watch the operator's inspection.
 """
 
 from __future__ import annotations
@@ -66,21 +70,26 @@ class WaypointsPanel(Panel):
         self.info = self.gui.add_html(waypoint_html(s.view()))
         self.move_button = self.gui.add_button(
             "Move arm here", hint="Command this waypoint's curvatures (simulation / hardware).")
-        self.prev_button.on_click(lambda _: s.inspect(step=-1))
-        self.next_button.on_click(lambda _: s.inspect(step=+1))
+        step = "step through the waypoints"
+        self.prev_button.on_click(self.operator_only(lambda _: s.inspect(step=-1), step))
+        self.next_button.on_click(self.operator_only(lambda _: s.inspect(step=+1), step))
         self.slider.on_update(self._on_slider)
         self.play_button.on_click(self._on_play)
-        self.speed.on_update(lambda e: e.client and s.play(s.view().playing,
-                                                          float(self.speed.value)))
-        self.trail.on_update(lambda e: e.client and s.set_trail(self.trail.value))
+        self.speed.on_update(self.operator_only(
+            lambda e: e.client and s.play(s.view().playing, float(self.speed.value)),
+            "change the playback speed"))
+        self.trail.on_update(self.operator_only(
+            lambda e: e.client and s.set_trail(self.trail.value), "change the trail"))
         self.move_button.on_click(self._on_move)
         self._shown: tuple | None = None
         s.add_listener(self.refresh)
 
+    @operator_only(action="step through the waypoints")
     def _on_slider(self, event) -> None:
         if event.client is not None:
             self.session.inspect(int(self.slider.value) - 1)
 
+    @operator_only(action="play the waypoints")
     def _on_play(self, _event) -> None:
         view = self.session.view()
         self.session.play(not view.playing, float(self.speed.value))
@@ -94,6 +103,16 @@ class WaypointsPanel(Panel):
                                               color="yellow", auto_close_seconds=4)
             return
         self.app.store.request(kappa, "planner")
+
+    def on_refused(self, event) -> None:
+        """Put a refused viewer's slider / speed / trail edit back, for everyone."""
+        view, target = self.session.view(), getattr(event, "target", None)
+        if target is self.slider:
+            self.slider.value = view.index + 1
+        elif target is self.speed:
+            self.speed.value = view.speed
+        elif target is self.trail:
+            self.trail.value = view.trail
 
     def refresh(self, view: SessionView) -> None:
         """Grasp worker thread: mirror the inspection state into the widgets."""

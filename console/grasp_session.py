@@ -1,0 +1,317 @@
+"""The grasp session: the table objects, planner settings, newest plan and waypoint inspection that
+the Objects, Grasp planner and Waypoints panels share (one per console, ``session_for(app)``).
+
+Callbacks only call :class:`GraspSession` methods, which take a lock, record the request and
+wake one worker thread. The worker plans the newest request with
+:class:`core.planning.grasp.GraspPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
+second, on the newest position only), steps waypoint playback, redraws the grasp layer
+(:class:`console.plan_view.PlanScene`, of which it is the only writer) and then tells the panels,
+which refresh their widgets. Who may change it is decided by the panels (operator-only
+callbacks); the session itself trusts its callers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+import viser
+
+from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableObject,
+                               start_reach_map, validate_object)
+from core.planning.grasp import GraspPlanner, GraspRefused
+from core.planning.reachability import ReachMap
+
+log = logging.getLogger(__name__)
+
+
+class GraspSession:
+    """Shared grasp state of one console; see the module docstring for the threading rules."""
+
+    compute_reach = True    # tests switch the (CPU-heavy) reachability map off
+
+    def __init__(self, app) -> None:
+        self.app = app
+        robot = app.robot
+        self.robot = robot
+        self.planner = GraspPlanner(robot)
+        self.scene = PlanScene(app.server, robot)
+        self.default_radius = robot.capture.nominal_object_radius
+        self._cond = threading.Condition()
+        self._objects = [TableObject("Object 1", -0.20, 0.20, self.default_radius)]
+        self._selected: str | None = "Object 1"
+        self._count = 1
+        self.delta_d = float(robot.delta_d)
+        self.weights = tuple(self.planner.config.weights)
+        self.live = True
+        self.show_reach = True
+        self._request: bool | None = False      # pending plan: True = live, False = final
+        self._outcome: Outcome | None = None
+        self._index, self._playing, self._speed, self._trail = 0, False, 2.0, True
+        self._dirty = {"objects", "reach"}
+        self._reach: ReachMap | str | None = "computing"
+        self._listeners: list[Callable[[SessionView], None]] = []
+        self._stop = False
+        self._next_tick = 0.0
+        self.gizmo_handler: Callable[[str, viser.TransformControlsEvent], None] | None = None
+        if not self.compute_reach:
+            self._reach = "off"
+        self._thread = threading.Thread(target=self._run, name="grasp-session", daemon=True)
+        self._thread.start()
+        if self.compute_reach:
+            start_reach_map(robot, self.default_radius, self._on_reach)
+
+    # -- thread-safe requests (GUI callbacks) ------------------------------------------------
+    def view(self) -> SessionView:
+        with self._cond:
+            return SessionView(tuple(self._objects), self._selected, self._outcome, self._index,
+                               self._playing, self._speed, self._trail, self._reach)
+
+    def add_listener(self, fn: Callable[[SessionView], None]) -> None:
+        with self._cond:
+            self._listeners.append(fn)
+
+    def _changed(self, *parts: str, plan: bool | None = None) -> None:
+        """Mark parts dirty and optionally request a plan (True = live); caller holds the lock."""
+        self._dirty.update(parts)
+        if plan is not None and (self._request is None or self._request):
+            self._request = plan
+        self._cond.notify_all()
+
+    def place(self, x: float, y: float, r: float | None = None) -> str:
+        """Select the object under (x, y), or add a new one there; returns its name."""
+        with self._cond:
+            for o in self._objects:
+                if np.hypot(o.x - x, o.y - y) <= o.r + 0.005:
+                    self._selected = o.name
+                    self._changed("objects", plan=False)
+                    return o.name
+            while f"Object {self._count}" in {o.name for o in self._objects}:
+                self._count += 1
+            obj = validate_object(TableObject(f"Object {self._count}", float(x), float(y),
+                                              float(r or self.default_radius)), self.robot)
+            self._objects.append(obj)
+            self._selected = obj.name
+            self._changed("objects", plan=False)
+            return obj.name
+
+    def update(self, name: str, *, x: float | None = None, y: float | None = None,
+               r: float | None = None, live: bool = False) -> None:
+        """Change an object (ValueError for bad values, nothing changes then)."""
+        with self._cond:
+            i = self._find(name)
+            old = self._objects[i]
+            new = validate_object(dataclasses.replace(
+                old, x=old.x if x is None else float(x), y=old.y if y is None else float(y),
+                r=old.r if r is None else float(r)), self.robot)
+            self._objects[i] = new
+            replan = (not live or self.live) and name == self._selected
+            self._changed("objects", plan=live if replan else None)
+
+    def remove(self, name: str) -> None:
+        with self._cond:
+            self._objects.pop(self._find(name))
+            if self._selected == name:
+                self._selected = self._objects[-1].name if self._objects else None
+            self._changed("objects", plan=False)
+
+    def select(self, name: str | None) -> None:
+        with self._cond:
+            if name is not None:
+                self._find(name)
+            self._selected = name
+            self._changed("objects", plan=False)
+
+    def set_objects(self, objects: list[TableObject]) -> None:
+        with self._cond:
+            self._objects = list(objects)
+            self._selected = objects[0].name if objects else None
+            self._changed("objects", plan=False)
+
+    def request_plan(self) -> None:
+        with self._cond:
+            self._request = False
+            self._cond.notify_all()
+
+    def configure(self, *, delta_d: float | None = None, weights: tuple | None = None,
+                  live: bool | None = None, show_reach: bool | None = None) -> None:
+        with self._cond:
+            if delta_d is not None:
+                self.delta_d = float(delta_d)
+            if weights is not None:
+                self.weights = tuple(float(w) for w in weights)
+            if live is not None:
+                self.live = bool(live)
+            if show_reach is not None:
+                self.show_reach = bool(show_reach)
+                self._changed("reach")
+
+    def inspect(self, index: int | None = None, step: int = 0) -> None:
+        """Inspect waypoint ``index`` (0-based) or move by ``step``; stops playback."""
+        with self._cond:
+            n = self._n()
+            i = self._index + step if index is None else int(index)
+            self._index = min(max(i, 0), max(n - 1, 0))
+            self._playing = False
+            self._changed("inspect")
+
+    def play(self, playing: bool, speed: float | None = None) -> None:
+        with self._cond:
+            if speed is not None:
+                self._speed = float(min(max(speed, 0.1), 50.0))
+            if playing and self._index >= self._n() - 1:
+                self._index = 0
+            self._playing = bool(playing) and self._n() > 1
+            self._next_tick = time.perf_counter() + 1.0 / self._speed
+            self._changed("inspect")
+
+    def set_trail(self, trail: bool) -> None:
+        with self._cond:
+            self._trail = bool(trail)
+            self._changed("inspect")
+
+    def inspected_kappa(self) -> np.ndarray | None:
+        with self._cond:
+            if self._outcome is None or self._outcome.plan is None:
+                return None
+            return self._outcome.plan.kappas[self._index].copy()
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+
+    def _find(self, name: str) -> int:
+        for i, o in enumerate(self._objects):
+            if o.name == name:
+                return i
+        raise ValueError(f"no object named {name!r}")
+
+    def _n(self) -> int:
+        plan = self._outcome.plan if self._outcome else None
+        return 0 if plan is None else plan.n
+
+    def _on_reach(self, result) -> None:
+        with self._cond:
+            self._reach = result if isinstance(result, ReachMap) else f"failed: {result}"
+            self._changed("reach")
+
+    def on_gizmo(self, name: str, event: viser.TransformControlsEvent) -> None:
+        """An object's gizmo moved: the Objects panel's operator-only ``gizmo_handler`` acts on
+        it; without one, a browser's drag is put back."""
+        handler = self.gizmo_handler
+        if handler is not None:
+            handler(name, event)
+        elif event.client is not None:
+            self.redraw_objects()
+
+    def drag(self, name: str, x: float, y: float, *, live: bool) -> None:
+        """``name`` dragged to (x, y): selected, re-planned live while dragging and finally on
+        release; a position the object may not have snaps back."""
+        with self._cond:
+            if name != self._selected:
+                self._selected = name
+        try:
+            self.update(name, x=x, y=y, live=live)
+        except ValueError:
+            self.redraw_objects()
+
+    def redraw_objects(self) -> None:
+        """Redraw the objects where the session has them (undoes a refused gizmo drag)."""
+        with self._cond:
+            self._changed("objects")
+
+    # -- worker ------------------------------------------------------------------------------
+    def _run(self) -> None:
+        last_live = 0.0
+        while True:
+            with self._cond:
+                while True:
+                    if self._stop:
+                        return
+                    now = time.perf_counter()
+                    tick = self._playing and now >= self._next_tick
+                    wait_live = (self._request is True and now - last_live < 1.0 / LIVE_HZ)
+                    if (self._request is not None and not wait_live) or self._dirty or tick:
+                        break
+                    timeout = 0.5
+                    if self._playing:
+                        timeout = min(timeout, self._next_tick - now)
+                    if wait_live:
+                        timeout = min(timeout, last_live + 1.0 / LIVE_HZ - now)
+                    self._cond.wait(max(timeout, 0.0))
+                request = None if wait_live else self._request
+                if request is not None:
+                    self._request = None
+                dirty, self._dirty = self._dirty, set()
+                if tick:
+                    last = max(self._n() - 1, 0)
+                    self._index = min(self._index + 1, last)
+                    self._next_tick = now + 1.0 / self._speed
+                    self._playing = self._index < last
+                    dirty.add("inspect")
+                objects, selected = list(self._objects), self._selected
+                settings = (self.delta_d, self.weights)
+            if request is not None:
+                if request:
+                    last_live = time.perf_counter()
+                outcome = self._plan(objects, selected, settings)
+                with self._cond:
+                    self._outcome = outcome
+                    n = self._n()
+                    self._index = min(self._index, max(n - 1, 0)) if request else 0
+                    if not request:
+                        self._playing = False
+                dirty.add("plan")
+            self._draw(dirty)
+
+    def _plan(self, objects, selected, settings) -> Outcome:
+        seq = (self._outcome.seq + 1) if self._outcome else 1
+        obj = next((o for o in objects if o.name == selected), None)
+        if obj is None:
+            return Outcome(None, None, "No object selected: click on the table to place one.",
+                           seq)
+        kappa = np.asarray(self.app.store.display.q, dtype=float)
+        try:
+            plan = self.planner.plan(kappa, (obj.x, obj.y), obj.r, delta_d=settings[0],
+                                     weights=settings[1])
+        except GraspRefused as exc:
+            return Outcome(obj, None, str(exc), seq)
+        except Exception as exc:  # a planner bug must not kill the worker
+            log.exception("grasp planning failed")
+            return Outcome(obj, None, f"The planner failed unexpectedly ({exc}).", seq)
+        return Outcome(obj, plan, None, seq)
+
+    def _draw(self, dirty: set[str]) -> None:
+        view = self.view()
+        try:
+            with self.app.server.atomic():
+                if "objects" in dirty:
+                    self.scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
+                if dirty & {"plan", "inspect"}:
+                    plan = view.outcome.plan if view.outcome else None
+                    self.scene.draw_plan(plan, view.index, view.trail)
+                if "reach" in dirty and isinstance(view.reach, ReachMap):
+                    self.scene.draw_reach(view.reach, self.show_reach)
+        except Exception:  # a drawing error must not kill the worker
+            log.exception("grasp scene update failed")
+        with self._cond:
+            listeners = list(self._listeners)
+        for fn in listeners:
+            try:
+                fn(view)
+            except Exception:
+                log.exception("grasp panel refresh failed")
+
+
+def session_for(app) -> GraspSession:
+    """The app's grasp session, created by the first grasp panel that asks for it."""
+    session = getattr(app, "grasp_session", None)
+    if session is None:
+        session = GraspSession(app)
+        app.grasp_session = session
+    return session
