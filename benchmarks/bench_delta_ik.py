@@ -1,17 +1,21 @@
 """Speed and success of the extensible arm's tip IK, side by side with baselines in the same run.
 
 Goal (issue 5): median <= 5 ms to 1 mm for the two-segment arm, 100 % of reachable targets.
-Targets are reachable by construction: tips of random rack lengths within the limits.
+Targets are reachable by construction: tips of random rack lengths within the rack limits whose
+segments bend no more than theta_max (rejection sampling). Every answer must be within the rack
+and bending limits (asserted).
 
 Rows:
   solve_tip_ik cold        delta0=None (seed batch, single-arc guess first)
   solve_tip_ik warm        delta0 = the generating posture with every rack moved by up to 1 cm
   solve_tip_ik retracted   delta0 = 0 (straight, retracted arm; restarts when it stalls)
   eq.(5) Euler h=...       the literal eq. (5) (Moore-Penrose J^+, J_set / e_set of the violated
-                           racks) integrated by explicit Euler from the retracted arm, then
-                           projected onto the limits ("numerically evaluated through simulations")
-  SLSQP (bounds in L)      scipy.optimize.minimize on ||x_d - h||^2 / 2 with analytic gradient,
-                           from the retracted arm
+                           racks and, as one more row per segment, of a violated bending limit)
+                           integrated by explicit Euler from the retracted arm, then projected
+                           onto the limits ("numerically evaluated through simulations")
+  SLSQP (L, bend constr.)  scipy.optimize.minimize on ||x_d - h||^2 / 2 with analytic gradient,
+                           rack bounds and dx^2 + dy^2 <= (d theta_max)^2 per segment, from the
+                           retracted arm
 
 Columns for solve_tip_ik: median iterations (summed over starts), share solved with no
 iteration (the start was already within the goal tolerance: for cold starts, the single-arc
@@ -23,7 +27,6 @@ Run: .venv/bin/python benchmarks/bench_delta_ik.py [--targets 200] [--baseline-t
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -41,7 +44,11 @@ TOL = 1e-3
 
 
 def literal_eq5(robot, target, h: float, max_steps: int) -> tuple[np.ndarray, int]:
-    """Eq. (5) as printed, explicit Euler with step h, from the retracted arm; rack lengths."""
+    """Eq. (5) as printed, explicit Euler with step h, from the retracted arm; rack lengths.
+
+    The bending limit is one more set-based row per segment: d|(dx, dy)| / dDelta with error
+    bend_max - |(dx, dy)| while violated.
+    """
     n = robot.n_segments
     Minv = np.kron(np.eye(n), dk.rack_matrix_inverse(robot.phi))  # dL / dDelta
     offset = np.tile([0.0, 0.0, robot.L0], n)
@@ -50,22 +57,31 @@ def literal_eq5(robot, target, h: float, max_steps: int) -> tuple[np.ndarray, in
     for steps in range(1, max_steps + 1):
         L = Minv @ (delta + offset)
         low, high = L < robot.rack_min, L > robot.rack_max
+        b = delta.reshape(n, 3)[:, :2]
+        size = np.linalg.norm(b, axis=1)
+        bent = size > robot.bend_max
         p, J = dk.chain_tip_and_jacobian(delta.reshape(n, 3), robot.L0, robot.d)
         e = target - p
-        if np.linalg.norm(e) <= TOL and not (low.any() or high.any()):
+        if np.linalg.norm(e) <= TOL and not (low.any() or high.any() or bent.any()):
             break
         task = np.linalg.pinv(J) @ e
         active = low | high
-        if active.any():
-            Jset = Minv[active]
-            eset = np.where(low, robot.rack_min - L, robot.rack_max - L)[active]
+        rows = list(Minv[active])
+        errs = list(np.where(low, robot.rack_min - L, robot.rack_max - L)[active])
+        for i in np.flatnonzero(bent):
+            row = np.zeros(3 * n)
+            row[3 * i:3 * i + 2] = b[i] / size[i]
+            rows.append(row)
+            errs.append(robot.bend_max - size[i])
+        if rows:
+            Jset, eset = np.array(rows), np.array(errs)
             Jset_pinv = np.linalg.pinv(Jset)
             rate = Jset_pinv @ eset + (np.eye(3 * n) - Jset_pinv @ Jset) @ task
         else:
             rate = task
         delta = delta + h * rate
-    L = np.clip(Minv @ (delta + offset), robot.rack_min, robot.rack_max)
-    return L.reshape(n, 3), steps
+    L = dk.limit_rack_lengths(robot, (Minv @ (delta + offset)).reshape(n, 3))
+    return L, steps
 
 
 def slsqp(robot, target) -> np.ndarray:
@@ -79,10 +95,15 @@ def slsqp(robot, target) -> np.ndarray:
         JL = (J.reshape(3, n, 3) @ M).reshape(3, 3 * n)
         return 0.5 * e @ e, -JL.T @ e
 
+    def slack(flat):  # >= 0: bending within the limit, per segment
+        b = flat.reshape(n, 3) @ M[:2].T
+        return robot.bend_max ** 2 - (b ** 2).sum(axis=1)
+
     res = minimize(f, np.full(3 * n, robot.rack_min), jac=True, method="SLSQP",
                    bounds=[(robot.rack_min, robot.rack_max)] * (3 * n),
+                   constraints=[{"type": "ineq", "fun": slack}],
                    options={"ftol": 1e-14, "maxiter": 500})
-    return np.clip(res.x, robot.rack_min, robot.rack_max).reshape(n, 3)
+    return dk.limit_rack_lengths(robot, res.x.reshape(n, 3))
 
 
 def run(name: str, targets: np.ndarray, solve: Callable[[int, np.ndarray], object], robot):
@@ -97,7 +118,9 @@ def run(name: str, targets: np.ndarray, solve: Callable[[int, np.ndarray], objec
             iters.append(out.iterations)
             seeded.append(out.starts > 1)
         assert np.all(lengths >= robot.rack_min) and np.all(lengths <= robot.rack_max), name
-        tip = dk.tip_position(robot, dk.delta_from_actuators(lengths, robot.phi, robot.L0))
+        delta = dk.delta_from_actuators(lengths, robot.phi, robot.L0)
+        assert np.all(dk.bend_angles(delta, robot.d) <= robot.theta_max), name
+        tip = dk.tip_position(robot, delta)
         errors.append(np.linalg.norm(target - tip))
     ms, errors = 1e3 * np.array(times), np.array(errors)
     ok = errors <= TOL
@@ -118,7 +141,12 @@ def main() -> None:
 
     robot = robots.load("extensible")
     rng = np.random.default_rng(args.seed)
-    lengths = rng.uniform(robot.rack_min, robot.rack_max, (args.targets, robot.n_segments, 3))
+    lengths = np.zeros((0, robot.n_segments, 3))
+    while len(lengths) < args.targets:  # rejection sampling within the bending limit
+        draw = rng.uniform(robot.rack_min, robot.rack_max, (20 * args.targets, robot.n_segments, 3))
+        theta = dk.bend_angles(dk.delta_from_actuators(draw, robot.phi, robot.L0), robot.d)
+        lengths = np.concatenate([lengths, draw[(theta <= robot.theta_max).all(axis=1)]])
+    lengths = lengths[:args.targets]
     deltas = dk.delta_from_actuators(lengths, robot.phi, robot.L0)
     targets = dk.tip_position(robot, deltas)
     near = np.clip(lengths + rng.uniform(-0.01, 0.01, lengths.shape), robot.rack_min, robot.rack_max)
@@ -128,7 +156,8 @@ def main() -> None:
     nb = min(args.baseline_targets, args.targets)
 
     print(f"extensible arm, {robot.n_segments} segments; reachable targets from random rack lengths "
-          f"in [{robot.rack_min}, {robot.rack_max}] m; success = error <= {TOL * 1e3:g} mm")
+          f"in [{robot.rack_min}, {robot.rack_max}] m with every bend <= "
+          f"{np.degrees(robot.theta_max):.0f} deg; success = error <= {TOL * 1e3:g} mm")
     print(f"{'method':<28} {'n':>5} {'median ms':>9} {'p90 ms':>8} {'max ms':>8} {'success':>10} "
           f"{'median err mm':>13} {'iters':>6} {'0 iters':>9} {'batch':>9}")
     run("solve_tip_ik cold", targets, lambda i, t: dk.solve_tip_ik(robot, t), robot)
@@ -138,7 +167,7 @@ def main() -> None:
         lambda i, t: dk.solve_tip_ik(robot, t, retracted), robot)
     run(f"eq.(5) Euler h={args.euler_step:g}", targets[:nb],
         lambda i, t: literal_eq5(robot, t, args.euler_step, args.euler_max_steps)[0], robot)
-    run("SLSQP (bounds in L)", targets[:nb], lambda i, t: slsqp(robot, t), robot)
+    run("SLSQP (L, bend constr.)", targets[:nb], lambda i, t: slsqp(robot, t), robot)
     run(f"(ours retracted, first {nb})", targets[:nb],
         lambda i, t: dk.solve_tip_ik(robot, t, retracted), robot)
 

@@ -3,13 +3,14 @@
 An :class:`ArmModel` knows the configuration ``q`` of one robot (planar: curvatures (N,);
 extensible: deltas (n, 3)), its jog coordinates with their slider ranges, how to validate a
 request (bad input raises ``ValueError`` with a clear message and moves nothing) and how to keep
-it inside the robot's limits (curvature bounds; rack lengths within [rack_min, rack_max]),
-reporting every clamp in words.
+it inside the robot's limits (curvature bounds; rack lengths within [rack_min, rack_max] and each
+segment's bend theta = |(dx, dy)| / d within theta_max), reporting every clamp in words.
 
 Rack feasibility of a Delta segment is linear: rack j has length
 ``L0 + dL - dx cos(beta_j) - dy sin(beta_j)`` (see ``core.kinematics.delta``), so moving one
-coordinate with the others fixed keeps the racks feasible on an interval, and scaling the
-bending (dx, dy) towards 0 at fixed dL reaches feasibility whenever dL itself is feasible.
+coordinate with the others fixed keeps the racks feasible on an interval; the bending limit
+|(dx, dy)| <= d theta_max is a disc, so it too leaves an interval for dx (or dy). Scaling the
+bending (dx, dy) towards 0 at fixed dL reaches both whenever dL itself is feasible.
 """
 
 from __future__ import annotations
@@ -132,7 +133,8 @@ class PlanarModel(ArmModel):
 
 
 class DeltaModel(ArmModel):
-    """Extensible arm: q = deltas (n, 3) = (dx, dy, dL) per segment, racks within limits."""
+    """Extensible arm: q = deltas (n, 3) = (dx, dy, dL) per segment, racks within limits and
+    every segment's bend within theta_max."""
 
     kind = "delta"
 
@@ -143,17 +145,20 @@ class DeltaModel(ArmModel):
         # d rack_j / d(dx, dy, dL), shape (3 coords, 3 racks).
         self.rack_gradient = np.stack([-np.cos(beta), -np.sin(beta), np.ones(3)])
         span = robot.rack_max - robot.rack_min
-        # Widest bending reachable at any extension, rounded down to the 1 mm slider step.
-        bound = [math.floor(span / float(np.ptp(g)) / 0.001 + 1e-6) * 0.001
+        self.bend_max = robot.rack_radius * robot.theta_max  # largest |(dx, dy)|
+        # Widest bending reachable at any extension (racks and bending limit), rounded down to
+        # the 1 mm slider step.
+        bound = [math.floor(min(span / float(np.ptp(g)), self.bend_max) / 0.001 + 1e-6) * 0.001
                  for g in self.rack_gradient[:2]]
+        limit = f"θ ≤ {math.degrees(robot.theta_max):.0f}°"
         coords = []
         for i in range(robot.n_segments):
             s = subscript(i + 1)
             coords += [
                 Coordinate(f"dx{i + 1}", f"Δx{s}", "m", (i, 0), -bound[0], bound[0], 0.001, i,
-                           f"Segment {i + 1}: bend toward +x (racks stay within limits)."),
+                           f"Segment {i + 1}: bend toward +x (racks within limits, {limit})."),
                 Coordinate(f"dy{i + 1}", f"Δy{s}", "m", (i, 1), -bound[1], bound[1], 0.001, i,
-                           f"Segment {i + 1}: bend toward +y (racks stay within limits)."),
+                           f"Segment {i + 1}: bend toward +y (racks within limits, {limit})."),
                 Coordinate(f"dL{i + 1}", f"δL{s}", "m", (i, 2), robot.rack_min - robot.L0,
                            robot.rack_max - robot.L0, 0.001, i,
                            f"Segment {i + 1}: extension; L = L0 + δL."),
@@ -171,7 +176,8 @@ class DeltaModel(ArmModel):
     def feasible_interval(self, q: Array, segment: int, axis: int) -> tuple[float, float]:
         """Interval of q[segment, axis] keeping that segment's racks within limits, others fixed.
 
-        Empty (lo > hi) only if the segment is already infeasible.
+        Empty (lo > hi) only if the segment is already infeasible. See :meth:`bend_interval`
+        for the bending limit.
         """
         r = self.robot
         racks = self.rack_lengths(q[segment])
@@ -185,14 +191,29 @@ class DeltaModel(ArmModel):
             lo, hi = max(lo, min(a, b)), min(hi, max(a, b))
         return lo, hi
 
+    def bend_interval(self, q: Array, segment: int, axis: int) -> tuple[float, float]:
+        """Interval of q[segment, axis] keeping that segment's bend within theta_max, the other
+        coordinates fixed (the whole line for dL)."""
+        if axis == 2:
+            return -math.inf, math.inf
+        other = float(q[segment, 1 - axis])
+        # A hair inside the disc, so rounding never leaves the bend above theta_max.
+        half = math.sqrt(max(self.bend_max ** 2 - other ** 2, 0.0)) * (1 - 1e-12)
+        return -half, half
+
     def set_coordinate(self, q: Array, coord: Coordinate, value: float) -> tuple[Array, str | None]:
         seg, axis = coord.index
         out, notes = self.clamp(q)  # the rest of q must be feasible for the interval to exist
         lo, hi = self.feasible_interval(out, seg, axis)
-        clamped = min(max(value, lo), hi)
+        blo, bhi = self.bend_interval(out, seg, axis)
+        clamped = min(max(value, max(lo, blo)), min(hi, bhi))
         out[seg, axis] = clamped
         if abs(clamped - value) <= 1e-9:
             return out, (notes[0] if notes else None)
+        if (bhi <= hi) if value > clamped else (blo >= lo):  # the bending limit binds
+            return out, (f"{coord.label} clamped to {clamped * 1e3:+.0f} mm: segment {seg + 1} "
+                         f"at its bending limit θ = {math.degrees(self.robot.theta_max):.0f}° "
+                         f"(|(Δx, Δy)| ≤ {self.bend_max * 1e3:.0f} mm)")
         racks = self.rack_lengths(out[seg])
         limits = (self.robot.rack_min, self.robot.rack_max)
         which, j = np.unravel_index(np.argmin(np.abs(racks[None] - np.array(limits)[:, None])),
@@ -217,10 +238,17 @@ class DeltaModel(ArmModel):
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             room = np.where(bend > _EPS, (r.rack_max - length[:, None]) / bend,
                             np.where(bend < -_EPS, (r.rack_min - length[:, None]) / bend, np.inf))
-        scale = np.clip(np.min(room, axis=1), 0.0, 1.0)
+            size = np.hypot(out[:, 0], out[:, 1])
+            bend_room = np.where(size > self.bend_max, self.bend_max * (1 - 1e-12) / size, np.inf)
+        rack_scale = np.clip(np.min(room, axis=1), 0.0, 1.0)
+        scale = np.minimum(rack_scale, bend_room)
         for i in np.flatnonzero(scale < 1.0 - 1e-12):
-            notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to keep racks within "
-                         f"[{r.rack_min * 1e3:.0f}, {r.rack_max * 1e3:.0f}] mm")
+            if bend_room[i] < rack_scale[i]:
+                notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to stay within "
+                             f"its bending limit θ = {math.degrees(r.theta_max):.0f}°")
+            else:
+                notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to keep racks "
+                             f"within [{r.rack_min * 1e3:.0f}, {r.rack_max * 1e3:.0f}] mm")
         out[:, :2] *= scale[:, None]
         return out, tuple(notes)
 

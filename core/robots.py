@@ -89,7 +89,13 @@ class SoftArm:
 
 @dataclasses.dataclass(frozen=True)
 class ExtensibleArm:
-    """Extensible tri-rack arm in the Delta-parametrisation (Hughes 2020)."""
+    """Extensible tri-rack arm in the Delta-parametrisation (Hughes 2020).
+
+    Limits: every rack length in [rack_min, rack_max]; every segment's bend
+    theta = |(dx, dy)| / d <= theta_max (rad); rack speeds <= rack_speed and motor speeds (the
+    motor travels m = U^-1 L, in metres of rack travel driven by the motor's pinion, so one
+    count is 1 / counts_per_metre m) <= motor_speed (m/s); tip speed <= tip_speed (m/s).
+    """
 
     name: str
     n_segments: int
@@ -98,9 +104,11 @@ class ExtensibleArm:
     L0: float
     rack_min: float
     rack_max: float
+    theta_max: float
     half_width: float
     tip_speed: float
     rack_speed: float
+    motor_speed: float
     n_motors: int
     counts_per_metre: float
     motor_mapping: str
@@ -113,6 +121,16 @@ class ExtensibleArm:
     def d(self) -> float:
         """Racks' radial distance from the backbone."""
         return self.rack_radius
+
+    @property
+    def bend_max(self) -> float:
+        """Largest bending magnitude |(dx, dy)| = d * theta_max of a segment (m)."""
+        return self.rack_radius * self.theta_max
+
+    @property
+    def motor_speed_counts(self) -> float:
+        """``motor_speed`` in encoder counts per second."""
+        return self.motor_speed * self.counts_per_metre
 
 
 Robot = Union[SoftArm, ExtensibleArm]
@@ -203,6 +221,19 @@ def _extensible(t: Mapping[str, Any], source: Path) -> ExtensibleArm:
     mapping = _get(t, "motors.mapping")
     if mapping != "block_upper_triangular":
         raise RobotFileError(f"motors.mapping: must be 'block_upper_triangular', got {mapping!r}")
+    counts_per_metre = _num(t, "motors.counts_per_metre", lo=0, strict_lo=True)
+    motor_speed = _num(t, "limits.motor_speed", lo=0, strict_lo=True)
+    emulator = t.get("emulator")
+    if isinstance(emulator, Mapping) and "motor_speed_counts" in emulator:
+        # The emulated motors must keep up with what the planner asks of the real ones.
+        emu = check_number(emulator["motor_speed_counts"], "emulator.motor_speed_counts",
+                           lo=0, strict_lo=True)
+        need = motor_speed * counts_per_metre
+        if emu < need:
+            raise RobotFileError(
+                f"emulator.motor_speed_counts: must be >= limits.motor_speed * "
+                f"motors.counts_per_metre ({need:g} counts/s) or the emulated motors lag every "
+                f"planned path, got {emu:g}")
     return ExtensibleArm(
         name=str(_get(t, "name")),
         n_segments=n_segments,
@@ -211,11 +242,13 @@ def _extensible(t: Mapping[str, Any], source: Path) -> ExtensibleArm:
         L0=_num(t, "segments.L0", lo=0),
         rack_min=rack_min,
         rack_max=rack_max,
+        theta_max=_num(t, "segments.theta_max", lo=0, hi=2 * math.pi, strict_lo=True),
         half_width=_num(t, "segments.half_width", lo=0, strict_lo=True),
         tip_speed=_num(t, "limits.tip_speed", lo=0, strict_lo=True),
         rack_speed=_num(t, "limits.rack_speed", lo=0, strict_lo=True),
+        motor_speed=motor_speed,
         n_motors=n_motors,
-        counts_per_metre=_num(t, "motors.counts_per_metre", lo=0, strict_lo=True),
+        counts_per_metre=counts_per_metre,
         motor_mapping=mapping,
         source=source,
         raw=t,

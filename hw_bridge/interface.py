@@ -319,7 +319,7 @@ class SerialHardware(HardwareInterface):
                else (self._clock() - link.last_state_time) * 1000)
         return LinkHealth(
             state=self.state.value, port=self.port, fault=self.fault,
-            armed=bool(st and st.status & p.Status.ARMED),
+            armed=self.state is LifecycleState.ACTIVE and bool(st and st.status & p.Status.ARMED),
             watchdog_tripped=bool(st and st.status & p.Status.WATCHDOG_TRIPPED),
             estop=bool(st and st.status & p.Status.ESTOP),
             rtt_ms_p50=pct["p50"], rtt_ms_p99=pct["p99"],

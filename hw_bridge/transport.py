@@ -8,6 +8,9 @@ returns whatever is waiting, or waits at most ``timeout`` for the first byte.
 from __future__ import annotations
 
 import dataclasses
+import os
+import select
+import time
 from typing import Protocol
 
 import serial
@@ -41,7 +44,8 @@ class Transport(Protocol):
 class SerialTransport:
     """A pyserial port opened exclusively where the platform supports it (POSIX flock).
 
-    ``read_chunk`` is ``read(in_waiting or 1)`` with a fixed ``read_timeout``.
+    ``read_chunk`` is ``read(in_waiting or 1)`` with a fixed ``read_timeout``; ``write`` times
+    out only when bytes are really stuck (see :meth:`write`).
     """
 
     def __init__(self, url: str, baud: int, read_timeout: float = 0.005,
@@ -57,6 +61,15 @@ class SerialTransport:
         except (serial.SerialException, OSError, ValueError) as exc:
             raise TransportError(f"cannot open {url!r}: {exc}") from None
         self.url = url
+        self.write_timeout = write_timeout
+        self._fd: int | None = None
+        fileno = getattr(self._ser, "fileno", None)
+        try:
+            self._fd = fileno() if fileno is not None else None
+        except (serial.SerialException, OSError, AttributeError, NotImplementedError):
+            self._fd = None  # URL handlers (loop://, socket://) have no descriptor to write to
+        if self._fd is not None:
+            os.set_blocking(self._fd, False)  # pyserial opens it O_NONBLOCK already
 
     def read_chunk(self) -> bytes:
         try:
@@ -65,10 +78,41 @@ class SerialTransport:
             raise TransportError(f"read from {self.url!r} failed: {exc}") from None
 
     def write(self, data: bytes) -> None:
+        """Write ``data``; fails only if bytes cannot leave within ``write_timeout``.
+
+        pyserial's ``write`` checks its deadline after every ``os.write``, also after one that
+        wrote the whole frame: a thread that waited longer than the timeout for the GIL (the
+        console process runs viser, the render thread and a loop) then gets "Write timeout"
+        for a frame that went out, and the link is dropped (measured: the extensible console
+        lost its link within seconds of GUI activity). Here the port's non-blocking descriptor
+        is written directly and ``select`` waits only while bytes remain.
+        """
+        if self._fd is None:  # URL handlers without a file descriptor: pyserial's own write
+            try:
+                self._ser.write(data)
+            except (serial.SerialException, serial.SerialTimeoutException, OSError) as exc:
+                raise TransportError(f"write to {self.url!r} failed: {exc}") from None
+            return
+        rest = memoryview(bytes(data))
+        deadline = time.monotonic() + self.write_timeout
         try:
-            self._ser.write(data)
-        except (serial.SerialException, serial.SerialTimeoutException, OSError) as exc:
+            while rest:
+                try:
+                    n = os.write(self._fd, rest)
+                except BlockingIOError:
+                    n = 0
+                rest = rest[n:]
+                if not rest:
+                    return
+                remaining = deadline - time.monotonic()
+                if remaining <= 0 or not select.select([], [self._fd], [], remaining)[1]:
+                    raise TransportError(f"write to {self.url!r} failed: {len(rest)} bytes "
+                                         f"stuck for {self.write_timeout * 1000:.0f} ms")
+        except TransportError:
+            raise
+        except (serial.SerialException, OSError) as exc:
             raise TransportError(f"write to {self.url!r} failed: {exc}") from None
+
 
     def reset_input(self) -> None:
         try:

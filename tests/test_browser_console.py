@@ -114,8 +114,22 @@ def _racks(robot, q: np.ndarray) -> np.ndarray:
 
 
 def _feasible(robot, q: np.ndarray) -> bool:
+    """Racks within their limits and every bend |(dx, dy)| / d within theta_max."""
     r = _racks(robot, q)
-    return bool(np.all(r >= robot.rack_min - 1e-12) and np.all(r <= robot.rack_max + 1e-12))
+    theta = np.hypot(q[:, 0], q[:, 1]) / robot.rack_radius
+    return bool(np.all(r >= robot.rack_min - 1e-12) and np.all(r <= robot.rack_max + 1e-12)
+                and np.all(theta <= robot.theta_max))
+
+
+def _boundary(robot, q: np.ndarray, index: tuple[int, int], good: float, bad: float) -> float:
+    """Bisection on the closed-form feasibility, independent of the app: the feasible value of
+    q[index] nearest ``bad``, going from ``good`` (feasible) towards ``bad`` (infeasible)."""
+    for _ in range(60):
+        mid = 0.5 * (good + bad)
+        trial = q.copy()
+        trial[index] = mid
+        good, bad = (mid, bad) if _feasible(robot, trial) else (good, mid)
+    return good
 
 
 def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
@@ -129,8 +143,8 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
     page.screenshot(path=str(artifacts_dir / "browser_extensible_default.png"))
     before = canvas_png(page)
 
-    q = np.array([[0.05, 0.0, 0.15], [0.0, -0.04, 0.10]])
-    for label, value in (("δL₁", 0.15), ("Δx₁", 0.05), ("δL₂", 0.10), ("Δy₂", -0.04)):
+    q = np.array([[0.04, 0.0, 0.15], [0.0, -0.04, 0.10]])
+    for label, value in (("δL₁", 0.15), ("Δx₁", 0.04), ("δL₂", 0.10), ("Δy₂", -0.04)):
         type_value(page, label, value)
     assert _feasible(robot, q)
     tip = dk.tip_position(robot, q)
@@ -143,20 +157,24 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
     assert canvas_png(page) != before, "3D view did not change after jogging"
     page.screenshot(path=str(artifacts_dir / "browser_extensible_jogged.png"))
 
-    # Ask for more bending than the racks allow: the console applies the largest feasible dx.
-    lo, hi = 0.05, 0.24
-    for _ in range(60):  # bisection on the closed-form feasibility, independent of the app
-        mid = 0.5 * (lo + hi)
-        trial = q.copy()
-        trial[0, 0] = mid
-        lo, hi = (mid, hi) if _feasible(robot, trial) else (lo, mid)
-    q[0, 0] = lo
+    # Ask for more bending than allowed: the console applies the largest feasible dx, here at
+    # the bending limit (theta_max; the racks would allow 210 mm).
+    q[0, 0] = _boundary(robot, q, (0, 0), 0.04, 0.24)
+    assert q[0, 0] < 0.05
     type_value(page, "Δx₁", 0.24)
     tip = dk.tip_position(robot, q)
     racks = _racks(robot, q)
     wait_for_readout(page, {"tip-0": tip[0] * 1e3, "tip-2": tip[2] * 1e3,
                             "rack-1-1": racks[0, 0] * 1e3})
-    assert float(slider(page, "Δx₁")[1].input_value()) == pytest.approx(lo, abs=1e-3)
+    assert float(slider(page, "Δx₁")[1].input_value()) == pytest.approx(q[0, 0], abs=1e-3)
+    assert page.get_by_text("bending limit").count() >= 1
+    # Retract segment 1 below what that bend needs: the racks stop it, flagged at their limit.
+    q[0, 2] = _boundary(robot, q, (0, 2), 0.15, 0.0)  # smallest feasible dL at that bend
+    type_value(page, "δL₁", 0.0)
+    tip = dk.tip_position(robot, q)
+    racks = _racks(robot, q)
+    wait_for_readout(page, {"tip-0": tip[0] * 1e3, "tip-2": tip[2] * 1e3,
+                            "rack-1-2": racks[0, 1] * 1e3})
     assert page.get_by_text("clamped").count() >= 1
-    assert page.locator('[data-testid="rack-1-1"]').get_attribute("data-near-limit") == "true"
+    assert page.locator('[data-testid="rack-1-2"]').get_attribute("data-near-limit") == "true"
     page.screenshot(path=str(artifacts_dir / "browser_extensible_clamped.png"))

@@ -5,14 +5,18 @@ within 1 mm of it, which the test checks against its own IK (``solve_tip_ik`` /
 ``tip_position``), the Δ jog boxes must hold a posture whose tip is there too, and an
 unreachable target must be reported with the distance the readout shows. The path test previews
 and executes a linear traverse on the in-process MockHardware and checks the tip ends at the
-path's end (``build_path``). Screenshots go to ``artifacts/``.
+path's end (``build_path``). The emulator test runs serve.py with its default hardware (the
+device emulator on a pty, through the real serial stack), where the arm view and the readout
+show what the encoders measure: a typed target must be reached by the measured tip, over time
+(no faster than the tip speed limit allows), after the operator connected and armed it in the
+Hardware panel. Screenshots go to ``artifacts/``.
 """
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
-import textwrap
 import time
 import urllib.error
 import urllib.request
@@ -140,3 +144,108 @@ def test_path_preview_and_execute_on_mock_hardware(
         dk.tip_position(ROBOT, jog_posture(page)) * 1e3 - end) <= 1.0)
     time.sleep(0.3)
     page.screenshot(path=str(artifacts_dir / "browser_extensible_path_done.png"))
+
+
+@pytest.fixture
+def emulator_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[str]:
+    """``serve.py --robot <extensible>`` with its default hardware (no ``--hardware``): the
+    device emulator on a pty. The robot file is the shipped one with 0.5 s link timeout and
+    watchdog (like tests/test_extensible_runner.py): the loop shares its process with the GUI
+    and this 2-core box with other jobs, so the shipped 40 / 50 ms would turn a CPU stall into
+    a (correct) link-loss stop; this test is about motion, not timing."""
+    text = (REPO / "data" / "robots" / "extensible.toml").read_text()
+    for key, value in (("watchdog_ms", 500), ("link_timeout_ms", 500)):
+        line = next(ln for ln in text.splitlines() if ln.startswith(f"{key} ="))
+        text = text.replace(line, f"{key} = {value}")
+    robot_file = tmp_path / "extensible.toml"
+    robot_file.write_text(text)
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    log = artifacts_dir / "serve-extensible-emulator.log"
+    with log.open("wb") as out:
+        proc = subprocess.Popen([sys.executable, str(REPO / "serve.py"), "--robot",
+                                 str(robot_file), "--host", "127.0.0.1", "--port", str(port),
+                                 "--data-dir", str(tmp_path / "runs")],
+                                cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+    url = f"http://127.0.0.1:{port}/"
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            if proc.poll() is not None:
+                pytest.fail(f"serve.py exited with {proc.returncode}:\n{log.read_text()}")
+            try:
+                with urllib.request.urlopen(url, timeout=1.0) as resp:
+                    if resp.status == 200:
+                        break
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
+                pass
+            if time.monotonic() > deadline:
+                pytest.fail(f"serve.py did not serve {url}:\n{log.read_text()}")
+            time.sleep(0.1)
+        yield url
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+    assert "device emulator on a pseudo-terminal" in log.read_text()  # the default hardware
+
+
+def link_text(page) -> str:
+    """The Hardware panel's link line (the runner's ``bridge_controls.health()``), if shown."""
+    link = page.get_by_text("Link:")
+    return link.first.locator("xpath=..").inner_text() if link.count() else "no link line"
+
+
+def emulator_log() -> str:
+    path = REPO / "artifacts" / "serve-extensible-emulator.log"
+    return path.read_text()[-600:] if path.exists() else ""
+
+
+def test_emulator_console_measured_tip_reaches_a_typed_target(
+        page, emulator_console: str, artifacts_dir: Path) -> None:
+    open_console(page, emulator_console)
+    # The operator connects and arms the emulator's pty through the Hardware panel (the
+    # runner's bridge_controls). serve.py armed the link at start already, but on a loaded box
+    # a CPU stall while it built the GUI can trip it before the page opens (nothing re-arms by
+    # itself); connecting again makes the test about the motion, and about those controls.
+    page.get_by_role("button", name="Connect", exact=True).click()
+    wait_until("the link configured", lambda: "inactive" in link_text(page), timeout=20,
+               show=lambda: link_text(page))
+    assert "/dev/pts/" in link_text(page)
+    page.get_by_role("button", name="Arm device", exact=True).click()
+    wait_until("the link armed", lambda: "ARMED" in link_text(page), timeout=20,
+               show=lambda: link_text(page))
+    start = np.array([0.0, 0.0, ROBOT.n_segments * ROBOT.L0 * 1e3])  # retracted, encoders at 0
+    wait_until("the measured tip at the retracted pose",
+               lambda: np.abs(readout_tip(page) - start).max() <= 0.5, timeout=20)
+    target = np.array([80.0, 40.0, 300.0])  # mm
+    ik = dk.solve_tip_ik(ROBOT, target / 1e3)
+    assert ik.reachable
+    t0 = time.monotonic()
+    type_target(page, target)
+    samples: list[np.ndarray] = []
+
+    def arrived() -> bool:
+        samples.append(readout_tip(page))
+        return bool(np.abs(samples[-1] - target).max() <= 1.0)
+
+    status = page.locator('[data-testid="target-status"]')
+    wait_until("the measured tip at the target", arrived, timeout=60,
+               show=lambda: f"(readout {samples[-1] if samples else None}; target panel: "
+                            f"{status.inner_text()!r}; {link_text(page)}; log: {emulator_log()})")
+    elapsed = time.monotonic() - t0
+    # Encoder-driven: the motors take time. The measured tip cannot cover the distance faster
+    # than the tip speed limit, and the readout showed it on the way (not a jump to the target).
+    distance = float(np.linalg.norm(target - start)) / 1e3
+    assert elapsed >= 0.9 * distance / ROBOT.tip_speed, elapsed
+    on_the_way = [p for p in samples if np.linalg.norm(p - start) > 20.0
+                  and np.linalg.norm(p - target) > 20.0]
+    assert on_the_way, "the readout never showed the arm between start and target"
+    assert status.get_attribute("data-state") == "reachable"
+    time.sleep(0.5)  # settled: the encoders hold there
+    assert np.abs(readout_tip(page) - target).max() <= 1.0
+    page.screenshot(path=str(artifacts_dir / "browser_extensible_emulator_target.png"))

@@ -22,13 +22,25 @@ def racks(q: np.ndarray) -> np.ndarray:
 
 
 def feasible(q: np.ndarray, tol: float = 1e-9) -> bool:
+    """Racks within their limits and every bend |(dx, dy)| / d within theta_max."""
     r = racks(q)
-    return bool(np.all(r >= EXT.rack_min - tol) and np.all(r <= EXT.rack_max + tol))
+    bend = np.hypot(q[:, 0], q[:, 1]) - EXT.rack_radius * EXT.theta_max
+    return bool(np.all(r >= EXT.rack_min - tol) and np.all(r <= EXT.rack_max + tol)
+                and np.all(bend <= tol))
+
+
+def within_bend_limit(q: np.ndarray) -> np.ndarray:
+    """q with each segment's (dx, dy) scaled into the bending disc (racks stay feasible: the
+    scaling moves them towards their in-range mean)."""
+    size = np.hypot(q[:, 0], q[:, 1])
+    limit = EXT.rack_radius * EXT.theta_max * (1 - 1e-9)
+    q[:, :2] *= np.minimum(1.0, limit / np.maximum(size, 1e-300))[:, None]
+    return q
 
 
 rack_lengths = st.floats(EXT.rack_min, EXT.rack_max)
 feasible_q = st.lists(rack_lengths, min_size=6, max_size=6).map(
-    lambda ls: dk.delta_from_actuators(np.reshape(ls, (2, 3)), EXT.phi, EXT.L0))
+    lambda ls: within_bend_limit(dk.delta_from_actuators(np.reshape(ls, (2, 3)), EXT.phi, EXT.L0)))
 
 
 @settings(max_examples=200, deadline=None)

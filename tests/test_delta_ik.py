@@ -1,5 +1,5 @@
-"""Tip IK of the extensible arm (eq. 4-6): against forward kinematics, the rack limits, closed-form
-distances to unreachable targets and an independent bounded optimiser."""
+"""Tip IK of the extensible arm (eq. 4-6): against forward kinematics, the rack and bending limits,
+closed-form distances to unreachable targets and an independent constrained optimiser."""
 
 import dataclasses
 import math
@@ -17,11 +17,24 @@ from core.kinematics.delta_ik import IKSettings, TipIKResult
 ARM = robots.load("extensible")
 LO, HI = ARM.rack_min, ARM.rack_max
 TOL = 1e-3
+FREE = dataclasses.replace(ARM, theta_max=2 * math.pi)  # racks only (up to a full turn)
+
+
+def bends(delta):
+    """theta = |(dx, dy)| / d per segment, computed here."""
+    delta = np.asarray(delta)
+    return np.sqrt(delta[..., 0] ** 2 + delta[..., 1] ** 2) / ARM.rack_radius
 
 
 def random_reachable(rng, count):
-    """Targets reachable by construction: tips of random rack lengths within the limits."""
-    lengths = rng.uniform(LO, HI, (count, ARM.n_segments, 3))
+    """Targets reachable by construction: tips of random rack lengths within the rack limits
+    whose bends are within theta_max (rejection sampling)."""
+    out = np.zeros((0, ARM.n_segments, 3))
+    while len(out) < count:
+        lengths = rng.uniform(LO, HI, (20 * count, ARM.n_segments, 3))
+        ok = (bends(dk.delta_from_actuators(lengths, ARM.phi, ARM.L0)) <= ARM.theta_max).all(1)
+        out = np.concatenate([out, lengths[ok]])
+    lengths = out[:count]
     deltas = dk.delta_from_actuators(lengths, ARM.phi, ARM.L0)
     return lengths, dk.tip_position(ARM, deltas)
 
@@ -31,6 +44,7 @@ def assert_consistent(res, target):
     assert isinstance(res, TipIKResult)
     assert res.delta.shape == (ARM.n_segments, 3) and res.lengths.shape == (ARM.n_segments, 3)
     assert np.all(res.lengths >= LO) and np.all(res.lengths <= HI)
+    assert np.all(bends(res.delta) <= ARM.theta_max)
     np.testing.assert_allclose(dk.robot_rack_lengths(ARM, res.delta), res.lengths, atol=1e-12)
     tip = dk.tip_position(ARM, res.delta)
     np.testing.assert_allclose(res.tip, tip, atol=1e-15)
@@ -75,7 +89,8 @@ def test_warm_start_near_the_solution_converges_alone():
 
 
 def test_exact_target_returns_its_configuration_without_iterating():
-    delta = dk.delta_from_actuators([[0.2, 0.25, 0.3], [0.1, 0.3, 0.2]], ARM.phi, ARM.L0)
+    delta = dk.delta_from_actuators([[0.2, 0.25, 0.23], [0.2, 0.25, 0.22]], ARM.phi, ARM.L0)
+    assert np.all(bends(delta) <= ARM.theta_max)
     target = dk.tip_position(ARM, delta)
     res = dk.solve_tip_ik(ARM, target, delta)
     assert res.iterations == 0 and res.error < 1e-12
@@ -110,8 +125,11 @@ def test_target_above_the_fully_extended_arm(z, bent_start):
 
 
 def bounded_best(target, starts=8, seed=0):
-    """Independent check: L-BFGS-B over the rack box from random starts, best distance."""
+    """Independent check: SLSQP over the rack box with the bending limit written as
+    dx^2 + dy^2 <= (d theta_max)^2 per segment (Delta from eq. 2), from random feasible starts
+    (not from the solver's answer); the best feasible distance."""
     M = dk.rack_matrix(ARM.phi)
+    bend_max = ARM.rack_radius * ARM.theta_max
 
     def f(flat):
         p, J = dk.chain_tip_and_jacobian(dk.delta_from_actuators(flat.reshape(2, 3), ARM.phi, ARM.L0),
@@ -119,13 +137,28 @@ def bounded_best(target, starts=8, seed=0):
         e = target - p
         return 0.5 * e @ e, -(J.reshape(3, 2, 3) @ M).reshape(3, 6).T @ e
 
+    def slack(flat):
+        b = flat.reshape(2, 3) @ M[:2].T
+        return bend_max ** 2 - (b ** 2).sum(axis=1)
+
     rng = np.random.default_rng(seed)
-    return min(math.sqrt(2 * minimize(f, rng.uniform(LO, HI, 6), jac=True, method="L-BFGS-B",
-                                      bounds=[(LO, HI)] * 6).fun) for _ in range(starts))
+    best = math.inf
+    while starts:
+        x0 = rng.uniform(LO, HI, 6)
+        if np.any(slack(x0) < 0):
+            continue
+        starts -= 1
+        res = minimize(f, x0, jac=True, method="SLSQP", bounds=[(LO, HI)] * 6,
+                       constraints=[{"type": "ineq", "fun": slack}],
+                       options={"maxiter": 300, "ftol": 1e-14})
+        x = np.clip(res.x, LO, HI)
+        if np.all(slack(x) >= -1e-9):
+            best = min(best, math.sqrt(2 * f(x)[0]))
+    return best
 
 
 @pytest.mark.parametrize("target", [(1.0, 1.0, 1.0), (0.0, 0.0, -1.0), (0.6, 0.0, 0.6),
-                                    (0.3, 0.2, -0.5)])
+                                    (0.3, 0.2, -0.5), (0.0, 0.0, -0.15), (-0.069, 0.0, -0.108)])
 def test_unreachable_error_matches_independent_bounded_optimiser(target):
     target = np.array(target)
     res = dk.solve_tip_ik(ARM, target)
@@ -134,15 +167,41 @@ def test_unreachable_error_matches_independent_bounded_optimiser(target):
     assert res.error <= bounded_best(target) + TOL
 
 
+def test_random_targets_never_bend_beyond_theta_max():
+    # Tips of random rack lengths over the whole box: most need more bending than theta_max.
+    rng = np.random.default_rng(21)
+    lengths = rng.uniform(LO, HI, (40, ARM.n_segments, 3))
+    targets = dk.tip_position(ARM, dk.delta_from_actuators(lengths, ARM.phi, ARM.L0))
+    over = 0
+    for target in targets:
+        res = dk.solve_tip_ik(ARM, target)
+        assert_consistent(res, target)  # racks in the box, every bend <= theta_max
+        over += not res.reachable
+    assert over > 0  # the limit mattered for some of them
+
+
+@pytest.mark.parametrize("target", [(0.0, 0.0, -0.15), (-0.069, 0.0, -0.108), (0.2, 0.0, -0.2)])
+def test_target_only_reachable_by_bending_beyond_the_limit(target):
+    target = np.array(target)
+    free = dk.solve_tip_ik(FREE, target)  # the racks alone reach it ...
+    assert free.reachable and bends(free.delta).max() > ARM.theta_max
+    res = dk.solve_tip_ik(ARM, target)  # ... but only by bending more than theta_max
+    assert_consistent(res, target)
+    assert not res.reachable and res.error > 0.05
+    # The closest feasible configuration: nothing feasible gets nearer (independent optimiser),
+    # and the answer bends as far as allowed towards the target.
+    assert res.error <= bounded_best(target) + TOL
+    assert bends(res.delta).max() == pytest.approx(ARM.theta_max, rel=1e-6)
+
+
 def test_restarts_escape_the_local_minimum_of_a_poor_warm_start():
-    # The straight, retracted arm is a poor start for a target curled below the base: alone it
-    # stalls at a local minimum (still feasible); the seeded restarts reach the target.
+    # Racks only (theta up to a full turn): the straight, retracted arm is a poor start for a
+    # target curled below the base: alone it stalls at a local minimum (still feasible); the
+    # seeded restarts reach the target. (Within theta_max = pi/2 that target is out of reach.)
     target = np.array([-0.069, 0.0, -0.108])
-    alone = dk.solve_tip_ik(ARM, target, np.zeros((2, 3)), restarts=False)
-    assert_consistent(alone, target)
+    alone = dk.solve_tip_ik(FREE, target, np.zeros((2, 3)), restarts=False)
     assert alone.starts == 1 and not alone.reachable
-    seeded = dk.solve_tip_ik(ARM, target, np.zeros((2, 3)))
-    assert_consistent(seeded, target)
+    seeded = dk.solve_tip_ik(FREE, target, np.zeros((2, 3)))
     assert seeded.reachable and seeded.starts > 1
 
 
@@ -180,6 +239,7 @@ def test_settings_read_from_robot_file():
                                        ({"max_iterations": 0}, "ik.max_iterations"),
                                        ({"max_iterations": 2.5}, "ik.max_iterations"),
                                        ({"goal_tolerance": 0.01}, "ik.goal_tolerance"),
+                                       ({"polish_iterations": -1}, "ik.polish_iterations"),
                                        ({"bogus": 1}, "unknown")])
 def test_bad_settings_in_robot_file_raise(ik, match):
     robot = dataclasses.replace(ARM, raw={**ARM.raw, "ik": ik})

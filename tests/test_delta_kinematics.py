@@ -218,3 +218,44 @@ def test_motor_map_is_block_upper_triangular_and_round_trips():
     m = dk.motors_from_lengths(L)
     np.testing.assert_allclose(m.reshape(7, -1), np.linalg.solve(U, L.reshape(7, -1).T).T, atol=1e-15)
     np.testing.assert_allclose(dk.lengths_from_motors(m), L, atol=1e-15)
+
+
+# --- limits: rack box and bending disc ----------------------------------------------------------
+
+def _in_limits(L, tol=1e-12):
+    delta = dk.delta_from_actuators(L, ARM.phi, ARM.L0)
+    theta = np.hypot(delta[..., 0], delta[..., 1]) / ARM.d
+    return (np.all(L >= ARM.rack_min - tol, axis=(-2, -1)) & np.all(L <= ARM.rack_max + tol, axis=(-2, -1))
+            & np.all(theta <= ARM.theta_max, axis=-1))
+
+
+def test_bend_angles_is_the_bend_per_segment():
+    delta = np.array([[0.03, 0.04, 0.1], [0.0, -0.015, 0.0]])
+    np.testing.assert_allclose(dk.bend_angles(delta, D), [0.05 / D, 0.015 / D])
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.floats(-0.2, 0.7), min_size=6, max_size=6).map(lambda v: np.reshape(v, (2, 3))))
+def test_limit_rack_lengths_lands_in_the_limits_and_keeps_feasible_lengths(L):
+    out = dk.limit_rack_lengths(ARM, L)
+    assert _in_limits(out)
+    clipped = np.clip(L, ARM.rack_min, ARM.rack_max)
+    d_in = dk.delta_from_actuators(clipped, ARM.phi, ARM.L0)
+    d_out = dk.delta_from_actuators(out, ARM.phi, ARM.L0)
+    # Extension kept, bending scaled (same direction, never larger) after clipping to the box.
+    np.testing.assert_allclose(d_out[:, 2], d_in[:, 2], atol=1e-12)
+    for i in range(2):
+        assert d_out[i, 0] * d_in[i, 1] - d_out[i, 1] * d_in[i, 0] == pytest.approx(0, abs=1e-12)
+        assert np.hypot(*d_out[i, :2]) <= np.hypot(*d_in[i, :2]) + 1e-15
+    if _in_limits(L, tol=0.0):
+        np.testing.assert_array_equal(out, L)
+
+
+def test_feasible_set_is_convex_along_random_chords():
+    # Straight lines between feasible rack lengths stay feasible (plan_path and joint_move rely
+    # on it): a box intersected with one elliptic cylinder per segment.
+    rng = np.random.default_rng(8)
+    a = dk.limit_rack_lengths(ARM, rng.uniform(0.05, 0.41, (500, 2, 3)))
+    b = dk.limit_rack_lengths(ARM, rng.uniform(0.05, 0.41, (500, 2, 3)))
+    s = rng.uniform(0, 1, (500, 1, 1))
+    assert np.all(_in_limits(a + s * (b - a), tol=1e-12))

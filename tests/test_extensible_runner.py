@@ -3,118 +3,28 @@
 Expectations are computed here, independently of the runner: measured tips come straight from
 the hardware's encoder counts (+ the retracted pose's counts, L = U m, eq. 2, forward
 kinematics), path ends from ``build_path``, speeds from finite differences of the samples.
-Links use 0.5 s timeouts (test_hw_emulator.py uses 0.2 s; this 2-core box, shared with other
-jobs, stalls processes for up to ~0.3 s) so these tests are about motion, not timing.
+The rig (robot, tolerant links, emulator, started runners) is in ``extensible_rig.py``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
-import subprocess
-import sys
-import threading
 import time
-from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pytest
 
 from console.panels.repeatability import run_repeatability
 from core.kinematics import delta as dk
-from core.planning.paths import build_path, plan_path
-from core.robots import load
-from hw_bridge.config import BridgeConfig
-from hw_bridge.extensible_runner import ExtensibleRunner, home_counts, joint_move, measure
-from hw_bridge.interface import LifecycleState, SerialHardware
-from hw_bridge.mock import MockHardware
-from hw_bridge.transport import SerialTransport
 
-ROOT = Path(__file__).resolve().parent.parent
-ROBOT = load("extensible")
-N = ROBOT.n_segments
-Q0 = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.03]])  # a little extended: short approach
-TIP_TOL = 0.003  # m: "within a few mm"
+pytest.register_assert_rewrite("extensible_rig")  # before its import: it holds fixtures
+from extensible_rig import (N, Q0, ROBOT, TIP_TOL, Emulator,  # noqa: E402
+                            serial_to, short_path, tip_from_counts)
+from hw_bridge.extensible_runner import ExtensibleRunner, home_counts, joint_move, measure  # noqa: E402
+from hw_bridge.interface import LifecycleState  # noqa: E402
+from hw_bridge.mock import MockHardware  # noqa: E402
 
-
-def tolerant() -> BridgeConfig:
-    return dataclasses.replace(BridgeConfig.from_robot(ROBOT), link_timeout_s=0.5, watchdog_s=0.5)
-
-
-def serial_to(port: str) -> SerialHardware:
-    """SerialHardware on the emulator's pty, tolerant like :func:`tolerant` (0.5 s writes too)."""
-    return SerialHardware(tolerant(), port,
-                          transport_factory=lambda url, baud: SerialTransport(url, baud,
-                                                                              write_timeout=0.5))
-
-
-def tip_from_counts(counts: np.ndarray) -> np.ndarray:
-    """Independent: encoders (0 = retracted) -> absolute motor travel -> L = U m -> Delta -> tip."""
-    retracted = np.full((N, 3), ROBOT.L0)
-    m = np.asarray(counts, float).reshape(N, 3) / ROBOT.counts_per_metre
-    m += np.vstack([retracted[:-1] - retracted[1:], retracted[-1:]])  # U^-1 L at retracted
-    lengths = np.flip(np.cumsum(np.flip(m, 0), 0), 0)
-    return dk.tip_position(ROBOT, dk.delta_from_actuators(lengths, ROBOT.phi, ROBOT.L0))
-
-
-@functools.lru_cache(maxsize=None)
-def short_path(kind: str = "linear", size: float = 0.03, speed: float = 0.1):
-    """(MotionPath, waypoints). Plan before starting a runner: planning is seconds of CPU-bound
-    Python, which in the loop's process starves it of the GIL (link timeouts, watchdog trips)
-    -- the reason the console plans in a worker process."""
-    centre = dk.tip_position(ROBOT, Q0)
-    return plan_path(ROBOT, build_path(kind, centre, size, "xy"), speed=speed, start_delta=Q0), \
-        build_path(kind, centre, size, "xy")
-
-
-@pytest.fixture
-def mock() -> Iterator[MockHardware]:
-    hw = MockHardware(ROBOT)
-    hw.config = tolerant()
-    yield hw
-    hw.shutdown()
-
-
-@pytest.fixture
-def runner_on(request: pytest.FixtureRequest) -> Iterator:
-    """Factory ``runner_on(hw)``: a started runner; closed at teardown."""
-    made: list[ExtensibleRunner] = []
-
-    def make(hw, **kw) -> ExtensibleRunner:
-        r = ExtensibleRunner(ROBOT, lambda: hw, **kw).start()
-        made.append(r)
-        deadline = time.monotonic() + 3.0
-        while r.snapshot.state not in ("holding", "fault") and time.monotonic() < deadline:
-            time.sleep(0.02)
-        assert r.snapshot.state == "holding", r.snapshot
-        return r
-
-    yield make
-    for r in made:
-        r.close()
-
-
-class Emulator:
-    """``python -m hw_bridge.emulator --robot extensible``; its JSON events kept in ``events``."""
-
-    def __init__(self) -> None:
-        self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", "--robot",
-                                      "extensible"], cwd=ROOT, stdout=subprocess.PIPE, text=True)
-        assert self.proc.stdout is not None
-        self.port = self.proc.stdout.readline().strip()
-        assert self.port.startswith("/dev/"), self.port
-        self.events: list[str] = []
-        threading.Thread(target=lambda: self.events.extend(self.proc.stdout), daemon=True).start()
-
-
-@pytest.fixture
-def emulator() -> Iterator[Emulator]:
-    emu = Emulator()
-    yield emu
-    if emu.proc.poll() is None:
-        emu.proc.terminate()
-    emu.proc.wait(timeout=5)
+pytest_plugins = ["extensible_rig"]  # its fixtures: mock, runner_on, emulator
 
 
 # -- pure parts -----------------------------------------------------------------------------
@@ -146,11 +56,42 @@ def test_joint_move_stays_in_limits_and_under_every_speed_limit() -> None:
     tips = dk.tip_position(ROBOT, dk.delta_from_actuators(mp.lengths, ROBOT.phi, ROBOT.L0))
     tip = np.linalg.norm(np.diff(tips, axis=0), axis=1) / dt
     assert rack.max() <= ROBOT.rack_speed * 1.001
-    assert motor.max() <= ROBOT.rack_speed * 1.001
+    assert motor.max() <= ROBOT.motor_speed * 1.001
     assert tip.max() <= ROBOT.tip_speed * 1.01
     # ... and as fast as one of them allows (not needlessly slow).
-    assert max(rack.max(), motor.max()) >= 0.9 * ROBOT.rack_speed \
+    assert rack.max() >= 0.9 * ROBOT.rack_speed or motor.max() >= 0.9 * ROBOT.motor_speed \
         or tip.max() >= 0.9 * ROBOT.tip_speed
+
+
+def test_joint_move_with_racks_in_opposite_directions_is_paced_by_the_motors() -> None:
+    # Straight arm: segment 1's racks 0.10 -> 0.30 m, segment 2's 0.30 -> 0.10 m. The tip stays
+    # put, the racks travel 0.2 m, motor 1 (m1 = L1 - L2) 0.4 m. Closed form: 0.4 m at the
+    # planned motor speed (margin, one count per sample in reserve), rounded up to a sample.
+    a = np.array([[0.10] * 3, [0.30] * 3])
+    b = a[::-1].copy()
+    mp = joint_move(ROBOT, a, b)
+    v = min(0.98 * ROBOT.motor_speed, ROBOT.motor_speed - 100.0 / ROBOT.counts_per_metre)
+    assert mp.duration == pytest.approx(np.ceil(0.4 / v * 100 - 1e-9) / 100, abs=1e-9)
+    steps = np.abs(np.diff(mp.motor_counts, axis=0)).max(axis=1) / np.diff(mp.times)
+    assert steps.max() <= ROBOT.motor_speed * ROBOT.counts_per_metre  # integer demands, counts/s
+    np.testing.assert_allclose(mp.tips, np.tile([0, 0, 0.4], (len(mp.times), 1)), atol=1e-12)
+
+
+def test_joint_move_goal_bent_beyond_the_limit_is_brought_within_it() -> None:
+    a = dk.robot_rack_lengths(ROBOT, np.zeros((N, 3)))
+    bent = dk.robot_rack_lengths(ROBOT, np.array([[0.09, 0.0, 0.25], [0.0, 0.0, 0.1]]))  # 3 rad
+    mp = joint_move(ROBOT, a, bent)
+    theta = np.hypot(mp.deltas[..., 0], mp.deltas[..., 1]) / ROBOT.rack_radius
+    assert theta.max() <= ROBOT.theta_max
+    np.testing.assert_allclose(mp.deltas[-1], [[ROBOT.rack_radius * ROBOT.theta_max, 0, 0.25],
+                                               [0, 0, 0.1]], atol=1e-9)
+
+
+def test_public_names_stay_importable_from_the_runner_module() -> None:
+    import hw_bridge.extensible_runner as er
+    for name in ("ExtensibleRunner", "StoreLink", "PoseLink", "RunnerSnapshot", "JobResult",
+                 "JobTrace", "home_counts", "measure", "joint_move", "mock_factory"):
+        assert hasattr(er, name), name
 
 
 def test_bad_jobs_raise_and_queue_nothing(mock: MockHardware) -> None:

@@ -1,5 +1,5 @@
-"""Motion paths (Fig. 9) for the extensible arm: geometry of the builders, continuity, the tip and
-rack speed limits, rack limits and the motor demand round trip."""
+"""Motion paths (Fig. 9) for the extensible arm: geometry of the builders, continuity, the tip,
+rack and motor speed limits, rack and bending limits and the motor demand round trip."""
 
 import dataclasses
 import math
@@ -26,6 +26,8 @@ def check_motion(robot, mp, ps, speed):
     assert mp.motor_counts.shape == (K, 3 * n) and mp.motor_counts.dtype == np.int64
     # Rack limits, and deltas / tips / errors consistent with the lengths.
     assert np.all(mp.lengths >= robot.rack_min) and np.all(mp.lengths <= robot.rack_max)
+    theta = np.hypot(mp.deltas[..., 0], mp.deltas[..., 1]) / robot.rack_radius
+    assert np.all(theta <= robot.theta_max)
     np.testing.assert_allclose(dk.robot_rack_lengths(robot, mp.deltas), mp.lengths, atol=1e-12)
     np.testing.assert_allclose(dk.tip_position(robot, mp.deltas), mp.tips, atol=1e-14)
     np.testing.assert_allclose(np.linalg.norm(mp.targets - mp.tips, axis=1), mp.errors, atol=1e-14)
@@ -42,6 +44,10 @@ def check_motion(robot, mp, ps, speed):
     bound = np.abs(M).sum(axis=1).max() * robot.rack_speed / ps.rate_hz
     assert np.abs(np.diff(mp.deltas, axis=0)).max() <= bound * (1 + 1e-9)
     assert mp.max_delta_step() <= bound * (1 + 1e-9)
+    # Motor speed: finite differences of the integer demands themselves, in counts/s.
+    counts_per_s = np.abs(np.diff(mp.motor_counts, axis=0)).max(axis=1) / dt
+    assert counts_per_s.max() <= robot.motor_speed * robot.counts_per_metre * (1 + 1e-9)
+    assert mp.max_motor_speed() <= robot.motor_speed * (1 + 1e-9)
     # Motor demands: counts of U^-1 L, round trip within rounding (n half-counts at most).
     np.testing.assert_allclose(dk.lengths_from_motor_counts(robot, mp.motor_counts), mp.lengths,
                                atol=n * 0.5 / robot.counts_per_metre + 1e-12)
@@ -149,14 +155,60 @@ def test_unreachable_stretch_is_reported_and_still_within_limits():
 
 
 def test_branch_switch_is_counted_and_crossed_within_the_limits():
-    # Following the branch down to a target curled below the base runs into rack limits; the
-    # restarts switch branch. The racks cross over at their speed limit (the tip leaves the
-    # path, which the errors show), still with no jump between samples.
-    w = paths.polyline([[-0.1, 0.0, 0.1], [0.0, 0.0, -0.2]])
+    # A low traverse from -x to +x: the branch bent towards -x runs into the rack and bending
+    # limits; the restarts switch to the branch bent towards +x. The racks cross over at their
+    # speed limit (the tip leaves the path, which the errors show), still with no jump between
+    # samples.
+    w = paths.polyline([[-0.2, 0.0, 0.1], [0.2, 0.0, 0.1]])
     mp = paths.plan_path(ARM, w, settings=COARSE)
     check_motion(ARM, mp, COARSE, ARM.tip_speed)
     assert mp.jumps >= 1
     assert mp.errors[-1] <= 1e-3
+
+
+def test_motor_limit_slows_racks_moving_in_opposite_directions():
+    # Straight arm; segment 1's racks extend from 0.10 to 0.30 m while segment 2's retract from
+    # 0.30 to 0.10 m: the tip stays at z = 0.40 m and every rack travels 0.2 m, but motor 1
+    # (m1 = L1 - L2) travels 0.4 m. Closed form: the duration is 0.4 m at the planned motor speed
+    # min(margin * motor_speed, motor_speed - one count per sample), rounded up to a sample;
+    # rack limit alone: 0.2 m / (margin * rack_speed), about half of that.
+    ps = paths.PathSettings.from_robot(ARM)
+    L = np.array([[[0.10] * 3, [0.30] * 3], [[0.30] * 3, [0.10] * 3]])
+    targets = np.array([[0.0, 0.0, 0.4], [0.0, 0.0, 0.4]])
+    mp = paths.timed_path(ARM, targets, L, settings=ps)
+    check_motion(ARM, mp, ps, ARM.tip_speed)
+    v_motor = min(ps.limit_margin * ARM.motor_speed,
+                  ARM.motor_speed - ps.rate_hz / ARM.counts_per_metre)
+    expected = math.ceil(0.4 / v_motor * ps.rate_hz - 1e-9) / ps.rate_hz
+    assert mp.duration == pytest.approx(expected, abs=1e-9)
+    assert mp.duration > 1.9 * 0.2 / (ps.limit_margin * ARM.rack_speed)
+    np.testing.assert_allclose(mp.lengths[[0, -1]], L, atol=1e-12)
+    np.testing.assert_allclose(mp.tips, np.tile([0.0, 0.0, 0.4], (len(mp.times), 1)), atol=1e-12)
+    # The same rack travel with both segments extending: motor 1 stays put, motor 2 (m2 = L2)
+    # travels 0.2 m, so it takes half as long (the tip, 0.4 m at the tip speed, is not slower).
+    same = paths.timed_path(ARM, [[0, 0, 0.2], [0, 0, 0.6]],
+                            np.array([[[0.10] * 3] * 2, [[0.30] * 3] * 2]), settings=ps)
+    check_motion(ARM, same, ps, ARM.tip_speed)
+    assert same.duration == pytest.approx(
+        math.ceil(0.2 / v_motor * ps.rate_hz - 1e-9) / ps.rate_hz, abs=1e-9)
+
+
+def test_timed_path_refuses_lengths_outside_the_limits():
+    bent = dk.robot_rack_lengths(ARM, np.array([[0.06, 0.0, 0.2], [0.0, 0.0, 0.2]]))
+    with pytest.raises(ValueError, match="theta_max"):  # 2 rad > theta_max, racks in the box
+        paths.timed_path(ARM, [[0, 0, 0.4]], bent[None])
+    with pytest.raises(ValueError, match="must match"):
+        paths.timed_path(ARM, [[0, 0, 0.4]], np.full((2, 2, 3), 0.2))
+
+
+def test_start_posture_bent_beyond_the_limit_is_brought_within_it():
+    start = np.array([[0.09, 0.0, 0.25], [0.0, 0.0, 0.1]])  # 3 rad: racks fine, too bent
+    w = paths.linear_traverse([0.1, 0.0, 0.3], 0.04, "xy")
+    mp = paths.plan_path(ARM, w, start_delta=start, settings=COARSE)
+    check_motion(ARM, mp, COARSE, ARM.tip_speed)
+    # Bending scaled back to theta_max along the same direction, extension kept.
+    np.testing.assert_allclose(mp.deltas[0], [[ARM.rack_radius * ARM.theta_max, 0.0, 0.25],
+                                              [0.0, 0.0, 0.1]], atol=1e-9)
 
 
 point = st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15), st.floats(0.3, 0.5))

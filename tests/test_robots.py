@@ -65,3 +65,30 @@ def test_not_toml_is_reported(tmp_path):
     p.write_text("this is = = not toml")
     with pytest.raises(robots.RobotFileError, match="not valid TOML"):
         robots.load(p)
+
+
+def test_extensible_bending_and_motor_limits():
+    arm = robots.load("extensible")
+    assert arm.theta_max == pytest.approx(math.pi / 2)
+    assert arm.bend_max == pytest.approx(arm.d * math.pi / 2)
+    assert arm.motor_speed == pytest.approx(0.05)
+    assert arm.motor_speed_counts == pytest.approx(0.05 * arm.counts_per_metre)
+    # The emulated motors are a bit faster than the planner's motor limit.
+    emu = arm.raw["emulator"]["motor_speed_counts"]
+    assert arm.motor_speed_counts < emu <= 1.5 * arm.motor_speed_counts
+
+
+@pytest.mark.parametrize("old,new,field", [
+    ("theta_max = 1.5707963267948966", "theta_max = 0", "segments.theta_max"),
+    ("theta_max = 1.5707963267948966", "theta_max = 7.0", "segments.theta_max"),
+    ("theta_max = 1.5707963267948966", "", "segments.theta_max"),
+    ("motor_speed = 0.05 ", "motor_speed = -0.05 ", "limits.motor_speed"),
+    ("motor_speed = 0.05 ", "motor_speed = \"fast\" ", "limits.motor_speed"),
+    ("motor_speed = 0.05 ", "", "limits.motor_speed"),
+    ("motor_speed_counts = 4560.0", "motor_speed_counts = 3000.0", "emulator.motor_speed_counts"),
+])
+def test_bad_extensible_limits_name_the_field(tmp_path, old, new, field):
+    with pytest.raises(robots.RobotFileError, match=field.replace(".", r"\.")) as err:
+        robots.load(_write(tmp_path, "extensible", old, new))
+    if "emulator" in field:
+        assert "3800 counts/s" in str(err.value)

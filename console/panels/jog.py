@@ -1,10 +1,12 @@
 """Jog panel: hold-to-run buttons and set-point sliders per coordinate, operator only.
 
 Planar arm: a curvature per segment (+-kappa_max, 1/m). Extensible arm: dx, dy, dL per
-segment (m); a move that would push a rack outside [rack_min, rack_max] is clamped to the
-feasible interval of that coordinate, the slider snaps to the value applied and the panel says
-which rack hit which limit. "Straighten" removes all bending; on the extensible arm "Retract"
-returns to delta = 0.
+segment (m); a move that would push a rack outside [rack_min, rack_max], or bend a segment
+beyond theta_max (theta = |(dx, dy)| / d; robot file ``segments.theta_max``), is clamped to the
+feasible interval of that coordinate (``console.model.DeltaModel.set_coordinate``), the slider
+snaps to the value applied and the panel says which rack hit which limit, or that the segment
+is at its bending limit. The Δx / Δy sliders span what the racks and the bending limit allow.
+"Straighten" removes all bending; on the extensible arm "Retract" returns to delta = 0.
 
 All motion goes through ``app.hold`` (``console.hold_to_run.HoldToRun``), capped at 250 mm/s
 for every arm point and clamped to the soft limits:
@@ -103,7 +105,10 @@ class JogPanel(Panel):
             self.app.hold.move_to(event.client.client_id, target)
         applied = float(target[coord.index])
         if abs(applied - float(handle.value)) > 1e-9:
-            handle.value = round(applied, 6)  # snap back to what the racks allow
+            # Snap back to what the limits allow, within the slider's range: the bending limit
+            # can lie a fraction of a step beyond the range (floored to whole steps), and a
+            # browser pulls an out-of-range value back, which would come in as a new request.
+            handle.value = round(min(max(applied, coord.lo), coord.hi), 6)
         self.note.content = f"⚠ {note}" if note else ""
 
     def _go(self, event: viser.GuiEvent, fn: Any) -> None:

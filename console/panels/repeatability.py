@@ -4,9 +4,10 @@ As in Hughes 2020, Table I ("reliability in positioning", +-19 mm / +-29 mm): th
 moves to the rack lengths the tip IK gives for the point, and the tip is measured (from the
 encoders, through forward kinematics) once the motors settle; N times. Per axis the panel shows
 the mean, the spread +-(max - min) / 2, the standard deviation and the mean's offset from the
-point. Moves are joint-space straight lines within the rack and tip speed limits, streamed by
-the :class:`~hw_bridge.extensible_runner.ExtensibleRunner`. On the emulator the encoders are
-exact, so the spread is only encoder quantisation; a real arm adds its backlash and friction.
+point. Moves are joint-space straight lines within the rack, motor and tip speed limits (and the
+rack and bending limits), streamed by the :class:`~hw_bridge.extensible_runner.ExtensibleRunner`.
+On the emulator the encoders are exact, so the spread is only encoder quantisation; a real arm
+adds its backlash and friction.
 """
 
 from __future__ import annotations

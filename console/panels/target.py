@@ -1,9 +1,13 @@
 """Tip-target panel: drag a gizmo (or type x, y, z) and the extensible arm's tip follows by IK.
 
 A transform control in the 3D view holds the tip target. While the operator drags it, a worker
-thread solves the tip IK (``core.kinematics.delta.solve_tip_ik``) warm-started from the
+thread has the tip IK (``core.kinematics.delta.solve_tip_ik``) solved, warm-started from the
 posture being moved to, without restarts, at most ``LIVE_HZ`` times a second on the newest
-target only; on release (and for typed targets) it solves once more with restarts. The solution
+target only; on release (and for typed targets) it solves once more with restarts. The solve
+itself runs in a ``spawn``-ed worker process (started on the first solve), never in the console's
+process: there a CPU-bound solve holds the GIL the extensible runner's 100 Hz loop needs
+(measured: an IK thread next to the runner tripped the serial link's write timeout within
+seconds). The solution
 is a set-point for ``app.hold`` (``console.hold_to_run``: speed-capped, stops on STOP or a lost
 lease), like the jog sliders; on arrival the panel re-commands it as ``"target"`` so the Δ jog
 sliders show it. With the hardware runner started, the motors follow the command. An
@@ -14,7 +18,10 @@ the target (``operator_only``).
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import html
+import multiprocessing
+import os
 import threading
 import time
 from typing import Any
@@ -24,6 +31,7 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel, operator_only
+from console.panels.paths import _exit_with_parent
 from console.state import ArmState
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import IKSettings, TipIKResult, solve_tip_ik
@@ -84,7 +92,7 @@ class _IKWorker:
 
 
 class TargetPanel(Panel):
-    """Gizmo and typed tip target, solved by the tip IK within the rack limits."""
+    """Gizmo and typed tip target, solved by the tip IK within the rack and bending limits."""
 
     title = "Tip target"
     order = 12.0
@@ -118,6 +126,8 @@ class TargetPanel(Panel):
         self._latest: tuple[int, Array, TipIKResult | None, str | None] = (0, tip, None, None)
         self._shown = 0
         self._synced_seq = self.app.store.command.seq
+        self._pool: cf.ProcessPoolExecutor | None = None
+        self._pool_lock = threading.Lock()
         self.worker = _IKWorker(self)
         self.gizmo.on_update(self._on_gizmo)
         for handle in self.inputs:
@@ -174,8 +184,7 @@ class TargetPanel(Panel):
             return
         moving = self.app.hold.target()
         q0 = np.asarray(self.app.store.command.q if moving is None else moving)
-        result = solve_tip_ik(self.app.robot, target, q0, restarts=final,  # type: ignore[arg-type]
-                              settings=self.settings)
+        result = self._solve(target, q0, final)
         if generation != self.worker.generation:
             return
         self._publish(target, result, None)
@@ -183,6 +192,33 @@ class TargetPanel(Panel):
             self._moving_to = result.delta
         else:
             self.report_error("Not moved: you no longer hold control.")
+
+    def _ik_pool(self) -> cf.ProcessPoolExecutor:
+        with self._pool_lock:
+            if self._pool is None:
+                self._pool = cf.ProcessPoolExecutor(
+                    1, mp_context=multiprocessing.get_context("spawn"),
+                    initializer=_exit_with_parent, initargs=(os.getpid(),))
+            return self._pool
+
+    def _solve(self, target: Array, q0: Array, final: bool) -> TipIKResult:
+        """Worker thread: the IK in the worker process (this thread waits without the GIL)."""
+        pool = self._ik_pool()
+        try:
+            return pool.submit(solve_tip_ik, self.app.robot, target, q0, restarts=final,
+                               settings=self.settings).result(timeout=60.0)
+        except cf.process.BrokenProcessPool:
+            with self._pool_lock:  # a new worker next time
+                if self._pool is pool:
+                    self._pool = None
+            raise RuntimeError("the IK worker process stopped; try again") from None
+
+    def close(self) -> None:
+        with self._pool_lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+        super().close()
 
     def check_arrival(self) -> None:
         """Worker thread: once ``app.hold`` reached the set-point, command it as ``"target"``

@@ -253,6 +253,38 @@ def robot_rack_lengths(robot: "ExtensibleArm", delta: npt.ArrayLike) -> Array:
     return actuators_from_delta(delta, robot.phi, robot.L0)
 
 
+def bend_angles(delta: npt.ArrayLike, d: float) -> Array:
+    """Bend theta = |(dx, dy)| / d of every segment: delta (..., 3) -> (...,)."""
+    delta = _check_delta(delta)
+    return np.hypot(delta[..., 0], delta[..., 1]) / d
+
+
+def limit_rack_lengths(robot: "ExtensibleArm", lengths: npt.ArrayLike) -> Array:
+    """Rack lengths (..., n, 3) moved into the feasible set: racks in [rack_min, rack_max] and
+    every segment's bend theta <= theta_max.
+
+    The racks are clipped onto their box, then each segment whose bend is too large has its
+    racks' deviations from their mean scaled down. Rack j deviates from the mean L0 + dL by
+    -dx cos(beta_j) - dy sin(beta_j) (the cosines and sines of the three rack angles sum to 0), so
+    the scaling scales (dx, dy) by the same factor and keeps dL; the result is a convex
+    combination of in-box racks and their in-box mean, hence still in the box. Feasible
+    lengths are returned unchanged. The feasible set is convex (a box intersected with one
+    elliptic cylinder per segment), so straight lines between feasible lengths stay feasible.
+    """
+    L = np.clip(np.asarray(lengths, dtype=float), robot.rack_min, robot.rack_max)
+    if L.shape[-1:] != (3,):
+        raise ValueError(f"lengths must have shape (..., 3), got {L.shape}")
+    bend = np.linalg.norm(L @ rack_matrix(robot.phi)[:2].T, axis=-1)  # |(dx, dy)|
+    limit = robot.rack_radius * robot.theta_max
+    over = bend > limit
+    if not over.any():
+        return L
+    # A hair inside the limit, so theta <= theta_max holds after rounding too.
+    scale = np.where(over, limit * (1 - 1e-12) / np.where(over, bend, 1.0), 1.0)[..., None]
+    mean = L.mean(axis=-1, keepdims=True)
+    return mean + scale * (L - mean)
+
+
 def tip_position(robot: "ExtensibleArm", delta: npt.ArrayLike) -> Array:
     """Tip position (..., 3) of ``robot`` at ``delta`` (..., n, 3) (or flat (3n,))."""
     delta = np.asarray(delta, dtype=float)

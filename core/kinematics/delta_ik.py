@@ -1,9 +1,12 @@
-"""Tip inverse kinematics of the extensible arm within its rack limits (Hughes 2020, eq. 4-6).
+"""Tip inverse kinematics of the extensible arm within its rack and bending limits (Hughes 2020,
+eq. 4-6).
 
-Problem (4): min ||x_d - h(Delta)|| with every rack length in [rack_min, rack_max]. The paper
-solves it as the steady state of the task-priority system (5): a set-based rack-limit task
-(J_set, e_set) with priority over the tip task, whose (pseudo-inverted) Jacobian acts in the
-null space of the active limits. Here that system is integrated as a discrete iteration.
+Problem (4): min ||x_d - h(Delta)|| with every rack length in [rack_min, rack_max], plus a
+bending limit the paper leaves implicit: every segment's theta = |(dx, dy)| / d <= theta_max
+(robot file ``segments.theta_max``; the racks alone would allow ~8 rad). The paper solves (4) as
+the steady state of the task-priority system (5): a set-based limit task (J_set, e_set) with
+priority over the tip task, whose (pseudo-inverted) Jacobian acts in the null space of the
+active limits. Here that system is integrated as a discrete iteration.
 
 Coordinates. The limits are a box in rack space, L = M^-1 (Delta + Delta_0), so we iterate on L
 (Delta = M L - Delta_0 is affine, nothing is lost). In L the rack-limit task's Jacobian rows are
@@ -11,12 +14,18 @@ rows of the identity -- the paper's "columns of the identity matrix" -- so
 
 * J_set selects the active racks: those at a limit that the tip task would push further out
   (the set-based activation), plus any rack outside its limits;
-* J_set^+ e_set moves a violating rack back onto its limit: that is exactly the projection of L
-  onto the box, applied after every step, so no iterate ever leaves the limits;
+* the bending limit is a second set-based task with one row per segment: the gradient of
+  |(dx_i, dy_i)| with respect to L (the radial bending direction), active when the segment is at
+  theta_max and the tip task would bend it further;
+* J_set^+ e_set moves a violating iterate back onto its limits: after every step the racks are
+  clipped onto the box and a segment bent beyond theta_max has its bending scaled back
+  (:func:`delta.limit_rack_lengths`, which stays in the box), so no iterate ever leaves the
+  feasible set (convex: a box intersected with one elliptic cylinder per segment);
 * the tip task acts through the damped pseudo-inverse of J_tip P, P = I - J_set^+ J_set (the
-  free racks only), with J_tip = dh/dDelta M from :func:`delta.chain_tip_and_jacobian`.
+  free directions only; column selection when only racks are held), with
+  J_tip = dh/dDelta M from :func:`delta.chain_tip_and_jacobian`.
 
-A step is L <- clip(L + (J_tip P)^T (J_tip P (J_tip P)^T + lambda^2 I)^-1 (x_d - h)), i.e. the
+A step is L <- limit(L + (J_tip P)^T (J_tip P (J_tip P)^T + lambda^2 I)^-1 (x_d - h)), i.e. the
 Euler step of (5) with unit gain, made safe by Levenberg-Marquardt step control: the step is
 kept only if the tip error decreases, otherwise lambda grows (shorter, more gradient-like steps).
 Near a solution lambda shrinks to ~0 and the iteration is Gauss-Newton (quadratic convergence).
@@ -25,16 +34,26 @@ out of the box). Using (J P)^+ rather than the literal P J^+ of (5) keeps the sa
 reachable targets and makes the fixed points for unreachable targets stationary points of
 ||x_d - h|| (locally closest feasible configurations); the iteration stops at the goal
 tolerance or when it stalls (``stall_step`` / ``stall_ratio``), so those are approximate.
+(With the activation tested per limit, a stall may also happen where a bend and a rack limit
+interact; the polish below covers it.)
 The metric of the pseudo-inverse is the rack space (minimum rack travel per step), which picks
 among the redundant solutions; the paper's J^+ in Delta would pick others.
 
-Starts. A warm start (e.g. the current posture) is iterated alone. A cold start, or a warm start
-that stalls above the tolerance, iterates a batch of seeds together (vectorised): the single
-constant-curvature arc through the target (the exact solution whenever its racks are within
+Starts. A warm start (e.g. the current posture) is iterated alone. A cold start first tries the
+single-arc guess alone (no iteration when it is exact). A cold start it does not solve, or a
+warm start that stalls above the tolerance, iterates a batch of seeds together (vectorised):
+the single constant-curvature arc through the target (the exact solution whenever its racks are within
 limits), arcs after straight proximal segments, straight postures and a fixed low-discrepancy
-set over the rack box; the first to converge (or the best) wins. The final rack lengths are
-clipped onto the box once more and the error is re-evaluated by forward kinematics. Solver
-settings come from the robot file's optional ``[ik]`` table.
+set over the rack box (each moved into the feasible set); the first to converge (or the best)
+wins (:mod:`core.kinematics.delta_ik_seeds`).
+
+Polish. For a target left out of reach the iteration's Gauss-Newton model (no error-weighted
+second derivatives of h) is poor, and on the curved bending limit it only creeps (measured: up
+to ~9 mm short of the closest configuration), so the best start is polished by SLSQP on the
+same problem (``polish_iterations``) and kept if closer. Reachable targets never get here.
+
+The final rack lengths are moved into the feasible set once more and the error is re-evaluated
+by forward kinematics. Solver settings come from the robot file's optional ``[ik]`` table.
 """
 
 from __future__ import annotations
@@ -45,6 +64,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 import numpy.typing as npt
+from scipy.optimize import minimize as _minimize
 
 if TYPE_CHECKING:
     from core.robots import ExtensibleArm
@@ -68,6 +88,8 @@ class IKSettings:
             (0 disables restarts from those).
         stall_step: A start stops when its error improves by less than this per iteration (m).
         stall_ratio: ... or by less than this fraction of its error (a local minimum).
+        polish_iterations: SLSQP iterations spent polishing the best configuration of a target
+            left above ``tolerance`` (0 disables; see :func:`_polish`).
     """
 
     tolerance: float = 1e-3
@@ -77,6 +99,7 @@ class IKSettings:
     restart_seeds: int = 12
     stall_step: float = 1e-9
     stall_ratio: float = 1e-4
+    polish_iterations: int = 50
 
     @classmethod
     def from_robot(cls, robot: "ExtensibleArm") -> "IKSettings":
@@ -112,7 +135,8 @@ class TipIKResult:
 
     Attributes:
         delta: (n, 3) postures (dx, dy, dL) per segment.
-        lengths: (n, 3) rack lengths, always within [rack_min, rack_max].
+        lengths: (n, 3) rack lengths, always within [rack_min, rack_max], and every segment's
+            bend |(dx, dy)| / d within theta_max.
         tip: (3,) tip position reached, h(delta).
         error: Distance from ``tip`` to the target (m).
         iterations: Iterations spent over all starts.
@@ -140,6 +164,7 @@ class _Problem:
     d: float
     lo: float
     hi: float
+    bend_max: float      # largest |(dx, dy)| of a segment, d * theta_max
 
 
 def _check_robot(robot: Any) -> None:
@@ -188,12 +213,53 @@ def _evaluate(pb: _Problem, L: Array) -> tuple[Array, Array, Array]:
     return e, np.sqrt(np.einsum("ki,ki->k", e, e)), J
 
 
+def _feasible(pb: _Problem, L: Array) -> Array:
+    """(K, 3n) rack lengths moved into the feasible set (see :func:`delta.limit_rack_lengths`)."""
+    L = np.clip(L, pb.lo, pb.hi)
+    seg = L.reshape(L.shape[0], pb.n, 3)
+    bend = np.linalg.norm(seg @ pb.M[:2].T, axis=-1)  # (K, n)
+    over = bend > pb.bend_max
+    if not over.any():
+        return L
+    # A hair inside the limit, so theta <= theta_max holds after rounding too.
+    scale = np.where(over, pb.bend_max * (1 - 1e-12) / np.where(over, bend, 1.0), 1.0)[..., None]
+    mean = seg.mean(axis=-1, keepdims=True)
+    return (mean + scale * (seg - mean)).reshape(L.shape)
+
+
+def _free_jacobian(pb: _Problem, L: Array, J: Array, grad: Array) -> Array:
+    """J_tip P: the tip Jacobians (K, 3, 3n) restricted to the directions no active limit holds.
+
+    A rack is held at a limit the descent direction -grad pushes it through; a segment at its
+    bending limit is held when -grad would bend it further (its radial bending row a_i, the
+    gradient of |(dx_i, dy_i)| in L, has a_i . grad < 0).
+    """
+    held = ((L <= pb.lo) & (grad > 0)) | ((L >= pb.hi) & (grad < 0))
+    K, n = L.shape[0], pb.n
+    b = L.reshape(K, n, 3) @ pb.M[:2].T  # (K, n, 2) = (dx, dy) per segment
+    bend = np.linalg.norm(b, axis=-1)
+    at_limit = bend >= pb.bend_max * (1.0 - 1e-9)
+    if not at_limit.any():
+        return np.where(held[:, None, :], 0.0, J)
+    rows = (b / np.maximum(bend, 1e-300)[..., None]) @ pb.M[:2]  # (K, n, 3): d|b_i| / dL_i
+    pushed = at_limit & (np.einsum("kij,kij->ki", rows, grad.reshape(K, n, 3)) < 0)
+    if not pushed.any():
+        return np.where(held[:, None, :], 0.0, J)
+    C = np.zeros((K, 3 * n + n, 3 * n))
+    idx = np.arange(3 * n)
+    C[:, idx, idx] = held
+    for i in range(n):
+        C[:, 3 * n + i, 3 * i:3 * i + 3] = np.where(pushed[:, i, None], rows[:, i], 0.0)
+    P = np.eye(3 * n) - np.linalg.pinv(C) @ C
+    return J @ P
+
+
 def _iterate(pb: _Problem, L: Array, s: IKSettings, stop_on_first: bool) -> tuple[Array, Array, int]:
     """Projected, damped task-priority iteration of eq. (5) on K starts at once.
 
     Returns the final rack lengths (K, 3n), errors (K,) and the number of batch iterations.
     """
-    L = np.clip(L, pb.lo, pb.hi)
+    L = _feasible(pb, L)
     e, err, J = _evaluate(pb, L)
     lam = np.full(L.shape[0], s.damping)
     live = err > s.goal_tolerance
@@ -206,12 +272,11 @@ def _iterate(pb: _Problem, L: Array, s: IKSettings, stop_on_first: bool) -> tupl
         idx = np.flatnonzero(live)
         Li, ei, Ji = L[idx], e[idx], J[idx]
         grad = -np.einsum("kij,ki->kj", Ji, ei)  # gradient of ||e||^2 / 2
-        # Set-based rack-limit task: racks at a limit that the tip task pushes outward are held.
-        held = ((Li <= pb.lo) & (grad > 0)) | ((Li >= pb.hi) & (grad < 0))
-        Jf = np.where(held[:, None, :], 0.0, Ji)  # J_tip P
+        # Set-based limit tasks: racks and bends at a limit the tip task pushes outward are held.
+        Jf = _free_jacobian(pb, Li, Ji, grad)  # J_tip P
         A = Jf @ Jf.transpose(0, 2, 1) + (lam[idx] ** 2)[:, None, None] * eye
         step = np.einsum("kij,ki->kj", Jf, np.linalg.solve(A, ei[..., None])[..., 0])
-        trial = np.clip(Li + step, pb.lo, pb.hi)  # J_set^+ e_set: back onto the limits
+        trial = _feasible(pb, Li + step)  # J_set^+ e_set: back onto the limits
         et, errt, Jt = _evaluate(pb, trial)
         better = errt < err[idx]
         gain = err[idx] - errt
@@ -227,67 +292,51 @@ def _iterate(pb: _Problem, L: Array, s: IKSettings, stop_on_first: bool) -> tupl
     return L, err, it
 
 
-def _arc_seed(pb: _Problem, rel: Array, n_arc: int) -> Array:
-    """Deltas (n_arc, 3) bending one constant-curvature arc from the origin through ``rel``."""
-    x, y, z = rel
-    r = math.hypot(x, y)
-    az = math.atan2(y, x)
-    big_theta = 2.0 * math.atan2(r, z)  # total bend of the arc, [0, 2 pi]
-    chord = math.hypot(r, z)
-    half = 0.5 * big_theta
-    s = chord if half < 1e-6 else chord * half / max(math.sin(half), 1e-3)
-    theta_i, len_i = big_theta / n_arc, s / n_arc
-    seg = np.array([theta_i * pb.d * math.cos(az), theta_i * pb.d * math.sin(az), len_i - pb.L0])
-    return np.tile(seg, (n_arc, 1))
+def _polish(pb: _Problem, L: Array, max_iterations: int) -> tuple[Array, float, int]:
+    """SLSQP on problem (4) with the bending constraints, from rack lengths ``L`` (3n,), for a
+    target left out of reach (see "Polish" above; its quasi-Newton Hessian does not creep).
 
+    Returns the feasible lengths, their error and SLSQP's iteration count; a failed run returns
+    ``L`` (moved into the limits) unchanged.
+    """
+    n, Mb = pb.n, pb.M[:2]
 
-def _halton(count: int, dim: int) -> Array:
-    """First ``count`` points (skipping 0) of the Halton sequence in [0, 1)^dim (deterministic)."""
-    primes = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61]
-    if dim > len(primes):  # more than 6 segments: a fixed pseudo-random set instead
-        return np.random.default_rng(dim).uniform(size=(count, dim))
-    out = np.zeros((count, dim))
-    for k in range(count):
-        for j in range(dim):
-            f, i, x = 1.0, k + 1, 0.0
-            while i:
-                f /= primes[j]
-                x += f * (i % primes[j])
-                i //= primes[j]
-            out[k, j] = x
-    return out
+    def f(x: Array) -> tuple[float, Array]:
+        e, _, J = _evaluate(pb, x[None])
+        return 0.5 * float(e[0] @ e[0]), -J[0].T @ e[0]
 
+    def bend(x: Array) -> Array:  # >= 0: bend_max^2 - |(dx_i, dy_i)|^2 per segment
+        b = x.reshape(n, 3) @ Mb.T
+        return pb.bend_max ** 2 - np.einsum("ij,ij->i", b, b)
 
-def _seeds(pb: _Problem, s: IKSettings) -> Array:
-    """Restart seeds as rack lengths (K, 3n)."""
-    n = pb.n
-    deltas = [_arc_seed(pb, pb.target, n)]
-    straight = np.zeros((n, 3))
-    for frac in (0.25, 0.75):
-        # Proximal segments straight at a fraction of their range, the rest as one arc.
-        for k in range(1, n):
-            head = np.zeros((k, 3))
-            head[:, 2] = pb.lo + frac * (pb.hi - pb.lo) - pb.L0
-            rel = pb.target - np.array([0.0, 0.0, k * (pb.lo + frac * (pb.hi - pb.lo))])
-            deltas.append(np.vstack([head, _arc_seed(pb, rel, n - k)]))
-    for frac in (0.0, 0.5):
-        straight[:, 2] = pb.lo + frac * (pb.hi - pb.lo) - pb.L0
-        deltas.append(straight.copy())
-    L = _dk.actuators_from_delta(np.stack(deltas), pb.phi, pb.L0).reshape(len(deltas), 3 * n)
-    if s.restart_seeds:
-        L = np.vstack([L, pb.lo + (pb.hi - pb.lo) * _halton(s.restart_seeds, 3 * n)])
-    return L
+    def bend_jac(x: Array) -> Array:
+        b = x.reshape(n, 3) @ Mb.T
+        return np.kron(np.eye(n), np.ones((1, 3))) * np.tile(-2.0 * b @ Mb, n)
+
+    x0 = _feasible(pb, L[None])[0]
+    _, err0, _ = _evaluate(pb, x0[None])
+    try:
+        res = _minimize(f, x0, jac=True, method="SLSQP", bounds=[(pb.lo, pb.hi)] * (3 * n),
+                        constraints=[{"type": "ineq", "fun": bend, "jac": bend_jac}],
+                        options={"ftol": 1e-12, "maxiter": max_iterations})
+    except (ValueError, ArithmeticError):
+        return x0, float(err0[0]), 0
+    if not np.all(np.isfinite(res.x)):
+        return x0, float(err0[0]), int(res.nit)
+    x = _feasible(pb, res.x[None])
+    err = float(_evaluate(pb, x)[1][0])
+    return (x[0], err, int(res.nit)) if err < err0[0] else (x0, float(err0[0]), int(res.nit))
 
 
 def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
                  delta0: npt.ArrayLike | None = None, *, restarts: bool = True,
                  settings: IKSettings | None = None) -> TipIKResult:
-    """Postures that put the tip at ``target_xyz`` with every rack within its limits.
+    """Postures that put the tip at ``target_xyz`` with every rack and bend within its limits.
 
     Args:
         robot: The extensible arm (``core.robots.load("extensible")``).
         target_xyz: (3,) tip target in the base frame (m).
-        delta0: (n, 3) warm start (e.g. the current posture); projected onto the rack limits.
+        delta0: (n, 3) warm start (e.g. the current posture); moved into the limits.
             ``None`` iterates the batch of seeds at once, the single-arc guess through the
             target first (exact whenever that arc's racks are within their limits).
         restarts: Iterate the batch of seeds when the warm start stalls above the tolerance.
@@ -307,7 +356,8 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
     n = robot.n_segments
     s = settings if settings is not None else IKSettings.from_robot(robot)
     M = _dk.rack_matrix(robot.phi)
-    pb = _Problem(target, n, M, robot.phi, robot.L0, robot.d, robot.rack_min, robot.rack_max)
+    pb = _Problem(target, n, M, robot.phi, robot.L0, robot.d, robot.rack_min, robot.rack_max,
+                  robot.bend_max)
     warm = None if delta0 is None else _check_delta0(delta0, n)
     iters, starts = 0, 0
     best_L, best_err = np.zeros(3 * n), math.inf
@@ -315,8 +365,14 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
         start = _dk.actuators_from_delta(warm, robot.phi, robot.L0).reshape(1, 3 * n)
         L, err, iters = _iterate(pb, start, s, stop_on_first=True)
         best_L, best_err, starts = L[0], float(err[0]), 1
+    else:  # cold: the single-arc guess alone first (exact whenever its racks and bends fit)
+        arc = _feasible(pb, _dk.actuators_from_delta(_arc_seed(pb, target, n), robot.phi,
+                                                     robot.L0).reshape(1, 3 * n))
+        err = _evaluate(pb, arc)[1]
+        if err[0] <= s.goal_tolerance:
+            best_L, best_err, starts = arc[0], float(err[0]), 1
     if best_err > s.tolerance and (restarts or warm is None):
-        seeds = _seeds(pb, s) if restarts else _dk.actuators_from_delta(
+        seeds = _seeds(pb, s.restart_seeds) if restarts else _dk.actuators_from_delta(
             _arc_seed(pb, target, n), robot.phi, robot.L0).reshape(1, 3 * n)
         Ls, errs, more = _iterate(pb, seeds, s, stop_on_first=True)
         iters += more
@@ -324,7 +380,12 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
         k = int(np.argmin(errs))
         if errs[k] < best_err:
             best_L, best_err = Ls[k], float(errs[k])
-    lengths = np.clip(best_L, robot.rack_min, robot.rack_max).reshape(n, 3)
+    if best_err > s.tolerance and s.polish_iterations:
+        L, err, more = _polish(pb, best_L, s.polish_iterations)
+        iters += more
+        if err < best_err:
+            best_L, best_err = L, err
+    lengths = _feasible(pb, best_L.reshape(1, -1)).reshape(n, 3)
     delta = _deltas(pb, lengths.reshape(1, -1))[0]
     tip = _dk.tip_position(robot, delta)
     error = float(np.linalg.norm(target - tip))
@@ -335,3 +396,4 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
 # Imported last: core.kinematics.delta re-exports solve_tip_ik from here at its end, so either
 # module may be imported first without a partially initialised import.
 from core.kinematics import delta as _dk  # noqa: E402
+from core.kinematics.delta_ik_seeds import arc_seed as _arc_seed, seeds as _seeds  # noqa: E402

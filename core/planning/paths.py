@@ -1,7 +1,8 @@
 """Tip motion paths for the extensible arm: Fig. 9's traverses and corners, sampled for the motors.
 
-A path is a polyline of tip waypoints (the builders make the paper's linear traverse, diagonal
-traverse and four corners from a centre, a size and a plane; :func:`polyline` takes any list).
+A path is a polyline of tip waypoints (the builders in :mod:`core.planning.path_shapes`,
+re-exported here, make the paper's linear traverse, diagonal traverse and four corners from a
+centre, a size and a plane; :func:`polyline` takes any list).
 :func:`plan_path` turns it into a :class:`MotionPath` a 100 Hz loop can stream:
 
 1. the polyline is sampled every ``spacing`` metres of tip travel (corners kept exactly) and the
@@ -9,14 +10,19 @@ traverse and four corners from a centre, a size and a plane; :func:`polyline` ta
    solution follows one continuous branch; an interval whose racks move more than
    ``jump_ratio`` times the tip displacement is bisected (``max_bisections`` times), and one
    still that steep is counted in ``MotionPath.jumps``; where the branch cannot reach the
-   target (it ran into rack limits) the IK restarts may switch branch (also a jump);
-2. time law: each interval lasts max(tip travel / speed, largest rack travel / rack_speed), the
-   limits scaled by ``limit_margin``, so the tip speed (Table I: 0.10 m/s) and every rack's speed
-   stay within their limits;
+   target (it ran into rack or bending limits) the IK restarts may switch branch (also a jump);
+2. time law (:func:`timed_path`): each interval lasts max(tip travel / speed, largest rack
+   travel / rack_speed, largest motor travel / motor_speed), the limits scaled by
+   ``limit_margin``, so the tip speed (Table I: 0.10 m/s), every rack's speed and every motor's
+   speed stay within their limits. Motor travels are m = U^-1 L: a proximal motor moves by the
+   difference of its segment's rack and the next segment's, up to twice the rack speed, so the
+   motor limit binds when consecutive segments' racks move in opposite directions. The motor
+   limit also keeps one encoder count in reserve per sample, so the rounded demands obey it;
 3. the rack lengths are interpolated linearly in time at ``rate_hz``, so consecutive samples move
    a rack by at most rack_speed / rate_hz and Delta = M L - Delta_0 by at most ||M||_inf times
    that (no jumps); tips are recomputed by forward kinematics and every sample's error to its
-   tip target is reported;
+   tip target is reported. Every IK sample is within the rack box and the bending limit
+   (theta <= theta_max) and that set is convex, so every interpolated sample is too;
 4. motor demands: U^-1 L in encoder counts (:func:`delta.motor_counts_from_lengths`).
 
 Settings come from the robot file's optional ``[paths]`` table.
@@ -26,22 +32,21 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any, Literal, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 import numpy as np
 import numpy.typing as npt
 
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import IKSettings, solve_tip_ik
+from core.planning.path_shapes import (PATH_KINDS, PathKind, Plane, build_path,  # noqa: F401
+                                       diagonal_traverse, four_corners, linear_traverse,
+                                       polyline)
 
 if TYPE_CHECKING:
     from core.robots import ExtensibleArm
 
 Array = npt.NDArray[np.float64]
-Plane = Literal["xy", "xz", "yz"]
-PathKind = Literal["linear", "diagonal", "corners"]
-PATH_KINDS: tuple[PathKind, ...] = ("linear", "diagonal", "corners")
-_PLANE_AXES = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,7 +56,7 @@ class PathSettings:
     Attributes:
         rate_hz: Output sample rate (the control loop's rate).
         spacing: Largest tip travel between IK samples (m).
-        limit_margin: Fraction of the tip and rack speed limits the time law plans for.
+        limit_margin: Fraction of the tip, rack and motor speed limits the time law plans for.
         jump_ratio: Rack travel / tip travel above which an interval is bisected.
         max_bisections: How often an interval may be bisected.
         retry_spacing: Tip travel between restart attempts while the target is out of reach of
@@ -96,8 +101,10 @@ class MotionPath:
         targets: (K, 3) tip targets on the polyline.
         tips: (K, 3) tips reached by ``deltas`` (forward kinematics).
         deltas: (K, n, 3) postures.
-        lengths: (K, n, 3) rack lengths, within [rack_min, rack_max].
-        motor_counts: (K, 3n) encoder demands, U^-1 L in counts.
+        lengths: (K, n, 3) rack lengths, within [rack_min, rack_max], every segment's bend
+            within theta_max.
+        motor_counts: (K, 3n) encoder demands, U^-1 L in counts; consecutive samples differ by
+            at most motor_speed * counts_per_metre / rate_hz counts.
         errors: (K,) |targets - tips| (m).
         rate_hz: Sample rate.
         jumps: Branch switches plus IK intervals still steeper than ``jump_ratio`` after
@@ -132,6 +139,12 @@ class MotionPath:
         """Largest single-rack speed between consecutive samples (m/s)."""
         return _max_rate(self.lengths.reshape(len(self.times), -1), self.times, norm="inf")
 
+    def max_motor_speed(self) -> float:
+        """Largest single-motor speed between consecutive samples, from the lengths (m/s of
+        rack travel, like ``motor_speed``)."""
+        motors = dk.motors_from_lengths(self.lengths).reshape(len(self.times), -1)
+        return _max_rate(motors, self.times, norm="inf")
+
     def max_delta_step(self) -> float:
         """Largest change of any Delta component between consecutive samples (m)."""
         if len(self.times) < 2:
@@ -145,90 +158,6 @@ def _max_rate(x: Array, t: Array, norm: Literal["l2", "inf"]) -> float:
     dx = np.diff(x, axis=0)
     step = np.linalg.norm(dx, axis=1) if norm == "l2" else np.abs(dx).max(axis=1)
     return float((step / np.diff(t)).max())
-
-
-def _check_point(value: npt.ArrayLike, name: str) -> Array:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be 3 numbers (x, y, z), got {value!r}") from None
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be 3 finite numbers (x, y, z), got {value!r}")
-    return arr
-
-
-def _frame(centre: npt.ArrayLike, size: float, plane: Plane) -> tuple[Array, Array, Array]:
-    c = _check_point(centre, "centre")
-    if isinstance(size, bool) or not isinstance(size, (int, float)) or not math.isfinite(size) \
-            or size <= 0:
-        raise ValueError(f"size must be a finite number > 0 (m), got {size!r}")
-    if plane not in _PLANE_AXES:
-        raise ValueError(f"plane must be one of {sorted(_PLANE_AXES)}, got {plane!r}")
-    i, j = _PLANE_AXES[plane]
-    u, v = np.zeros(3), np.zeros(3)
-    u[i], v[j] = 0.5 * size, 0.5 * size
-    return c, u, v
-
-
-def linear_traverse(centre: npt.ArrayLike, size: float, plane: Plane = "xy",
-                    axis: Literal[0, 1] = 0) -> Array:
-    """Fig. 9A: a straight traverse of length ``size`` through ``centre``.
-
-    Args:
-        centre: (3,) midpoint (m).
-        size: Length (m).
-        plane: Plane of the path; the traverse runs along its first (``axis=0``) or second axis.
-
-    Returns:
-        (2, 3) waypoints.
-    """
-    c, u, v = _frame(centre, size, plane)
-    if axis not in (0, 1):
-        raise ValueError(f"axis must be 0 or 1, got {axis!r}")
-    w = u if axis == 0 else v
-    return np.stack([c - w, c + w])
-
-
-def diagonal_traverse(centre: npt.ArrayLike, size: float, plane: Plane = "xy") -> Array:
-    """Fig. 9B: the diagonal of a ``size`` x ``size`` square centred on ``centre``; (2, 3)."""
-    c, u, v = _frame(centre, size, plane)
-    return np.stack([c - u - v, c + u + v])
-
-
-def four_corners(centre: npt.ArrayLike, size: float, plane: Plane = "xy",
-                 closed: bool = True) -> Array:
-    """Fig. 9C: the four corners of a ``size`` x ``size`` square, in turn.
-
-    Returns:
-        (5, 3) waypoints (back to the first corner), or (4, 3) if not ``closed``.
-    """
-    c, u, v = _frame(centre, size, plane)
-    corners = [c - u - v, c + u - v, c + u + v, c - u + v]
-    return np.stack(corners + [corners[0]] if closed else corners)
-
-
-def polyline(points: Sequence[Sequence[float]] | npt.ArrayLike) -> Array:
-    """Any polyline: (k, 3) finite waypoints, k >= 1 (m)."""
-    try:
-        arr = np.asarray(points, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError("points must be a list of (x, y, z) points") from None
-    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] < 1:
-        raise ValueError(f"points must have shape (k, 3) with k >= 1, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError("points must be finite")
-    return arr
-
-
-def build_path(kind: PathKind, centre: npt.ArrayLike, size: float, plane: Plane = "xy") -> Array:
-    """Waypoints of a named path (the console's "path, size" choice)."""
-    if kind == "linear":
-        return linear_traverse(centre, size, plane)
-    if kind == "diagonal":
-        return diagonal_traverse(centre, size, plane)
-    if kind == "corners":
-        return four_corners(centre, size, plane)
-    raise ValueError(f"path kind must be one of {PATH_KINDS}, got {kind!r}")
 
 
 def _sample_polyline(points: Array, spacing: float) -> Array:
@@ -315,14 +244,16 @@ def _tip_chord_bound(robot: "ExtensibleArm", L: Array, substeps: int = 8) -> Arr
 def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float | None = None,
               start_delta: npt.ArrayLike | None = None,
               settings: PathSettings | None = None) -> MotionPath:
-    """Time-parametrised, rack-limited joint path that moves the tip along ``waypoints``.
+    """Time-parametrised joint path within the rack, bending and speed limits that moves the tip
+    along ``waypoints``.
 
     Args:
         robot: The extensible arm.
         waypoints: (k, 3) tip polyline (m), e.g. from :func:`build_path`.
         speed: Tip speed (m/s), at most the robot's ``tip_speed`` (default: that limit).
-        start_delta: (n, 3) current posture. When given, the path starts at its tip and first
-            moves to ``waypoints[0]``; otherwise it starts at ``waypoints[0]`` (cold IK).
+        start_delta: (n, 3) current posture (moved into the limits). When given, the path
+            starts at its tip and first moves to ``waypoints[0]``; otherwise it starts at
+            ``waypoints[0]`` (cold IK).
         settings: Overrides the robot file's ``[paths]`` settings.
 
     Returns:
@@ -346,7 +277,7 @@ def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float 
         sd = np.asarray(start_delta, dtype=float)
         if sd.shape != (n, 3) or not np.all(np.isfinite(sd)):
             raise ValueError(f"start_delta must be a finite ({n}, 3) array, got shape {sd.shape}")
-        L_start = np.clip(dk.robot_rack_lengths(robot, sd), robot.rack_min, robot.rack_max)
+        L_start = dk.limit_rack_lengths(robot, dk.robot_rack_lengths(robot, sd))
         start_tip = dk.tip_position(robot, dk.delta_from_actuators(L_start, robot.phi, robot.L0))
         points = np.vstack([start_tip, points])
     else:
@@ -356,24 +287,69 @@ def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float 
     targets, L, jumps = _track(robot, _sample_polyline(points, spacing), L_start, ik, ps)
     targets, L = _densify(targets, L, spacing)
 
-    # Time law: every interval at the tip speed unless a rack would exceed its speed limit.
+    return timed_path(robot, targets, L, speed=v, settings=ps, jumps=jumps)
+
+
+def timed_path(robot: "ExtensibleArm", targets: npt.ArrayLike, lengths: npt.ArrayLike, *,
+               speed: float | None = None, settings: PathSettings | None = None,
+               jumps: int = 0) -> MotionPath:
+    """Time law and sampling (steps 2-4 above) of a keyframed path.
+
+    Args:
+        robot: The extensible arm.
+        targets: (k, 3) tip targets of the keyframes (m).
+        lengths: (k, n, 3) rack lengths of the keyframes, within the rack and bending limits
+            (as the IK returns them); the samples interpolate them linearly in time.
+        speed: Tip speed (m/s), default the robot's ``tip_speed``.
+        settings: Overrides the robot file's ``[paths]`` settings.
+        jumps: Passed through to :attr:`MotionPath.jumps`.
+
+    Returns:
+        The :class:`MotionPath`: each interval lasts as long as the slowest of its tip, rack and
+        motor travel at the (margin-scaled) limits allows.
+
+    Raises:
+        ValueError: shapes do not match the robot, or lengths are outside the limits.
+    """
+    ps = settings if settings is not None else PathSettings.from_robot(robot)
+    v = robot.tip_speed if speed is None else float(speed)
+    n = robot.n_segments
+    targets = np.asarray(targets, dtype=float)
+    L = np.asarray(lengths, dtype=float)
+    if targets.ndim != 2 or targets.shape[1] != 3 or L.shape != (len(targets), n, 3) \
+            or len(targets) < 1:
+        raise ValueError(f"targets (k, 3) and lengths (k, {n}, 3) must match, k >= 1; "
+                         f"got {targets.shape} and {L.shape}")
+    if not np.allclose(dk.limit_rack_lengths(robot, L), L, rtol=0.0, atol=1e-12):
+        raise ValueError("lengths must be within the rack limits and theta_max")
+
+    # Time law: every interval at the tip speed unless a rack or motor would exceed its limit.
     flat = L.reshape(len(L), -1)
+    motors = dk.motors_from_lengths(L).reshape(len(L), -1)
     v_tip, v_rack = v * ps.limit_margin, robot.rack_speed * ps.limit_margin
+    # One count per sample in reserve: rounding to counts adds less than a count per sample.
+    v_motor = min(robot.motor_speed * ps.limit_margin,
+                  robot.motor_speed - ps.rate_hz / robot.counts_per_metre)
+    if v_motor <= 0:
+        raise ValueError(f"motor_speed {robot.motor_speed:g} m/s is below one count per sample "
+                         f"at {ps.rate_hz:g} Hz")
     dt = np.maximum.reduce([
         np.linalg.norm(np.diff(targets, axis=0), axis=1) / v_tip,
         _tip_chord_bound(robot, L) / v_tip,
         np.abs(np.diff(flat, axis=0)).max(axis=1) / v_rack,
+        np.abs(np.diff(motors, axis=0)).max(axis=1) / v_motor,
     ]) if len(targets) > 1 else np.zeros(0)
     t_ik = np.concatenate([[0.0], np.cumsum(dt)])
 
     count = math.ceil(t_ik[-1] * ps.rate_hz - 1e-9) + 1
     times = np.arange(count) / ps.rate_hz
-    lengths = np.stack([np.interp(times, t_ik, flat[:, j]) for j in range(flat.shape[1])], axis=1)
-    lengths = np.clip(lengths, robot.rack_min, robot.rack_max).reshape(count, n, 3)
+    samples = np.stack([np.interp(times, t_ik, flat[:, j]) for j in range(flat.shape[1])], axis=1)
+    # Interpolations of feasible keyframes are feasible (convex set); this only removes rounding.
+    samples = dk.limit_rack_lengths(robot, samples.reshape(count, n, 3))
     tgt = np.stack([np.interp(times, t_ik, targets[:, j]) for j in range(3)], axis=1)
-    deltas = dk.delta_from_actuators(lengths, robot.phi, robot.L0)
+    deltas = dk.delta_from_actuators(samples, robot.phi, robot.L0)
     reached = dk.tip_position(robot, deltas)
     return MotionPath(
-        times=times, targets=tgt, tips=reached, deltas=deltas, lengths=lengths,
-        motor_counts=dk.motor_counts_from_lengths(robot, lengths),
+        times=times, targets=tgt, tips=reached, deltas=deltas, lengths=samples,
+        motor_counts=dk.motor_counts_from_lengths(robot, samples),
         errors=np.linalg.norm(tgt - reached, axis=1), rate_hz=ps.rate_hz, jumps=int(jumps))
