@@ -1,5 +1,6 @@
 """Control / trials / capture panels without a browser: the loop process obeys Arm, moves,
-holds on STOP (from any source), refuses bad input; trials and capture helpers."""
+holds on STOP (from any source), refuses bad input; the panel shows a hardware fault (told to
+every browser once) and the link; trials and capture helpers."""
 
 from __future__ import annotations
 
@@ -12,10 +13,14 @@ import viser
 from console.app import ConsoleApp
 from console.panels.capture import merge
 from console.panels.control import ControlPanel, table_point
+from console.panels.control_process import DISCONNECTED, ControlView
 from console.panels.trials import results_markdown
 from core.control.capture import characterise
+from core.control.stack import Telemetry
 from core.control.trials import TrialResult
 from core.robots import load
+from hw_bridge.interface import LinkHealth
+from hw_bridge.loop import LoopSnapshot, LoopStats
 
 SOFT = load("soft-arm")
 
@@ -71,6 +76,121 @@ def test_arm_move_and_stop_hold_through_the_loop_process(app):
     wait_for(lambda: control(app).phase == "approach" and control(app).n_waypoints == len(plan.kappas))
     app.stop_motion("second STOP")
     wait_for(lambda: control(app).phase == "stopped" and control(app).reason == "second STOP")
+
+
+class FakeControl:
+    """Stands in for ControlProcess: the panel only reads ``view`` (and ``failure``)."""
+
+    alive = True
+    failure = None
+
+    def __init__(self):
+        self.view = None
+        self.closed = False
+
+    def close(self):
+        self.closed = True
+
+
+class FakeClient:
+    def __init__(self, cid):
+        self.client_id = cid
+        self.notes = []
+
+    def add_notification(self, title, body, **kw):
+        self.notes.append((title, body, kw.get("color")))
+
+
+def fake_view(device="mock", fault=None, link_state="inactive", armed=False, stale_s=0.0,
+              kappa_meas=(0.5, -1.25, 2.0, 0.0, 3.333, -16.7), phase="idle", link=True):
+    n = len(kappa_meas)
+    tel = Telemetry(t=3.0, armed=armed, phase=phase, reason=None, waypoint=0, n_waypoints=0,
+                    replans=0, tracking_ok=True, prepressurised=True,
+                    kappa_meas=np.array(kappa_meas), kappa_ref=np.linspace(-1, 1, n),
+                    kappa_target=np.zeros(n), commands=np.zeros(2 * n + 1),
+                    saturated=np.zeros(n, bool), gripper_closed=False, object_xy=None)
+    snap = LoopSnapshot(300, 3.0 + stale_s, tel, 10.0, 0.5, 0.1, 0.3, 0.1, 0, fault)
+    health = LinkHealth(link_state, "mock://", fault, armed, False, False, 0.8, 1.234, 0.9,
+                        500, 498, 3, 0, 0, 0, 4.0) if link else None
+    return ControlView(snap, LoopStats(300, 0, 0, 0, *([0.0] * 9)), "default", None, None,
+                       False, None, device, health, fault)
+
+
+@pytest.fixture
+def fake_panel():
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    a = ConsoleApp(SOFT, srv, panels=())
+    a.soft_control = FakeControl()
+    clients = {1: FakeClient(1), 2: FakeClient(2)}
+    srv.get_clients = lambda: clients  # viser notifications are per client: two browsers
+    panel = a.add_panel(ControlPanel)
+    panel._pump_stop.set()  # the test drives the pump itself
+    panel._pump.join(2.0)
+    try:
+        yield panel, a.soft_control, clients
+    finally:
+        panel.close()
+        srv.stop()
+
+
+def pump(panel):
+    panel._plot_at = 0.0  # as if the render thread had been idle
+    panel._pump_once()
+
+
+def test_panel_shows_link_and_kappa_and_tells_every_browser_of_a_fault_once(fake_panel):
+    panel, ctl, clients = fake_panel
+    ctl.view = fake_view()
+    pump(panel)  # no on_state call: the pump refreshes the text by itself
+    link = panel.link_md.content
+    for part in ("mock device", "inactive", "disarmed", "round trip p99 1.23 ms", "lost 3"):
+        assert part in link, (part, link)
+    assert not panel.fault_md.visible and "data-phase=\"idle\"" in panel.state_md.content
+    kappa = panel.kappa_md.content
+    assert 'data-testid="kappa-meas-1">-1.25<' in kappa and 'kappa-meas-4">+3.33<' in kappa
+    assert 'kappa-meas-5">-16.70<' in kappa and 'kappa-ref-0">-1.00<' in kappa
+    assert all(c.notes == [] for c in clients.values())
+
+    fault = "link lost: no valid STATE for 45 ms"
+    ctl.view = fake_view(fault=fault, link_state="unconfigured")
+    pump(panel)
+    pump(panel)  # still the same fault: told once
+    assert panel.fault_md.visible and f"**Fault: {fault}**" in panel.fault_md.content
+    assert "**Arm**" in panel.fault_md.content and "re-arms by itself" in panel.fault_md.content
+    assert "unconfigured" in panel.link_md.content
+    for c in clients.values():
+        assert len(c.notes) == 1
+        title, body, color = c.notes[0]
+        assert title == "Hardware fault" and fault in body and "re-arm" in body and color == "red"
+
+    ctl.view = fake_view()  # cleared (the operator re-armed) ...
+    pump(panel)
+    assert not panel.fault_md.visible
+    ctl.view = fake_view(fault=fault)  # ... and back: told again
+    pump(panel)
+    assert all(len(c.notes) == 2 for c in clients.values())
+
+    ctl.view = fake_view(fault=DISCONNECTED, link_state="unconfigured")
+    pump(panel)  # the operator's own Disconnect is shown, not broadcast as a fault
+    assert panel.fault_md.visible and "**Disconnected**" in panel.fault_md.content
+    assert all(len(c.notes) == 2 for c in clients.values())
+
+
+def test_panel_on_the_simulated_arm_and_with_stale_telemetry(fake_panel):
+    panel, ctl, _ = fake_panel
+    ctl.view = fake_view(device="sim", link=False, kappa_meas=(0.0,) * 6)
+    pump(panel)
+    assert "simulated arm" in panel.link_md.content and "no serial link" in panel.link_md.content
+    assert "stale" not in panel.state_md.content
+    assert not panel.arm_btn.disabled and panel.disarm_btn.disabled  # disarmed
+    ctl.view = fake_view(stale_s=1.0, armed=True, phase="stopped")
+    pump(panel)
+    assert "telemetry stale" in panel.state_md.content and "ARMED" in panel.state_md.content
+    assert "round trip p99" in panel.link_md.content
+    assert panel.arm_btn.disabled and not panel.disarm_btn.disabled  # armed, healthy
+    ctl.view = fake_view(stale_s=1.0, armed=True, phase="stopped", fault="link lost")
+    pump(panel)
+    assert not panel.arm_btn.disabled  # after a fault Arm is how the operator gets back
 
 
 def test_click_ray_meets_the_table():

@@ -4,6 +4,10 @@ Independent expectations: the curvature fitted from the emulator's mocap markers
 frames the loop sees) must reach the commanded goto target; after STOP the demands written to
 the device stay frozen; an object placed through grasp_at appears in the emulator's world (its
 mocap stream); closing ends the emulator process (checked in /proc, not through our handles).
+The Hardware panel's controls (``ControlProcess.bridge_controls``): after Disconnect no DEMAND
+leaves the console and the device itself, asked over the released pty by this test, reports
+disarmed (not tripped) with still motors; Connect to the same pty brings telemetry back without
+arming; only Arm arms; a bad port is a clear fault; the sim and the mock say what they cannot do.
 """
 
 from __future__ import annotations
@@ -16,8 +20,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from console.panels.control_process import ControlProcess
+from console.panels.control_process import DISCONNECTED, NO_SERIAL_LINK, ControlProcess
 from core.robots import load
+from hw_bridge import protocol as p
 
 SOFT = load("soft-arm")
 
@@ -57,6 +62,26 @@ def alive(pid: int) -> bool:
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def device_state(path: str, timeout: float = 1.0) -> p.State:
+    """The device's own STATE, asked by this test over the pty (HELLO only: arms nothing)."""
+    from hw_bridge.link import Link
+    from hw_bridge.transport import open_serial
+    transport = open_serial(path, 1_000_000)
+    try:
+        link = Link(transport)
+        transport.reset_input()
+        transport.write(p.DELIMITER)
+        link.send(p.Hello())
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            for m in link.poll():
+                if isinstance(m, p.State):
+                    return m
+        raise AssertionError(f"no STATE from the device on {path}")
+    finally:
+        transport.close()
 
 
 def test_goto_stop_and_grasp_object_through_the_emulator():
@@ -149,5 +174,95 @@ def test_mock_device_runs_the_same_plant_in_process():
         ctl.place_object(0.25, 0.02, 0.02).result(10)
         wait_for(lambda: ctl.view.object_xy is not None, what="object in the mock world")
         assert ctl.view.object_xy == pytest.approx((0.25, 0.02), abs=1e-6)
+
+        # The mock's link can be dropped and re-opened, but it has no other port to go to.
+        bc = ctl.bridge_controls
+        bc.disconnect()
+        wait_for(lambda: bc.health().state == "unconfigured", what="mock disconnected")
+        assert not ctl.view.snapshot.control.armed and ctl.view.fault == DISCONNECTED
+        with pytest.raises(RuntimeError, match="mock device"):
+            ctl.connect_link("/dev/ttyUSB0", 115200).result(10)
+        wait_for(lambda: "--port-path" in bc.health().fault, what="refusal shown")
+        assert bc.health().state == "unconfigured"
+        bc.connect("mock://", 0)
+        wait_for(lambda: bc.health().state == "inactive" and ctl.view.fault is None,
+                 what="mock reconnected")
+        assert not bc.health().armed
+    finally:
+        ctl.close()
+
+
+def test_bridge_controls_disconnect_reconnect_and_arm_only_when_asked():
+    ctl = ControlProcess(SOFT, seed=5, device="emulator", sched_priority=50)
+    bc = ctl.bridge_controls
+    try:
+        wait_for(lambda: bc.health().state == "inactive", what="configured link")
+        port = bc.health().port
+        assert port.startswith("/dev/") and not bc.health().armed
+        bc.arm()  # the Hardware panel's Arm: the device is armed and the loop commands it
+        wait_for(lambda: bc.health().armed and ctl.view.snapshot.control.armed, what="ARMED")
+        ctl.goto(np.full(6, 3.0)).result(10)
+        wait_for(lambda: ctl.view.snapshot.control.kappa_ref[0] > 0.5, what="moving")
+
+        bc.disconnect()
+        wait_for(lambda: bc.health().state == "unconfigured", what="disconnected")
+        wait_for(lambda: ctl.view.fault == DISCONNECTED, what="disconnect shown")
+        assert not ctl.view.snapshot.control.armed
+        sent = bc.health().sent
+        time.sleep(0.3)
+        assert bc.health().sent == sent  # no DEMAND leaves the console
+        # The device itself (asked over the released pty): disarmed by DISARM, not by its
+        # watchdog, and its motors stay where they are.
+        first = device_state(port)
+        time.sleep(0.3)
+        second = device_state(port)
+        assert not first.status & p.Status.ARMED and not first.status & p.Status.WATCHDOG_TRIPPED
+        assert second.positions == first.positions and not second.status & p.Status.ARMED
+        with pytest.raises(RuntimeError, match="disconnected"):
+            ctl.arm().result(10)  # no implicit reconnect after the operator's Disconnect
+        assert bc.health().state == "unconfigured"
+
+        bc.connect(port, 0)  # the same pty again: telemetry, not armed
+        wait_for(lambda: bc.health().state == "inactive", what="reconnected")
+        received = bc.health().received
+        wait_for(lambda: bc.health().received > received + 30, what="telemetry again")
+        v = ctl.view
+        assert v.fault is None and not v.link.armed and not v.snapshot.control.armed
+        assert v.link.sent == 0  # a new link that has sent no DEMAND
+        time.sleep(0.3)
+        assert bc.health().sent == 0 and not bc.health().armed  # still: arm only when asked
+        bc.arm()
+        wait_for(lambda: bc.health().armed and bc.health().sent > 20, what="armed on request")
+        assert ctl.view.fault is None and ctl.view.snapshot.control.armed
+        bc.disarm()
+        wait_for(lambda: bc.health().state == "inactive" and not bc.health().armed,
+                 what="disarmed")
+        sent = bc.health().sent
+        time.sleep(0.3)
+        assert bc.health().sent == sent and ctl.view.fault is None
+
+        bc.connect("/dev/no-such-port", 115200)  # bad input: a clear fault, nothing armed
+        wait_for(lambda: bc.health().port == "/dev/no-such-port" and bc.health().fault,
+                 what="connect fault")
+        assert "no-such-port" in bc.health().fault and bc.health().state == "unconfigured"
+        assert "no-such-port" in ctl.view.fault
+    finally:
+        ctl.close()
+
+
+def test_bridge_controls_on_the_simulated_arm_say_there_is_no_link():
+    ctl = ControlProcess(SOFT, seed=6, device="sim", sched_priority=None)
+    bc = ctl.bridge_controls
+    try:
+        wait_for(lambda: ctl.view is not None, what="first view")
+        assert bc.health() is None  # no link to show
+        with pytest.raises(RuntimeError, match="no serial link"):
+            ctl.connect_link("/dev/ttyACM0", 115200).result(10)
+        wait_for(lambda: bc.health() is not None, what="health after Connect")
+        assert bc.health().fault == NO_SERIAL_LINK and bc.health().state == "unconfigured"
+        bc.arm()  # arming the simulated arm still works
+        wait_for(lambda: ctl.view.snapshot.control.armed, what="armed")
+        bc.disarm()
+        wait_for(lambda: not ctl.view.snapshot.control.armed, what="disarmed")
     finally:
         ctl.close()

@@ -10,14 +10,19 @@ Widgets: Arm / Disarm, object x, y, r and *Place object*, *Execute* (the full gr
 for the placed object: settle, plan in the planner process, approach, grasp, carry, release),
 *Click to grasp* (one click on the table places the object there and runs it all), STOP (any
 client, also the Session panel's hotkey: it runs ``app.stop_motion``, whose hook freezes the
-arm), the state machine's state and reason, and live uPlots of kappa target vs measured per
-segment and of the loop's period and tick time. While armed the 3D view shows the measured
-(simulated) arm; jog commands from other panels are forwarded as moves when no task runs.
+arm), the state machine's state and reason, a hardware fault in bold (every browser is told
+once; nothing re-arms until the operator does), one line of link health (device, lifecycle
+state, armed, round trip p99, lost demands), measured vs target kappa per segment in numbers,
+and live uPlots of kappa target vs measured and of the loop's period and tick time. While armed
+the 3D view shows the measured arm; jog commands from other panels are forwarded as moves when
+no task runs. The render thread only runs on new arm states (none while disarmed), so the pump
+refreshes the text itself when ``on_state`` has been quiet.
 """
 
 from __future__ import annotations
 
 import collections
+import html
 import math
 import threading
 import time
@@ -25,11 +30,11 @@ from typing import Any
 
 import numpy as np
 import viser
-import viser.uplot as uplot
+from viser import uplot
 
 from console.panels.base import Panel, operator_only
+from console.panels.control_process import DISCONNECTED, ControlProcess, ControlView
 from console.state import ArmState
-from console.panels.control_process import ControlProcess
 
 SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")
 OBJECT_COLOR = (60, 170, 90)
@@ -40,6 +45,10 @@ HISTORY_S = 10.0
 STATS_TICKS = 1000
 IDLE_PHASES = ("idle", "released", "stopped")
 FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
+STALE_S = 0.2  # telemetry older than this (loop time) was not refreshed by a device read
+DEVICE_NAMES = {"sim": "simulated arm", "mock": "mock device", "emulator": "device emulator",
+                "port": "controller"}
+_CELL = "padding:0 2px;text-align:right;font-variant-numeric:tabular-nums"
 
 
 def control_for(app: Any) -> ControlProcess:
@@ -60,6 +69,67 @@ def table_point(origin: Any, direction: Any) -> tuple[float, float] | None:
     return None if s <= 0 else (float(o[0] + s * d[0]), float(o[1] + s * d[1]))
 
 
+def state_html(view: ControlView) -> str:
+    """The state machine's state (``data-phase`` for tests), reason and flags."""
+    c = view.snapshot.control
+    if c is None:
+        return '<div data-testid="control-state" data-phase=""><b>State:</b> –</div>'
+    wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
+    stale = (f" · <b>telemetry stale</b> (last at t = {c.t:.2f} s: the device is not read)"
+             if view.snapshot.t - c.t > STALE_S else "")
+    why = f"<br><b>Reason:</b> {html.escape(c.reason)}" if c.reason else ""
+    return (f'<div data-testid="control-state" data-phase="{c.phase}"><b>State:</b> '
+            f'<span data-testid="control-phase">{c.phase}</span>{wp} · re-plans {c.replans} · '
+            f"{'ARMED' if c.armed else 'disarmed'} · tracking {'ok' if c.tracking_ok else 'LOST'}"
+            f" · gripper {'closed' if c.gripper_closed else 'open'}{stale}{why}</div>")
+
+
+def fault_markdown(fault: str | None) -> str:
+    """The hardware fault in bold, with what the operator must do (empty without one)."""
+    if not fault:
+        return ""
+    if fault == DISCONNECTED:
+        return ("**Disconnected** by the operator: the arm is not commanded. "
+                "Connect (Hardware panel), then Arm.")
+    return (f"**Fault: {fault}**  \nThe arm is not commanded and nothing re-arms by itself: "
+            "the operator must press **Arm** again (it reconnects the link first).")
+
+
+def link_line(view: ControlView) -> str:
+    """One line of link health: device, lifecycle state, armed, round trip p99, lost."""
+    name = DEVICE_NAMES.get(view.device, view.device)
+    h = view.link
+    if view.device == "sim" and (h is None or h.port == "sim://"):
+        return f"<small>link: {name} in the loop process (no serial link)</small>"
+    if h is None:
+        return f"<small>link: {name} · starting…</small>"
+    where = f" {h.port}" if view.device == "port" else ""
+    rtt = "–" if h.rtt_ms_p99 is None else f"{h.rtt_ms_p99:.2f} ms"
+    return (f'<small data-testid="control-link">link: {name}{where} · {h.state} · '
+            f"{'ARMED' if h.armed else 'disarmed'} · round trip p99 {rtt} · lost {h.lost}"
+            "</small>")
+
+
+def kappa_html(view: ControlView) -> str:
+    """Measured and target curvature per segment (1/m), two decimals; cells have test ids."""
+    c = view.snapshot.control
+    if c is None:
+        return ""
+    n = len(c.kappa_ref)
+    meas = c.kappa_meas if c.kappa_meas is not None else [None] * n
+
+    def row(label: str, key: str, values: Any) -> str:
+        cells = "".join(f'<td style="{_CELL}" data-testid="kappa-{key}-{i}">'
+                        f"{'–' if v is None else f'{v:+.2f}'}</td>" for i, v in enumerate(values))
+        return f'<tr><td style="{_CELL};text-align:left">{label}</td>{cells}</tr>'
+
+    head = "".join(f'<th style="{_CELL}">{i + 1}</th>' for i in range(n))
+    return (f'<div data-testid="control-kappa" style="font-size:0.72em">'
+            f'<table style="border-collapse:collapse;width:100%">'
+            f'<tr><th style="{_CELL};text-align:left">κ (1/m)</th>{head}</tr>'
+            f"{row('measured', 'meas', meas)}{row('target', 'ref', c.kappa_ref)}</table></div>")
+
+
 class ControlPanel(Panel):
     """Arm, Execute, STOP, click-to-grasp, state and live plots for the soft arm."""
 
@@ -71,7 +141,8 @@ class ControlPanel(Panel):
         gui = self.gui
         r0 = self.app.robot.capture.nominal_object_radius
         self.state_md = gui.add_markdown("**State:** –")
-        self.loop_md = gui.add_markdown("<small>loop: –</small>")
+        self.fault_md = gui.add_markdown("", visible=False)
+        self.link_md = gui.add_markdown("<small>link: –</small>")
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
         self.stop_btn = gui.add_button("STOP arm", color="red", icon=viser.Icon.HAND_STOP)
@@ -85,6 +156,8 @@ class ControlPanel(Panel):
         self.click_mode = gui.add_checkbox("Click to grasp", False,
                                            hint="one click on the table places the object there "
                                                 "and runs the whole grasp-and-place")
+        self.kappa_md = gui.add_markdown("")
+        self.loop_md = gui.add_markdown("<small>loop: –</small>")
         n = self.app.robot.n_segments
         series = [uplot.Series(label="t (s)")]
         for i in range(n):
@@ -112,8 +185,9 @@ class ControlPanel(Panel):
                                               FINGER_COLOR, thickness=0.012, visible=False)
 
         self.ctl = control_for(self.app)
-        self.arm_btn.on_click(operator_only(lambda e: self._arm(), panel=self, action="arm the arm"))
-        self.disarm_btn.on_click(operator_only(lambda e: self.ctl.disarm(), panel=self,
+        self.arm_btn.on_click(operator_only(lambda e: self._arm(e), panel=self,
+                                            action="arm the arm"))
+        self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
                                                action="disarm the arm"))
         self.stop_btn.on_click(self._on_stop)  # STOP: any client
         self.place_btn.on_click(operator_only(lambda e: self._place(), panel=self,
@@ -129,15 +203,22 @@ class ControlPanel(Panel):
         self._plot_at = 0.0
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
+        self._last_fault: str | None = None
+        self._draw_lock = threading.Lock()
         self._pump_stop = threading.Event()
         self._pump = threading.Thread(target=self._pump_loop, name="control-pump", daemon=True)
         self._pump.start()
 
     # -- callbacks (thin: enqueue to the loop) -----------------------------------------------
-    def _arm(self) -> None:
+    def _arm(self, event: Any = None) -> None:
         self._fwd_seq = self.app.store.command.seq  # forward only later jog commands
         self._stopped = False
-        self.ctl.arm()
+        fut = self.ctl.arm()  # a refusal (link down, Disconnected) is told to this operator
+        fut.add_done_callback(lambda f: self._report(event, f))
+
+    def _disarm(self, event: Any = None) -> None:
+        fut = self.ctl.disarm()
+        fut.add_done_callback(lambda f: self._report(event, f))
 
     def _place(self) -> None:
         self.ctl.place_object(float(self.obj_x.value), float(self.obj_y.value), float(self.obj_r.value))
@@ -204,6 +285,10 @@ class ControlPanel(Panel):
     def _pump_once(self) -> None:
         view = self.ctl.view
         c = None if view is None else view.snapshot.control
+        if view is not None:
+            self._notify_fault(view.fault)
+        if time.monotonic() - self._plot_at > 2.0 / PLOT_HZ:
+            self._refresh()  # the render thread is idle (no new arm state): show the view anyway
         if c is None:
             return
         snap = view.snapshot
@@ -219,25 +304,51 @@ class ControlPanel(Panel):
                     self.ctl.goto(np.asarray(cmd.q))
             store.report(c.kappa_meas, "control")
 
-    def on_state(self, state: ArmState) -> None:
-        now = time.monotonic()
-        if now - self._plot_at < 1.0 / PLOT_HZ:
+    def _notify_fault(self, fault: str | None) -> None:
+        """Tell every browser once when a new hardware fault appears (not the operator's
+        own Disconnect); a fault that clears and comes back is told again."""
+        if fault == self._last_fault:
             return
-        self._plot_at = now
-        view = self.ctl.view
+        self._last_fault = fault
+        if fault and fault != DISCONNECTED:
+            self.app.notify_all("Hardware fault",
+                                f"{fault}. The arm is not commanded; the operator must re-arm.",
+                                color="red")
+            self.app.recorder.action(f"hardware fault: {fault}", None)
+
+    def on_state(self, state: ArmState) -> None:
+        if time.monotonic() - self._plot_at >= 1.0 / PLOT_HZ:
+            self._refresh()
+
+    def _refresh(self) -> None:
+        """Show the newest view (render thread, or the pump while the render thread idles)."""
+        if not self._draw_lock.acquire(blocking=False):
+            return
+        try:
+            self._plot_at = time.monotonic()
+            self._show(self.ctl.view)
+        finally:
+            self._draw_lock.release()
+
+    def _show(self, view: ControlView | None) -> None:
         if view is None:
-            self.state_md.content = "**State:** starting the control process…"
+            failure = getattr(self.ctl, "failure", None)
+            self.state_md.content = ("**State:** starting the control process…" if not failure
+                                     else f"**Control process failed:** {failure}")
             return
         c = view.snapshot.control
+        self.state_md.content = state_html(view)
         if c is not None:
-            wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
-            why = f"  \n**Reason:** {c.reason}" if c.reason else ""
-            self.state_md.content = (
-                f"**State:** {c.phase}{wp} · re-plans {c.replans} · "
-                f"{'ARMED' if c.armed else 'disarmed'} · tracking {'ok' if c.tracking_ok else 'LOST'}"
-                f" · gripper {'closed' if c.gripper_closed else 'open'}{why}")
             busy = c.phase not in IDLE_PHASES + ("settling",)
             self.execute_btn.disabled = self.plan_btn.disabled = busy
+            # Arm while armed would only restart the stack; after a fault it is the way back.
+            self.arm_btn.disabled = c.armed and not view.fault
+            self.disarm_btn.disabled = not c.armed
+        fault = fault_markdown(view.fault)
+        self.fault_md.content = fault
+        self.fault_md.visible = bool(fault)
+        self.link_md.content = link_line(view)
+        self.kappa_md.content = kappa_html(view)
         st = view.stats
         self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
                                 f"ticks · overruns "

@@ -24,6 +24,7 @@ from __future__ import annotations
 import atexit
 import concurrent.futures as cf
 import dataclasses
+import gc
 import itertools
 import multiprocessing
 import queue
@@ -32,6 +33,9 @@ from typing import Any, Literal
 
 import numpy as np
 
+from console.panels.control_worlds import DISCONNECTED, NO_SERIAL_LINK  # noqa: F401 (re-export)
+from console.panels.control_worlds import HardwareWorld as _HardwareWorld
+from console.panels.control_worlds import SimWorld as _SimWorld
 from hw_bridge.loop import LoopSnapshot, LoopStats
 
 
@@ -64,118 +68,30 @@ class DeviceOptions:
     emulator_args: tuple[str, ...] = ()
 
 
-class _SimWorld:
-    """device="sim": SoftArmSim stepped by the loop itself (SimDevice)."""
-
-    kind = "sim"
-
-    def __init__(self, robot: Any, seed: int):
-        from core.control.sim import SoftArmSim
-        from hw_bridge.loop import SimDevice
-        self.sim = SoftArmSim(robot, seed=seed)
-        self.device = SimDevice(self.sim)
-
-    def configure(self) -> None:
-        pass
-
-    def arm(self, stack: Any) -> None:  # loop thread
-        stack.arm(self.sim.cylinders.copy())
-
-    def disarm(self, stack: Any) -> None:  # loop thread
-        stack.disarm()
-
-    def scene(self, runner: Any) -> tuple[Any, Any, bool, Any, Any, str | None]:
-        sim = self.sim
-        obj = sim.obj
-        finger = sim.gripper_polyline() if sim.turn > 1e-3 else None
-        return (None if obj is None else (float(obj.xy[0]), float(obj.xy[1])),
-                None if obj is None else obj.radius, sim.captured, finger, None, None)
-
-    def close(self) -> None:
-        pass
-
-
-class _HardwareWorld:
-    """device="emulator" / "port" / "mock": SerialHardware (or MockHardware) + mocap."""
-
-    def __init__(self, robot: Any, seed: int, opts: DeviceOptions):
-        from hw_bridge.soft_arm_link import open_link
-        self.kind = opts.kind
-        self.link = open_link(robot, opts.kind, port_path=opts.port_path, seed=seed,  # type: ignore[arg-type]
-                              emulator_args=opts.emulator_args)
-        self.device = self.link.device
-        self.radius: float | None = None
-
-    def configure(self) -> None:
-        """Before the loop starts: open the port, handshake (a failure shows as the fault)."""
-        from hw_bridge.interface import ReturnType
-        if self.link.hw.configure() is not ReturnType.OK:
-            self.device.fault = self.link.hw.fault
-
-    def place_object(self, x: float, y: float, r: float) -> None:
-        """Command thread: put the object into the simulated world (none for a real device)."""
-        if self.link.scene is not None:
-            self.link.scene.place_object(x, y, r)
-        self.radius = r
-        self.device.object_radius = r
-
-    def arm(self, stack: Any) -> None:
-        """Loop thread (an operator action, so it may block ~100 ms): (re)connect, ARM, arm."""
-        from hw_bridge.interface import LifecycleState, ReturnType
-        hw = self.link.hw
-        if hw.state is LifecycleState.UNCONFIGURED and hw.configure() is not ReturnType.OK:
-            raise RuntimeError(f"arm refused: {hw.fault}")
-        if hw.state is LifecycleState.INACTIVE and hw.activate() is not ReturnType.OK:
-            raise RuntimeError(f"arm refused: {hw.fault}")
-        self.device.fault = None
-        stack.arm(self.device.cylinders())
-
-    def disarm(self, stack: Any) -> None:  # loop thread
-        from hw_bridge.interface import LifecycleState
-        stack.disarm()
-        if self.link.hw.state is LifecycleState.ACTIVE:
-            self.link.hw.deactivate()
-
-    def scene(self, runner: Any) -> tuple[Any, Any, bool, Any, Any, str | None]:
-        hw = self.link.hw
-        fault = hw.fault if hw.state.value == "unconfigured" else None
-        health = hw.health()
-        sc = self.link.scene
-        emu = self.link.emulator
-        if emu is not None and emu.proc.poll() is not None:
-            sc = None  # the emulator is gone: do not wait on its scene channel
-        if sc is not None:
-            try:
-                s = sc.scene()
-            except (RuntimeError, OSError):
-                s = None
-            if s is not None:
-                obj, finger = s["object"], s["finger"]
-                return (None if obj is None else (obj[0], obj[1]),
-                        None if obj is None else obj[2], bool(s["captured"]),
-                        None if finger is None else np.asarray(finger, float), health, fault)
-        c = runner.snapshot.control
-        xy = None if c is None or c.object_xy is None else (float(c.object_xy[0]),
-                                                             float(c.object_xy[1]))
-        return xy, self.radius if xy is not None else None, False, None, health, fault
-
-    def close(self) -> None:
-        self.link.close()
-
-
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,
            stats_ticks: int, sched_priority: int | None, opts: DeviceOptions = DeviceOptions()) -> None:
     from core.control.stack import ControlStack
     from core.robots import load
     from hw_bridge.loop import LoopRunner, ProcessPlanner
+    from hw_bridge.realtime import promote_threads, shorten_gil_wait
 
     robot = load(robot_source)
+    # Every thread of this process runs SCHED_FIFO just below the loop, so a thread that holds
+    # the GIL is never preempted by ordinary processes while the loop waits for it
+    # (hw_bridge.realtime); from the start, so the link's receive thread is real-time before
+    # the first STATE is due. Processes started later (planner, emulator) do not inherit it.
+    helper_priority = max(1, sched_priority - 10) if sched_priority else 0
+    if helper_priority:
+        shorten_gil_wait()
+        promote_threads(helper_priority)
     try:
         world: Any = _SimWorld(robot, seed) if opts.kind == "sim" else _HardwareWorld(robot, seed, opts)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which shows it
         replies.put(("failed", f"{opts.kind} device: {exc}"))
         return
     world.configure()
+    if helper_priority:
+        promote_threads(helper_priority)  # the receive thread configure() started
     planner = ProcessPlanner(robot_source)
     stack = ControlStack(robot, 0.01, planner)
     runner = LoopRunner(world.device, stack, 0.01)
@@ -187,6 +103,10 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     def arm(s: ControlStack) -> None:
         world.arm(s)
         runner.fault = None
+
+    def connect(s: ControlStack, port: str, baud: int) -> None:
+        world.connect(s, port, baud)
+        runner.fault = None  # a fresh link: the old fault is history (nothing is armed)
 
     def grasp_at(s: ControlStack, t: float, x: float, y: float, r: float) -> None:
         place(x, y, r)
@@ -211,6 +131,8 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         "start": lambda s, t: s.start(t),
         "place_object": lambda s, t, x, y, r: place(x, y, r),
         "grasp_at": grasp_at,
+        "connect": lambda s, t, port, baud: connect(s, port, baud),
+        "disconnect": lambda s, t: world.disconnect(s),
     }
     # With hardware the simulated object lives in the emulator / mock plant: placed from this
     # (command) thread before the loop's part runs, so the loop never waits on the scene channel.
@@ -218,16 +140,26 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     stop = threading.Event()
 
     def publish() -> None:
+        n = 0
         while not stop.wait(1.0 / publish_hz):
             obj_xy, radius, captured, finger, link, fault = world.scene(runner)
             fault = fault or runner.fault
             view = ControlView(runner.snapshot, runner.stats(last=stats_ticks), runner.scheduling,
                                obj_xy, radius, captured, finger, world.kind, link, fault)
             replies.put(("view", view))
+            n += 1
+            if helper_priority and n % int(publish_hz) == 1:  # queue feeders start lazily
+                promote_threads(helper_priority)
 
+    # Everything built so far lives as long as the process: out of the collector's sight, so a
+    # full collection triggered in the loop thread scans only what the loop allocates.
+    gc.collect()
+    gc.freeze()
     runner.start(sched_priority=sched_priority)
     pub = threading.Thread(target=publish, name="control-publish", daemon=True)
     pub.start()
+    if helper_priority:
+        promote_threads(helper_priority)
     try:
         parent = multiprocessing.parent_process()
         while True:
@@ -285,7 +217,11 @@ class ControlProcess:
 
     With hardware, Arm (and grasp_at/execute while disarmed) configures and activates the
     link in the loop thread; a link fault stops commanding and shows in ``view.fault``, and
-    nothing re-arms until the operator arms again.
+    nothing re-arms until the operator arms again. :meth:`disconnect_link` /
+    :meth:`connect_link` close and re-open the link (a new SerialHardware on the given port,
+    configured but not armed); after a Disconnect, Arm is refused until Connect, and the loop
+    keeps reading motion capture only. :attr:`bridge_controls` offers all this to the Hardware
+    panel as a :class:`hw_bridge.controls.BridgeControls`.
     """
 
     def __init__(self, robot: Any, seed: int = 0, publish_hz: float = 30.0,
@@ -372,6 +308,19 @@ class ControlProcess:
         return self.send("execute", np.asarray(plan.kappas, float).tolist(),
                          np.asarray(plan.palm_poses, float).tolist(), float(x), float(y), float(r))
 
+    def connect_link(self, port: str, baud: int = 0) -> cf.Future:
+        """Close the link and open ``port`` at ``baud`` (0: the robot file's); inactive."""
+        return self.send("connect", str(port), int(baud))
+
+    def disconnect_link(self) -> cf.Future:
+        """Stop commanding, DISARM and close the port; Arm refuses until :meth:`connect_link`."""
+        return self.send("disconnect")
+
+    @property
+    def bridge_controls(self) -> ProcessBridgeControls:
+        """This loop as a :class:`hw_bridge.controls.BridgeControls` (the Hardware panel's)."""
+        return ProcessBridgeControls(self)
+
     @property
     def alive(self) -> bool:
         return self._proc.is_alive()
@@ -383,3 +332,35 @@ class ControlProcess:
             self._proc.join(timeout)
         if self._proc.is_alive():
             self._proc.terminate()
+
+
+class ProcessBridgeControls:
+    """:class:`hw_bridge.controls.BridgeControls` over a :class:`ControlProcess`.
+
+    Every method only queues a command for the child's loop thread (the only writer to the
+    hardware) and returns at once; refusals land in ``health().fault`` (and in the link's
+    fault shown by the Control panel). Arm / Disarm are the Control panel's: the link is
+    activated (ARM) *and* the control stack starts commanding (holding where the arm is),
+    since an armed device without demands trips its watchdog within ``watchdog_ms``.
+    On the simulated arm Connect / Disconnect do nothing and health() then says so.
+    """
+
+    def __init__(self, ctl: ControlProcess):
+        self.ctl = ctl
+
+    def connect(self, port: str, baud: int) -> None:
+        self.ctl.connect_link(port, baud)
+
+    def disconnect(self) -> None:
+        self.ctl.disconnect_link()
+
+    def arm(self) -> None:
+        self.ctl.arm()
+
+    def disarm(self) -> None:
+        self.ctl.disarm()
+
+    def health(self) -> Any:
+        """The newest published :class:`~hw_bridge.interface.LinkHealth` (None: no link yet)."""
+        view = self.ctl.view
+        return None if view is None else view.link

@@ -73,14 +73,23 @@ class SessionPanel(Panel):
         self.app.access.add_listener(self._on_control_change)
         self.app.server.on_client_connect(self._on_connect)
         self.app.server.on_client_disconnect(self._on_disconnect)
+        for client in list(self.app.server.get_clients().values()):
+            self._on_connect(client)  # browsers that connected before the panels were built
         self.refresh()
 
     # -- per-client widgets ------------------------------------------------------------------
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        gui = client.gui
         access = self.app.access
-        with self._build_lock, self.folder:
+        with self._build_lock:
+            if client.client_id in self.clients:
+                return  # already built (connected while the panel was being built)
+            self._build_client(client, access)
+        self.refresh()
+
+    def _build_client(self, client: viser.ClientHandle, access: Any) -> None:
+        gui = client.gui
+        with self.folder:
             role = gui.add_html("", order=2.0)
             name = gui.add_text("Your name", access.name_of(client), order=3.0,
                                 hint="Shown to everyone when you hold control.")
@@ -98,7 +107,6 @@ class SessionPanel(Panel):
         with self._lock:
             self.clients[client.client_id] = widgets
         self.player.add(client.client_id, replay)
-        self.refresh()
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:

@@ -1,0 +1,222 @@
+"""Browser test of the Control panel on the simulated arm (serve.py --hardware mock).
+
+Chromium places an object at one of the paper's spots (core.control.trials.paper_locations),
+presses *Execute grasp-and-place* and reads the state machine's phase from the Control panel
+until it shows "released". Then it starts the grasp again, presses *STOP arm* while the arm is
+on its way, and reads the panel: the phase must become "stopped" and the measured curvatures
+(the panel's numbers) and the tip readout must stop changing, while over the same time before
+STOP they changed (so the hold check can fail). A screenshot of the Control panel mid-run goes to
+``artifacts/browser_control_panel.png``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from core.control.trials import paper_locations
+
+pytestmark = pytest.mark.browser
+SPOT = "E"  # (-0.08, 0.33): the quickest of the five (about 9 s approach, 9 s return in sim)
+# The held arm is measured through 0.2 mm marker noise (soft-arm.toml): the fitted curvature
+# of a perfectly still arm scatters with sigma 0.04 (segment 1) to 0.34 1/m (segment 6, the
+# chain accumulates heading noise), while the tip (the last marker) scatters by ~0.2 mm. So
+# the hold is judged on means of several readings per window: kappa within KAPPA_TOL (over 3
+# sigma of a difference of means), the tip within TIP_TOL_MM; the target row must not change
+# at all. Before STOP the same windows must show the tip moving by more than TIP_MOVING_MM
+# (measured: 4-17 mm per second early in the approach; held: ~0.2 mm).
+KAPPA_TOL = 0.8  # 1/m
+TIP_TOL_MM = 1.0
+TIP_MOVING_MM = 2.0
+WINDOW_S = 1.0
+LEASE_LOST = "went silent"  # the reason the console gives when a silent tab loses control
+RUNNING = ("settling", "planning", "approach", "grasp", "move_to_bin", "release")
+
+
+def phase(page: Any) -> str:
+    return page.locator('[data-testid="control-state"]').get_attribute("data-phase") or ""
+
+
+def state_text(page: Any) -> str:
+    return page.locator('[data-testid="control-state"]').inner_text()
+
+
+def wait_phase(page: Any, wanted: tuple[str, ...], timeout: float, avoid: tuple[str, ...] = ()
+               ) -> str:
+    """Poll the panel's phase until it is one of ``wanted`` (fail at once on ``avoid``)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        ph = phase(page)
+        if ph in wanted:
+            return ph
+        if ph in avoid or time.monotonic() > deadline:
+            notes = page.locator(".mantine-Notification-root").all_inner_texts()
+            link = page.locator('[data-testid="control-link"]').all_inner_texts()
+            fault = page.get_by_text("Fault:").all_inner_texts()
+            raise AssertionError(f"phase {ph!r}, wanted {wanted}: {state_text(page)!r}; "
+                                 f"link {link}; fault {fault}; notifications: {notes}")
+        time.sleep(0.05)
+
+
+def kappa_measured(page: Any, timeout: float = 2.0) -> np.ndarray:
+    """The panel's measured kappa per segment; waits out frames with an occluded marker ("–")."""
+    cells = page.locator('[data-testid^="kappa-meas-"]')
+    deadline = time.monotonic() + timeout
+    while True:
+        k = np.array([float(t.replace("–", "nan")) for t in cells.all_inner_texts()])
+        if k.size and np.all(np.isfinite(k)):
+            return k
+        assert time.monotonic() < deadline, f"no complete measurement shown: {k}"
+        time.sleep(0.05)
+
+
+def kappa_target(page: Any) -> np.ndarray:
+    cells = page.locator('[data-testid^="kappa-ref-"]')
+    return np.array([float(t) for t in cells.all_inner_texts()])
+
+
+def tip_mm(page: Any) -> np.ndarray:
+    return np.array([float(page.locator(f'[data-testid="tip-{i}"]').inner_text()
+                           .replace("⚠", "")) for i in range(2)])
+
+
+def window(page: Any, seconds: float = WINDOW_S) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean measured kappa, mean tip (mm) and every target row read over ``seconds``."""
+    kappa, tip, target = [], [], []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        kappa.append(kappa_measured(page))
+        tip.append(tip_mm(page))
+        target.append(kappa_target(page))
+        time.sleep(0.1)
+    return np.mean(kappa, axis=0), np.mean(tip, axis=0), np.array(target)
+
+
+def take_control(page: Any) -> None:
+    """Desk mode hands control to the first tab (the only one here), but a tab that stalls
+    for 2 s while the software renderer starts loses it: then take it (``--no-token``)."""
+    holder = page.locator('[data-testid="holder"]')
+    if "nobody" not in holder.inner_text():
+        return
+    page.get_by_role("button", name="Take control").click()
+    deadline = time.monotonic() + 20.0
+    while "nobody" in holder.inner_text():
+        notes = page.locator(".mantine-Notification-root").all_inner_texts()
+        assert time.monotonic() < deadline, f"could not take control: {notes}"
+        time.sleep(0.05)
+
+
+def close_notices(page: Any) -> None:
+    from playwright.sync_api import Error as PlaywrightError
+    for notice in page.locator(".mantine-Notification-root").all():
+        try:
+            notice.locator("button").first.click(timeout=1_000)
+        except PlaywrightError:  # closed on its own meanwhile
+            continue
+
+
+def execute_at(page: Any, x: float, y: float) -> None:
+    page.get_by_label("Object x (m)", exact=True).fill(f"{x:g}")
+    page.get_by_label("Object y (m)", exact=True).fill(f"{y:g}")
+    page.keyboard.press("Tab")  # commit the number inputs
+    take_control(page)
+    page.get_by_role("button", name="Execute grasp-and-place").click()
+
+
+def open_console(page: Any, url: str) -> None:
+    """Load the console once every panel is built (the Session panel's shared status shows).
+
+    serve.py answers HTTP before its panels exist; a browser that connects that early gets no
+    per-browser Session widgets (role, Take control), so reload it if they are missing.
+    """
+    page.goto(url)
+    page.locator('[data-testid="holder"]').wait_for(timeout=60_000)
+    if page.locator('[data-testid="role"]').count() == 0:
+        page.reload()
+    page.locator('[data-testid="role"]').wait_for(timeout=60_000)
+    page.locator('[data-testid="control-state"]').wait_for(timeout=30_000)
+
+
+def start_grasp(page: Any, x: float, y: float, until: tuple[str, ...], timeout: float,
+                attempts: int = 3) -> None:
+    """Execute at (x, y) until the panel shows a phase in ``until``.
+
+    A run that stops only because this tab lost control (the lease: a tab silent for 2 s, which
+    a loaded 2-core machine's software renderer can cause) is started again, at most
+    ``attempts`` times; any other stop or an idle arm fails at once.
+    """
+    for attempt in range(attempts):
+        execute_at(page, x, y)
+        try:
+            wait_phase(page, RUNNING, timeout=20.0)  # (the previous phase showed until now)
+            wait_phase(page, until, timeout=timeout, avoid=("stopped", "idle", "released"))
+            return
+        except AssertionError:
+            if LEASE_LOST not in state_text(page) or attempt == attempts - 1:
+                raise
+
+
+def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
+        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
+    page.set_viewport_size({"width": 1024, "height": 760})  # less for the software renderer
+    try:
+        run_scenarios(page, console_server("soft-arm", "--no-token"), artifacts_dir)
+    except BaseException:
+        page.screenshot(path=str(artifacts_dir / "browser_control_failure.png"))
+        raise
+
+
+def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
+    open_console(page, url)
+    # The control process is up. (On a loaded machine the mock link may already have timed
+    # out: then the panel shows that fault, and Execute's Arm reconnects it.)
+    link = page.locator('[data-testid="control-link"]')
+    link.wait_for(timeout=60_000)
+    assert "mock device" in link.inner_text() and "round trip p99" in link.inner_text()
+    close_notices(page)
+
+    # 1. The full grasp-and-place: settle, plan, approach, grasp, carry, release.
+    x, y = paper_locations()[SPOT]
+    for attempt in range(3):
+        start_grasp(page, x, y, ("grasp", "move_to_bin"), timeout=40.0)
+        assert np.all(np.isfinite(kappa_measured(page)))  # measured while it runs
+        assert "ARMED" in link.inner_text()
+        page.locator('[data-testid="control-state"]').scroll_into_view_if_needed()
+        page.mouse.move(5, 5)
+        page.screenshot(path=str(artifacts_dir / "browser_control_panel.png"))
+        try:
+            wait_phase(page, ("released",), timeout=40.0, avoid=("stopped", "idle"))
+            break
+        except AssertionError:  # as in start_grasp: only a lost lease may start it again
+            if LEASE_LOST not in state_text(page) or attempt == 2:
+                raise
+    assert "ARMED" in state_text(page)
+
+    # 2. Start again, STOP on the way: the arm holds where it is.
+    for attempt in range(3):
+        start_grasp(page, x, y, ("approach",), timeout=20.0)
+        time.sleep(0.3)  # into the approach
+        _, tip0, _ = window(page)
+        _, tip1, _ = window(page)
+        if phase(page) in RUNNING or LEASE_LOST not in state_text(page) or attempt == 2:
+            break
+    assert phase(page) in RUNNING, state_text(page)
+    moved = np.linalg.norm(tip1 - tip0)
+    assert moved > TIP_MOVING_MM, f"the tip barely moved before STOP ({moved:.1f} mm)"
+    page.get_by_role("button", name="STOP arm").click()
+    wait_phase(page, ("stopped",), timeout=5.0)
+    assert "STOP pressed in the Control panel" in state_text(page)
+    time.sleep(0.5)  # the soft segments settle on their held cylinder volumes (tau 0.25 s)
+    k1, tip1, ref1 = window(page)
+    k2, tip2, ref2 = window(page)
+    assert phase(page) == "stopped"
+    assert np.all(np.vstack([ref1, ref2]) == ref1[0]), "the target moved after STOP"
+    held = np.max(np.abs(k2 - k1))
+    assert held <= KAPPA_TOL, f"mean measured kappa moved by {held:.2f} 1/m: {k1} -> {k2}"
+    drift = np.linalg.norm(tip2 - tip1)
+    assert drift <= TIP_TOL_MM, f"the held tip moved by {drift:.2f} mm: {tip1} -> {tip2}"
