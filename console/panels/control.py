@@ -306,10 +306,13 @@ class ControlPanel(Panel):
 
     def _notify_fault(self, fault: str | None) -> None:
         """Tell every browser once when a new hardware fault appears (not the operator's
-        own Disconnect); a fault that clears and comes back is told again."""
+        own Disconnect); a fault that clears and comes back is told again. With the Hardware
+        panel composed (``app.bridge_controls``) it tells them instead: one notification."""
         if fault == self._last_fault:
             return
         self._last_fault = fault
+        if getattr(self.app, "bridge_controls", None) is not None:
+            return
         if fault and fault != DISCONNECTED:
             self.app.notify_all("Hardware fault",
                                 f"{fault}. The arm is not commanded; the operator must re-arm.",
