@@ -219,11 +219,14 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
     s0, c0, t0 = console.stats(), cpu_seconds(pid), time.monotonic()
     l0 = cpu_seconds(lpid) if lpid else 0.0
     rss, loops = [rss_mb(pid)], []
+    loop_rss = [rss_mb(lpid)] if lpid else []
     end = t0 + seconds
     next_report = t0 + progress_every if progress_every > 0 else float("inf")
     while time.monotonic() < end:
         time.sleep(min(sample_every, max(0.0, end - time.monotonic())))
         rss.append(rss_mb(pid))
+        if lpid:
+            loop_rss.append(rss_mb(lpid))
         loops.append(console.stats()["loop"])
         now = time.monotonic()
         if now >= next_report:  # running figures, so a long soak shows its first 10 min too
@@ -250,6 +253,7 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
     if lpid:
         out["loop_cpu_pct"] = 100.0 * (cpu_seconds(lpid) - l0) / (t1 - t0)
         out["loop_rss_mb"] = rss_mb(lpid)
+        out["loop_rss_trace"] = loop_rss + [out["loop_rss_mb"]]
     return out
 
 
@@ -405,6 +409,11 @@ def main() -> int:
     picks = [trace[round(i * (len(trace) - 1) / 9)] for i in range(10)] if len(trace) > 10 else trace
     half = trace[len(trace) // 2]
     print(f"\nRSS under load, MB, evenly over the phase: {' '.join(f'{v:.1f}' for v in picks)}")
+    ltrace = load.get("loop_rss_trace") or []
+    if ltrace:
+        lp = [ltrace[round(i * (len(ltrace) - 1) / 9)] for i in range(10)] if len(ltrace) > 10 \
+            else ltrace
+        print(f"control process RSS, MB, evenly over the phase: {' '.join(f'{v:.1f}' for v in lp)}")
     print(f"growth over the second half: {100.0 * (trace[-1] - half) / half:+.1f} %")
     growth = load["rss_growth_pct"]
     print(f"memory growth under load: {growth:+.1f} % over {a.seconds:g} s "
