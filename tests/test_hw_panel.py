@@ -21,6 +21,7 @@ from core.robots import load
 from hw_bridge.controls import QueuedBridgeControls
 from hw_bridge.interface import LifecycleState, LinkHealth
 from hw_bridge.mock import MockHardware
+from fakes import FakeClient
 
 ROBOT = load("extensible")
 SOFT = load("soft-arm")
@@ -104,17 +105,6 @@ class FakeControls:
 
     def health(self) -> LinkHealth | None:
         return self.h
-
-
-class FakeClient:
-    """What operator_only, app.refuse and app.notify_all use of a viser ClientHandle."""
-
-    def __init__(self, cid: int) -> None:
-        self.client_id = cid
-        self.notes: list[tuple[str, str]] = []
-
-    def add_notification(self, title: str, body: str, **_: object) -> None:
-        self.notes.append((title, body))
 
 
 def user(handle: Any, client: FakeClient, value: Any = None) -> None:

@@ -15,6 +15,7 @@ from console.app import ConsoleApp
 from console.panels.base import Panel, operator_only
 from console.panels.jog import JogPanel
 from core.robots import load
+from fakes import FakeClient
 
 SOFT = load("soft-arm")
 
@@ -25,17 +26,6 @@ class FakeClock:
 
     def __call__(self) -> float:
         return self.t
-
-
-class FakeClient:
-    """What operator_only and the app use of a viser ClientHandle."""
-
-    def __init__(self, cid: int) -> None:
-        self.client_id = cid
-        self.notes: list[tuple[str, str]] = []
-
-    def add_notification(self, title: str, body: str, **_: object) -> None:
-        self.notes.append((title, body))
 
 
 @pytest.fixture

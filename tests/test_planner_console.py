@@ -19,6 +19,7 @@ from core.kinematics import planar as pk
 from core.planning.grasp import plan_grasp
 from core.planning.reachability import PLANNABLE, ReachMap, from_json, reachability_map, to_json
 from core.robots import load
+from fakes import FakeClient
 
 ROBOT = load("soft-arm")
 
@@ -178,17 +179,6 @@ def test_live_replanning_is_throttled_to_the_newest_position(console):
 
 
 # -- sharing: only the operator changes the objects, the plan and the inspected waypoint ------
-
-class FakeClient:
-    """What operator_only and app.refuse use of a viser ClientHandle."""
-
-    def __init__(self, cid: int) -> None:
-        self.client_id = cid
-        self.notes: list[tuple[str, str]] = []
-
-    def add_notification(self, title: str, body: str, **_: object) -> None:
-        self.notes.append((title, body))
-
 
 def user(handle, client, value=None):
     """What viser does with a browser's click / edit: store the value, then call back."""
