@@ -37,6 +37,11 @@ def set_fifo(priority: int, tid: int = 0) -> str:
     return f"SCHED_FIFO {priority}"
 
 
+def helper_priority(loop_priority: int | None) -> int:
+    """Priority of a control process's other threads: 10 below its loop (0: no loop priority)."""
+    return max(1, loop_priority - 10) if loop_priority else 0
+
+
 def thread_policy(tid: int = 0) -> int:
     """The scheduling policy of thread ``tid`` without the reset-on-fork flag."""
     return os.sched_getscheduler(tid) & ~getattr(os, "SCHED_RESET_ON_FORK", 0)

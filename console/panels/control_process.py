@@ -73,6 +73,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     from core.control.stack import ControlStack
     from core.robots import load
     from hw_bridge.loop import LoopRunner, ProcessPlanner
+    from hw_bridge.realtime import helper_priority as realtime_helper_priority
     from hw_bridge.realtime import promote_threads, shorten_gil_wait
 
     robot = load(robot_source)
@@ -80,7 +81,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     # the GIL is never preempted by ordinary processes while the loop waits for it
     # (hw_bridge.realtime); from the start, so the link's receive thread is real-time before
     # the first STATE is due. Processes started later (planner, emulator) do not inherit it.
-    helper_priority = max(1, sched_priority - 10) if sched_priority else 0
+    helper_priority = realtime_helper_priority(sched_priority)
     if helper_priority:
         shorten_gil_wait()
         promote_threads(helper_priority)

@@ -77,10 +77,10 @@ def _promote_new_threads() -> None:
     descheduled GIL holder stalls the loop past the link timeout on a loaded machine."""
     import os
 
-    from hw_bridge.realtime import promote_threads, thread_policy
+    from hw_bridge.realtime import helper_priority, promote_threads, thread_policy
     try:
         if thread_policy() == os.SCHED_FIFO:
-            promote_threads(max(1, os.sched_getparam(0).sched_priority - 10))
+            promote_threads(helper_priority(os.sched_getparam(0).sched_priority))
     except (OSError, AttributeError):  # no real-time scheduling here: nothing to match
         pass
 
