@@ -335,6 +335,12 @@ def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str
         console.close()
 
 
+def evenly(trace: list[float], n: int = 10) -> list[float]:
+    """``n`` samples of ``trace`` evenly over it (all of it when shorter)."""
+    return [trace[round(i * (len(trace) - 1) / (n - 1))] for i in range(n)] if len(trace) > n \
+        else trace
+
+
 def fmt(v: Any, spec: str) -> str:
     return "n/a" if v is None else format(v, spec)
 
@@ -406,13 +412,12 @@ def main() -> int:
     if load["loop"]:
         print(f"loop thread scheduling: {load['loop']['scheduling']}")
     trace = load["rss_trace"]
-    picks = [trace[round(i * (len(trace) - 1) / 9)] for i in range(10)] if len(trace) > 10 else trace
+    picks = evenly(trace)
     half = trace[len(trace) // 2]
     print(f"\nRSS under load, MB, evenly over the phase: {' '.join(f'{v:.1f}' for v in picks)}")
     ltrace = load.get("loop_rss_trace") or []
     if ltrace:
-        lp = [ltrace[round(i * (len(ltrace) - 1) / 9)] for i in range(10)] if len(ltrace) > 10 \
-            else ltrace
+        lp = evenly(ltrace)
         print(f"control process RSS, MB, evenly over the phase: {' '.join(f'{v:.1f}' for v in lp)}")
     print(f"growth over the second half: {100.0 * (trace[-1] - half) / half:+.1f} %")
     growth = load["rss_growth_pct"]
