@@ -278,6 +278,14 @@ class AccessControl:
             self._answered = True
             return True
 
+    def last_heard(self, client: Any) -> float | None:
+        """Clock time ``client``'s tab last answered (or took control), if it holds control."""
+        cid = client_id_of(client)
+        with self._lock:
+            if self._holder is None or self._holder.client_id != cid:
+                return None
+            return self._last_seen
+
     def lease_limit(self) -> float:
         """How long the holder may stay silent: ``lease_s``, or ``first_answer_s`` until the
         holder's tab has answered once."""
@@ -330,14 +338,15 @@ class LeaseMonitor:
 
     A thread probes the holder's tab every ``probe_period`` s with a localStorage read (a
     JavaScript round trip) bounded so that the lease expires at most ``lease_s`` after the last
-    answer; a closed tab is also caught at once by ``server.on_client_disconnect``. On a desk
+    answer; the answers are also the heartbeats that keep a set-point jog moving (it holds when
+    the last one is over 300 ms old, see ``console.hold_to_run``), hence the 0.1 s default; a closed tab is also caught at once by ``server.on_client_disconnect``. On a desk
     console (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-
     rendered page busy for seconds -- is probed too and gets control back when it answers (the
     arm stopped when the lease lapsed and stays stopped).
     """
 
     def __init__(self, server: viser.ViserServer, access: AccessControl,
-                 probe_period: float = 0.25) -> None:
+                 probe_period: float = 0.1) -> None:
         self.server = server
         self.access = access
         self.probe_period = probe_period

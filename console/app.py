@@ -113,7 +113,8 @@ class ConsoleApp:
         self._data: DataDir | None = None
         self.access = access if access is not None else AccessControl()
         self.lease = LeaseMonitor(server, self.access)
-        self.hold = HoldToRun(self.store, allowed=self.access.is_operator)
+        self.hold = HoldToRun(self.store, allowed=self.access.is_operator,
+                              heard=self.access.last_heard)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
         self.access.add_listener(self._on_control_change)
         server.on_client_connect(self.access.grant_if_free)

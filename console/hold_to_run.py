@@ -8,9 +8,12 @@ the commanded configuration itself, at ``rate_hz``, from its own thread:
   sent, so a released button, a closed tab or a dropped network stops it within that time.
   The jog buttons renew it from viser's ``on_hold`` (sent by the browser while the button is
   pressed); releasing the button ends it at once.
-* :meth:`HoldToRun.move_to` moves towards a set-point (the jog sliders, Straighten/Retract) and
-  keeps going only while ``allowed(client)`` holds, i.e. while the client keeps its operator
-  lease (which its heartbeat renews, see ``console.access``).
+* :meth:`HoldToRun.move_to` moves towards a set-point (the jog sliders, Straighten/Retract).
+  It too runs only while heartbeats arrive: a step is taken only if the client was heard from
+  (the request itself, or a lease probe answer: ``heard(client)``, see ``console.access``) less
+  than ``expiry`` s ago; otherwise the arm holds where it is until the next answer, and the
+  move ends for good when the client loses its operator lease (``allowed(client)``), on STOP
+  or when someone else commands the arm.
 
 Both are capped on the server: every step is clamped to the robot's soft limits
 (``ArmModel.set_coordinate`` / ``clamp``) and scaled down so that no point of the arm (segment
@@ -91,6 +94,7 @@ class _Hold:
 class _Move:
     client_id: int
     target: Array
+    requested: float  # clock time of the request (the first sign of life)
 
 
 class HoldToRun:
@@ -99,7 +103,11 @@ class HoldToRun:
     Args:
         store: Where the commanded configuration lives.
         allowed: ``allowed(client_id)``: may this client still move the arm (holds the lease)?
-        expiry: A hold not renewed for this long stops (s).
+        heard: ``heard(client_id)``: clock time this client's tab last answered (None: never).
+            A set-point move steps only while that, or its request, is less than ``expiry``
+            old. None: set-point moves need no heartbeat (programmatic use, tests).
+        expiry: A hold not renewed for this long stops; a set-point move without a heartbeat
+            for this long holds (s).
         tip_speed: Largest speed of any arm point (m/s).
         rate_hz: Steps per second while moving.
         sweep_s: Time a held jog takes to sweep a coordinate's whole range (before the cap).
@@ -109,7 +117,7 @@ class HoldToRun:
     """
 
     def __init__(self, store: StateStore, *, allowed: Callable[[int], bool] = lambda _: True,
-                 expiry: float = 0.3, tip_speed: float = 0.25, rate_hz: float = 50.0,
+                 heard: Callable[[int], float | None] | None = None, expiry: float = 0.3, tip_speed: float = 0.25, rate_hz: float = 50.0,
                  sweep_s: float = 4.0, latch_gap: float = 2.0,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if expiry <= 0 or tip_speed <= 0 or rate_hz <= 0 or sweep_s <= 0:
@@ -117,6 +125,7 @@ class HoldToRun:
         self.store = store
         self.model = store.model
         self.allowed = allowed
+        self.heard = heard
         self.expiry = expiry
         self.tip_speed = tip_speed
         self.period = 1.0 / rate_hz
@@ -186,7 +195,7 @@ class HoldToRun:
         with self._cond:
             if not self.allowed(client_id):
                 return False
-            self._move = _Move(client_id, q)
+            self._move = _Move(client_id, q, self._clock())
             self._hold = None
             self._last_tick = None
             self._last_seq = self.store.command.seq
@@ -237,6 +246,9 @@ class HoldToRun:
             if h is None and m is None:
                 self._last_tick = None
                 return None
+            if h is None and not self._heard_recently(m, now):  # type: ignore[arg-type]
+                self._last_tick = None  # hold here; the next answer resumes from rest
+                return None
             dt = self.period if self._last_tick is None else min(now - self._last_tick,
                                                                  2 * self.period)
             self._last_tick = now
@@ -262,6 +274,14 @@ class HoldToRun:
             if done:
                 self._move = None
             return state
+
+    def _heard_recently(self, m: _Move, now: float) -> bool:
+        """Whether the client of set-point move ``m`` gave a sign of life within ``expiry``."""
+        if self.heard is None:
+            return True
+        last = self.heard(m.client_id)
+        latest = m.requested if last is None else max(m.requested, last)
+        return now - latest < self.expiry
 
     def start(self) -> None:
         if self._thread is None or not self._thread.is_alive():

@@ -143,6 +143,19 @@ def test_desk_mode_grants_only_when_enabled_and_free() -> None:
     assert desk.grant_if_free(2) is None and desk.is_operator(1)
 
 
+def test_last_heard_is_the_holders_latest_answer() -> None:
+    t = {"now": 5.0}
+    access = AccessControl(None, clock=lambda: t["now"])
+    assert access.last_heard(1) is None
+    access.take(1)
+    assert access.last_heard(1) == 5.0 and access.last_heard(2) is None
+    t["now"] = 7.5
+    assert not access.heartbeat(2) and access.last_heard(1) == 5.0
+    assert access.heartbeat(1) and access.last_heard(1) == 7.5
+    access.release(1)
+    assert access.last_heard(1) is None
+
+
 def test_names_are_cleaned() -> None:
     access = AccessControl(None)
     assert access.set_name(5, "  <b>Eve</b>\n") == "bEveb"  # no markup, no line breaks
@@ -175,10 +188,14 @@ def test_jog_from_a_viewer_is_refused_with_the_reason_and_moves_nothing(server) 
     jog._on_slider(coord, event(operator, slider))
     assert operator.notes == []
     np.testing.assert_allclose(app.hold.target(), [0, 6.0, 0, 0, 0, 0])
-    for _ in range(400):
-        if app.hold.tick() is None:
-            break
-        time.sleep(0.001)
+    time.sleep(0.35)  # no answer from the operator's tab for 300 ms: the move holds
+    q = app.store.command.q.copy()
+    assert app.hold.tick() is None and app.hold.active and np.array_equal(app.store.command.q, q)
+    deadline = time.monotonic() + 10.0  # at the 250 mm/s cap it takes about 0.45 s
+    while app.hold.active and time.monotonic() < deadline:
+        app.access.heartbeat(operator.client_id)  # the lease probe's answers keep it moving
+        app.hold.tick()
+        time.sleep(0.005)
     np.testing.assert_allclose(app.store.command.q, [0, 6.0, 0, 0, 0, 0], atol=1e-9)
 
 

@@ -37,10 +37,10 @@ def planar_points(q: np.ndarray) -> np.ndarray:
     return np.vstack([poses[1:, :2], far])
 
 
-def make(robot, allowed=lambda cid: True):
+def make(robot, allowed=lambda cid: True, heard=None):
     clock = FakeClock()
     store = StateStore(model_for(robot))
-    hold = HoldToRun(store, allowed=allowed, clock=clock, rate_hz=50.0)
+    hold = HoldToRun(store, allowed=allowed, heard=heard, clock=clock, rate_hz=50.0)
     return store, hold, clock
 
 
@@ -196,3 +196,39 @@ def test_bad_set_point_raises_and_changes_nothing() -> None:
     with pytest.raises(ValueError, match="direction"):
         hold.hold(1, hold.model.coordinates[0], 2)
     assert not hold.active and store.command.seq == 0
+
+
+def test_a_set_point_move_steps_only_while_heartbeats_arrive() -> None:
+    """Without an answer from the operator's tab for 300 ms the arm holds; answers resume it."""
+    answers: list[float] = []
+    store, hold, clock = make(SOFT, heard=lambda cid: answers[-1] if answers else None)
+    target = np.full(6, 8.0)
+    requested = clock.t
+    assert hold.move_to(1, target)
+    # No answer at all: the request itself counts for 300 ms, then nothing moves.
+    states = run(hold, clock, 1.0)
+    moving = [t for t, s in states if s is not None]
+    assert moving and max(moving) - requested < 0.3 + 1e-9
+    assert max(moving) - requested >= 0.3 - 0.02 - 1e-9
+    q = store.command.q.copy()
+    assert not np.allclose(q, target)
+    run(hold, clock, 1.0)
+    assert np.array_equal(store.command.q, q) and hold.active  # held, not given up
+    # Heartbeats every 0.1 s (the lease probe): it moves on, no faster than the cap, and arrives.
+    prev_t, prev = clock.t, planar_points(store.command.q)
+    for t, state in run(hold, clock, 6.0, renew=lambda: answers.append(clock.t)):
+        if state is None:
+            continue
+        pts = planar_points(state.q)
+        assert np.max(np.linalg.norm(pts - prev, axis=1)) / (t - prev_t) <= CAP * (1 + 1e-9)
+        prev_t, prev = t, pts
+    np.testing.assert_allclose(store.command.q, target, atol=1e-12)
+    assert not hold.active
+    # Heartbeats stop mid-move: it holds within 300 ms of the last one.
+    assert hold.move_to(1, np.zeros(6))
+    run(hold, clock, 0.5, renew=lambda: answers.append(clock.t))
+    last = answers[-1]
+    states = run(hold, clock, 1.0)
+    moving = [t for t, s in states if s is not None]
+    assert moving and max(moving) - last < 0.3 + 1e-9
+    assert hold.active and not np.allclose(store.command.q, 0.0)

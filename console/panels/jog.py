@@ -16,8 +16,10 @@ for every arm point and clamped to the soft limits:
   renewal; letting go ends it at once). The browser sends the renewals from its main thread: a
   software-rendered tab busy drawing the moving arm was measured sending them 0.5-0.8 s apart,
   so there a held jog advances in 300 ms bursts (safe, but jerky); with a GPU it is smooth.
-* Sliders, Straighten, Retract: a set-point; the arm moves towards it at the capped speed while
-  the operator keeps the lease (a closed tab stops it), STOP ends it.
+* Sliders, Straighten, Retract: a set-point; the arm moves towards it at the capped speed only
+  while heartbeats from the operator's tab arrive (the lease probe's answers, every 0.1 s): with
+  none for 300 ms it holds where it is, and goes on when the tab answers again. A lost lease
+  (2 s of silence, a closed tab), STOP or another command ends the move.
 
 Every callback is wrapped with ``operator_only``: viewers are told who holds control.
 """
