@@ -42,10 +42,11 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
-from console.access import AccessControl, LeaseMonitor, NotOperator, Operator
+from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
 from console.datadir import DataDir
 from console.hold_to_run import HoldToRun
+from console.lease import LeaseMonitor
 from console.model import ArmModel, model_for
 from console.panels.base import Panel
 from console.panels.jog import JogPanel
