@@ -271,11 +271,13 @@ class Emulator:
     def run(self) -> None:
         self.writer.start()
         priority = getattr(self.args, "sched_priority", 0)
-        if priority:  # a dedicated MCU is never preempted: neither is its stand-in
-            from hw_bridge.realtime import promote_threads, thread_policy
+        keeper = None
+        if priority:  # a dedicated MCU is never preempted: neither is its stand-in, nor its wire
+            from hw_bridge.realtime import TtyWorkerKeeper, promote_threads, thread_policy
             promote_threads(priority)
+            keeper = TtyWorkerKeeper(max(1, priority - 1)).start()  # (the pty's kworkers)
             _emit("scheduling", policy="SCHED_FIFO" if thread_policy() == os.SCHED_FIFO
-                  else "default", priority=priority)
+                  else "default", priority=priority, tty_workers=len(keeper.promoted))
         period = self.bridge.period_s
         next_tick = time.monotonic() + period
         while not self.stop:
@@ -302,6 +304,8 @@ class Emulator:
                 if next_tick <= now:  # overrun: skip, do not catch up
                     next_tick = now + period
         self.writer.q.put(None)
+        if keeper is not None:
+            keeper.stop()
         _emit("exit")
         try:
             os.close(self.master)

@@ -114,6 +114,10 @@ class Streamer:
             self._end_job(False, f"aborted: {self.fault}")
         self.message = f"fault: {self.fault}"
 
+    def device_fault(self, t: float, reason: str) -> None:
+        """The loop's device read/write failed: :meth:`stop`; the next update publishes it."""
+        self.stop(t, reason)
+
     def _end_job(self, ok: bool, message: str) -> None:
         job = self.job
         assert job is not None

@@ -41,6 +41,11 @@ class Stack(Protocol):
 
     def stop(self, t: float, reason: str) -> None: ...
 
+    def device_fault(self, t: float, reason: str) -> Any | None:
+        """The device failed: stop commanding; returns the control telemetry to publish
+        (None: keep the last)."""
+        ...
+
 
 class Device(Protocol):
     """What the loop drives. ``t`` is the loop's time in seconds (ignored by real hardware)."""
@@ -265,16 +270,16 @@ class LoopRunner:
         if reading is None:
             self.read_failures += 1
             self.fault = getattr(self.device, "fault", None) or "device read failed"
-            if self.stack.armed:
-                self.stack.stop(t, f"device: {self.fault}")
             control = self.snapshot.control
+            if self.stack.armed:
+                control = self.stack.device_fault(t, f"device: {self.fault}") or control
         else:
             commands, control = self.stack.update(reading, t, periods)
         t_write = timer()
         if commands is not None and not self.device.write(commands, t):
             self.write_failures += 1
             self.fault = getattr(self.device, "fault", None) or "device write failed"
-            self.stack.stop(t, f"device: {self.fault}")
+            control = self.stack.device_fault(t, f"device: {self.fault}") or control
         end = timer()
         i = self.ticks % _STATS_WINDOW
         period = 0.0 if self._last_start is None else (start - self._last_start) / 1e6

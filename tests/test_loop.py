@@ -73,6 +73,9 @@ class StubStack:
     def stop(self, t, reason):
         pass
 
+    def device_fault(self, t, reason):
+        return None
+
 
 class WorkDevice:
     """Device whose read 'takes' work_ns[tick] on the injected clock."""
@@ -243,6 +246,8 @@ def test_hardware_device_adapter_prepressurises_and_stops_on_link_loss(arm):
     runner.run_sim(0.01)
     assert runner.read_failures == 1 and stack.machine.phase.value == "stopped"
     assert "link lost" in stack.machine.reason
+    c = runner.snapshot.control  # what the Control panel shows: stopped, why, not commanded
+    assert c.phase == "stopped" and "link lost" in c.reason and not c.armed and not stack.armed
     n = len(hw.written)
     hw.fail_read = False
     runner.run_sim(0.05)

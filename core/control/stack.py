@@ -124,6 +124,23 @@ class ControlStack:
         self.traj.hold()
         self._freeze = True
 
+    def device_fault(self, t: float, reason: str) -> Telemetry | None:
+        """The device failed (no reading, or a write refused): hold, abort the task with
+        ``reason`` and stop commanding, so nothing moves until the operator arms again.
+
+        Returns the last telemetry marked so (phase, reason, disarmed; its ``t`` stays that of
+        the last reading, so it reads as stale), or None before the first reading.
+        """
+        if self.armed:
+            self.stop(t, reason)
+            self.armed = False
+        if self._last is None:
+            return None
+        m = self.machine
+        self._last = dataclasses.replace(self._last, armed=False, phase=m.phase.value,
+                                         reason=m.reason, tracking_ok=False)
+        return self._last
+
     def _require_armed(self, what: str) -> None:
         if not self.armed:
             raise RuntimeError(f"{what} refused: the arm is not armed")

@@ -1,0 +1,80 @@
+"""Real-time helpers: the pty's kernel workers are promoted while a real-time emulator runs and
+handed back when it exits (read back from the kernel, not from the helpers' own records)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from hw_bridge.realtime import (TtyWorkerKeeper, demote_tty_workers, promote_tty_workers,
+                                tty_workers)
+
+REPO = Path(__file__).resolve().parent.parent
+needs_root = pytest.mark.skipif(os.geteuid() != 0, reason="changing kernel threads needs root")
+
+
+def policy(pid: int) -> tuple[int, int]:
+    return os.sched_getscheduler(pid), os.sched_getparam(pid).sched_priority
+
+
+def test_tty_workers_are_the_unbound_kworkers() -> None:
+    pids = tty_workers()
+    assert pids, "a Linux kernel always has unbound workqueue workers"
+    for pid in pids:
+        assert Path(f"/proc/{pid}/comm").read_text().startswith("kworker/u")
+    assert os.getpid() not in pids
+
+
+@needs_root
+def test_promote_then_demote_the_workers() -> None:
+    before = {pid: policy(pid) for pid in tty_workers()}
+    promoted = promote_tty_workers(7)
+    try:
+        assert set(promoted) <= set(before)
+        for pid in promoted:
+            assert policy(pid) == (os.SCHED_FIFO, 7)
+        # Workers that were already real-time were left as they were.
+        for pid, was in before.items():
+            if pid not in promoted and was[0] == os.SCHED_FIFO:
+                assert policy(pid) == was
+    finally:
+        demote_tty_workers(promoted, 7)
+    for pid in promoted:
+        assert policy(pid) == (os.SCHED_OTHER, 0)
+    with pytest.raises(ValueError):
+        promote_tty_workers(0)
+
+
+@needs_root
+def test_keeper_promotes_new_workers_and_hands_them_back() -> None:
+    keeper = TtyWorkerKeeper(6, every=0.05).start()
+    try:
+        for pid in tty_workers():
+            assert os.sched_getscheduler(pid) == os.SCHED_FIFO
+    finally:
+        promoted = list(keeper.promoted)
+        keeper.stop()
+    for pid in promoted:
+        assert policy(pid) == (os.SCHED_OTHER, 0)
+
+
+@needs_root
+def test_real_time_emulator_keeps_its_wire_real_time_while_it_runs() -> None:
+    proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", "--robot", "extensible",
+                             "--sched-priority", "30"], cwd=REPO, stdout=subprocess.PIPE,
+                            text=True)
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline().startswith("/dev/")
+        event = json.loads(proc.stdout.readline())
+        assert event["event"] == "scheduling" and event["policy"] == "SCHED_FIFO"
+        assert all(os.sched_getscheduler(pid) == os.SCHED_FIFO for pid in tty_workers())
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    assert all(policy(pid) != (os.SCHED_FIFO, 29) for pid in tty_workers())
