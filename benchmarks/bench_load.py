@@ -28,6 +28,7 @@ itself, to 0 and -8), or ``--browser-sched normal`` to compete at equal priority
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import json
 import os
@@ -41,6 +42,8 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from load_trials import TrialTally, start_trials, trials_in, trials_text  # noqa: E402
+
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 TICK = os.sysconf("SC_CLK_TCK")
@@ -53,42 +56,6 @@ def _serve_module() -> Any:
     module = importlib.util.module_from_spec(spec)  # type: ignore[arg-type]
     spec.loader.exec_module(module)  # type: ignore[union-attr]
     return module
-
-
-def start_trials(app: Any, robot: Any, stop: threading.Event) -> Any:
-    """Grasp-and-place trials back to back on the console's control process; None if absent.
-
-    The soft arm's 100 Hz loop runs in ``app.soft_control`` (a ``ControlProcess``: its own
-    process, attached by ``serve.build``); the Control panel draws what it measures.
-    """
-    ctl = getattr(app, "soft_control", None)
-    if ctl is None:
-        return None
-    from core.control.trials import paper_locations
-
-    spots = list(paper_locations().values())
-    r0 = robot.capture.nominal_object_radius
-    ctl.arm().result(30)
-
-    def trials() -> None:
-        i = 0
-        while not stop.is_set():
-            x, y = spots[i % len(spots)]
-            i += 1
-            try:
-                ctl.grasp_at(x, y, r0).result(30)
-            except Exception as exc:  # noqa: BLE001 - a refused trial: note it, go on
-                print(f"trial refused: {exc}", file=sys.stderr)
-            while not stop.wait(0.1):
-                view = ctl.view
-                c = None if view is None else view.snapshot.control
-                if c is not None and c.phase in ("released", "stopped"):
-                    break
-            ctl.goto([0.0] * robot.n_segments).result(30)
-            stop.wait(1.0)
-
-    threading.Thread(target=trials, name="bench-trials", daemon=True).start()
-    return ctl
 
 
 def child(a: argparse.Namespace) -> int:
@@ -106,7 +73,7 @@ def child(a: argparse.Namespace) -> int:
     server, app, _ = serve.build(args, robot, "load benchmark")
     app.start()
     stop = threading.Event()
-    ctl = start_trials(app, robot, stop) if a.motion == "loop" else None
+    ctl, tally = start_trials(app, robot, stop) if a.motion == "loop" else (None, TrialTally())
     demo = None
     if ctl is None:
         demo = DemoMotion(app.store)
@@ -123,7 +90,8 @@ def child(a: argparse.Namespace) -> int:
             base_overruns = view.stats.overruns
         elif cmd == "stats":
             out: dict[str, Any] = {"clients": len(server.get_clients()),
-                                   "frames_drawn": app.frames_drawn, "loop": None}
+                                   "frames_drawn": app.frames_drawn, "loop": None,
+                                   "trials": dataclasses.asdict(tally)}
             if view is not None:  # the control process publishes stats of its last 1000 ticks
                 st = view.stats
                 out["loop"] = {"overruns": st.overruns - base_overruns,
@@ -227,7 +195,8 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
         rss.append(rss_mb(pid))
         if lpid:
             loop_rss.append(rss_mb(lpid))
-        loops.append(console.stats()["loop"])
+        st = console.stats()
+        loops.append(st["loop"])
         now = time.monotonic()
         if now >= next_report:  # running figures, so a long soak shows its first 10 min too
             next_report += progress_every
@@ -238,12 +207,14 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
                         if w else "loop n/a")
             print(f"  [{now - t0:6.0f} s] console CPU "
                   f"{100.0 * (cpu_seconds(pid) - c0) / (now - t0):.1f} %, RSS {rss[-1]:.1f} MB "
-                  f"({100.0 * (rss[-1] - rss[0]) / rss[0]:+.1f} %), {loop_txt}", flush=True)
+                  f"({100.0 * (rss[-1] - rss[0]) / rss[0]:+.1f} %), {loop_txt}, "
+                  f"{trials_text(s0['trials'], st['trials'])}", flush=True)
     s1, c1, t1 = console.stats(), cpu_seconds(pid), time.monotonic()
     out = {"cpu_pct": 100.0 * (c1 - c0) / (t1 - t0), "rss_mb": rss[-1], "rss_trace": rss,
            "rss_growth_pct": 100.0 * (rss[-1] - rss[0]) / rss[0], "rss_peak_mb": max(rss),
            "fps": (s1["frames_drawn"] - s0["frames_drawn"]) / (t1 - t0),
-           "clients": s1["clients"], "loop": None, "loop_cpu_pct": None, "loop_rss_mb": None}
+           "clients": s1["clients"], "loop": None, "loop_cpu_pct": None, "loop_rss_mb": None,
+           "trials": trials_in(s0["trials"], s1["trials"])}
     windows = [w for w in loops + [s1["loop"]] if w]
     if windows:
         out["loop"] = {"p99_ms": max(w["p99_ms"] for w in windows),
@@ -411,6 +382,9 @@ def main() -> int:
         print(f"{name:40s} {fmt(b, spec):>12s} {fmt(l, spec):>12s}")
     if load["loop"]:
         print(f"loop thread scheduling: {load['loop']['scheduling']}")
+    for name, phase in (("0 clients", base), (f"{a.clients} clients", load)):
+        t = phase["trials"]
+        print(f"{name}: {trials_text({k: 0 for k in t} | {'last_stop': ''}, t)}")
     trace = load["rss_trace"]
     picks = evenly(trace)
     half = trace[len(trace) // 2]
