@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
+import logging
 import queue
 import threading
 import time
@@ -29,6 +30,7 @@ from core.control.stack import Telemetry
 from hw_bridge.realtime import set_fifo
 
 Array = npt.NDArray[np.float64]
+log = logging.getLogger(__name__)
 _STATS_WINDOW = 65536  # ticks kept for percentiles (~11 min at 100 Hz)
 
 
@@ -207,6 +209,7 @@ class LoopRunner:
         self.overruns = 0
         self.read_failures = 0
         self.write_failures = 0
+        self.update_failures = 0
         self.fault: str | None = None
         self.scheduling = "not started"
         self._buf = np.zeros((6, _STATS_WINDOW))  # period err, latency, read, update, write, work
@@ -274,7 +277,13 @@ class LoopRunner:
             if self.stack.armed:
                 control = self.stack.device_fault(t, f"device: {self.fault}") or control
         else:
-            commands, control = self.stack.update(reading, t, periods)
+            try:
+                commands, control = self.stack.update(reading, t, periods)
+            except Exception as exc:  # noqa: BLE001 - a failing part must not end the loop
+                log.exception("control update failed at t = %.2f s", t)
+                self.update_failures += 1
+                self.fault = f"control update failed: {type(exc).__name__}: {exc}"
+                control = self.stack.device_fault(t, self.fault) or self.snapshot.control
         t_write = timer()
         if commands is not None and not self.device.write(commands, t):
             self.write_failures += 1

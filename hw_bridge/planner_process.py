@@ -51,13 +51,31 @@ class ProcessPlanner:
 
     def __init__(self, robot_source: str | Path, workers: int = 1,
                  plan_spec: str = "core.planning.grasp:plan_grasp"):
+        self._args = (workers, str(robot_source), plan_spec)
+        self.restarts = 0
+        self.pool = self._new_pool()
+
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        workers, robot_source, plan_spec = self._args
         ctx = multiprocessing.get_context("spawn")
-        self.pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                                           initargs=(str(robot_source), plan_spec))
-        self.warm = self.pool.submit(int)  # start the worker now (without waiting for it)
+        pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
+                                      initargs=(robot_source, plan_spec))
+        self.warm = pool.submit(int)  # start the worker now (without waiting for it)
+        return pool
 
     def __call__(self, req: PlanRequest) -> cf.Future:
-        return self.pool.submit(_worker_plan, req)
+        """Submit a plan. If the worker process has died (the pool is broken), a new one is
+        started and this request fails with a reason, so the task stops and says why."""
+        try:
+            return self.pool.submit(_worker_plan, req)
+        except cf.process.BrokenProcessPool:
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            self.pool = self._new_pool()
+            self.restarts += 1
+            failed: cf.Future = cf.Future()
+            failed.set_exception(RuntimeError(
+                "the planning process had ended unexpectedly; a new one was started, try again"))
+            return failed
 
     def close(self) -> None:
         """Cancel pending plans and end the worker (waits for a plan in progress, ~ms)."""

@@ -195,6 +195,54 @@ def test_planning_runs_in_another_process(arm):
     assert np.allclose(plan.center, [-0.22, 0.2])
 
 
+def test_a_dead_planning_process_fails_one_plan_with_a_reason_and_is_replaced(arm):
+    import os
+    import signal
+    planner = ProcessPlanner(arm.source)
+    try:
+        planner.warm.result(timeout=60)
+        (pid,) = [p.pid for p in planner.pool._processes.values()]
+        os.kill(pid, signal.SIGKILL)  # as if it crashed
+        req = PlanRequest(np.zeros(6), np.array([-0.22, 0.2]), 0.0165)
+        deadline = time.monotonic() + 30
+        fut = planner(req)  # the pool may not have noticed yet: then this plan fails on its own
+        while planner.restarts == 0 and time.monotonic() < deadline:
+            with pytest.raises(Exception):
+                fut.result(timeout=30)
+            fut = planner(req)
+        assert planner.restarts == 1
+        with pytest.raises(RuntimeError, match="planning process had ended"):
+            fut.result(timeout=1)
+        plan = planner(req).result(timeout=60)  # the new worker plans
+        assert np.allclose(plan.center, [-0.22, 0.2])
+    finally:
+        planner.close()
+
+
+def test_an_exception_in_the_update_stops_and_disarms_but_the_loop_goes_on(arm):
+    runner, sim, stack = sim_runner(arm)
+    runner.arm()
+    runner.run_sim(0.1)
+    assert stack.armed
+    real_step = stack.machine.step
+
+    def broken(obs):
+        raise ZeroDivisionError("boom")
+
+    stack.machine.step = broken
+    ticks = runner.snapshot.tick
+    runner.run_sim(0.05)
+    assert runner.snapshot.tick == ticks + 5  # every tick ran
+    assert runner.update_failures == 1  # disarmed after the first: not stepped again
+    assert "control update failed: ZeroDivisionError: boom" in runner.fault
+    c = runner.snapshot.control
+    assert c.phase == "stopped" and "boom" in c.reason and not c.armed and not stack.armed
+    stack.machine.step = real_step
+    runner.arm()  # the operator arms again: it works
+    runner.run_sim(0.05)
+    assert runner.snapshot.control.armed
+
+
 class StraightMocap:
     """A motion-capture source that always sees the straight arm (fresh frames)."""
 

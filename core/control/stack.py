@@ -125,8 +125,9 @@ class ControlStack:
         self._freeze = True
 
     def device_fault(self, t: float, reason: str) -> Telemetry | None:
-        """The device failed (no reading, or a write refused): hold, abort the task with
-        ``reason`` and stop commanding, so nothing moves until the operator arms again.
+        """The device failed (no reading, or a write refused), or the update itself raised:
+        hold, abort the task with ``reason`` and stop commanding, so nothing moves until the
+        operator arms again.
 
         Returns the last telemetry marked so (phase, reason, disarmed; its ``t`` stays that of
         the last reading, so it reads as stale), or None before the first reading.
