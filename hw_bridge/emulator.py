@@ -278,6 +278,23 @@ class Emulator:
             keeper = TtyWorkerKeeper(max(1, priority - 1)).start()  # (the pty's kworkers)
             _emit("scheduling", policy="SCHED_FIFO" if thread_policy() == os.SCHED_FIFO
                   else "default", priority=priority, tty_workers=len(keeper.promoted))
+        try:
+            self._serve()
+        finally:  # hand the kernel workers back even if serving failed
+            if keeper is not None:
+                keeper.stop()
+        self.writer.q.put(None)
+        _emit("exit")
+        try:
+            os.close(self.master)
+        except OSError:
+            pass
+        for sock in (self.udp, self.control):
+            if sock is not None:
+                sock.close()
+
+    def _serve(self) -> None:
+        """Serve the protocol until :attr:`stop`."""
         period = self.bridge.period_s
         next_tick = time.monotonic() + period
         while not self.stop:
@@ -303,17 +320,6 @@ class Emulator:
                 next_tick += period
                 if next_tick <= now:  # overrun: skip, do not catch up
                     next_tick = now + period
-        self.writer.q.put(None)
-        if keeper is not None:
-            keeper.stop()
-        _emit("exit")
-        try:
-            os.close(self.master)
-        except OSError:
-            pass
-        for sock in (self.udp, self.control):
-            if sock is not None:
-                sock.close()
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:

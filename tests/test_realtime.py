@@ -18,6 +18,16 @@ REPO = Path(__file__).resolve().parent.parent
 needs_root = pytest.mark.skipif(os.geteuid() != 0, reason="changing kernel threads needs root")
 
 
+@pytest.fixture
+def ordinary_workers() -> None:
+    """Start from ordinary workers (an emulator ended by SIGKILL cannot hand its back)."""
+    for pid in tty_workers():
+        try:
+            os.sched_setscheduler(pid, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass
+
+
 def policy(pid: int) -> tuple[int, int]:
     return os.sched_getscheduler(pid), os.sched_getparam(pid).sched_priority
 
@@ -31,11 +41,11 @@ def test_tty_workers_are_the_unbound_kworkers() -> None:
 
 
 @needs_root
-def test_promote_then_demote_the_workers() -> None:
+def test_promote_then_demote_the_workers(ordinary_workers) -> None:
     before = {pid: policy(pid) for pid in tty_workers()}
     promoted = promote_tty_workers(7)
     try:
-        assert set(promoted) <= set(before)
+        assert promoted and set(promoted) <= set(before)
         for pid in promoted:
             assert policy(pid) == (os.SCHED_FIFO, 7)
         # Workers that were already real-time were left as they were.
@@ -51,9 +61,10 @@ def test_promote_then_demote_the_workers() -> None:
 
 
 @needs_root
-def test_keeper_promotes_new_workers_and_hands_them_back() -> None:
+def test_keeper_promotes_new_workers_and_hands_them_back(ordinary_workers) -> None:
     keeper = TtyWorkerKeeper(6, every=0.05).start()
     try:
+        assert keeper.promoted
         for pid in tty_workers():
             assert os.sched_getscheduler(pid) == os.SCHED_FIFO
     finally:
@@ -64,7 +75,7 @@ def test_keeper_promotes_new_workers_and_hands_them_back() -> None:
 
 
 @needs_root
-def test_real_time_emulator_keeps_its_wire_real_time_while_it_runs() -> None:
+def test_real_time_emulator_keeps_its_wire_real_time_while_it_runs(ordinary_workers) -> None:
     proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", "--robot", "extensible",
                              "--sched-priority", "30"], cwd=REPO, stdout=subprocess.PIPE,
                             text=True)
@@ -73,6 +84,7 @@ def test_real_time_emulator_keeps_its_wire_real_time_while_it_runs() -> None:
         assert proc.stdout.readline().startswith("/dev/")
         event = json.loads(proc.stdout.readline())
         assert event["event"] == "scheduling" and event["policy"] == "SCHED_FIFO"
+        assert event["tty_workers"] >= 1
         assert all(os.sched_getscheduler(pid) == os.SCHED_FIFO for pid in tty_workers())
     finally:
         proc.terminate()
