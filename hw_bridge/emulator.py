@@ -277,7 +277,7 @@ class Emulator:
             promote_threads(priority)
             keeper = TtyWorkerKeeper(max(1, priority - 1)).start()  # (the pty's kworkers)
             _emit("scheduling", policy="SCHED_FIFO" if thread_policy() == os.SCHED_FIFO
-                  else "default", priority=priority, tty_workers=len(keeper.promoted))
+                  else "default", priority=priority, tty_workers=keeper.promoted)
         try:
             self._serve()
         finally:  # hand the kernel workers back even if serving failed

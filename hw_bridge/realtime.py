@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+from typing import Any
 
 
 def set_fifo(priority: int, tid: int = 0) -> str:
@@ -139,33 +140,63 @@ def demote_tty_workers(pids: list[int], priority: int) -> None:
 class TtyWorkerKeeper:
     """Keeps the ``kworker/u*`` workers real-time while a real-time pty user runs.
 
-    A thread of ordinary priority (it sets itself back if started from a real-time thread)
-    promotes new workers every ``every`` s; :meth:`stop` returns the ones it promoted.
+    The keeping runs in a small process of its own (``python -m hw_bridge.realtime``) at
+    ordinary priority: a thread of ordinary priority inside a real-time process would hold that
+    process's GIL while it scans /proc, and if it were preempted there the real-time threads
+    would wait for it. The keeper promotes new workers every ``every`` s and, when told to stop
+    or when its parent goes away (its stdin closes, also after a SIGKILL), returns the workers
+    it promoted to ordinary scheduling.
     """
 
     def __init__(self, priority: int, every: float = 2.0) -> None:
+        if not 1 <= priority <= 99:
+            raise ValueError(f"SCHED_FIFO priority must be in 1..99, got {priority}")
         self.priority = priority
         self.every = every
-        self.promoted: list[int] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="tty-worker-keeper", daemon=True)
+        self.promoted = 0  # how many the first pass promoted
+        self._proc: Any = None
 
     def start(self) -> "TtyWorkerKeeper":
-        self.promoted += promote_tty_workers(self.priority)
-        self._thread.start()
+        import subprocess
+        self._proc = subprocess.Popen(
+            [sys.executable, "-m", "hw_bridge.realtime", str(self.priority), str(self.every)],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+            preexec_fn=_ordinary_scheduling)
+        line = self._proc.stdout.readline()  # the first pass's count, once it is done
+        self.promoted = int(line) if line.strip().isdigit() else 0
         return self
 
-    def _run(self) -> None:
+    def stop(self, timeout: float = 5.0) -> None:
+        if self._proc is None:
+            return
+        self._proc.stdin.close()  # the keeper hands the workers back and exits
         try:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-        except OSError:
-            pass
-        while not self._stop.wait(self.every):
-            self.promoted += promote_tty_workers(self.priority)
+            self._proc.wait(timeout)
+        except Exception:  # noqa: BLE001 - never leave it behind
+            self._proc.kill()
+        self._proc = None
 
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(self.every + 1.0)
-        demote_tty_workers(self.promoted, self.priority)
-        self.promoted = []
+
+def _ordinary_scheduling() -> None:  # in the keeper child, between fork and exec
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except OSError:
+        pass
+
+
+def _keep(priority: int, every: float) -> int:
+    """The keeper process: promote now and every ``every`` s until stdin closes, then demote."""
+    import select
+    promoted = promote_tty_workers(priority)
+    print(len(promoted), flush=True)
+    while True:
+        ready, _, _ = select.select([sys.stdin], [], [], every)
+        if ready and not sys.stdin.read(1):  # EOF: the parent stopped us or went away
+            break
+        promoted += promote_tty_workers(priority)
+    demote_tty_workers(promoted, priority)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(_keep(int(sys.argv[1]), float(sys.argv[2])))

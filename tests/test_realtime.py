@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -64,14 +65,30 @@ def test_promote_then_demote_the_workers(ordinary_workers) -> None:
 def test_keeper_promotes_new_workers_and_hands_them_back(ordinary_workers) -> None:
     keeper = TtyWorkerKeeper(6, every=0.05).start()
     try:
-        assert keeper.promoted
-        for pid in tty_workers():
-            assert os.sched_getscheduler(pid) == os.SCHED_FIFO
+        assert keeper.promoted >= 1
+        promoted = [pid for pid in tty_workers() if policy(pid) == (os.SCHED_FIFO, 6)]
+        assert len(promoted) == len(tty_workers())
     finally:
-        promoted = list(keeper.promoted)
         keeper.stop()
     for pid in promoted:
         assert policy(pid) == (os.SCHED_OTHER, 0)
+
+
+@needs_root
+def test_keeper_hands_the_workers_back_when_its_parent_is_killed(ordinary_workers) -> None:
+    code = ("import sys, time; from hw_bridge.realtime import TtyWorkerKeeper; "
+            "k = TtyWorkerKeeper(5, every=0.05).start(); print(k.promoted, flush=True); "
+            "time.sleep(60)")
+    parent = subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE,
+                              text=True)
+    assert int(parent.stdout.readline()) >= 1
+    assert any(policy(pid) == (os.SCHED_FIFO, 5) for pid in tty_workers())
+    parent.kill()  # SIGKILL: no clean-up in the parent; the keeper sees its stdin close
+    parent.wait(timeout=10)
+    deadline = time.monotonic() + 10
+    while any(policy(pid) == (os.SCHED_FIFO, 5) for pid in tty_workers()):
+        assert time.monotonic() < deadline, "workers still real-time after the parent died"
+        time.sleep(0.05)
 
 
 @needs_root
