@@ -72,6 +72,32 @@ def test_clients_connecting_together_all_get_session_widgets(n_clients: int) -> 
         server.stop()
 
 
+def test_browsers_connected_before_the_session_panel_is_built_get_their_widgets() -> None:
+    """serve.py answers browsers before its panels exist. A browser already connected when the
+    Session panel was built crashed serve.py (the panel built its widgets inside its own folder's
+    `with` block: "GuiFolderHandle is already active"); seen in a full browser-test run."""
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    ready, stop = threading.Barrier(2), threading.Event()
+    url = f"ws://127.0.0.1:{server.get_port()}"
+    threads = [threading.Thread(target=_viewer, args=(url, ready, stop), daemon=True)
+               for _ in range(2)]
+    try:
+        for th in threads:
+            th.start()
+        deadline = time.monotonic() + 10.0
+        while len(server.get_clients()) < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert len(server.get_clients()) == 2
+        app = ConsoleApp(SOFT, server, access=AccessControl("tok"), panels=(SessionPanel,))
+        session = app.panel(SessionPanel)
+        assert set(session.clients) == set(server.get_clients())
+    finally:
+        stop.set()
+        for th in threads:
+            th.join(5)
+        server.stop()
+
+
 class _WatchedWaiters(collections.deque):
     """A waiter deque that records which threads iterate it."""
 

@@ -67,6 +67,7 @@ class Panel:
                                           expand_by_default=self.expand_by_default)
         with self.folder:
             self.build()
+        self.after_build()
 
     @classmethod
     def supports(cls, robot: Robot) -> bool:
@@ -76,6 +77,10 @@ class Panel:
     def build(self) -> None:
         """Create the widgets (inside this panel's folder) and attach thin callbacks."""
         raise NotImplementedError
+
+    def after_build(self) -> None:
+        """Work that must run outside the folder's ``with`` block (a folder handle may be
+        entered only once at a time), e.g. per-browser widgets for browsers already connected."""
 
     def on_state(self, state: ArmState) -> None:
         """Show the newest displayed state; runs on the render thread, keep it cheap."""

@@ -48,6 +48,7 @@ class SessionPanel(Panel):
         # viser runs connect callbacks concurrently, and a folder handle can be entered by one
         # thread at a time: per-client widgets are built one client after the other.
         self._build_lock = threading.Lock()
+        self._ready = threading.Event()  # set once build() has left the folder's `with` block
         self.clients: dict[int, _ClientWidgets] = {}
         self.player = ReplayPlayer()
         self.stop_btn = gui.add_button("STOP", color="red", icon=viser.Icon.HAND_STOP,
@@ -73,14 +74,20 @@ class SessionPanel(Panel):
         self.app.access.add_listener(self._on_control_change)
         self.app.server.on_client_connect(self._on_connect)
         self.app.server.on_client_disconnect(self._on_disconnect)
+        self.refresh()
+
+    def after_build(self) -> None:
+        self._ready.set()
         for client in list(self.app.server.get_clients().values()):
             self._on_connect(client)  # browsers that connected before the panels were built
-        self.refresh()
 
     # -- per-client widgets ------------------------------------------------------------------
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
         access = self.app.access
+        # A browser connecting while build() runs must wait: build() is inside the folder's
+        # `with` block, which _build_client enters too (viser allows one at a time).
+        self._ready.wait(60.0)
         with self._build_lock:
             if client.client_id in self.clients:
                 return  # already built (connected while the panel was being built)
