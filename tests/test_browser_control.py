@@ -139,13 +139,7 @@ def open_console(page: Any, url: str) -> None:
     if page.locator('[data-testid="role"]').count() == 0:
         page.reload()
     page.locator('[data-testid="role"]').wait_for(timeout=60_000)
-    try:
-        page.locator('[data-testid="control-state"]').wait_for(timeout=30_000)
-    except Exception:  # noqa: BLE001 - seen once in a full suite run: the page had lost its
-        # websocket while the console started (viser's "..." indicator) and did not come back.
-        # Reload once, as a person would; the server's log is in artifacts/serve-soft-arm-*.log.
-        page.reload()
-        page.locator('[data-testid="control-state"]').wait_for(timeout=60_000)
+    page.locator('[data-testid="control-state"]').wait_for(timeout=30_000)
 
 
 def start_grasp(page: Any, x: float, y: float, until: tuple[str, ...], timeout: float,
