@@ -158,6 +158,8 @@ class TtyWorkerKeeper:
 
     def start(self) -> "TtyWorkerKeeper":
         import subprocess
+        if os.geteuid() != 0:  # only root may change kernel threads: nothing to keep
+            return self
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "hw_bridge.realtime", str(self.priority), str(self.every)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
