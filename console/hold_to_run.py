@@ -117,9 +117,9 @@ class HoldToRun:
     """
 
     def __init__(self, store: StateStore, *, allowed: Callable[[int], bool] = lambda _: True,
-                 heard: Callable[[int], float | None] | None = None, expiry: float = 0.3, tip_speed: float = 0.25, rate_hz: float = 50.0,
-                 sweep_s: float = 4.0, latch_gap: float = 2.0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 heard: Callable[[int], float | None] | None = None, expiry: float = 0.3,
+                 tip_speed: float = 0.25, rate_hz: float = 50.0, sweep_s: float = 4.0,
+                 latch_gap: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
         if expiry <= 0 or tip_speed <= 0 or rate_hz <= 0 or sweep_s <= 0:
             raise ValueError("expiry, tip_speed, rate_hz and sweep_s must be > 0")
         self.store = store

@@ -162,8 +162,8 @@ class TtyWorkerKeeper:
             return self
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "hw_bridge.realtime", str(self.priority), str(self.every)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-            preexec_fn=_ordinary_scheduling)
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # ordinary priority:
+        # the real-time threads calling this were set with SCHED_RESET_ON_FORK (set_fifo)
         line = self._proc.stdout.readline()  # the first pass's count, once it is done
         self.promoted = int(line) if line.strip().isdigit() else 0
         return self
@@ -177,13 +177,6 @@ class TtyWorkerKeeper:
         except Exception:  # noqa: BLE001 - never leave it behind
             self._proc.kill()
         self._proc = None
-
-
-def _ordinary_scheduling() -> None:  # in the keeper child, between fork and exec
-    try:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    except OSError:
-        pass
 
 
 def _keep(priority: int, every: float) -> int:
