@@ -9,11 +9,13 @@
 The loop thread is the only caller of the device and the stack. Commands from other threads go
 through a queue (:meth:`LoopRunner.submit`) and run at the next tick; :attr:`LoopRunner.snapshot`
 is swapped each tick (readers take no lock). Planning runs in another process
-(:class:`ProcessPlanner`). Devices: :class:`SimDevice`, :class:`HardwareDevice`.
+(:class:`ProcessPlanner`). Devices (:mod:`hw_bridge.loop_devices`): :class:`SimDevice`,
+:class:`HardwareDevice`.
 """
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures as cf
 import dataclasses
 import logging
@@ -25,13 +27,13 @@ from typing import Any, Callable, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from core.control.sim import MocapReading
 from core.control.stack import Telemetry
 from hw_bridge.realtime import set_fifo
 
 Array = npt.NDArray[np.float64]
 log = logging.getLogger(__name__)
 _STATS_WINDOW = 65536  # ticks kept for percentiles (~11 min at 100 Hz)
+_SLOW_MS = 1.0  # a tick that starts later than this, or works longer, is kept in slow_ticks
 
 
 class Stack(Protocol):
@@ -57,70 +59,6 @@ class Device(Protocol):
     def write(self, commands: Array, t: float) -> bool: ...
 
     def cylinders(self) -> Array | None: ...
-
-
-class SimDevice:
-    """The simulated arm: ``read(t)`` steps the physics to ``t`` (sub-steps <= ``max_step``)
-    under the last written demands, then measures; works on either clock."""
-
-    def __init__(self, sim: Any, max_step: float = 0.01):
-        self.sim = sim
-        self.max_step = max_step
-        self.demands = sim.demands.copy()
-        self._t: float | None = None
-
-    def read(self, t: float) -> Any:
-        if self._t is None:
-            self._t = t
-        while t - self._t > 1e-12:
-            h = min(self.max_step, t - self._t)
-            self.sim.step(self.demands, h)
-            self._t += h
-        return self.sim.measure()
-
-    def write(self, commands: Array, t: float) -> bool:
-        self.demands = np.asarray(commands, dtype=float).copy()
-        return True
-
-    def cylinders(self) -> Array | None:
-        return self.sim.cylinders.copy()
-
-
-class HardwareDevice:
-    """``hw_bridge`` hardware (MockHardware / SerialHardware) plus a motion-capture source.
-
-    The mocap frame's points are [x, y, theta] of the base and the N segment ends; a further
-    point, if present, is the object centre (its radius is ``object_radius``). A stale or
-    invalid frame gives NaN markers, which the stack treats as tracking lost.
-    """
-
-    def __init__(self, hardware: Any, mocap: Any, n_segments: int, object_radius: float | None = None):
-        self.hw, self.mocap, self.n = hardware, mocap, n_segments
-        self.object_radius = object_radius
-        self.fault: str | None = None
-
-    def read(self, t: float) -> MocapReading | None:
-        from hw_bridge.interface import ReturnType
-        from hw_bridge.mocap import frame_health
-        if self.hw.read() is not ReturnType.OK:
-            self.fault = self.hw.fault
-            return None
-        frame = self.mocap.latest()
-        if frame_health(frame) != "ok" or frame.points.shape[0] < self.n + 1:
-            return MocapReading(t, np.full((self.n, 2), np.nan), None, self.object_radius)
-        obj = frame.points[self.n + 1, :2].copy() if frame.points.shape[0] > self.n + 1 else None
-        return MocapReading(t, frame.points[1:self.n + 1, :2].copy(), obj, self.object_radius)
-
-    def write(self, commands: Array, t: float) -> bool:
-        from hw_bridge.interface import ReturnType
-        ok = self.hw.write(commands) is ReturnType.OK
-        if not ok:
-            self.fault = self.hw.fault
-        return ok
-
-    def cylinders(self) -> Array | None:
-        pos = self.hw.positions()
-        return None if pos is None else np.asarray(pos, dtype=float)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -156,6 +94,25 @@ class LoopSnapshot:
     write_ms: float
     overruns: int
     fault: str | None
+
+
+@dataclasses.dataclass(frozen=True)
+class SlowTick:
+    """A tick that started late (> 1 ms), worked long (> 1 ms) or overran: where it went (ms).
+
+    ``tick`` counts from 1 (the first tick); ``late_ms`` is the wake-up delay after the
+    deadline (scheduler or GIL); ``drain_ms`` the queued commands; ``missed`` the deadlines
+    skipped after it.
+    """
+
+    tick: int
+    t: float
+    late_ms: float
+    drain_ms: float
+    read_ms: float
+    update_ms: float
+    write_ms: float
+    missed: int
 
 
 class SimClock:
@@ -213,6 +170,7 @@ class LoopRunner:
         self.fault: str | None = None
         self.scheduling = "not started"
         self._buf = np.zeros((6, _STATS_WINDOW))  # period err, latency, read, update, write, work
+        self.slow_ticks: collections.deque[SlowTick] = collections.deque(maxlen=64)
         self.snapshot = LoopSnapshot(0, 0.0, None, 0.0, 0.0, 0.0, 0.0, 0.0, 0, None)
 
     # -- commands ------------------------------------------------------------------------------
@@ -307,11 +265,15 @@ class LoopRunner:
         self._k += 1
         next_deadline = self._t0 + self._k * self.period_ns
         now = clock()
+        missed = 0
         if now > next_deadline:
-            missed = (now - next_deadline) // self.period_ns + 1
-            self.overruns += int(missed)
-            self._skipped = int(missed)
-            self._k += int(missed)
+            missed = int((now - next_deadline) // self.period_ns + 1)
+            self.overruns += missed
+            self._skipped = missed
+            self._k += missed
+        if missed or b[1, i] > _SLOW_MS or b[5, i] > _SLOW_MS:
+            self.slow_ticks.append(SlowTick(self.ticks, t, b[1, i], (t_read - w0) / 1e6,
+                                            b[2, i], b[3, i], b[4, i], missed))
 
     def next_deadline_ns(self) -> int:
         t0 = self.clock_ns() if self._t0 is None else self._t0
@@ -404,5 +366,7 @@ class LoopRunner:
                          pct(b[5], 50), pct(b[5], 99), pct(b[2], 99), pct(b[3], 99), pct(b[4], 99))
 
 
-# Planning in another process lives in hw_bridge.planner_process; re-exported here.
+# Planning in another process lives in hw_bridge.planner_process, the devices in
+# hw_bridge.loop_devices; re-exported here.
+from hw_bridge.loop_devices import HardwareDevice, SimDevice  # noqa: E402,F401
 from hw_bridge.planner_process import ProcessPlanner, resolve  # noqa: E402,F401

@@ -121,6 +121,29 @@ def test_real_time_loop_counts_and_skips_overruns_without_catching_up():
     assert st.ticks == 12 and st.overruns == 2
     assert st.work_ms_p99 == pytest.approx(25.0, rel=0.2)
     assert st.period_error_ms_max == pytest.approx(0.0, abs=1e-9)  # skipped periods accounted
+    # The long ticks (the 6th and the 10th) are kept with where their time went.
+    slow = [(s.tick, round(s.read_ms, 6), s.missed, s.late_ms) for s in runner.slow_ticks]
+    assert slow == [(6, 25.0, 2, 0.0), (10, 10.0, 0, 0.0)]
+
+
+def test_a_late_wake_up_is_kept_as_a_slow_tick():
+    clock = SimClock(0)
+    box = []
+    dev = WorkDevice(clock, {}, box)
+    late = {4: 3 * MS}  # the 4th wake-up comes 3 ms after its deadline (a GIL or the kernel)
+    calls = []
+
+    def sleep_until(deadline_ns):
+        calls.append(deadline_ns)
+        clock.sleep_until(deadline_ns + late.get(len(calls), 0))
+
+    dev.work = {i: 0.2 for i in range(12)}
+    runner = LoopRunner(dev, StubStack(), 0.01, clock_ns=clock, sleep_until=sleep_until,
+                        timer_ns=clock)
+    box.append(runner)
+    runner._run()
+    assert [(s.tick, s.late_ms, s.missed) for s in runner.slow_ticks] == [(5, 3.0, 0)]
+    assert runner.overruns == 0
 
 
 def test_commands_from_another_thread_are_applied_by_the_loop(arm):
