@@ -60,6 +60,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--port-path", default=None,
                    help="serial device or pyserial URL of a real controller (overrides "
                         "--hardware)")
+    p.add_argument("--rt-cpu", choices=("auto", "none"), default="auto",
+                   help="auto: keep the highest CPU for the soft arm's 100 Hz loop and its device "
+                        "emulator, the console and planner on the others; none: no pinning "
+                        "(the extensible arm's loop runs in the console process: not pinned)")
     return p.parse_args(argv)
 
 
@@ -102,6 +106,22 @@ def urls(host: str, port: int) -> list[str]:
     return [f"http://{shown}:{port}/"]
 
 
+def cpu_partition(args: argparse.Namespace) -> Any:
+    """The CPU split ``--rt-cpu`` asks for (:mod:`hw_bridge.cpu_partition`; None: no pinning)."""
+    from hw_bridge.cpu_partition import CpuPartition
+    return CpuPartition.default() if getattr(args, "rt_cpu", "auto") == "auto" else None
+
+
+def pin_console(app: Any) -> str:
+    """Move this (console) process off the real-time CPU; returns what was done, for the log."""
+    from hw_bridge.cpu_partition import pin_process
+    part = getattr(app, "cpu_partition", None)
+    if part is None:
+        return "CPUs: no pinning"
+    pin_process(part.other)
+    return f"CPUs: {part.describe()}"
+
+
 def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, ConsoleApp, str | None]:
     """Create the viser server and the console app; returns (server, app, token)."""
     import viser  # after argument checks, so --help and bad input stay fast
@@ -125,6 +145,9 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
                      panels=(),
                      mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
+    # (the extensible arm's loop is a thread of this process: nothing to split off for it)
+    app.cpu_partition = (  # type: ignore[attr-defined]
+        cpu_partition(args) if robot.kind == "planar" else None)
     app.hardware = hardware_setup.attach(app, mode, port_path)  # type: ignore[attr-defined]
     if args.demo:
         app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
@@ -158,6 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     server, app, token = build(args, robot, status)
+    print(f"serve.py: {pin_console(app)}", file=sys.stderr)
     app.start()
     port = server.get_port()  # viser moves to the next free port if --port is taken
     if port != args.port:

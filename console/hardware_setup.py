@@ -88,7 +88,8 @@ def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttac
         from console.panels.control_process import ControlProcess
 
         device = "emulator" if port_path or mode == "emulator" else "mock"
-        ctl = ControlProcess(robot, device=device, port_path=port_path)
+        ctl = ControlProcess(robot, device=device, port_path=port_path,
+                             cpus=getattr(app, "cpu_partition", "auto"))
         app.soft_control = ctl
         app.bridge_controls = getattr(ctl, "bridge_controls", None)
         out.closers.append(ctl.close)

@@ -272,10 +272,16 @@ class Emulator:
         self.writer.start()
         priority = getattr(self.args, "sched_priority", 0)
         keeper = None
+        cpus = getattr(self.args, "cpus", None)
         if priority:  # a dedicated MCU is never preempted: neither is its stand-in, nor its wire
             from hw_bridge.realtime import TtyWorkerKeeper, promote_threads, thread_policy
+            keeper = TtyWorkerKeeper(max(1, priority - 1)).start()  # (the pty's kworkers;
+            # started before the move below, so its start-up runs where this one's did)
+        if cpus:
+            from hw_bridge.cpu_partition import pin_process
+            pin_process(cpus)
+        if priority:
             promote_threads(priority)
-            keeper = TtyWorkerKeeper(max(1, priority - 1)).start()  # (the pty's kworkers)
             _emit("scheduling", policy="SCHED_FIFO" if thread_policy() == os.SCHED_FIFO
                   else "default", priority=priority, tty_workers=keeper.promoted)
         try:
@@ -322,6 +328,11 @@ class Emulator:
                     next_tick = now + period
 
 
+def _online() -> frozenset[int]:
+    from hw_bridge.cpu_partition import online_cpus
+    return online_cpus()
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="python -m hw_bridge.emulator", description=__doc__.split("\n")[0])
     ap.add_argument("--robot", required=True, help="robot name (extensible, soft-arm) or TOML path")
@@ -343,7 +354,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--sched-priority", type=int, default=0, metavar="P",
                     help="run the device under SCHED_FIFO at priority P (1-99; 0: normal), like "
                          "a dedicated microcontroller that nothing else on the machine delays")
+    ap.add_argument("--cpus", default=None, metavar="LIST",
+                    help="run on these CPUs (comma-separated), moved there once started up, "
+                         "e.g. the real-time CPU of hw_bridge.cpu_partition")
     args = ap.parse_args(argv)
+    if args.cpus is not None:
+        try:
+            args.cpus = frozenset(int(c) for c in args.cpus.split(","))
+        except ValueError:
+            ap.error(f"--cpus must be comma-separated CPU numbers, got {args.cpus!r}")
+        if not args.cpus or not args.cpus <= _online():
+            ap.error(f"--cpus {sorted(args.cpus)}: no such CPU")
     if not 0 <= args.sched_priority <= 99:
         ap.error("--sched-priority must be in 0..99")
     if args.object is not None and (not all(map(math.isfinite, args.object))

@@ -29,9 +29,12 @@ def resolve(spec: str) -> Callable[..., Any]:
     return getattr(importlib.import_module(module), name)
 
 
-def _worker_init(robot_source: str, plan_spec: str) -> None:
+def _worker_init(robot_source: str, plan_spec: str, cpus: frozenset[int] | None = None) -> None:
     global _WORKER_ROBOT, _WORKER_PLAN
     from core import robots
+    if cpus:  # off the real-time CPU its parent runs on (hw_bridge.cpu_partition)
+        from hw_bridge.cpu_partition import pin_process
+        pin_process(cpus)
     _WORKER_ROBOT = robots.load(robot_source)
     _WORKER_PLAN = resolve(plan_spec)
 
@@ -50,16 +53,17 @@ class ProcessPlanner:
     """
 
     def __init__(self, robot_source: str | Path, workers: int = 1,
-                 plan_spec: str = "core.planning.grasp:plan_grasp"):
-        self._args = (workers, str(robot_source), plan_spec)
+                 plan_spec: str = "core.planning.grasp:plan_grasp",
+                 cpus: frozenset[int] | None = None):
+        self._args = (workers, str(robot_source), plan_spec, cpus)
         self.restarts = 0
         self.pool = self._new_pool()
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
-        workers, robot_source, plan_spec = self._args
+        workers, robot_source, plan_spec, cpus = self._args
         ctx = multiprocessing.get_context("spawn")
         pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                                      initargs=(robot_source, plan_spec))
+                                      initargs=(robot_source, plan_spec, cpus))
         self.warm = pool.submit(int)  # start the worker now (without waiting for it)
         return pool
 

@@ -182,6 +182,11 @@ class TtyWorkerKeeper:
 def _keep(priority: int, every: float) -> int:
     """The keeper process: promote now and every ``every`` s until stdin closes, then demote."""
     import select
+
+    from hw_bridge.cpu_partition import CpuPartition, pin_process
+    part = CpuPartition.default()
+    if part is not None:  # ordinary work: off the real-time CPU its parent may run on
+        pin_process(part.other)
     promoted = promote_tty_workers(priority)
     print(len(promoted), flush=True)
     while True:

@@ -55,7 +55,7 @@ def control_for(app: Any) -> ControlProcess:
     """``app.soft_control``, the app's control process, started on first use."""
     ctl = getattr(app, "soft_control", None)
     if ctl is None or not ctl.alive:
-        ctl = ControlProcess(app.robot)
+        ctl = ControlProcess(app.robot, cpus=getattr(app, "cpu_partition", "auto"))
         app.soft_control = ctl
     return ctl
 

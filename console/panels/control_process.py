@@ -36,7 +36,8 @@ import numpy as np
 from console.panels.control_worlds import DISCONNECTED, NO_SERIAL_LINK  # noqa: F401 (re-export)
 from console.panels.control_worlds import HardwareWorld as _HardwareWorld
 from console.panels.control_worlds import SimWorld as _SimWorld
-from hw_bridge.loop import LoopSnapshot, LoopStats
+from hw_bridge.cpu_partition import CpuPartition, pin_process
+from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +58,7 @@ class ControlView:
     device: str = "sim"
     link: Any = None  # hw_bridge.interface.LinkHealth with hardware
     fault: str | None = None
+    slow_ticks: tuple[SlowTick, ...] = ()  # the loop's latest late / long ticks
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,10 +68,15 @@ class DeviceOptions:
     kind: str = "sim"
     port_path: str | None = None
     emulator_args: tuple[str, ...] = ()
+    cpus: CpuPartition | None = None  # the loop (and emulator) on .realtime, planner on .other
 
 
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,
            stats_ticks: int, sched_priority: int | None, opts: DeviceOptions = DeviceOptions()) -> None:
+    if opts.cpus is not None:  # start-up work (this and the children's imports) off the
+        pin_process(opts.cpus.other)  # real-time CPU; the loop moves there once all started
+        opts = dataclasses.replace(opts, emulator_args=(
+            *opts.emulator_args, "--cpus", ",".join(map(str, sorted(opts.cpus.realtime)))))
     from core.control.stack import ControlStack
     from core.robots import load
     from hw_bridge.loop import LoopRunner, ProcessPlanner
@@ -93,7 +100,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     world.configure()
     if helper_priority:
         promote_threads(helper_priority)  # the receive thread configure() started
-    planner = ProcessPlanner(robot_source)
+    planner = ProcessPlanner(robot_source, cpus=None if opts.cpus is None else opts.cpus.other)
     stack = ControlStack(robot, 0.01, planner)
     runner = LoopRunner(world.device, stack, 0.01)
 
@@ -139,14 +146,20 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     # (command) thread before the loop's part runs, so the loop never waits on the scene channel.
     scene_first = {"place_object", "grasp_at", "execute"} if world.kind != "sim" else set()
     stop = threading.Event()
+    rt_cpus = "" if opts.cpus is None else ",".join(map(str, sorted(opts.cpus.realtime)))
+    on_cpus = f" on CPU {rt_cpus}" if rt_cpus else ""
+
+    def scheduling() -> str:  # what the loop thread got, and where it runs
+        return runner.scheduling + on_cpus
 
     def publish() -> None:
         n = 0
         while not stop.wait(1.0 / publish_hz):
             obj_xy, radius, captured, finger, link, fault = world.scene(runner)
             fault = fault or runner.fault
-            view = ControlView(runner.snapshot, runner.stats(last=stats_ticks), runner.scheduling,
-                               obj_xy, radius, captured, finger, world.kind, link, fault)
+            view = ControlView(runner.snapshot, runner.stats(last=stats_ticks), scheduling(),
+                               obj_xy, radius, captured, finger, world.kind, link, fault,
+                               tuple(runner.slow_ticks))
             replies.put(("view", view))
             n += 1
             if helper_priority and n % int(publish_hz) == 1:  # queue feeders start lazily
@@ -156,6 +169,12 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     # full collection triggered in the loop thread scans only what the loop allocates.
     gc.collect()
     gc.freeze()
+    try:
+        planner.warm.result(60)  # the worker's start-up done, on the other CPUs
+    except Exception:  # noqa: BLE001 - a broken worker is replaced at the first plan
+        pass
+    if opts.cpus is not None:
+        pin_process(opts.cpus.realtime)  # every thread; those started later inherit it
     runner.start(sched_priority=sched_priority)
     pub = threading.Thread(target=publish, name="control-publish", daemon=True)
     pub.start()
@@ -215,6 +234,9 @@ class ControlProcess:
             controller on that serial device (mocap on the robot's ``[emulator].mocap_port``).
         port_path: Serial device of a real controller (no emulator is spawned).
         emulator_args: Extra emulator arguments (fault injection: ``("--drop", "0.01")``).
+        cpus: Where the processes run (:mod:`hw_bridge.cpu_partition`): ``"auto"`` (the
+            default) the loop and its emulator on the highest CPU, the planner on the others;
+            None: anywhere.
 
     With hardware, Arm (and grasp_at/execute while disarmed) configures and activates the
     link in the loop thread; a link fault stops commanding and shows in ``view.fault``, and
@@ -228,10 +250,15 @@ class ControlProcess:
     def __init__(self, robot: Any, seed: int = 0, publish_hz: float = 30.0,
                  stats_ticks: int = 1000, sched_priority: int | None = 50,
                  device: Literal["sim", "emulator", "mock"] = "sim",
-                 port_path: str | None = None, emulator_args: tuple[str, ...] = ()):
+                 port_path: str | None = None, emulator_args: tuple[str, ...] = (),
+                 cpus: CpuPartition | None | Literal["auto"] = "auto"):
         if device not in ("sim", "emulator", "mock"):
             raise ValueError(f"device must be 'sim', 'emulator' or 'mock', got {device!r}")
-        opts = DeviceOptions("port" if port_path else device, port_path, tuple(emulator_args))
+        if cpus == "auto":
+            cpus = CpuPartition.default()
+        opts = DeviceOptions("port" if port_path else device, port_path, tuple(emulator_args),
+                             cpus)
+        self.cpus = cpus
         self.device = opts.kind
         self.failure: str | None = None
         ctx = multiprocessing.get_context("spawn")
