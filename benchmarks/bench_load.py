@@ -42,11 +42,13 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from hw_bridge.cpu_partition import CpuPartition, pin_process, pin_tree  # noqa: E402
+from load_clients import CHROMIUM_ARGS, chromium_path, ws_viewer  # noqa: E402
 from load_trials import TrialTally, start_trials, trials_in, trials_text  # noqa: E402
+from rt_reference import ReferenceSleeper  # noqa: E402
 
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update", "--disable-sync", "--no-first-run"]
 TICK = os.sysconf("SC_CLK_TCK")
+LOOP_PRIORITY = 50  # the control process's loop thread (ControlProcess's sched_priority)
 
 
 # -- the console child ---------------------------------------------------------------------------
@@ -69,8 +71,10 @@ def child(a: argparse.Namespace) -> int:
             "--data-dir", a.data_dir]
     if a.hardware:
         argv += ["--hardware", a.hardware]
+    argv += ["--rt-cpu", a.rt_cpu]
     args = serve.parse_args(argv)
     server, app, _ = serve.build(args, robot, "load benchmark")
+    print(f"bench_load child: {serve.pin_console(app)}", file=sys.stderr, flush=True)
     app.start()
     stop = threading.Event()
     ctl, tally = start_trials(app, robot, stop) if a.motion == "loop" else (None, TrialTally())
@@ -96,7 +100,8 @@ def child(a: argparse.Namespace) -> int:
                 st = view.stats
                 out["loop"] = {"overruns": st.overruns - base_overruns,
                                "p99_ms": st.period_error_ms_p99, "max_ms": st.period_error_ms_max,
-                               "work_p99_ms": st.work_ms_p99, "scheduling": view.scheduling}
+                               "work_p99_ms": st.work_ms_p99, "scheduling": view.scheduling,
+                               "slow": [dataclasses.asdict(x) for x in view.slow_ticks]}
             print(json.dumps(out), flush=True)
         elif cmd == "quit":
             break
@@ -132,7 +137,7 @@ class Console:
 
     def __init__(self, a: argparse.Namespace) -> None:
         cmd = [sys.executable, __file__, "--child", "--robot", a.robot, "--motion", a.motion,
-               "--data-dir", a.data_dir]
+               "--data-dir", a.data_dir, "--rt-cpu", a.rt_cpu]
         if a.hardware:
             cmd += ["--hardware", a.hardware]
         log = Path(a.data_dir) / "console-child.log"  # the console's stderr, for a post-mortem
@@ -175,15 +180,17 @@ class Console:
 
 
 def measure(console: Console, seconds: float, warmup: float, sample_every: float,
-            progress_every: float = 0.0) -> dict[str, Any]:
+            progress_every: float = 0.0, cpus: Any = None) -> dict[str, Any]:
     """CPU, memory and loop figures of the console over ``seconds`` after ``warmup``.
 
     The control process publishes loop stats of its last 1000 ticks (10 s); they are sampled
-    every ``sample_every`` s (<= 10 s) and the worst window is reported.
+    every ``sample_every`` s (<= 10 s) and the worst window is reported. A reference sleeper
+    (:mod:`rt_reference`) runs beside the loop for the same time: the machine's own floor.
     """
     pid, lpid = console.proc.pid, console.loop_pid
     time.sleep(warmup)
     console.mark()
+    ref = ReferenceSleeper(seconds, LOOP_PRIORITY, None if cpus is None else cpus.realtime)
     s0, c0, t0 = console.stats(), cpu_seconds(pid), time.monotonic()
     l0 = cpu_seconds(lpid) if lpid else 0.0
     rss, loops = [rss_mb(pid)], []
@@ -214,13 +221,14 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
            "rss_growth_pct": 100.0 * (rss[-1] - rss[0]) / rss[0], "rss_peak_mb": max(rss),
            "fps": (s1["frames_drawn"] - s0["frames_drawn"]) / (t1 - t0),
            "clients": s1["clients"], "loop": None, "loop_cpu_pct": None, "loop_rss_mb": None,
-           "trials": trials_in(s0["trials"], s1["trials"])}
+           "trials": trials_in(s0["trials"], s1["trials"]), "reference": ref.result()}
     windows = [w for w in loops + [s1["loop"]] if w]
     if windows:
         out["loop"] = {"p99_ms": max(w["p99_ms"] for w in windows),
                        "max_ms": max(w["max_ms"] for w in windows),
                        "work_p99_ms": max(w["work_p99_ms"] for w in windows),
-                       "overruns": s1["loop"]["overruns"], "scheduling": s1["loop"]["scheduling"]}
+                       "overruns": s1["loop"]["overruns"], "scheduling": s1["loop"]["scheduling"],
+                       "slow": s1["loop"]["slow"]}
     if lpid:
         out["loop_cpu_pct"] = 100.0 * (cpu_seconds(lpid) - l0) / (t1 - t0)
         out["loop_rss_mb"] = rss_mb(lpid)
@@ -228,48 +236,15 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
     return out
 
 
-def chromium_path(a: argparse.Namespace) -> str:
-    """Chromium, or a wrapper starting it in the idle scheduling class (``chrt --idle 0``) so
-    that on this shared machine the browsers take only the CPU the console does not need (on
-    the lab network they run elsewhere). Children inherit the class; Chromium's own re-nicing
-    of its renderers does not leave it."""
-    if a.browser_sched == "normal":
-        return "/usr/bin/chromium"
-    wrapper = Path(a.data_dir) / "chromium-idle.sh"
-    wrapper.parent.mkdir(parents=True, exist_ok=True)
-    wrapper.write_text('#!/bin/sh\nexec chrt --idle 0 /usr/bin/chromium "$@"\n')
-    wrapper.chmod(0o755)
-    return str(wrapper)
-
-
-def ws_viewer(url: str, stop: threading.Event, received: list[int], i: int) -> None:
-    """A websocket-only viewer: registers like a browser (one camera message), then receives
-    everything the console streams and throws it away (no decoding, no rendering)."""
-    import msgspec
-    import viser
-    from viser import _messages
-    from websockets.sync.client import connect
-
-    cam = _messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, 0.01, 100.0,
-                                        480, 640, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
-    hello = msgspec.msgpack.encode(cam.as_serializable_dict())
-    with connect(url.replace("http://", "ws://"), max_size=None,
-                 subprotocols=[f"viser-v{viser.__version__}"]) as ws:  # type: ignore[list-item]
-        ws.send(hello)
-        while not stop.is_set():
-            try:
-                received[i] += len(ws.recv(timeout=0.5))
-            except TimeoutError:
-                continue
-
-
 def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str, Any]:
     console = Console(a)
     pages: list[Any] = []
     try:
         if n_clients == 0:
-            return measure(console, seconds, a.warmup, a.sample_every)
+            return measure(console, seconds, a.warmup, a.sample_every, cpus=a.cpus)
         if a.client_kind == "ws":
+            if a.cpus is not None:  # the viewers started from here inherit it
+                pin_process(a.cpus.other)
             stop = threading.Event()
             received = [0] * n_clients
             threads = [threading.Thread(target=ws_viewer, args=(console.url, stop, received, i),
@@ -277,7 +252,7 @@ def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str
             for th in threads:
                 th.start()
             try:
-                result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every)
+                result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every, a.cpus)
             finally:
                 stop.set()
                 for th in threads:
@@ -299,7 +274,10 @@ def run_phase(a: argparse.Namespace, n_clients: int, seconds: float) -> dict[str
                 pages.append(page)
             print(f"  {n_clients} pages loaded in "
                   f"{a.connect_timeout - (deadline - time.monotonic()):.0f} s", flush=True)
-            result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every)
+            if a.cpus is not None:  # loaded on every core, measured off the real-time one
+                print(f"  {pin_tree(os.getpid(), a.cpus.other, frozenset({console.proc.pid}))} browser and benchmark threads "
+                      f"moved to CPUs {sorted(a.cpus.other)}", flush=True)
+            result = measure(console, seconds, a.warmup, a.sample_every, a.progress_every, a.cpus)
             browser.close()
         return result
     finally:
@@ -342,6 +320,9 @@ def main() -> int:
     p.add_argument("--width", type=int, default=800)
     p.add_argument("--height", type=int, default=500)
     p.add_argument("--data-dir", default=str(REPO / "artifacts" / "bench_load_runs"))
+    p.add_argument("--rt-cpu", choices=("auto", "none"), default="auto",
+                   help="serve.py's --rt-cpu; auto also keeps the clients off the real-time CPU "
+                        "(on the lab network they run on other machines)")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--port", type=int, default=0, help=argparse.SUPPRESS)
     a = p.parse_args()
@@ -350,10 +331,12 @@ def main() -> int:
     if a.clients < 0 or a.seconds <= 0:
         p.error("--clients must be >= 0 and --seconds > 0")
     base_s = a.baseline_seconds if a.baseline_seconds is not None else min(a.seconds, 60.0)
+    a.cpus = CpuPartition.default() if a.rt_cpu == "auto" else None
     print(f"console under load: {a.robot}, motion={a.motion}, {a.clients} {a.client_kind} "
           f"clients for "
           f"{a.seconds:g} s (baseline 0 clients for {base_s:g} s), {os.cpu_count()} cores, "
-          f"browsers in the {a.browser_sched} scheduling class",
+          f"browsers in the {a.browser_sched} scheduling class; "
+          f"{'no CPU pinning' if a.cpus is None else a.cpus.describe()}",
           flush=True)
     base = run_phase(a, 0, base_s)
     load = run_phase(a, a.clients, a.seconds)
@@ -375,6 +358,11 @@ def main() -> int:
         ("loop tick work p99 (worst 10 s), ms", ".3f", (base["loop"] or {}).get("work_p99_ms"),
          (load["loop"] or {}).get("work_p99_ms")),
     ]
+    for key, name, spec in (("p99_ms", "reference sleeper p99 lateness, ms", ".3f"),
+                            ("max_ms", "reference sleeper max lateness, ms", ".3f"),
+                            ("missed", "reference sleeper deadlines missed", "d")):
+        rows.append((name, spec, (base["reference"] or {}).get(key),
+                     (load["reference"] or {}).get(key)))
     if "mb_per_client_s" in load:
         rows.append(("MB/s streamed to each client", ".2f", None, load["mb_per_client_s"]))
     print(f"\n{'figure':40s} {'0 clients':>12s} {f'{a.clients} clients':>12s}")
@@ -382,6 +370,11 @@ def main() -> int:
         print(f"{name:40s} {fmt(b, spec):>12s} {fmt(l, spec):>12s}")
     if load["loop"]:
         print(f"loop thread scheduling: {load['loop']['scheduling']}")
+        for x in sorted(load["loop"]["slow"], key=lambda x: -x["late_ms"] - x["read_ms"]
+                        - x["update_ms"] - x["write_ms"])[:5]:
+            print(f"  slow tick at t = {x['t']:.2f} s: late {x['late_ms']:.2f}, drain "
+                  f"{x['drain_ms']:.2f}, read {x['read_ms']:.2f}, update {x['update_ms']:.2f}, "
+                  f"write {x['write_ms']:.2f} ms, {x['missed']} deadlines skipped")
     for name, phase in (("0 clients", base), (f"{a.clients} clients", load)):
         t = phase["trials"]
         print(f"{name}: {trials_text({k: 0 for k in t} | {'last_stop': ''}, t)}")
