@@ -1,0 +1,125 @@
+"""The two-browser lab rig: an in-process lab console and helpers that drive its pages
+(shared by test_browser_lab.py and test_browser_lab_export.py)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import pytest
+
+from core.robots import load
+
+SOFT = load("soft-arm")
+
+
+class Lab:
+    """The in-process console plus helpers to drive pages."""
+
+    def __init__(self, server: Any, app: Any, token: str, browser: Any) -> None:
+        self.server, self.app, self.token, self.browser = server, app, token, browser
+        self.url = f"http://127.0.0.1:{server.get_port()}/"
+        self.stops: list[tuple[float, str]] = []
+        app.add_stop_hook(lambda reason: self.stops.append((time.monotonic(), reason)))
+        self.contexts: list[Any] = []
+
+    def page(self) -> Any:
+        context = self.browser.new_context(viewport={"width": 1280, "height": 900})
+        self.contexts.append(context)
+        page = context.new_page()
+        n = len(self.server.get_clients())
+        page.goto(self.url)
+        page.get_by_text("Session", exact=True).wait_for(timeout=20_000)
+        page.locator('[data-testid="role"]').wait_for(timeout=10_000)
+        wait_for(lambda: len(self.server.get_clients()) > n)
+        notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+        if notice.count():
+            notice.locator("button").first.click()
+        return page
+
+    def take_control(self, page: Any, name: str) -> None:
+        field(page, "Your name").fill(name)
+        field(page, "Operator token").fill(self.token)
+        page.get_by_role("button", name="Take control").click()
+        wait_for(lambda: self.app.access.holder is not None
+                 and self.app.access.holder.name == name)
+        wait_for(lambda: page.locator('[data-testid="role"]').get_attribute("data-role")
+                 == "operator")
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 5.0) -> Any:
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError("condition not reached")
+        time.sleep(0.02)
+
+
+def field(page: Any, label: str) -> Any:
+    """The input next to a viser text field's label."""
+    return page.locator(f'xpath=//label[normalize-space()="{label}"]/ancestor::div'
+                        '[contains(@class,"mantine-Flex-root")][1]//input')
+
+
+def stop_button(page: Any) -> Any:
+    """The Session panel's STOP (the first; the Control panel has one too)."""
+    return page.get_by_role("button", name="STOP", exact=True).first
+
+
+def notifications(page: Any) -> list[str]:
+    # One snapshot: reading them one by one waits 30 s for one that closed in between.
+    return page.locator(".mantine-Notification-root").all_inner_texts()
+
+
+def press(page: Any, name: str) -> Any:
+    """Mouse down on the button labelled ``name``; returns the mouse to release."""
+    button = page.get_by_role("button", name=name, exact=True)
+    button.scroll_into_view_if_needed()
+    box = button.bounding_box()
+    assert box is not None
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    return page.mouse
+
+
+@pytest.fixture
+def lab(browser, tmp_path: Path) -> Iterator[Lab]:
+    """A lab console as ``serve.py --lab --demo`` builds it (token, viewers first, demo motion),
+    with the panels these tests use -- Jog, Readout, Control (the real Execute and the control
+    process), Session -- rather than all of them: the full console takes twice as long to load
+    in software-rendered Chromium, and the other panels play no part here."""
+    import secrets
+
+    import viser
+
+    from console.access import AccessControl
+    from console.app import DEFAULT_PANELS, ConsoleApp
+    from console.demo_motion import DemoMotion
+    from console.panels.control import ControlPanel
+    from console.panels.session import SessionPanel
+
+    token = secrets.token_urlsafe(9)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(token),
+                     data_dir=tmp_path / "runs", status="lab test")
+    app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
+    app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
+    for panel_cls in (*DEFAULT_PANELS, ControlPanel, SessionPanel):
+        app.add_panel(panel_cls)
+    app.start()
+    lab = Lab(server, app, token, browser)
+    try:
+        yield lab
+    finally:
+        for context in lab.contexts:
+            context.close()
+        app.stop_motion("test over")
+        app.stop()
+        ctl = getattr(app, "soft_control", None)
+        if ctl is not None:
+            ctl.close()
+        server.stop()
