@@ -314,8 +314,10 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     made: dict[str, Any] = {}
 
     class FakeControlProcess:
-        def __init__(self, robot: Any, device: str, port_path: str | None) -> None:
+        def __init__(self, robot: Any, device: str, port_path: str | None,
+                     cpus: Any = "auto") -> None:
             made["soft"] = (device, port_path)
+            made["cpus"] = cpus
             self.bridge_controls = FakeControls()
 
         def close(self) -> None:
@@ -348,6 +350,7 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     soft = FakeApp(SOFT)
     out = attach(soft, "emulator", None)
     assert made["soft"] == ("emulator", None) and out.kind == "emulator"
+    assert made["cpus"] == "auto"  # no partition chosen by the app: the control process picks
     assert soft.bridge_controls is soft.soft_control.bridge_controls
     assert out.port_path is None and out.baud == 1_000_000  # the child knows the pty
     out = attach(FakeApp(SOFT), "mock", "/dev/ttyACM3")
