@@ -45,10 +45,11 @@ sys.path.insert(0, str(REPO))
 from hw_bridge.cpu_partition import CpuPartition, pin_process, pin_tree  # noqa: E402
 from load_clients import CHROMIUM_ARGS, chromium_path, ws_viewer  # noqa: E402
 from load_trials import TrialTally, start_trials, trials_in, trials_text  # noqa: E402
+from proc_figures import cpu_seconds, largest_process, memory_mb, rss_mb  # noqa: E402
 from rt_reference import ReferenceSleeper  # noqa: E402
 
-TICK = os.sysconf("SC_CLK_TCK")
 LOOP_PRIORITY = 50  # the control process's loop thread (ControlProcess's sched_priority)
+MEMORY_FLOOR = 0.05  # a phase ends when the machine has less than this share of memory left
 
 
 # -- the console child ---------------------------------------------------------------------------
@@ -118,20 +119,6 @@ def child(a: argparse.Namespace) -> int:
 
 # -- the measuring parent ------------------------------------------------------------------------
 
-def cpu_seconds(pid: int) -> float:
-    """utime + stime of ``pid`` and its threads, seconds (fields 14, 15 of /proc/pid/stat)."""
-    text = Path(f"/proc/{pid}/stat").read_text()
-    fields = text[text.rindex(")") + 2:].split()
-    return (int(fields[11]) + int(fields[12])) / TICK
-
-
-def rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024.0
-    return float("nan")
-
-
 class Console:
     """A console child process."""
 
@@ -197,8 +184,16 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
     loop_rss = [rss_mb(lpid)] if lpid else []
     end = t0 + seconds
     next_report = t0 + progress_every if progress_every > 0 else float("inf")
+    ended_early = None
     while time.monotonic() < end:
         time.sleep(min(sample_every, max(0.0, end - time.monotonic())))
+        avail, total = memory_mb()
+        if avail < MEMORY_FLOOR * total:  # the clients, not the console: stop measuring
+            ended_early = (f"after {time.monotonic() - t0:.0f} s: the machine's memory ran out "
+                           f"({avail:.0f} of {total:.0f} MB available; largest process "
+                           f"{largest_process()}); later figures would measure thrashing")
+            print(f"  ** phase ended {ended_early}", flush=True)
+            break
         rss.append(rss_mb(pid))
         if lpid:
             loop_rss.append(rss_mb(lpid))
@@ -215,13 +210,15 @@ def measure(console: Console, seconds: float, warmup: float, sample_every: float
             print(f"  [{now - t0:6.0f} s] console CPU "
                   f"{100.0 * (cpu_seconds(pid) - c0) / (now - t0):.1f} %, RSS {rss[-1]:.1f} MB "
                   f"({100.0 * (rss[-1] - rss[0]) / rss[0]:+.1f} %), {loop_txt}, "
-                  f"{trials_text(s0['trials'], st['trials'])}", flush=True)
+                  f"{trials_text(s0['trials'], st['trials'])}, machine memory available "
+                  f"{avail:.0f} MB", flush=True)
     s1, c1, t1 = console.stats(), cpu_seconds(pid), time.monotonic()
     out = {"cpu_pct": 100.0 * (c1 - c0) / (t1 - t0), "rss_mb": rss[-1], "rss_trace": rss,
            "rss_growth_pct": 100.0 * (rss[-1] - rss[0]) / rss[0], "rss_peak_mb": max(rss),
            "fps": (s1["frames_drawn"] - s0["frames_drawn"]) / (t1 - t0),
            "clients": s1["clients"], "loop": None, "loop_cpu_pct": None, "loop_rss_mb": None,
-           "trials": trials_in(s0["trials"], s1["trials"]), "reference": ref.result()}
+           "trials": trials_in(s0["trials"], s1["trials"]), "ended_early": ended_early,
+           "reference": ref.stop() if ended_early else ref.result()}
     windows = [w for w in loops + [s1["loop"]] if w]
     if windows:
         out["loop"] = {"p99_ms": max(w["p99_ms"] for w in windows),
@@ -375,6 +372,8 @@ def main() -> int:
             print(f"  slow tick at t = {x['t']:.2f} s: late {x['late_ms']:.2f}, drain "
                   f"{x['drain_ms']:.2f}, read {x['read_ms']:.2f}, update {x['update_ms']:.2f}, "
                   f"write {x['write_ms']:.2f} ms, {x['missed']} deadlines skipped")
+    if load["ended_early"]:
+        print(f"** the load phase ended {load['ended_early']}")
     for name, phase in (("0 clients", base), (f"{a.clients} clients", load)):
         t = phase["trials"]
         print(f"{name}: {trials_text({k: 0 for k in t} | {'last_stop': ''}, t)}")

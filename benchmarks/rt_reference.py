@@ -31,12 +31,17 @@ def sleep_loop(seconds: float, period_s: float = 0.01) -> dict[str, Any]:
     t0 = clock()
     n = int(seconds / period_s)
     late = np.empty(n)
-    for k in range(1, n + 1):
-        deadline = t0 + k * period
-        remaining = deadline - clock()
-        if remaining > 0:
-            time.sleep(remaining / 1e9)
-        late[k - 1] = (clock() - deadline) / 1e6
+    k = 0
+    try:
+        for k in range(1, n + 1):
+            deadline = t0 + k * period
+            remaining = deadline - clock()
+            if remaining > 0:
+                time.sleep(remaining / 1e9)
+            late[k - 1] = (clock() - deadline) / 1e6
+    except KeyboardInterrupt:  # ReferenceSleeper.stop(): report what was measured
+        n = max(1, k - 1)
+        late = late[:n]
     return {"ticks": n, "p50_ms": float(np.percentile(late, 50)),
             "p99_ms": float(np.percentile(late, 99)), "max_ms": float(late.max()),
             "over_1ms": int((late > 1.0).sum()), "missed": int((late > period_s * 1e3).sum())}
@@ -52,6 +57,13 @@ class ReferenceSleeper:
         if cpus:
             cmd += ["--cpus", ",".join(map(str, sorted(cpus)))]
         self.proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, text=True)
+
+    def stop(self) -> dict[str, Any] | None:
+        """End it now (SIGINT); the figures of the time it ran."""
+        import signal
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+        return self.result(10.0)
 
     def result(self, timeout: float = 60.0) -> dict[str, Any] | None:
         try:

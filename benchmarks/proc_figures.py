@@ -1,0 +1,44 @@
+"""Process and machine figures from /proc for the benchmarks: CPU time, resident memory."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+TICK = os.sysconf("SC_CLK_TCK")
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime of ``pid`` and its threads, seconds (fields 14, 15 of /proc/pid/stat)."""
+    text = Path(f"/proc/{pid}/stat").read_text()
+    fields = text[text.rindex(")") + 2:].split()
+    return (int(fields[11]) + int(fields[12])) / TICK
+
+
+def memory_mb() -> tuple[float, float]:
+    """(MemAvailable, MemTotal) of the machine, MB."""
+    fields = dict(line.split(":", 1) for line in Path("/proc/meminfo").read_text().splitlines())
+    return (int(fields["MemAvailable"].split()[0]) / 1024.0,
+            int(fields["MemTotal"].split()[0]) / 1024.0)
+
+
+def largest_process() -> str:
+    """The process with the most resident memory, as ``name (pid) N MB``."""
+    best = (0, "?", 0)
+    for entry in os.scandir("/proc"):
+        if entry.name.isdigit():
+            try:
+                r = rss_mb(int(entry.name))
+                name = Path(f"/proc/{entry.name}/comm").read_text().strip()
+            except (OSError, ValueError):
+                continue
+            if r > best[0]:
+                best = (r, name, int(entry.name))
+    return f"{best[1]} ({best[2]}) {best[0]:.0f} MB"
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
