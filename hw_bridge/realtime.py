@@ -47,8 +47,13 @@ def set_fifo(priority: int, tid: int = 0) -> str:
 
 
 def helper_priority(loop_priority: int | None) -> int:
-    """Priority of a control process's other threads: 10 below its loop (0: no loop priority)."""
-    return max(1, loop_priority - 10) if loop_priority else 0
+    """Priority of a control process's other threads: just below its loop (0: no loop priority).
+
+    Just below, not further: on the one real-time CPU (:mod:`hw_bridge.cpu_partition`) the
+    device emulator runs too (at 45 under a loop at 50); a helper that holds the GIL must not
+    wait for it while the loop waits for the helper.
+    """
+    return max(1, loop_priority - 1) if loop_priority else 0
 
 
 def thread_policy(tid: int = 0) -> int:

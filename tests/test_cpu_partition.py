@@ -119,5 +119,17 @@ def test_control_process_runs_the_loop_and_emulator_on_the_real_time_cpu() -> No
         assert process_cpus(planner[0]) == part.other  # planning is ordinary work
         for k in _children(emulator[0]):  # the emulator's pty-worker keeper (root only)
             assert process_cpus(k) == part.other
+        if os.geteuid() == 0:  # real-time priorities granted: loop > its helpers > emulator
+            emulator_priority = os.sched_getparam(emulator[0]).sched_priority
+            assert emulator_priority == 45
+
+            def helpers_ordered() -> bool:
+                prios = sorted(os.sched_getparam(int(t)).sched_priority
+                               for t in os.listdir(f"/proc/{pid}/task"))
+                return prios[-1] == 50 and all(emulator_priority < q < 50 for q in prios[:-1])
+            deadline = time.monotonic() + 5  # threads started lazily are promoted each second
+            while not helpers_ordered() and time.monotonic() < deadline:
+                time.sleep(0.2)
+            assert helpers_ordered()
     finally:
         ctl.close()

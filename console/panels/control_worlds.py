@@ -73,7 +73,7 @@ class SimWorld:
 
 def _promote_new_threads() -> None:
     """Loop thread, after a (re)configure started a new receive thread: make it real-time like
-    the loop's other helper threads (:mod:`hw_bridge.realtime`, 10 below the loop), or a
+    the loop's other helper threads (:mod:`hw_bridge.realtime`, just below the loop), or a
     descheduled GIL holder stalls the loop past the link timeout on a loaded machine."""
     import os
 
