@@ -55,7 +55,8 @@ class ReferenceSleeper:
         if priority:
             cmd += ["--priority", str(priority)]
         if cpus:
-            cmd += ["--cpus", ",".join(map(str, sorted(cpus)))]
+            from hw_bridge.cpu_partition import format_cpus
+            cmd += ["--cpus", format_cpus(cpus)]
         self.proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.PIPE, text=True)
 
     def stop(self) -> dict[str, Any] | None:
@@ -84,10 +85,13 @@ def main() -> int:
     sys.path.insert(0, str(REPO))
     import numpy  # noqa: F401 - import before turning real-time: an import at the loop's
     # priority on its CPU would hold it off for tens of ms (equal FIFO priorities do not preempt)
-    from hw_bridge.cpu_partition import pin_process
+    from hw_bridge.cpu_partition import parse_cpus, pin_process
     from hw_bridge.realtime import set_fifo
     if a.cpus:
-        pin_process(frozenset(int(c) for c in a.cpus.split(",")))
+        try:
+            pin_process(parse_cpus(a.cpus))
+        except ValueError as exc:
+            p.error(f"--cpus: {exc}")
     scheduling = set_fifo(a.priority) if a.priority else "default (SCHED_OTHER)"
     out = sleep_loop(a.seconds)
     out["scheduling"] = scheduling

@@ -59,11 +59,44 @@ class CpuPartition:
         return cls(frozenset({top}), cpus - {top})
 
     def describe(self) -> str:
-        return f"real-time CPU {_ranges(self.realtime)}, others {_ranges(self.other)}"
+        return f"real-time CPU {format_cpus(self.realtime)}, others {format_cpus(self.other)}"
 
 
-def _ranges(cpus: frozenset[int]) -> str:
+def format_cpus(cpus: frozenset[int]) -> str:
+    """``{1, 0}`` -> ``"0,1"`` (what :func:`parse_cpus` and the ``--cpus`` flags read)."""
     return ",".join(str(c) for c in sorted(cpus))
+
+
+def parse_cpus(text: str) -> frozenset[int]:
+    """``"0,1"`` -> ``{0, 1}``: online CPUs only.
+
+    Raises:
+        ValueError: not comma-separated numbers, empty, or a CPU that is not online.
+    """
+    try:
+        cpus = frozenset(int(c) for c in text.split(","))
+    except ValueError:
+        raise ValueError(f"CPUs must be comma-separated numbers, got {text!r}") from None
+    if not cpus or not cpus <= online_cpus():
+        raise ValueError(f"CPUs {sorted(cpus)}: no such CPU (online: "
+                         f"{format_cpus(online_cpus())})")
+    return cpus
+
+
+def _pin_tasks(pid: int | str, cpus: frozenset[int]) -> int:
+    """Confine every thread of process ``pid`` (``"self"``: this one); returns how many."""
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+    except OSError:  # the process ended meanwhile
+        return 0
+    n = 0
+    for tid in tasks:
+        try:
+            os.sched_setaffinity(int(tid), cpus)
+        except OSError:  # the thread ended meanwhile
+            continue
+        n += 1
+    return n
 
 
 def pin_process(cpus: frozenset[int]) -> int:
@@ -72,14 +105,7 @@ def pin_process(cpus: frozenset[int]) -> int:
     Returns:
         How many threads were pinned (a thread that ended meanwhile is skipped).
     """
-    n = 0
-    for entry in os.scandir("/proc/self/task"):
-        try:
-            os.sched_setaffinity(int(entry.name), cpus)
-        except OSError:  # ended meanwhile
-            continue
-        n += 1
-    return n
+    return _pin_tasks("self", cpus)
 
 
 def pin_tree(pid: int, cpus: frozenset[int], skip: frozenset[int] = frozenset()) -> int:
@@ -105,16 +131,7 @@ def pin_tree(pid: int, cpus: frozenset[int], skip: frozenset[int] = frozenset())
         if p in skip:
             continue
         todo.extend(children.get(p, []))
-        try:
-            tasks = os.listdir(f"/proc/{p}/task")
-        except OSError:
-            continue
-        for tid in tasks:
-            try:
-                os.sched_setaffinity(int(tid), cpus)
-            except OSError:
-                continue
-            n += 1
+        n += _pin_tasks(p, cpus)
     return n
 
 

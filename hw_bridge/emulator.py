@@ -328,11 +328,6 @@ class Emulator:
                     next_tick = now + period
 
 
-def _online() -> frozenset[int]:
-    from hw_bridge.cpu_partition import online_cpus
-    return online_cpus()
-
-
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="python -m hw_bridge.emulator", description=__doc__.split("\n")[0])
     ap.add_argument("--robot", required=True, help="robot name (extensible, soft-arm) or TOML path")
@@ -359,12 +354,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                          "e.g. the real-time CPU of hw_bridge.cpu_partition")
     args = ap.parse_args(argv)
     if args.cpus is not None:
+        from hw_bridge.cpu_partition import parse_cpus
         try:
-            args.cpus = frozenset(int(c) for c in args.cpus.split(","))
-        except ValueError:
-            ap.error(f"--cpus must be comma-separated CPU numbers, got {args.cpus!r}")
-        if not args.cpus or not args.cpus <= _online():
-            ap.error(f"--cpus {sorted(args.cpus)}: no such CPU")
+            args.cpus = parse_cpus(args.cpus)
+        except ValueError as exc:
+            ap.error(f"--cpus: {exc}")
     if not 0 <= args.sched_priority <= 99:
         ap.error("--sched-priority must be in 0..99")
     if args.object is not None and (not all(map(math.isfinite, args.object))

@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from hw_bridge.cpu_partition import CpuPartition, online_cpus, pin_tree, process_cpus
+from hw_bridge.cpu_partition import (CpuPartition, format_cpus, online_cpus, parse_cpus,
+                                     pin_tree, process_cpus)
 
 REPO = Path(__file__).resolve().parent.parent
 needs_two_cpus = pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2,
@@ -28,6 +29,15 @@ def test_default_keeps_the_highest_cpu_for_real_time() -> None:
         CpuPartition(frozenset({1}), frozenset({0, 1}))
     with pytest.raises(ValueError, match="non-empty"):
         CpuPartition(frozenset(), frozenset({0}))
+
+
+def test_cpu_lists_round_trip_and_bad_ones_are_refused() -> None:
+    cpus = frozenset(os.sched_getaffinity(0))
+    assert parse_cpus(format_cpus(cpus)) == cpus
+    assert format_cpus(frozenset({3, 0, 1})) == "0,1,3"
+    for bad in ("", "x", "0,,1", str(max(online_cpus()) + 1)):
+        with pytest.raises(ValueError):
+            parse_cpus(bad)
 
 
 def test_online_cpus_cover_this_process() -> None:

@@ -36,7 +36,7 @@ import numpy as np
 from console.panels.control_worlds import DISCONNECTED, NO_SERIAL_LINK  # noqa: F401 (re-export)
 from console.panels.control_worlds import HardwareWorld as _HardwareWorld
 from console.panels.control_worlds import SimWorld as _SimWorld
-from hw_bridge.cpu_partition import CpuPartition, pin_process
+from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
 
 
@@ -76,7 +76,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     if opts.cpus is not None:  # start-up work (this and the children's imports) off the
         pin_process(opts.cpus.other)  # real-time CPU; the loop moves there once all started
         opts = dataclasses.replace(opts, emulator_args=(
-            *opts.emulator_args, "--cpus", ",".join(map(str, sorted(opts.cpus.realtime)))))
+            *opts.emulator_args, "--cpus", format_cpus(opts.cpus.realtime)))
     from core.control.stack import ControlStack
     from core.robots import load
     from hw_bridge.loop import LoopRunner, ProcessPlanner
@@ -146,8 +146,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     # (command) thread before the loop's part runs, so the loop never waits on the scene channel.
     scene_first = {"place_object", "grasp_at", "execute"} if world.kind != "sim" else set()
     stop = threading.Event()
-    rt_cpus = "" if opts.cpus is None else ",".join(map(str, sorted(opts.cpus.realtime)))
-    on_cpus = f" on CPU {rt_cpus}" if rt_cpus else ""
+    on_cpus = "" if opts.cpus is None else f" on CPU {format_cpus(opts.cpus.realtime)}"
 
     def scheduling() -> str:  # what the loop thread got, and where it runs
         return runner.scheduling + on_cpus
@@ -258,7 +257,6 @@ class ControlProcess:
             cpus = CpuPartition.default()
         opts = DeviceOptions("port" if port_path else device, port_path, tuple(emulator_args),
                              cpus)
-        self.cpus = cpus
         self.device = opts.kind
         self.failure: str | None = None
         ctx = multiprocessing.get_context("spawn")
