@@ -187,11 +187,8 @@ class TtyWorkerKeeper:
 def _keep(priority: int, every: float) -> int:
     """The keeper process: promote now and every ``every`` s until stdin closes, then demote."""
     import select
-
-    from hw_bridge.cpu_partition import CpuPartition, pin_process
-    part = CpuPartition.default()
-    if part is not None:  # ordinary work: off the real-time CPU its parent may run on
-        pin_process(part.other)
+    # (Its CPUs are those its parent had when starting it: the emulator starts it before
+    # moving itself to the real-time CPU, so ordinary work stays off that CPU.)
     promoted = promote_tty_workers(priority)
     print(len(promoted), flush=True)
     while True:
