@@ -86,26 +86,35 @@ def press(page: Any, name: str) -> Any:
     return page.mouse
 
 
+def lab_app(tmp_path: Path) -> tuple[Any, Any, str]:
+    """A viser server on a free port and a soft-arm ConsoleApp in lab mode with a fresh operator
+    token (no panels yet); returns (server, app, token)."""
+    import secrets
+
+    import viser
+
+    from console.access import AccessControl
+    from console.app import ConsoleApp
+
+    token = secrets.token_urlsafe(9)
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(token),
+                     data_dir=tmp_path / "runs", status="lab test")
+    return server, app, token
+
+
 @pytest.fixture
 def lab(browser, tmp_path: Path) -> Iterator[Lab]:
     """A lab console as ``serve.py --lab --demo`` builds it (token, viewers first, demo motion),
     with the panels these tests use -- Jog, Readout, Control (the real Execute and the control
     process), Session -- rather than all of them: the full console takes twice as long to load
     in software-rendered Chromium, and the other panels play no part here."""
-    import secrets
-
-    import viser
-
-    from console.access import AccessControl
-    from console.app import DEFAULT_PANELS, ConsoleApp
+    from console.app import DEFAULT_PANELS
     from console.demo_motion import DemoMotion
     from console.panels.control import ControlPanel
     from console.panels.session import SessionPanel
 
-    token = secrets.token_urlsafe(9)
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(token),
-                     data_dir=tmp_path / "runs", status="lab test")
+    server, app, token = lab_app(tmp_path)
     app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
     app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
     for panel_cls in (*DEFAULT_PANELS, ControlPanel, SessionPanel):

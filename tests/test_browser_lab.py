@@ -21,8 +21,8 @@ import pytest
 from console.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
-from lab_rig import (SOFT, Lab, field, lab, notifications, press,  # noqa: E402,F401 (lab: fixture)
-                     stop_button, wait_for)
+from lab_rig import (Lab, field, lab, lab_app, notifications,  # noqa: E402,F401 (lab: fixture)
+                     press, stop_button, wait_for)
 
 pytestmark = pytest.mark.browser
 
@@ -143,12 +143,6 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     """A lab console with the grasp panels (Objects, Grasp planner, Waypoints), the Hardware
     panel on queued bridge controls (nothing drains them here) and Session; no reachability
     map (CPU), no control process."""
-    import secrets
-
-    import viser
-
-    from console.access import AccessControl
-    from console.app import ConsoleApp
     from console.hardware_setup import HardwareAttachment
     from console.panels import planner
     from console.panels.hardware import HardwarePanel
@@ -156,10 +150,7 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     from hw_bridge.controls import QueuedBridgeControls
 
     planner.GraspSession.compute_reach = False
-    token = secrets.token_urlsafe(9)
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(token),
-                     data_dir=tmp_path / "runs", status="lab test")
+    server, app, token = lab_app(tmp_path)
     app.bridge_controls = QueuedBridgeControls()  # type: ignore[attr-defined]
     app.hardware = HardwareAttachment("test", kind="emulator",  # type: ignore[attr-defined]
                                       port_path="/dev/pts/99")
