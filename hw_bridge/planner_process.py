@@ -10,23 +10,15 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from core.control.grasp_place import PlanRequest
+from core.control.planner_spec import DEFAULT_PLANNER, resolve
 
 _WORKER_ROBOT: Any = None  # per worker process: the robot loaded once by the initializer
 
 
 _WORKER_PLAN: Any = None
-
-
-def resolve(spec: str) -> Callable[..., Any]:
-    """``"package.module:function"`` -> the function."""
-    import importlib
-    module, _, name = spec.partition(":")
-    if not module or not name:
-        raise ValueError(f"expected 'module:function', got {spec!r}")
-    return getattr(importlib.import_module(module), name)
 
 
 def _worker_init(robot_source: str, plan_spec: str, cpus: frozenset[int] | None = None) -> None:
@@ -53,7 +45,7 @@ class ProcessPlanner:
     """
 
     def __init__(self, robot_source: str | Path, workers: int = 1,
-                 plan_spec: str = "core.planning.grasp:plan_grasp",
+                 plan_spec: str = DEFAULT_PLANNER,
                  cpus: frozenset[int] | None = None):
         self._args = (workers, str(robot_source), plan_spec, cpus)
         self.restarts = 0

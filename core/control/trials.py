@@ -4,14 +4,15 @@
 
 Each trial builds a seeded :class:`~core.control.sim.SoftArmSim`, places the object (the user's
 placement is uniform within +-1 mm of the spot, as in the paper), arms the controller and runs
-the full grasp-and-place through the loop runner (``hw_bridge.loop``) on its simulated clock,
+the full grasp-and-place through the control cycle on a simulated clock
+(:class:`core.control.sim_loop.SimLoop`, the loop runner's order and timing without a thread),
 until ``released``, ``stopped`` or a time limit. Success: released, and the object put down within
 ``bin.drop_radius_m`` of the bin drop point (where the object sits when the gripper is at the
 bin). Without ``--object`` the five spots A-E of :func:`paper_locations` are used, x 5 repeats,
 with the paper's 3.3 cm object. Trials run in parallel processes (``--workers``).
 
 This module is the CLI around the pure pieces: it is the one place in ``core.control`` that
-prints, and it imports the loop runner from ``hw_bridge`` lazily.
+prints.
 """
 
 from __future__ import annotations
@@ -29,12 +30,13 @@ import numpy as np
 
 from core.control.grasp_place import Phase, immediate
 from core.control.params import BinParams
+from core.control.planner_spec import DEFAULT_PLANNER, resolve
 from core.control.sim import SoftArmSim
+from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
 from core.kinematics.planar import forward_kinematics, point_in_frame
 from core.robots import SoftArm, load
 
-DEFAULT_PLANNER = "core.planning.grasp:plan_grasp"
 PLACEMENT_TOLERANCE_M = 0.001  # the paper: user placement within +-1 mm
 
 
@@ -81,8 +83,6 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
               planner: str = DEFAULT_PLANNER, time_limit_s: float = 150.0,
               sim_overrides: dict[str, Any] | None = None) -> TrialResult:
     """One headless grasp-and-place trial on the simulated clock."""
-    from hw_bridge.loop import LoopRunner, SimClock, SimDevice, resolve
-
     x, y, r = (float(v) for v in obj)
     rng = np.random.default_rng([seed, 7])
     plan_fn: Callable[..., Any] = resolve(planner)
@@ -93,14 +93,14 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
                      y + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M), r)
     stack = ControlStack(robot, 0.01, immediate(
         lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
-    runner = LoopRunner(SimDevice(sim), stack, 0.01, clock_ns=SimClock())
+    loop = SimLoop(sim, stack, 0.01)
     wall = time.perf_counter()
-    runner.run_sim(0.05)
-    runner.arm()
-    runner.run_sim(0.5)  # pre-pressurise the root segments
-    runner.start_task()
-    runner.run_sim(time_limit_s, until=lambda s: s.control is not None
-                   and s.control.phase in (Phase.RELEASED.value, Phase.STOPPED.value))
+    loop.run(0.05)
+    loop.arm()
+    loop.run(0.5)  # pre-pressurise the root segments
+    loop.start_task()
+    loop.run(time_limit_s, until=lambda c: c is not None
+             and c.phase in (Phase.RELEASED.value, Phase.STOPPED.value))
     wall = time.perf_counter() - wall
     m = stack.machine
     failure: str | None = None
@@ -116,12 +116,12 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
             d = float(np.hypot(*(sim.obj.xy - drop)))
             if d > BinParams.from_robot(robot).drop_radius_m:
                 failure = f"object released {d * 1000:.0f} mm from the bin drop point"
-    stats = runner.stats()
+    stats = loop.stats()
     return TrialResult(
         object=[x, y, r], success=failure is None, failure=failure,
         approach_s=round(m.approach_s or 0.0, 3), return_s=round(m.return_s or 0.0, 3),
-        label=label, seed=seed, sim_s=round(runner.ticks * 0.01, 2), wall_s=round(wall, 3),
-        ticks=runner.ticks, replans=m.replans, stalls=sim.stalls, occlusions=sim.occlusions,
+        label=label, seed=seed, sim_s=round(loop.ticks * 0.01, 2), wall_s=round(wall, 3),
+        ticks=loop.ticks, replans=m.replans, stalls=sim.stalls, occlusions=sim.occlusions,
         work_ms_p99=round(stats.work_ms_p99, 4),
         final_object=None if sim.obj is None else (float(sim.obj.xy[0]), float(sim.obj.xy[1])))
 
