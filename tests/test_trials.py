@@ -7,6 +7,7 @@ import pytest
 
 from core import robots
 from core.control import trials
+from core.control.trials.__main__ import main as trials_main
 from core.planning.grasp import plan_grasp
 
 
@@ -29,7 +30,7 @@ def test_paper_locations_are_in_the_left_quadrant_and_plannable(arm):
 
 def test_two_trials_succeed_end_to_end(arm):
     results = trials.run_trials("soft-arm", [("B", (-0.22, 0.20, 0.0165)),
-                                             ("E", (-0.08, 0.33, 0.0165))], 1, 0, workers=0)
+                                             ("E", (-0.08, 0.33, 0.0165))], 1, 0)
     assert [r.success for r in results] == [True, True], [r.failure for r in results]
     for r in results:
         assert r.failure is None and r.approach_s > 0 and r.return_s > 0
@@ -46,7 +47,7 @@ def test_unreachable_object_fails_with_the_planners_reason(arm):
 
 
 def test_cli_json_shape(capsys):
-    assert trials.main(["--object", "-0.16", "0.28", "0.0165", "--repeats", "1", "--seed", "3",
+    assert trials_main(["--object", "-0.16", "0.28", "0.0165", "--repeats", "1", "--seed", "3",
                         "--json", "--workers", "0"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out) == {"trials", "loop"}
@@ -58,5 +59,5 @@ def test_cli_json_shape(capsys):
 
 def test_cli_rejects_bad_objects(capsys):
     with pytest.raises(SystemExit):
-        trials.main(["--object", "0", "0.2", "-1"])
+        trials_main(["--object", "0", "0.2", "-1"])
     assert "R > 0" in capsys.readouterr().err

@@ -2,13 +2,15 @@
 
 *Run trials* starts a batch (spots A-E of :func:`core.control.trials.paper_locations` x repeats,
 or one custom spot) on the simulated clock in a spawned worker process
-(:func:`core.control.trials.run_trials`), so the console's 100 Hz loop and render thread keep
-their interpreter. A progress bar follows the finished trials; the results table lists each
+(:func:`core.control.trials.run_trials` through this panel's one-process pool), so the
+console's 100 Hz loop and render thread keep their interpreter. A progress bar follows the finished trials; the results table lists each
 trial (spot, success, failure reason, approach and return times) and the total.
 """
 
 from __future__ import annotations
 
+import concurrent.futures as cf
+import multiprocessing
 import threading
 from typing import Any
 
@@ -92,8 +94,9 @@ class TrialsPanel(Panel):
         t0 = time.perf_counter()
         try:
             src = str(self.app.robot.source)
-            self.results = run_trials(src, objects, repeats, seed, workers=1, progress=progress,
-                                      mp_context="spawn")
+            with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+                self.results = run_trials(src, objects, repeats, seed, progress=progress,
+                                          map_fn=pool.map)
             loop: dict[str, Any] = summary(self.results, time.perf_counter() - t0, 1)
             self.table.content = results_markdown(self.results, loop)
             self.status.content = "<small>done</small>"
