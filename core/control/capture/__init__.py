@@ -15,26 +15,23 @@ infeasible (the disc would overlap the open gripper or the arm, so nobody could 
 The result saves to JSON or ``.npz`` and renders to SVG (:meth:`CaptureMap.to_svg`); the
 console draws it from the data.
 
-CLI: ``python -m core.control.capture [--radius R] [--spacing S] [--repeats N] [--out F.json|F.npz]
-[--svg F.svg]``.
+Command line: ``python -m core.control.capture`` (:mod:`core.control.capture.__main__`).
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import math
-import sys
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
 
 from core.control.gripper import GripperGeometry, capsule_contacts, close_sweep
 from core.control.params import SimParams
-from core.robots import SoftArm, load
+from core.robots import SoftArm
 
 Array = npt.NDArray[np.float64]
 SUCCESS, FAILURE, INFEASIBLE = 1, 0, -1
@@ -223,40 +220,3 @@ def characterise(robot: SoftArm, radius: float | None = None, *, spacing: float 
     return CaptureMap(xs, ys, r, spacing, repeats, outcome, rate,
                       CaptureModel.from_robot(robot, r), geom.centreline(0.0)[0, 1:],
                       geom.centreline(closed)[0, 1:])
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m core.control.capture", description=__doc__.split("\n")[0])
-    ap.add_argument("--robot", default="soft-arm")
-    ap.add_argument("--radius", type=float, default=None, help="object radius, m")
-    ap.add_argument("--spacing", type=float, default=0.005)
-    ap.add_argument("--repeats", type=int, default=1)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=None, help="save .json or .npz")
-    ap.add_argument("--svg", type=Path, default=None, help="write the Fig. 6 drawing")
-    a = ap.parse_args(argv)
-    robot = load(a.robot)
-    if not isinstance(robot, SoftArm):
-        ap.error(f"{a.robot} is not a soft planar arm")
-    try:
-        cmap = characterise(robot, a.radius, spacing=a.spacing, repeats=a.repeats, seed=a.seed)
-    except ValueError as exc:
-        ap.error(str(exc))
-    if a.out:
-        cmap.save(a.out)
-    if a.svg:
-        a.svg.write_text(cmap.to_svg())
-    rows = {SUCCESS: "o", FAILURE: "x", INFEASIBLE: " "}
-    for j in range(len(cmap.ys) - 1, -1, -1):
-        print(f"{cmap.ys[j] * 100:6.1f} cm " + "".join(rows[int(o)] for o in cmap.outcome[j]))
-    cx, cy = cmap.centroid()
-    print(f"object r = {cmap.radius * 100:.2f} cm, grid {cmap.spacing * 1000:.0f} mm: "
-          f"{cmap.successes} successes, equivalent diameter {cmap.equivalent_diameter() * 100:.1f} cm "
-          f"(model {cmap.model.diameter * 100:.1f} cm), centroid ({cx * 100:.1f}, {cy * 100:.1f}) cm "
-          f"(model ({cmap.model.center[0] * 100:.1f}, {cmap.model.center[1] * 100:.1f}) cm), "
-          f"agreement with the model {cmap.model_agreement():.0%}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -12,18 +12,15 @@ waypoints (from kappa_meas) cannot be certified clear (:mod:`core.planning.clear
 waypoints are inserted between Algorithm 1's radii. Requests that cannot work raise
 :class:`GraspRefused` with a plain-words reason (:mod:`core.planning.feasibility`).
 
-CLI: ``python -m core.planning.grasp --object X Y R [--json] [--robot soft-arm]`` prints the
-plan; a refusal goes to stderr with exit code 2 (1 if planning failed).
+Command line: ``python -m core.planning.grasp --object X Y R [--json]``
+(:mod:`core.planning.grasp.__main__`).
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
-import json
 import math
-import sys
 import time
 
 import numpy as np
@@ -377,34 +374,3 @@ def plan_grasp(robot, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: 
     """
     return _planner_for(_Identity(robot)).plan(kappa_meas, center, radius, delta_d=delta_d,
                                                weights=weights)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point; returns the exit code."""
-    from core import robots
-
-    ap = argparse.ArgumentParser(prog="python -m core.planning.grasp", description=__doc__
-                                 .split("\n")[0])
-    ap.add_argument("--object", nargs=3, type=float, metavar=("X", "Y", "R"), required=True,
-                    help="object centre x, y and radius r_o (m)")
-    ap.add_argument("--robot", default="soft-arm", help="robot name or TOML path")
-    ap.add_argument("--kappa", nargs="+", type=float, help="measured curvatures (default 0)")
-    ap.add_argument("--delta-d", type=float, help="allowable incremental distance (m)")
-    ap.add_argument("--json", action="store_true", help="print the plan as JSON")
-    args = ap.parse_args(argv)
-    try:
-        robot = robots.load(args.robot)
-        km = np.zeros(robot.n_segments) if args.kappa is None else np.array(args.kappa)
-        plan = plan_grasp(robot, km, args.object[:2], args.object[2], delta_d=args.delta_d)
-    except GraspRefused as exc:
-        print(f"refused ({exc.reason}): {exc}", file=sys.stderr)
-        return 2
-    print(json.dumps(plan.to_dict(), indent=1) if args.json else format_plan(plan))
-    if not plan.success:
-        print(f"planning failed: {plan.summary()}", file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,8 +1,49 @@
-"""``python -m core.planning.grasp``."""
+"""``python -m core.planning.grasp``: plan one grasp from the command line.
 
+``python -m core.planning.grasp --object X Y R [--json] [--robot soft-arm] [--kappa K ...]
+[--delta-d D]`` prints the plan (:func:`core.planning.grasp.plan_grasp`); a refusal goes to
+stderr with exit code 2 (1 if planning failed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
 import sys
 
-from core.planning.grasp import main
+import numpy as np
+
+from core.planning.feasibility import GraspRefused
+from core.planning.grasp import plan_grasp
+from core.planning.plan_types import format_plan
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit code."""
+    from core import robots
+
+    ap = argparse.ArgumentParser(prog="python -m core.planning.grasp", description=__doc__
+                                 .split("\n")[0])
+    ap.add_argument("--object", nargs=3, type=float, metavar=("X", "Y", "R"), required=True,
+                    help="object centre x, y and radius r_o (m)")
+    ap.add_argument("--robot", default="soft-arm", help="robot name or TOML path")
+    ap.add_argument("--kappa", nargs="+", type=float, help="measured curvatures (default 0)")
+    ap.add_argument("--delta-d", type=float, help="allowable incremental distance (m)")
+    ap.add_argument("--json", action="store_true", help="print the plan as JSON")
+    args = ap.parse_args(argv)
+    try:
+        robot = robots.load(args.robot)
+        km = np.zeros(robot.n_segments) if args.kappa is None else np.array(args.kappa)
+        plan = plan_grasp(robot, km, args.object[:2], args.object[2], delta_d=args.delta_d)
+    except GraspRefused as exc:
+        print(f"refused ({exc.reason}): {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(plan.to_dict(), indent=1) if args.json else format_plan(plan))
+    if not plan.success:
+        print(f"planning failed: {plan.summary()}", file=sys.stderr)
+        return 1
+    return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -4,17 +4,15 @@ Every cell centre of a table grid is planned with :func:`core.planning.grasp.pla
 given start (the paper's straight arm by default) for one object radius. To keep the map cheap,
 cells that no sampled final configuration comes near (the object centre a configuration holds at
 the final radius, arm body clear) are marked unreachable without planning; only the others are
-planned. Pure and single-threaded; ``python -m core.planning.reachability`` prints a map as JSON
-(the console runs that in a low-priority child process, once per robot).
+planned. Pure and single-threaded; ``python -m core.planning.reachability``
+(:mod:`core.planning.reachability.__main__`) prints a map as JSON (the console runs that in a
+low-priority child process, once per robot).
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
-import os
-import sys
 from typing import Callable
 
 import numpy as np
@@ -125,35 +123,3 @@ def from_json(text: str) -> ReachMap:
     status = np.array([[int(c) for c in row] for row in d["status"]], np.int8)
     return ReachMap(np.array(d["xs"], float), np.array(d["ys"], float), status,
                     float(d["radius"]))
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m core.planning.reachability --robot soft-arm --radius 0.0165``: map as JSON."""
-    from core import robots
-
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--robot", default="soft-arm")
-    ap.add_argument("--radius", type=float, required=True)
-    ap.add_argument("--x", type=float, nargs=2, default=(-0.5, 0.5))
-    ap.add_argument("--y", type=float, nargs=2, default=(-0.26, 0.5))
-    ap.add_argument("--step", type=float, default=0.02)
-    ap.add_argument("--nice", type=int, default=0, help="lower this process's priority")
-    ap.add_argument("--parent", type=int, default=0,
-                    help="stop (exit 3) as soon as the process with this pid is gone")
-    args = ap.parse_args(argv)
-    if args.nice:
-        try:
-            os.nice(args.nice)
-        except OSError:
-            pass
-    orphaned = (lambda: os.getppid() != args.parent) if args.parent else None
-    reach = reachability_map(robots.load(args.robot), args.radius, tuple(args.x), tuple(args.y),
-                             args.step, should_stop=orphaned)
-    if orphaned is not None and orphaned():
-        return 3
-    sys.stdout.write(to_json(reach) + "\n")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())
