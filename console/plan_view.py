@@ -32,7 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.kinematics import planar as pk
-from core.planning.grasp import GraspPlan
+from core.planning.plan_types import GraspPlan
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap, from_json
 
 Array = npt.NDArray[np.float64]

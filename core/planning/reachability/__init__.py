@@ -19,7 +19,9 @@ import numpy as np
 import numpy.typing as npt
 
 from core.planning.arm_model import ArmModel
-from core.planning.grasp import GraspPlanner, GraspRefused, PlannerConfig
+from core.planning.feasibility import GraspRefused
+from core.planning.grasp import GraspPlanner
+from core.planning.plan_types import PlannerConfig
 
 Array = npt.NDArray[np.float64]
 
