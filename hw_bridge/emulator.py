@@ -26,306 +26,37 @@ object centre while an object is present. ``--object X Y R`` places a disc at st
 ``{"cmd": "place_object", "x": X, "y": Y, "r": R}``, ``{"cmd": "remove_object"}``,
 ``{"cmd": "scene"}`` (answer: ``object`` [x, y, r] or null, ``captured``, ``finger`` polyline
 or null). It stands in for moving the real object by hand.
+
+This module is the command line (argument checks, JSON event lines on stdout, signals); the
+emulator itself is :class:`hw_bridge.pty_emulator.Emulator`.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
-import os
-import queue
-import random
-import select
 import signal
-import socket
 import sys
-import threading
 import time
-import tty
-from typing import Any, Callable
+from typing import Any
 
-from core.robots import ExtensibleArm, Robot, load
-from hw_bridge.config import BridgeConfig, EmulatorConfig
-from hw_bridge.device import DeviceCore
-from hw_bridge.mocap import encode_mocap_packet
-from hw_bridge.plants import MotorBank
+from core.robots import load
+from hw_bridge.pty_emulator import Emulator, EmulatorOptions
 
 
-def _emit(event: str, **fields: Any) -> None:
+def print_event(event: str, **fields: Any) -> None:
+    """One stdout JSON line: ``{"event": ..., "t": monotonic s, **fields}``."""
     print(json.dumps({"event": event, "t": round(time.monotonic(), 4), **fields}), flush=True)
 
 
-class _Writer(threading.Thread):
-    """TX line: one frame at a time, each taking len*10/baud seconds before it reaches the host."""
-
-    def __init__(self, fd: int, baud: int, connected: Callable[[], bool]):
-        super().__init__(daemon=True, name="emulator-tx")
-        self.fd, self.baud, self.connected = fd, baud, connected
-        self.q: queue.Queue[bytes | None] = queue.Queue()
-        self.dropped_overflow = 0
-
-    def run(self) -> None:
-        while (data := self.q.get()) is not None:
-            if self.baud:
-                time.sleep(len(data) * 10 / self.baud)
-            if not self.connected():
-                continue  # nobody has the port open: the bytes go nowhere
-            try:
-                os.write(self.fd, data)
-            except BlockingIOError:
-                self.dropped_overflow += 1  # nobody reads the pty: drop, like a UART
-            except OSError:
-                return
-
-
-class Emulator:
-    """Device process state: pty, wire model, faults, the DeviceCore and the plants."""
-
-    def __init__(self, robot: Robot, args: argparse.Namespace):
-        self.args = args
-        self.rng = random.Random(args.seed)
-        self.bridge = BridgeConfig.from_robot(robot, n_motors=args.motors)
-        emu = EmulatorConfig.from_robot(robot)
-        self.baud = self.bridge.baud if args.baud is None else args.baud
-        self.master, slave = os.openpty()
-        tty.setraw(slave)
-        os.set_blocking(self.master, False)
-        self.path = os.ttyname(slave)
-        # Close our slave end: while no host has the port open the master reads EIO ("cable
-        # unplugged") and output is dropped instead of piling up stale frames in the pty.
-        os.close(slave)
-        self.host_present = False
-        now = time.monotonic()
-        self.t0 = now
-        self.core = DeviceCore(MotorBank(self.bridge.n_motors, emu.motor_speed_counts),
-                               self.bridge.watchdog_s, self.bridge.period_s, now=now)
-        self.plant: Any = None  # core.control.sim.EmulatorPlant for the soft arm
-        self.udp: socket.socket | None = None
-        self.control: socket.socket | None = None
-        if not isinstance(robot, ExtensibleArm):
-            from core.control.sim import EmulatorPlant
-            self.plant = EmulatorPlant(robot, seed=0 if args.seed is None else args.seed)
-            if args.object is not None:
-                self.plant.sim.place_object(*args.object)
-            self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            self.mocap_addr = ("127.0.0.1", args.mocap_port or emu.mocap_port)
-            self.mocap_seq = 0
-            if args.control_port is not None:
-                self.control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                self.control.bind(("127.0.0.1", args.control_port))
-                self.control.setblocking(False)
-        elif args.object is not None or args.control_port is not None:
-            raise ValueError("--object and --control-port need the soft arm")
-        self.writer = _Writer(self.master, self.baud, lambda: self.host_present)
-        self.rx_pending: list[tuple[float, bytes]] = []
-        self.rx_busy_until = now
-        self.stop = False
-        self.stalled = False
-        self.cut = False
-        self.requests: set[str] = set()  # filled by signal handlers, served by the loop
-
-    # -- wire ---------------------------------------------------------------------------------
-    def _fault(self, data: bytes) -> bytes | None:
-        if self.args.drop and self.rng.random() < self.args.drop:
-            return None
-        if self.args.corrupt and self.rng.random() < self.args.corrupt and data:
-            b = bytearray(data)
-            b[self.rng.randrange(len(b))] ^= 1 << self.rng.randrange(8)
-            return bytes(b)
-        return data
-
-    def _on_readable(self, now: float) -> None:
-        try:
-            data = os.read(self.master, 4096)
-        except BlockingIOError:
-            return
-        except OSError:  # EIO: the host closed the port
-            self._set_host(False)
-            return
-        self._set_host(True)
-        if self.cut or self.stalled or not data:
-            return True
-        data = self._fault(data)
-        if data is None:
-            return
-        start = max(now, self.rx_busy_until)
-        self.rx_busy_until = start + (len(data) * 10 / self.baud if self.baud else 0.0)
-        self.rx_pending.append((self.rx_busy_until, data))
-
-    def _set_host(self, present: bool) -> None:
-        if present != self.host_present:
-            self.host_present = present
-            self.rx_pending.clear()
-            _emit("host_connected" if present else "host_disconnected")
-
-    def _check_host(self) -> None:
-        po = select.poll()
-        po.register(self.master, select.POLLIN)
-        self._set_host(not any(ev & select.POLLHUP for _, ev in po.poll(0)))
-    def _deliver(self, now: float) -> None:
-        while self.rx_pending and self.rx_pending[0][0] <= now:
-            _, data = self.rx_pending.pop(0)
-            self.core.receive(data, now)
-        self._flush_output()
-
-    def _flush_output(self) -> None:
-        for frame in self.core.take_output():
-            if self.cut or self.stalled or not self.host_present:
-                continue
-            frame = self._fault(frame)
-            if frame is not None:
-                self.writer.q.put(frame)
-
-    # -- timer --------------------------------------------------------------------------------
-    def _tick(self, now: float) -> None:
-        elapsed = now - self.t0
-        a = self.args
-        if a.stall_after is not None and elapsed >= a.stall_after and not self.stalled:
-            self.stalled = True
-            _emit("stalled")
-        if self.stalled:
-            return
-        if a.disconnect_after is not None:
-            cut = elapsed >= a.disconnect_after and (
-                a.disconnect_for is None or elapsed < a.disconnect_after + a.disconnect_for)
-            if cut != self.cut:
-                self.cut = cut
-                self.rx_pending.clear()
-                _emit("link_cut" if cut else "link_restored")
-        self.core.tick(now)
-        ev = self.core.take_events()
-        pos = [int(c) for c in self.core.motors.encoders]
-        if ev.watchdog_tripped:
-            _emit("watchdog_tripped", positions=pos)
-        if ev.armed:
-            _emit("armed", positions=pos)
-        if ev.disarmed:
-            _emit("disarmed", positions=pos)
-        if self.plant is not None and self.udp is not None:
-            self.plant.step(self.core.motors.position, self.bridge.period_s)
-            self.mocap_seq += 1
-            pts, valid = self.plant.mocap_frame()
-            try:
-                self.udp.sendto(encode_mocap_packet(self.mocap_seq, now, pts, valid),
-                                self.mocap_addr)
-            except OSError:
-                pass
-        self._flush_output()
-
-    # -- scene channel (soft arm) --------------------------------------------------------------
-    def _serve_control(self) -> None:
-        """Answer waiting scene datagrams (non-blocking; see the module docstring)."""
-        assert self.control is not None
-        while True:
-            try:
-                data, addr = self.control.recvfrom(4096)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:
-                return
-            try:
-                reply = self._scene_command(json.loads(data))
-            except Exception as exc:  # noqa: BLE001 - bad input: answer, change nothing
-                reply = {"ok": False, "error": str(exc)}
-            try:
-                self.control.sendto(json.dumps(reply).encode(), addr)
-            except OSError:
-                pass
-
-    def _scene_command(self, msg: dict[str, Any]) -> dict[str, Any]:
-        sim = self.plant.sim
-        cmd = msg.get("cmd") if isinstance(msg, dict) else None
-        if cmd == "place_object":
-            x, y, r = (float(msg[k]) for k in ("x", "y", "r"))
-            if not all(map(math.isfinite, (x, y, r))):
-                raise ValueError("object x, y, r must be finite")
-            sim.place_object(x, y, r)
-            _emit("object_placed", xy=[x, y], r=r)
-            return {"ok": True}
-        if cmd == "remove_object":
-            sim.remove_object()
-            return {"ok": True}
-        if cmd == "scene":
-            obj = sim.obj
-            finger = sim.gripper_polyline().tolist() if sim.turn > 1e-3 else None
-            return {"ok": True, "captured": sim.captured, "finger": finger,
-                    "object": None if obj is None else [*map(float, obj.xy), obj.radius]}
-        raise ValueError(f"unknown scene command {cmd!r}")
-
-    def status(self) -> None:
-        """Print a status event (SIGUSR1)."""
-        _emit("status", armed=self.core.armed, tripped=self.core.tripped, estop=self.core.estop,
-              positions=[int(c) for c in self.core.motors.encoders],
-              rx_bad_frames=self.core.decoder.stats.bad_frames,
-              tx_overflow=self.writer.dropped_overflow, path=self.path)
-
-    def _serve_requests(self, now: float) -> None:
-        requests, self.requests = self.requests, set()
-        if "status" in requests:
-            self.status()
-        if "estop" in requests:
-            self.core.set_estop(not self.core.estop, now)
-            _emit("estop", pressed=self.core.estop)
-
-    def run(self) -> None:
-        self.writer.start()
-        priority = getattr(self.args, "sched_priority", 0)
-        keeper = None
-        cpus = getattr(self.args, "cpus", None)
-        if priority:  # a dedicated MCU is never preempted: neither is its stand-in, nor its wire
-            from hw_bridge.realtime import TtyWorkerKeeper, promote_threads, thread_policy
-            keeper = TtyWorkerKeeper(max(1, priority - 1)).start()  # (the pty's kworkers;
-            # started before the move below, so its start-up runs where this one's did)
-        if cpus:
-            from hw_bridge.cpu_partition import pin_process
-            pin_process(cpus)
-        if priority:
-            promote_threads(priority)
-            _emit("scheduling", policy="SCHED_FIFO" if thread_policy() == os.SCHED_FIFO
-                  else "default", priority=priority, tty_workers=keeper.promoted)
-        try:
-            self._serve()
-        finally:  # hand the kernel workers back even if serving failed
-            if keeper is not None:
-                keeper.stop()
-        self.writer.q.put(None)
-        _emit("exit")
-        try:
-            os.close(self.master)
-        except OSError:
-            pass
-        for sock in (self.udp, self.control):
-            if sock is not None:
-                sock.close()
-
-    def _serve(self) -> None:
-        """Serve the protocol until :attr:`stop`."""
-        period = self.bridge.period_s
-        next_tick = time.monotonic() + period
-        while not self.stop:
-            now = time.monotonic()
-            wake = next_tick if not self.rx_pending else min(next_tick, self.rx_pending[0][0])
-            if self.host_present:
-                ready, _, _ = select.select([self.master], [], [], max(0.0, wake - now))
-            else:  # a hung-up master is always readable: sleep, then look again
-                time.sleep(max(0.0, wake - now))
-                self._check_host()
-                ready = [self.master] if self.host_present else []
-            now = time.monotonic()
-            if ready:
-                self._on_readable(now)
-            if not self.stalled:
-                self._deliver(now)
-            if self.requests:
-                self._serve_requests(now)
-            if self.control is not None:
-                self._serve_control()
-            if now >= next_tick:
-                self._tick(now)
-                next_tick += period
-                if next_tick <= now:  # overrun: skip, do not catch up
-                    next_tick = now + period
+def options_from_args(args: argparse.Namespace) -> EmulatorOptions:
+    """The parsed command line as :class:`EmulatorOptions`."""
+    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(EmulatorOptions)}
+    if values["object"] is not None:
+        values["object"] = tuple(values["object"])
+    return EmulatorOptions(**values)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -380,13 +111,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         robot = load(args.robot)
-        emu = Emulator(robot, args)
+        emu = Emulator(robot, options_from_args(args), print_event)
     except Exception as exc:  # noqa: BLE001 - report any setup failure plainly
         print(f"emulator: {exc}", file=sys.stderr)
         return 2
     print(emu.path, flush=True)
     if emu.control is not None:
-        _emit("control", port=emu.control.getsockname()[1])
+        print_event("control", port=emu.control.getsockname()[1])
 
     def _stop(signum: int, frame: object) -> None:
         emu.stop = True
