@@ -28,7 +28,7 @@ from hw_bridge import protocol as p
 from hw_bridge.config import BridgeConfig, EmulatorConfig
 from hw_bridge.interface import LifecycleState, ReturnType, SerialHardware
 from hw_bridge.mocap import UdpMocapReceiver, frame_health
-from hw_bridge.probe import run_probe
+from hw_bridge.link_probe import run_probe
 
 ROOT = Path(__file__).resolve().parent.parent
 EXT = load("extensible")
