@@ -145,7 +145,7 @@ def demote_tty_workers(pids: list[int], priority: int) -> None:
 class TtyWorkerKeeper:
     """Keeps the ``kworker/u*`` workers real-time while a real-time pty user runs.
 
-    The keeping runs in a small process of its own (``python -m hw_bridge.realtime``) at
+    The keeping runs in a small process of its own (``python -m hw_bridge.tty_keeper``) at
     ordinary priority: a thread of ordinary priority inside a real-time process would hold that
     process's GIL while it scans /proc, and if it were preempted there the real-time threads
     would wait for it. The keeper promotes new workers every ``every`` s and, when told to stop
@@ -166,7 +166,7 @@ class TtyWorkerKeeper:
         if os.geteuid() != 0:  # only root may change kernel threads: nothing to keep
             return self
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "hw_bridge.realtime", str(self.priority), str(self.every)],
+            [sys.executable, "-m", "hw_bridge.tty_keeper", str(self.priority), str(self.every)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)  # ordinary priority:
         # the real-time threads calling this were set with SCHED_RESET_ON_FORK (set_fifo)
         line = self._proc.stdout.readline()  # the first pass's count, once it is done
@@ -182,23 +182,3 @@ class TtyWorkerKeeper:
         except Exception:  # noqa: BLE001 - never leave it behind
             self._proc.kill()
         self._proc = None
-
-
-def _keep(priority: int, every: float) -> int:
-    """The keeper process: promote now and every ``every`` s until stdin closes, then demote."""
-    import select
-    # (Its CPUs are those its parent had when starting it: the emulator starts it before
-    # moving itself to the real-time CPU, so ordinary work stays off that CPU.)
-    promoted = promote_tty_workers(priority)
-    print(len(promoted), flush=True)
-    while True:
-        ready, _, _ = select.select([sys.stdin], [], [], every)
-        if ready and not sys.stdin.read(1):  # EOF: the parent stopped us or went away
-            break
-        promoted += promote_tty_workers(priority)
-    demote_tty_workers(promoted, priority)
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_keep(int(sys.argv[1]), float(sys.argv[2])))
