@@ -39,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from core import robots  # noqa: E402
 from core.kinematics import delta as dk  # noqa: E402
+from core.kinematics.delta_ik import solve_tip_ik  # noqa: E402
 
 TOL = 1e-3
 
@@ -152,7 +153,7 @@ def main() -> None:
     near = np.clip(lengths + rng.uniform(-0.01, 0.01, lengths.shape), robot.rack_min, robot.rack_max)
     near_deltas = dk.delta_from_actuators(near, robot.phi, robot.L0)
     retracted = np.zeros((robot.n_segments, 3))
-    dk.solve_tip_ik(robot, targets[0])  # warm up imports / caches
+    solve_tip_ik(robot, targets[0])  # warm up imports / caches
     nb = min(args.baseline_targets, args.targets)
 
     print(f"extensible arm, {robot.n_segments} segments; reachable targets from random rack lengths "
@@ -160,16 +161,16 @@ def main() -> None:
           f"{np.degrees(robot.theta_max):.0f} deg; success = error <= {TOL * 1e3:g} mm")
     print(f"{'method':<28} {'n':>5} {'median ms':>9} {'p90 ms':>8} {'max ms':>8} {'success':>10} "
           f"{'median err mm':>13} {'iters':>6} {'0 iters':>9} {'batch':>9}")
-    run("solve_tip_ik cold", targets, lambda i, t: dk.solve_tip_ik(robot, t), robot)
+    run("solve_tip_ik cold", targets, lambda i, t: solve_tip_ik(robot, t), robot)
     run("solve_tip_ik warm (1 cm)", targets,
-        lambda i, t: dk.solve_tip_ik(robot, t, near_deltas[i]), robot)
+        lambda i, t: solve_tip_ik(robot, t, near_deltas[i]), robot)
     run("solve_tip_ik retracted", targets,
-        lambda i, t: dk.solve_tip_ik(robot, t, retracted), robot)
+        lambda i, t: solve_tip_ik(robot, t, retracted), robot)
     run(f"eq.(5) Euler h={args.euler_step:g}", targets[:nb],
         lambda i, t: literal_eq5(robot, t, args.euler_step, args.euler_max_steps)[0], robot)
     run("SLSQP (L, bend constr.)", targets[:nb], lambda i, t: slsqp(robot, t), robot)
     run(f"(ours retracted, first {nb})", targets[:nb],
-        lambda i, t: dk.solve_tip_ik(robot, t, retracted), robot)
+        lambda i, t: solve_tip_ik(robot, t, retracted), robot)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 
 from core.kinematics import delta as dk
+from core.kinematics.delta_ik import solve_tip_ik
 from core.planning.paths import build_path
 from core.robots import load
 
@@ -92,7 +93,7 @@ def test_typed_target_moves_the_tip_and_the_jog_sliders(
         page, extensible_console: Callable[[], str], artifacts_dir: Path) -> None:
     open_console(page, extensible_console())
     target = np.array([120.0, -60.0, 350.0])  # mm
-    ik = dk.solve_tip_ik(ROBOT, target / 1e3)
+    ik = solve_tip_ik(ROBOT, target / 1e3)
     assert ik.reachable and np.linalg.norm(dk.tip_position(ROBOT, ik.delta) - target / 1e3) < 1e-3
     type_target(page, target)
     wait_until("the tip readout at the target",
@@ -106,7 +107,7 @@ def test_typed_target_moves_the_tip_and_the_jog_sliders(
     page.screenshot(path=str(artifacts_dir / "browser_extensible_target.png"))
 
     far = np.array([900.0, -60.0, 350.0])  # beyond the 820 mm arm
-    assert not dk.solve_tip_ik(ROBOT, far / 1e3).reachable
+    assert not solve_tip_ik(ROBOT, far / 1e3).reachable
     type_target(page, far)
     wait_until("the unreachable status",
                lambda: status.get_attribute("data-state") == "unreachable", timeout=15)
@@ -223,7 +224,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     wait_until("the measured tip at the retracted pose",
                lambda: np.abs(readout_tip(page) - start).max() <= 0.5, timeout=20)
     target = np.array([80.0, 40.0, 300.0])  # mm
-    ik = dk.solve_tip_ik(ROBOT, target / 1e3)
+    ik = solve_tip_ik(ROBOT, target / 1e3)
     assert ik.reachable
     t0 = time.monotonic()
     type_target(page, target)

@@ -12,7 +12,7 @@ from scipy.optimize import minimize
 
 from core import robots
 from core.kinematics import delta as dk
-from core.kinematics.delta_ik import IKSettings, TipIKResult
+from core.kinematics.delta_ik import IKSettings, TipIKResult, solve_tip_ik
 
 ARM = robots.load("extensible")
 LO, HI = ARM.rack_min, ARM.rack_max
@@ -52,17 +52,18 @@ def assert_consistent(res, target):
     assert res.reachable == (res.error <= TOL)
 
 
-def test_reexported_from_delta_module():
+def test_defined_in_delta_ik_and_not_re_exported_from_delta():
+    """The IK imports the forward kinematics (delta), never the other way round: no circle."""
     from core.kinematics import delta_ik
-    assert dk.solve_tip_ik is delta_ik.solve_tip_ik
-    assert dk.TipIKResult is delta_ik.TipIKResult
+    assert solve_tip_ik.__module__ == TipIKResult.__module__ == delta_ik.__name__
+    assert not hasattr(dk, "solve_tip_ik") and not hasattr(dk, "TipIKResult")
 
 
 def test_random_reachable_targets_cold_start_all_solved():
     rng = np.random.default_rng(11)
     _, targets = random_reachable(rng, 100)
     for target in targets:
-        res = dk.solve_tip_ik(ARM, target)
+        res = solve_tip_ik(ARM, target)
         assert_consistent(res, target)
         assert res.reachable and res.error <= TOL, (target, res.error)
 
@@ -72,7 +73,7 @@ def test_random_reachable_targets_from_retracted_start_all_solved():
     rng = np.random.default_rng(12)
     _, targets = random_reachable(rng, 40)
     for target in targets:
-        res = dk.solve_tip_ik(ARM, target, np.zeros((ARM.n_segments, 3)))
+        res = solve_tip_ik(ARM, target, np.zeros((ARM.n_segments, 3)))
         assert_consistent(res, target)
         assert res.error <= TOL, (target, res.error)
 
@@ -82,7 +83,7 @@ def test_warm_start_near_the_solution_converges_alone():
     lengths, targets = random_reachable(rng, 30)
     for L, target in zip(lengths, targets):
         near = np.clip(L + rng.uniform(-0.005, 0.005, L.shape), LO, HI)
-        res = dk.solve_tip_ik(ARM, target, dk.delta_from_actuators(near, ARM.phi, ARM.L0),
+        res = solve_tip_ik(ARM, target, dk.delta_from_actuators(near, ARM.phi, ARM.L0),
                               restarts=False)
         assert_consistent(res, target)
         assert res.error <= 1e-5 and res.starts == 1
@@ -92,7 +93,7 @@ def test_exact_target_returns_its_configuration_without_iterating():
     delta = dk.delta_from_actuators([[0.2, 0.25, 0.23], [0.2, 0.25, 0.22]], ARM.phi, ARM.L0)
     assert np.all(bends(delta) <= ARM.theta_max)
     target = dk.tip_position(ARM, delta)
-    res = dk.solve_tip_ik(ARM, target, delta)
+    res = solve_tip_ik(ARM, target, delta)
     assert res.iterations == 0 and res.error < 1e-12
     np.testing.assert_allclose(res.delta, delta, atol=1e-15)
 
@@ -106,7 +107,7 @@ warm_starts = st.none() | st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6)
 @given(st.tuples(finite, finite, finite), warm_starts)
 def test_limits_never_exceeded_and_error_is_true_distance(target, delta0):
     # Targets up to ~2.6 m away (mostly unreachable) and warm starts far outside the limits.
-    res = dk.solve_tip_ik(ARM, target, delta0)
+    res = solve_tip_ik(ARM, target, delta0)
     assert_consistent(res, target)
 
 
@@ -117,7 +118,7 @@ def test_target_above_the_fully_extended_arm(z, bent_start):
     # the backbone's arc length from the base, lies within n * rack_max of it; the straight,
     # fully extended arm attains it. Closest distance: z - n * rack_max.
     delta0 = [[0.05, -0.02, 0.1], [-0.03, 0.04, 0.2]] if bent_start else None
-    res = dk.solve_tip_ik(ARM, [0.0, 0.0, z], delta0)
+    res = solve_tip_ik(ARM, [0.0, 0.0, z], delta0)
     assert_consistent(res, [0.0, 0.0, z])
     assert not res.reachable
     assert res.error == pytest.approx(z - ARM.n_segments * HI, abs=TOL)
@@ -161,7 +162,7 @@ def bounded_best(target, starts=8, seed=0):
                                     (0.3, 0.2, -0.5), (0.0, 0.0, -0.15), (-0.069, 0.0, -0.108)])
 def test_unreachable_error_matches_independent_bounded_optimiser(target):
     target = np.array(target)
-    res = dk.solve_tip_ik(ARM, target)
+    res = solve_tip_ik(ARM, target)
     assert_consistent(res, target)
     assert not res.reachable
     assert res.error <= bounded_best(target) + TOL
@@ -174,7 +175,7 @@ def test_random_targets_never_bend_beyond_theta_max():
     targets = dk.tip_position(ARM, dk.delta_from_actuators(lengths, ARM.phi, ARM.L0))
     over = 0
     for target in targets:
-        res = dk.solve_tip_ik(ARM, target)
+        res = solve_tip_ik(ARM, target)
         assert_consistent(res, target)  # racks in the box, every bend <= theta_max
         over += not res.reachable
     assert over > 0  # the limit mattered for some of them
@@ -183,9 +184,9 @@ def test_random_targets_never_bend_beyond_theta_max():
 @pytest.mark.parametrize("target", [(0.0, 0.0, -0.15), (-0.069, 0.0, -0.108), (0.2, 0.0, -0.2)])
 def test_target_only_reachable_by_bending_beyond_the_limit(target):
     target = np.array(target)
-    free = dk.solve_tip_ik(FREE, target)  # the racks alone reach it ...
+    free = solve_tip_ik(FREE, target)  # the racks alone reach it ...
     assert free.reachable and bends(free.delta).max() > ARM.theta_max
-    res = dk.solve_tip_ik(ARM, target)  # ... but only by bending more than theta_max
+    res = solve_tip_ik(ARM, target)  # ... but only by bending more than theta_max
     assert_consistent(res, target)
     assert not res.reachable and res.error > 0.05
     # The closest feasible configuration: nothing feasible gets nearer (independent optimiser),
@@ -199,9 +200,9 @@ def test_restarts_escape_the_local_minimum_of_a_poor_warm_start():
     # target curled below the base: alone it stalls at a local minimum (still feasible); the
     # seeded restarts reach the target. (Within theta_max = pi/2 that target is out of reach.)
     target = np.array([-0.069, 0.0, -0.108])
-    alone = dk.solve_tip_ik(FREE, target, np.zeros((2, 3)), restarts=False)
+    alone = solve_tip_ik(FREE, target, np.zeros((2, 3)), restarts=False)
     assert alone.starts == 1 and not alone.reachable
-    seeded = dk.solve_tip_ik(FREE, target, np.zeros((2, 3)))
+    seeded = solve_tip_ik(FREE, target, np.zeros((2, 3)))
     assert seeded.reachable and seeded.starts > 1
 
 
@@ -209,23 +210,23 @@ def test_restarts_escape_the_local_minimum_of_a_poor_warm_start():
                                     [0.1, float("inf"), 0.3], "abc", None])
 def test_bad_target_raises_clear_error(target):
     with pytest.raises(ValueError, match="target_xyz"):
-        dk.solve_tip_ik(ARM, target)
+        solve_tip_ik(ARM, target)
 
 
 @pytest.mark.parametrize("delta0", [np.zeros((3, 3)), np.zeros(5), np.full((2, 3), np.nan), "x"])
 def test_bad_warm_start_raises_clear_error(delta0):
     with pytest.raises(ValueError, match="delta0"):
-        dk.solve_tip_ik(ARM, [0.1, 0.0, 0.4], delta0)
+        solve_tip_ik(ARM, [0.1, 0.0, 0.4], delta0)
 
 
 def test_flat_warm_start_accepted():
-    res = dk.solve_tip_ik(ARM, [0.1, 0.0, 0.4], np.zeros(6))
+    res = solve_tip_ik(ARM, [0.1, 0.0, 0.4], np.zeros(6))
     assert res.reachable
 
 
 def test_wrong_robot_raises():
     with pytest.raises(ValueError, match="extensible"):
-        dk.solve_tip_ik(robots.load("soft-arm"), [0.1, 0.0, 0.4])
+        solve_tip_ik(robots.load("soft-arm"), [0.1, 0.0, 0.4])
 
 
 def test_settings_read_from_robot_file():
@@ -244,4 +245,4 @@ def test_settings_read_from_robot_file():
 def test_bad_settings_in_robot_file_raise(ik, match):
     robot = dataclasses.replace(ARM, raw={**ARM.raw, "ik": ik})
     with pytest.raises(ValueError, match=match):
-        dk.solve_tip_ik(robot, [0.1, 0.0, 0.4])
+        solve_tip_ik(robot, [0.1, 0.0, 0.4])

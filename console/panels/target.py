@@ -1,7 +1,7 @@
 """Tip-target panel: drag a gizmo (or type x, y, z) and the extensible arm's tip follows by IK.
 
 A transform control in the 3D view holds the tip target. While the operator drags it, a worker
-thread has the tip IK (``core.kinematics.delta.solve_tip_ik``) solved, warm-started from the
+thread has the tip IK (``core.kinematics.delta_ik.solve_tip_ik``) solved, warm-started from the
 posture being moved to, without restarts, at most ``LIVE_HZ`` times a second on the newest
 target only; on release (and for typed targets) it solves once more with restarts. The solve
 itself runs in a ``spawn``-ed worker process (started on the first solve), never in the console's

@@ -293,6 +293,3 @@ def tip_position(robot: "ExtensibleArm", delta: npt.ArrayLike) -> Array:
     if delta.shape[-2:] != (robot.n_segments, 3):
         raise ValueError(f"delta must have shape (..., {robot.n_segments}, 3), got {delta.shape}")
     return forward_kinematics(delta, robot.L0, robot.d)[..., -1, :3, 3]
-
-
-from core.kinematics.delta_ik import solve_tip_ik, TipIKResult  # noqa: E402

@@ -66,6 +66,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import minimize as _minimize
 
+from core.kinematics import delta as _dk
+from core.kinematics.delta_ik_seeds import arc_seed as _arc_seed, seeds as _seeds
+
 if TYPE_CHECKING:
     from core.robots import ExtensibleArm
 
@@ -391,9 +394,3 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
     error = float(np.linalg.norm(target - tip))
     return TipIKResult(delta=delta, lengths=lengths, tip=tip, error=error, iterations=iters,
                        reachable=error <= s.tolerance, starts=starts)
-
-
-# Imported last: core.kinematics.delta re-exports solve_tip_ik from here at its end, so either
-# module may be imported first without a partially initialised import.
-from core.kinematics import delta as _dk  # noqa: E402
-from core.kinematics.delta_ik_seeds import arc_seed as _arc_seed, seeds as _seeds  # noqa: E402

@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from core.kinematics import delta as dk
+
 if TYPE_CHECKING:
     from core.kinematics.delta_ik import _Problem
 
@@ -58,7 +60,6 @@ def halton(count: int, dim: int) -> Array:
 
 def seeds(pb: "_Problem", restart_seeds: int) -> Array:
     """Restart seeds as rack lengths (K, 3n)."""
-    from core.kinematics import delta as dk  # here: delta imports delta_ik, which imports us
     n = pb.n
     deltas = [arc_seed(pb, pb.target, n)]
     straight = np.zeros((n, 3))
