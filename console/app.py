@@ -1,8 +1,9 @@
 """The operator console: one viser server, one arm, composable panels and a single render thread.
 
-``ConsoleApp(robot, server)`` sets up the theme (share button off), the table (z = 0 plane with a
-subtle grid), the arm view and the camera, then composes its panels. ``start()`` launches the
-render thread; ``stop()`` ends it (the app is also a context manager).
+``ConsoleApp(robot, server)`` sets up the theme (colours and label from ``static/theme.toml``;
+share button off), the table (z = 0 plane with a subtle grid), the arm view and the camera,
+then composes its panels. ``start()`` launches the render thread; ``stop()`` ends it (the app is
+also a context manager).
 
 Data flow (see ``console.state``)::
 
@@ -53,6 +54,7 @@ from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel
 from console.recording import Recorder
 from console.state import ArmState, StateStore
+from console.theme import load_theme
 from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
 
@@ -61,8 +63,6 @@ _install_viser_fixes()  # before any server exists: thread-safe message events (
 log = logging.getLogger(__name__)
 
 DEFAULT_PANELS: tuple[type[Panel], ...] = (JogPanel, ReadoutPanel)
-BRAND_COLOR = (38, 110, 150)
-TABLE_COLOR = (226, 222, 214)
 P = TypeVar("P", bound=Panel)
 
 
@@ -308,9 +308,10 @@ class ConsoleApp:
     def _setup_theme(self, status: str) -> None:
         gui = self.server.gui
         self._disable_share_tunnel()
-        gui.configure_theme(show_share_button=False, show_logo=False, brand_color=BRAND_COLOR,
-                            control_width="medium")
-        gui.set_panel_label(f"Arm console · {self.robot.name}")
+        self.theme = theme = load_theme()  # static/theme.toml: colours and the panel label
+        gui.configure_theme(show_share_button=False, show_logo=False,
+                            brand_color=theme.brand_color, control_width=theme.control_width)
+        gui.set_panel_label(theme.label_for(self.robot.name))
         self.status = gui.add_markdown(f"<small>{status}</small>", order=0.0)
 
     def _span(self) -> float:
@@ -332,13 +333,14 @@ class ConsoleApp:
         w, h = x1 - x0, y1 - y0
         centre = ((x0 + x1) / 2, (y0 + y1) / 2)
         thickness = 0.02
-        scene = self.server.scene
-        self.table = scene.add_box("/table/top", color=TABLE_COLOR, dimensions=(w, h, thickness),
+        scene, theme = self.server.scene, self.theme
+        self.table = scene.add_box("/table/top", color=theme.table_color,
+                                   dimensions=(w, h, thickness),
                                    position=(centre[0], centre[1], -thickness / 2),
                                    cast_shadow=False, receive_shadow=True)
         self.grid = scene.add_grid("/table/grid", width=w, height=h, plane="xy",
-                                   cell_size=0.05, cell_color=(200, 196, 188),
-                                   section_size=0.25, section_color=(165, 160, 150),
+                                   cell_size=0.05, cell_color=theme.grid_cell_color,
+                                   section_size=0.25, section_color=theme.grid_section_color,
                                    position=(centre[0], centre[1], 0.0005), shadow_opacity=0.15)
         scene.world_axes.visible = False
 
@@ -350,8 +352,8 @@ class ConsoleApp:
         scene = self.server.scene
         scene.configure_environment_map(None)
         scene.configure_default_lights(enabled=True, cast_shadow=False)
-        scene.add_light_hemisphere("/lights/hemisphere", sky_color=(255, 255, 255),
-                                   ground_color=(150, 140, 130), intensity=1.3)
+        scene.add_light_hemisphere("/lights/hemisphere", sky_color=self.theme.sky_color,
+                                   ground_color=self.theme.ground_color, intensity=1.3)
 
     def _setup_camera(self) -> None:
         # Framed so the table and every reachable arm shape are in view with the control panel
