@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
-import math
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING
+
+from core.robot_schema import Section
 
 if TYPE_CHECKING:
     from core.robots import ExtensibleArm
@@ -12,7 +13,7 @@ if TYPE_CHECKING:
 
 @dataclasses.dataclass(frozen=True)
 class IKSettings:
-    """Solver settings (robot file ``[ik]``; every key optional).
+    """Tip-IK solver settings (robot file ``[ik]``; every key optional).
 
     Attributes:
         tolerance: A target is reachable when the final error is <= this (m).
@@ -37,31 +38,31 @@ class IKSettings:
     polish_iterations: int = 50
 
     @classmethod
+    def read(cls, sec: Section) -> "IKSettings":
+        """Defaults overridden by the robot file's ``[ik]`` table (every key optional)."""
+        d = cls()
+        s = cls(
+            tolerance=sec.num("tolerance", lo=0, hi=1.0, strict_lo=True, default=d.tolerance),
+            goal_tolerance=sec.num("goal_tolerance", lo=0, hi=1.0, strict_lo=True,
+                                   default=d.goal_tolerance),
+            damping=sec.num("damping", lo=0, hi=1e6, strict_lo=True, default=d.damping),
+            max_iterations=sec.integer("max_iterations", lo=1, hi=10_000, default=d.max_iterations),
+            restart_seeds=sec.integer("restart_seeds", lo=0, hi=10_000, default=d.restart_seeds),
+            stall_step=sec.num("stall_step", lo=0, hi=1.0, strict_lo=True, default=d.stall_step),
+            stall_ratio=sec.num("stall_ratio", lo=0, hi=1.0, strict_lo=True, default=d.stall_ratio),
+            polish_iterations=sec.integer("polish_iterations", lo=0, hi=10_000,
+                                          default=d.polish_iterations),
+        )
+        if s.goal_tolerance > s.tolerance:
+            raise sec.error("goal_tolerance", f"must be <= ik.tolerance ({s.tolerance:g}), "
+                                              f"got {s.goal_tolerance:g}")
+        sec.finish()
+        return s
+
+    @classmethod
     def from_robot(cls, robot: "ExtensibleArm") -> "IKSettings":
-        """Defaults overridden by the robot file's ``[ik]`` table; bad values raise ValueError."""
-        table: Mapping[str, Any] = robot.raw.get("ik", {}) if robot.raw else {}
-        kwargs: dict[str, Any] = {}
-        for field in dataclasses.fields(cls):
-            if field.name not in table:
-                continue
-            value = table[field.name]
-            if field.type in ("int", int):
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise ValueError(f"ik.{field.name}: must be an integer >= 0, got {value!r}")
-            elif (isinstance(value, bool) or not isinstance(value, (int, float))
-                  or not math.isfinite(value) or value <= 0):
-                raise ValueError(f"ik.{field.name}: must be a finite number > 0, got {value!r}")
-            kwargs[field.name] = value
-        unknown = set(table) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f"ik: unknown keys {sorted(unknown)}")
-        settings = cls(**kwargs)
-        if settings.max_iterations < 1:
-            raise ValueError("ik.max_iterations: must be >= 1")
-        if settings.goal_tolerance > settings.tolerance:
-            raise ValueError(f"ik.goal_tolerance: must be <= ik.tolerance ({settings.tolerance:g}), "
-                             f"got {settings.goal_tolerance:g}")
-        return settings
+        """The robot file's ``[ik]`` settings (validated when the file was loaded)."""
+        return robot.ik
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,22 +87,90 @@ class PathSettings:
     retry_spacing: float = 0.01
 
     @classmethod
+    def read(cls, sec: Section) -> "PathSettings":
+        """Defaults overridden by the robot file's ``[paths]`` table (every key optional)."""
+        d = cls()
+        s = cls(
+            rate_hz=sec.num("rate_hz", lo=0, hi=10_000, strict_lo=True, default=d.rate_hz),
+            spacing=sec.num("spacing", lo=1e-5, hi=1.0, default=d.spacing),
+            limit_margin=sec.num("limit_margin", lo=0, hi=1, strict_lo=True,
+                                 default=d.limit_margin),
+            jump_ratio=sec.num("jump_ratio", lo=0, hi=1e6, strict_lo=True, default=d.jump_ratio),
+            max_bisections=sec.integer("max_bisections", lo=0, hi=20, default=d.max_bisections),
+            retry_spacing=sec.num("retry_spacing", lo=1e-5, hi=10.0, default=d.retry_spacing),
+        )
+        sec.finish()
+        return s
+
+    @classmethod
     def from_robot(cls, robot: "ExtensibleArm") -> "PathSettings":
-        """Defaults overridden by the robot file's ``[paths]`` table; bad values raise ValueError."""
-        table: Mapping[str, Any] = robot.raw.get("paths", {}) if robot.raw else {}
-        names = {f.name for f in dataclasses.fields(cls)}
-        if set(table) - names:
-            raise ValueError(f"paths: unknown keys {sorted(set(table) - names)}")
-        kwargs: dict[str, Any] = {}
-        for name, value in table.items():
-            if name == "max_bisections":
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise ValueError(f"paths.{name}: must be an integer >= 0, got {value!r}")
-            elif (isinstance(value, bool) or not isinstance(value, (int, float))
-                  or not math.isfinite(value) or value <= 0):
-                raise ValueError(f"paths.{name}: must be a finite number > 0, got {value!r}")
-            kwargs[name] = value
-        settings = cls(**kwargs)
-        if settings.limit_margin > 1:
-            raise ValueError(f"paths.limit_margin: must be <= 1, got {settings.limit_margin}")
-        return settings
+        """The robot file's ``[paths]`` settings (validated when the file was loaded)."""
+        return robot.paths
+
+
+@dataclasses.dataclass(frozen=True)
+class BridgeSection:
+    """``[bridge]``: the serial link to the device (docs/protocol.md); times in milliseconds.
+
+    ``hw_bridge.config.BridgeConfig`` turns this into the link's settings in seconds.
+    """
+
+    baud: int
+    rate_hz: float
+    watchdog_ms: float
+    link_timeout_ms: float
+    hello_timeout_ms: float
+    config_retries: int
+    config_retry_ms: float
+    velocities: bool
+
+    @classmethod
+    def read(cls, sec: Section) -> "BridgeSection":
+        """Read and check ``[bridge]``."""
+        b = cls(
+            baud=sec.integer("baud", lo=300, hi=100_000_000),
+            rate_hz=sec.num("rate_hz", lo=0, hi=10_000, strict_lo=True),
+            watchdog_ms=sec.num("watchdog_ms", lo=0, hi=60_000, strict_lo=True),
+            link_timeout_ms=sec.num("link_timeout_ms", lo=0, hi=60_000, strict_lo=True),
+            hello_timeout_ms=sec.num("hello_timeout_ms", lo=0, hi=60_000, strict_lo=True),
+            config_retries=sec.integer("config_retries", lo=0, hi=100),
+            config_retry_ms=sec.num("config_retry_ms", lo=0, hi=60_000, strict_lo=True),
+            velocities=sec.flag("velocities", default=False),
+        )
+        sec.finish()
+        return b
+
+
+@dataclasses.dataclass(frozen=True)
+class EmulatorSection:
+    """``[emulator]``: the device emulator's plant (hw_bridge/emulator.py).
+
+    Attributes:
+        motor_speed_counts: Speed limit of every emulated motor / drive cylinder (counts/s).
+        counts_per_kappa, tau, mocap_port, mocap_rate_hz: Soft arm only: curvature-plant gain
+            (differential counts per 1/m) and lag (s), and the emulated motion capture's UDP
+            port on 127.0.0.1 and frame rate (Hz); None for the extensible arm.
+    """
+
+    motor_speed_counts: float
+    counts_per_kappa: float | None = None
+    tau: float | None = None
+    mocap_port: int | None = None
+    mocap_rate_hz: float | None = None
+
+    @classmethod
+    def read(cls, sec: Section, *, planar: bool) -> "EmulatorSection":
+        """Read and check ``[emulator]``; the soft arm's plant and mocap keys only if ``planar``."""
+        speed = sec.num("motor_speed_counts", lo=0, hi=1e9, strict_lo=True)
+        if not planar:
+            sec.finish()
+            return cls(motor_speed_counts=speed)
+        e = cls(
+            motor_speed_counts=speed,
+            counts_per_kappa=sec.num("counts_per_kappa", lo=0, hi=1e9, strict_lo=True),
+            tau=sec.num("tau", lo=0, hi=100.0, strict_lo=True),
+            mocap_port=sec.integer("mocap_port", lo=1, hi=65535),
+            mocap_rate_hz=sec.num("mocap_rate_hz", lo=0, hi=10_000, strict_lo=True),
+        )
+        sec.finish()
+        return e

@@ -11,6 +11,7 @@ from hypothesis import given, settings, strategies as st
 from core import robots
 from core.kinematics import delta as dk
 from core.planning import paths
+from core.robot_schema import tomllib
 
 ARM = robots.load("extensible")
 COARSE = paths.PathSettings(rate_hz=20.0, spacing=0.005)  # fast variants for property tests
@@ -239,6 +240,7 @@ def test_bad_plan_input(kwargs, match):
 
 
 def test_bad_path_settings_in_robot_file():
-    robot = dataclasses.replace(ARM, raw={**ARM.raw, "paths": {"rate_hz": -5}})
-    with pytest.raises(ValueError, match="paths.rate_hz"):
-        paths.plan_path(robot, [[0, 0, 0.4], [0.05, 0, 0.4]])
+    table = tomllib.loads(ARM.source.read_text())
+    with pytest.raises(ValueError, match="paths.rate_hz"):  # refused when the file is read
+        paths.plan_path(robots.parse({**table, "paths": {"rate_hz": -5}}, ARM.source),
+                        [[0, 0, 0.4], [0.05, 0, 0.4]])

@@ -74,7 +74,7 @@ def test_extensible_bending_and_motor_limits():
     assert arm.motor_speed == pytest.approx(0.05)
     assert arm.motor_speed_counts == pytest.approx(0.05 * arm.counts_per_metre)
     # The emulated motors are a bit faster than the planner's motor limit.
-    emu = arm.raw["emulator"]["motor_speed_counts"]
+    emu = arm.emulator.motor_speed_counts
     assert arm.motor_speed_counts < emu <= 1.5 * arm.motor_speed_counts
 
 
