@@ -146,12 +146,12 @@ class Section:
                 raise RobotFileError(f"{self.file}: {exc}") from None
         return tuple(out)
 
-    def interval(self, key: str, *, lo: float = 0.0) -> tuple[float, float]:
-        """``[a, b]`` with ``lo <= a <= b``, both finite."""
+    def interval(self, key: str, *, lo: float = 0.0, hi: float = 3600.0) -> tuple[float, float]:
+        """``[a, b]`` with ``lo <= a <= b <= hi``, both finite."""
         value = self.value(key, _REQUIRED)
         if (not isinstance(value, list) or len(value) != 2 or not all(map(_is_number, value))
-                or not lo <= value[0] <= value[1]):
-            raise self.error(key, f"must be [lo, hi] with {lo:g} <= lo <= hi, got {value!r}")
+                or not lo <= value[0] <= value[1] <= hi):
+            raise self.error(key, f"must be [a, b] with {lo:g} <= a <= b <= {hi:g}, got {value!r}")
         return float(value[0]), float(value[1])
 
     def sub(self, key: str, *, required: bool = True) -> "Section":

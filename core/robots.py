@@ -30,9 +30,10 @@ __all__ = ["ROBOTS_DIR", "CaptureSpec", "ExtensibleArm", "GripperSpec", "MAX_SEG
 
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "data" / "robots"
 
-#: Largest ``segments.count`` per kind: far beyond any arm we know of, small enough that a typo
+#: Largest ``segments.count`` per kind: the serial protocol carries at most 32 channels (2N + 1
+#: drive cylinders, 3N motors), and a typo
 #: (``count = 100000``) is refused at load instead of hanging start-up.
-MAX_SEGMENTS = {"planar": 16, "delta": 4}
+MAX_SEGMENTS = {"planar": 15, "delta": 4}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,8 +169,10 @@ def _soft_arm(top: Section, source: Path) -> SoftArm:
     pose = base.value("pose")
     if (not isinstance(pose, list) or len(pose) != 3
             or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                       and math.isfinite(v) for v in pose)):
-        raise base.error("pose", f"must be [x, y, theta], got {pose!r}")
+                       and math.isfinite(v) for v in pose)
+            or max(abs(pose[0]), abs(pose[1])) > 100 or abs(pose[2]) > 2 * math.pi):
+        raise base.error("pose", f"must be [x, y, theta] with |x|, |y| <= 100 m and "
+                                 f"|theta| <= 2 pi, got {pose!r}")
     n = seg.integer("count", lo=1, hi=MAX_SEGMENTS["planar"])
     gripper = GripperSpec(
         length=grip.num("length", lo=0, hi=10.0, strict_lo=True),

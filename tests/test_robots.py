@@ -47,7 +47,7 @@ def test_bad_soft_arm_file_names_the_field(tmp_path, old, new, field):
 
 @pytest.mark.parametrize("old,new,field", [
     ("rack_max = 0.41", "rack_max = 0.01", "segments.rack_max"),
-    ("count = 6", "count = 5", "motors.count"),
+    ("counts_per_metre = 76000.0", "count = 5\ncounts_per_metre = 76000.0", "motors.count"),
     ("rack_radius = 0.03", "rack_radius = 0", "segments.rack_radius"),
 ])
 def test_bad_extensible_file_names_the_field(tmp_path, old, new, field):
