@@ -120,10 +120,10 @@ class Section:
             raise self.error(key, f"must be a non-empty string, got {value!r}")
         return value
 
-    def numbers(self, key: str, n: int, *, per: str = "segment", count_field: str = "segments.count",
-                lo: float | None = None, hi: float | None = None, strict_lo: bool = False,
+    def numbers(self, key: str, n: int, *, per: str = "segment",
+                count_field: str = "segments.count", lo: float | None = None, hi: float | None = None, strict_lo: bool = False,
                 broadcast: bool = True, default: Any = _REQUIRED) -> tuple[float, ...]:
-        """``n`` numbers within bounds: a list of exactly ``n``, or (``broadcast``) one number for all.
+        """``n`` numbers in bounds: a list of exactly ``n`` or (``broadcast``) one number for all.
 
         A list of the wrong length is refused naming ``count_field``, so a robot file whose
         segment count changed says which per-segment list still has the old length.

@@ -192,7 +192,7 @@ def test_emulator_process_answers_with_the_files_channel_count(name, shipped):
 # ---- extensible arms ---------------------------------------------------------------------------
 
 def delta_tip(arm: robots.ExtensibleArm, delta: np.ndarray) -> np.ndarray:
-    """Tip position: each segment an arc of length L0 + dL bent by |(dx, dy)| / d toward (dx, dy)."""
+    """Tip position: each segment an arc of length L0 + dL bent |(dx, dy)| / d toward (dx, dy)."""
     R, p = np.eye(3), np.zeros(3)
     for dx, dy, dl in np.asarray(delta).reshape(-1, 3):
         length, bend = arm.L0 + dl, math.hypot(dx, dy) / arm.d

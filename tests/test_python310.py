@@ -1,4 +1,4 @@
-"""The code base runs on Python 3.10: no 3.11+-only stdlib without a fallback, and it compiles there.
+"""The code runs on Python 3.10: no 3.11+-only stdlib without a fallback, and it compiles there.
 
 ``pyproject.toml`` declares ``requires-python = ">=3.10"`` (Ubuntu 22.04 ships 3.10), so every
 module of core/, console/, hw_bridge/ and serve.py is scanned with ``ast`` for stdlib modules and

@@ -91,7 +91,7 @@ class TrajectoryParams:
 
     @classmethod
     def read(cls, sec: Section, n: int) -> "TrajectoryParams":
-        """Read ``[trajectory]``: each limit is one number for all ``n`` segments or ``n`` numbers."""
+        """Read ``[trajectory]``: each limit is one number for all n segments or n numbers."""
         lim = {key: np.array(sec.numbers(key, n, lo=0, hi=1e9, strict_lo=True))
                for key in ("max_velocity", "max_acceleration", "max_jerk")}
         sync = sec.choice("synchronization", ("phase", "time"), default="phase")
@@ -228,7 +228,8 @@ class SimParams:
             capture_turn=g.num("capture_turn", lo=0, strict_lo=True, hi=2 * math.pi),
             sweep_steps=g.integer("sweep_steps", lo=2, hi=10_000))
         mocap = MocapSimParams(
-            noise_m=m.num("noise_m", lo=0, hi=1.0), object_noise_m=m.num("object_noise_m", lo=0, hi=1.0),
+            noise_m=m.num("noise_m", lo=0, hi=1.0),
+            object_noise_m=m.num("object_noise_m", lo=0, hi=1.0),
             occlusion_rate_hz=m.num("occlusion_rate_hz", lo=0, hi=1e4),
             occlusion_duration_s=m.interval("occlusion_duration_s"))
         p = cls(
