@@ -281,3 +281,40 @@ def test_extensible_path_executes_on_the_mock_device(name):
     finally:
         runner.close()
         hw.shutdown()
+
+
+# ---- console -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["soft-8x50mm", "extensible-3seg"])
+def test_console_jogs_every_segment_of_the_file(name):
+    """The console builds for the file's arm with one jog slider per coordinate; a request of the
+    file's shape is drawn and the sliders follow it; the paper arm's shape is refused."""
+    import viser
+
+    from console.app import ConsoleApp
+    from console.panels.jog import JogPanel
+    arm = load(name)
+    n = arm.n_segments
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        app = ConsoleApp(arm, server)
+        jog = app.panel(JogPanel)
+        if isinstance(arm, robots.SoftArm):
+            q = np.arange(n, dtype=float) - 3.0
+            assert sorted(jog.sliders) == sorted(f"kappa{i}" for i in range(1, n + 1))
+        else:
+            q = np.tile([0.005, -0.004, 0.05], (n, 1))
+            assert len(jog.sliders) == 3 * n
+        with pytest.raises(ValueError, match="shape"):
+            app.store.request(np.zeros(6 if n != 6 else 5), "jog")  # the paper arm's shape
+        with app:
+            state = app.store.request(q, "planner")
+            end = time.monotonic() + 3.0
+            while app.last_drawn_seq != state.seq and time.monotonic() < end:
+                time.sleep(0.01)
+            assert app.last_drawn_seq == state.seq
+        np.testing.assert_allclose(np.asarray(app.store.command.q), q)
+        if isinstance(arm, robots.SoftArm):
+            assert [jog.sliders[f"kappa{i}"].value for i in range(1, n + 1)] == pytest.approx(q)
+    finally:
+        server.stop()
