@@ -13,6 +13,7 @@ Also home of the ``tomllib`` import with its Python 3.10 fallback (``tomli``).
 
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Any, Mapping, Sequence
 
@@ -78,7 +79,10 @@ class Section:
             return self.table[key]
         if default is _REQUIRED:
             where = f"[{self.name}]" if self.name else "the top level"
-            raise self.error(key, f"missing (a required key of {where})")
+            others = {str(k).lower(): k for k in self.table if k not in self.known}
+            near = difflib.get_close_matches(key.lower(), list(others), n=1, cutoff=0.6)
+            hint = f"; the table has {others[near[0]]!r}: a misspelling?" if near else ""
+            raise self.error(key, f"missing (a required key of {where}){hint}")
         return default
 
     # ---- typed reads -------------------------------------------------------------------------

@@ -248,3 +248,12 @@ def test_a_file_given_by_path_is_named_by_its_path(tmp_path):
         robots.load(path)
     with pytest.raises(RobotFileError, match="no such file"):
         robots.load(tmp_path / "none.toml")
+
+
+def test_a_misspelt_required_key_is_reported_with_the_spelling_found():
+    table = edited("soft-arm", "controller", "kp", delete=True)
+    table["controller"]["kP"] = 90.0
+    with pytest.raises(RobotFileError, match=r"^soft-arm\.toml: controller\.kp: missing \(a "
+                                             r"required key of \[controller\]\); the table has "
+                                             r"'kP': a misspelling\?$"):
+        parse(table, "soft-arm")
