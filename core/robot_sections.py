@@ -46,11 +46,11 @@ class IKSettings:
             goal_tolerance=sec.num("goal_tolerance", lo=0, hi=1.0, strict_lo=True,
                                    default=d.goal_tolerance),
             damping=sec.num("damping", lo=0, hi=1e6, strict_lo=True, default=d.damping),
-            max_iterations=sec.integer("max_iterations", lo=1, hi=10_000, default=d.max_iterations),
-            restart_seeds=sec.integer("restart_seeds", lo=0, hi=10_000, default=d.restart_seeds),
+            max_iterations=sec.integer("max_iterations", lo=1, hi=1000, default=d.max_iterations),
+            restart_seeds=sec.integer("restart_seeds", lo=0, hi=1000, default=d.restart_seeds),
             stall_step=sec.num("stall_step", lo=0, hi=1.0, strict_lo=True, default=d.stall_step),
             stall_ratio=sec.num("stall_ratio", lo=0, hi=1.0, strict_lo=True, default=d.stall_ratio),
-            polish_iterations=sec.integer("polish_iterations", lo=0, hi=10_000,
+            polish_iterations=sec.integer("polish_iterations", lo=0, hi=1000,
                                           default=d.polish_iterations),
         )
         if s.goal_tolerance > s.tolerance:
@@ -96,7 +96,7 @@ class PathSettings:
             limit_margin=sec.num("limit_margin", lo=0, hi=1, strict_lo=True,
                                  default=d.limit_margin),
             jump_ratio=sec.num("jump_ratio", lo=0, hi=1e6, strict_lo=True, default=d.jump_ratio),
-            max_bisections=sec.integer("max_bisections", lo=0, hi=20, default=d.max_bisections),
+            max_bisections=sec.integer("max_bisections", lo=0, hi=12, default=d.max_bisections),
             retry_spacing=sec.num("retry_spacing", lo=1e-5, hi=10.0, default=d.retry_spacing),
         )
         sec.finish()

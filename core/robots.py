@@ -66,6 +66,11 @@ class SoftArm:
 
     The serial link carries ``drive_cylinders`` = 2N + 1 channels: channels 2i and 2i + 1 are the
     two lateral drive cylinders of segment i, channel 2N is the gripper.
+
+    The file's other sections, read and checked by :func:`load`: ``planner``
+    (:class:`~core.planning.plan_types.PlannerConfig`), ``bridge`` / ``emulator``
+    (:mod:`core.robot_sections`), ``controller``, ``trajectory``, ``state_machine``, ``bin`` and
+    ``sim`` (:mod:`core.control.params`).
     """
 
     name: str
@@ -119,6 +124,8 @@ class ExtensibleArm:
     theta = |(dx, dy)| / d <= theta_max (rad); rack speeds <= rack_speed and motor speeds (the
     motor travels m = U^-1 L, in metres of rack travel driven by the motor's pinion, so one
     count is 1 / counts_per_metre m) <= motor_speed (m/s); tip speed <= tip_speed (m/s).
+    ``n_motors`` = 3N (one per rack). The file's other sections: ``bridge`` / ``emulator`` and
+    the optional ``ik`` / ``paths`` (:mod:`core.robot_sections`).
     """
 
     name: str

@@ -8,6 +8,7 @@ to a file without a reader, or a reader that skips a check, fails here.
 from __future__ import annotations
 
 import math
+import re
 import time
 from typing import Any, Iterator
 
@@ -257,3 +258,24 @@ def test_a_misspelt_required_key_is_reported_with_the_spelling_found():
                                              r"required key of \[controller\]\); the table has "
                                              r"'kP': a misspelling\?$"):
         parse(table, "soft-arm")
+
+
+@pytest.mark.parametrize("old,new,message", [
+    ("kp = 90.0", "kp = \"fast\"", r"controller\.kp: must be a finite number, got 'fast'"),
+    ("weights = 1.0 ", "weights = [1.0, 1.0] ",
+     r"planner\.weights: must have 6 entries, one per segment \(segments\.count = 6\), got 2"),
+    ("baud = 1000000", "baud = -5", r"bridge\.baud: must be an integer in \[300, 100000000\]"),
+    ("count = 6 ", "count = 100000 ", r"segments\.count: must be an integer in \[1, 15\]"),
+])
+def test_serve_refuses_a_bad_robot_file_before_starting_anything(serve_module, tmp_path, capsys,
+                                                                  old, new, message):
+    """Issue 20: these used to give a traceback or a GUI stuck on 'starting the control process'."""
+    text = (robots.ROBOTS_DIR / "soft-arm.toml").read_text()
+    assert old in text
+    path = tmp_path / "lab-arm.toml"
+    path.write_text(text.replace(old, new))
+    t0 = time.perf_counter()
+    assert serve_module.main(["--robot", str(path), "--port", "1"]) == 2
+    assert time.perf_counter() - t0 < 2.0
+    err = capsys.readouterr().err
+    assert re.fullmatch(rf"serve\.py: {re.escape(str(path))}: {message}.*\n", err), err

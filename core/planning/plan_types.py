@@ -56,7 +56,7 @@ class PlannerConfig:
             clearance_margin=sec.num("clearance_margin", lo=0, hi=1.0, default=d.clearance_margin),
             base_keepout=sec.num("base_keepout", lo=0, hi=10.0, default=d.base_keepout),
             max_restarts=sec.integer("max_restarts", lo=0, hi=100, default=d.max_restarts),
-            max_insertions=sec.integer("max_insertions", lo=0, hi=10, default=d.max_insertions),
+            max_insertions=sec.integer("max_insertions", lo=0, hi=8, default=d.max_insertions),
             line_samples=sec.integer("line_samples", lo=1, hi=1000, default=d.line_samples),
             seed_table=sec.integer("seed_table", lo=1, hi=65_536, default=d.seed_table),
         )
