@@ -1,26 +1,39 @@
 """Robot descriptions loaded from data files, so parameters never live in code.
 
 ``load("soft-arm")`` / ``load("extensible")`` read ``data/robots/<name>.toml``; ``load(path)``
-reads any TOML file of the same shape. A missing or wrong field raises
-:class:`RobotFileError` naming the field (``segments.length: must be > 0, got -1``).
+reads any TOML file of the same shape. Every section is read and checked once, here, into typed
+frozen dataclasses (``robot.planner``, ``robot.controller``, ``robot.bridge``, ``robot.ik``, ...);
+nothing else parses the file. Counts come from the file: ``segments.count`` sizes every
+per-segment list, and a list that is given must match it. A missing, unknown or bad field raises
+:class:`RobotFileError` naming file, section and key
+(``soft-arm.toml: segments.length: must be > 0, got -1``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from pathlib import Path
 from typing import Any, Mapping, Union
 
 import numpy as np
 import numpy.typing as npt
 
+from core.control.params import (BinParams, ControllerParams, SimParams, StateMachineParams,
+                                  TrajectoryParams)
+from core.planning.plan_types import PlannerConfig
+from core.robot_schema import RobotFileError, Section, check_number, tomllib
+from core.robot_sections import BridgeSection, EmulatorSection, IKSettings, PathSettings
+
+__all__ = ["ROBOTS_DIR", "CaptureSpec", "ExtensibleArm", "GripperSpec", "MAX_SEGMENTS", "Robot",
+           "RobotFileError", "SoftArm", "available", "check_number", "load", "parse"]
+
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "data" / "robots"
 
-
-class RobotFileError(ValueError):
-    """A robot description file is missing a field or has a bad value."""
+#: Largest ``segments.count`` per kind: the serial protocol carries at most 32 channels (2N + 1
+#: drive cylinders, 3N motors), and a typo
+#: (``count = 100000``) is refused at load instead of hanging start-up.
+MAX_SEGMENTS = {"planar": 15, "delta": 4}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -49,7 +62,16 @@ class CaptureSpec:
 
 @dataclasses.dataclass(frozen=True)
 class SoftArm:
-    """Soft planar grasping arm: N constant-curvature segments and a gripper."""
+    """Soft planar grasping arm: N constant-curvature segments and a gripper.
+
+    The serial link carries ``drive_cylinders`` = 2N + 1 channels: channels 2i and 2i + 1 are the
+    two lateral drive cylinders of segment i, channel 2N is the gripper.
+
+    The file's other sections, read and checked by :func:`load`: ``planner``
+    (:class:`~core.planning.plan_types.PlannerConfig`), ``bridge`` / ``emulator``
+    (:mod:`core.robot_sections`), ``controller``, ``trajectory``, ``state_machine``, ``bin`` and
+    ``sim`` (:mod:`core.control.params`).
+    """
 
     name: str
     base_pose: npt.NDArray[np.float64]
@@ -64,7 +86,14 @@ class SoftArm:
     delta_d: float
     constraint_tolerance: float
     source: Path
-    raw: Mapping[str, Any] = dataclasses.field(repr=False, compare=False)
+    planner: PlannerConfig = dataclasses.field(repr=False)
+    bridge: BridgeSection = dataclasses.field(repr=False)
+    emulator: EmulatorSection = dataclasses.field(repr=False)
+    controller: ControllerParams = dataclasses.field(repr=False)
+    trajectory: TrajectoryParams = dataclasses.field(repr=False, compare=False)
+    state_machine: StateMachineParams = dataclasses.field(repr=False)
+    bin: BinParams = dataclasses.field(repr=False, compare=False)
+    sim: SimParams = dataclasses.field(repr=False)
 
     kind = "planar"
 
@@ -95,6 +124,8 @@ class ExtensibleArm:
     theta = |(dx, dy)| / d <= theta_max (rad); rack speeds <= rack_speed and motor speeds (the
     motor travels m = U^-1 L, in metres of rack travel driven by the motor's pinion, so one
     count is 1 / counts_per_metre m) <= motor_speed (m/s); tip speed <= tip_speed (m/s).
+    ``n_motors`` = 3N (one per rack). The file's other sections: ``bridge`` / ``emulator`` and
+    the optional ``ik`` / ``paths`` (:mod:`core.robot_sections`).
     """
 
     name: str
@@ -113,7 +144,10 @@ class ExtensibleArm:
     counts_per_metre: float
     motor_mapping: str
     source: Path
-    raw: Mapping[str, Any] = dataclasses.field(repr=False, compare=False)
+    bridge: BridgeSection = dataclasses.field(repr=False)
+    emulator: EmulatorSection = dataclasses.field(repr=False)
+    ik: IKSettings = dataclasses.field(default_factory=IKSettings, repr=False)
+    paths: PathSettings = dataclasses.field(default_factory=PathSettings, repr=False)
 
     kind = "delta"
 
@@ -136,123 +170,111 @@ class ExtensibleArm:
 Robot = Union[SoftArm, ExtensibleArm]
 
 
-def _get(table: Mapping[str, Any], dotted: str) -> Any:
-    node: Any = table
-    for part in dotted.split("."):
-        if not isinstance(node, Mapping) or part not in node:
-            raise RobotFileError(f"{dotted}: missing")
-        node = node[part]
-    return node
-
-
-def check_number(value: Any, field: str, *, lo: float | None = None, hi: float | None = None,
-                 strict_lo: bool = False) -> float:
-    """``value`` as a finite float within bounds, or :class:`RobotFileError` naming ``field``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise RobotFileError(f"{field}: must be a finite number, got {value!r}")
-    value = float(value)
-    if lo is not None and (value <= lo if strict_lo else value < lo):
-        raise RobotFileError(f"{field}: must be {'>' if strict_lo else '>='} {lo:g}, got {value:g}")
-    if hi is not None and value > hi:
-        raise RobotFileError(f"{field}: must be <= {hi:g}, got {value:g}")
-    return value
-
-
-def _num(table: Mapping[str, Any], dotted: str, *, lo: float | None = None,
-         hi: float | None = None, strict_lo: bool = False) -> float:
-    return check_number(_get(table, dotted), dotted, lo=lo, hi=hi, strict_lo=strict_lo)
-
-
-def _int(table: Mapping[str, Any], dotted: str, *, lo: int = 1) -> int:
-    value = _get(table, dotted)
-    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
-        raise RobotFileError(f"{dotted}: must be an integer >= {lo}, got {value!r}")
-    return value
-
-
-def _soft_arm(t: Mapping[str, Any], source: Path) -> SoftArm:
-    pose = _get(t, "base.pose")
+def _soft_arm(top: Section, source: Path) -> SoftArm:
+    base, seg, grip = top.sub("base"), top.sub("segments"), top.sub("gripper")
+    cap, act = top.sub("capture"), top.sub("actuation")
+    pose = base.value("pose")
     if (not isinstance(pose, list) or len(pose) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pose)):
-        raise RobotFileError(f"base.pose: must be [x, y, theta], got {pose!r}")
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       and math.isfinite(v) for v in pose)
+            or max(abs(pose[0]), abs(pose[1])) > 100 or abs(pose[2]) > 2 * math.pi):
+        raise base.error("pose", f"must be [x, y, theta] with |x|, |y| <= 100 m and "
+                                 f"|theta| <= 2 pi, got {pose!r}")
+    n = seg.integer("count", lo=1, hi=MAX_SEGMENTS["planar"])
     gripper = GripperSpec(
-        length=_num(t, "gripper.length", lo=0, strict_lo=True),
-        w_off_along=_num(t, "gripper.w_off_along", lo=0),
-        g_off=_num(t, "gripper.g_off", lo=0),
-        max_object_radius=_num(t, "gripper.max_object_radius", lo=0, strict_lo=True),
-        half_width=_num(t, "gripper.half_width", lo=0, strict_lo=True),
+        length=grip.num("length", lo=0, hi=10.0, strict_lo=True),
+        w_off_along=grip.num("w_off_along", lo=0, hi=10.0),
+        g_off=grip.num("g_off", lo=0, hi=10.0),
+        max_object_radius=grip.num("max_object_radius", lo=0, hi=10.0, strict_lo=True),
+        half_width=grip.num("half_width", lo=0, hi=10.0, strict_lo=True),
     )
     if gripper.w_off_along > gripper.length:
-        raise RobotFileError(
-            f"gripper.w_off_along: must be <= gripper.length ({gripper.length:g}), "
-            f"got {gripper.w_off_along:g}")
-    return SoftArm(
-        name=str(_get(t, "name")),
+        raise grip.error("w_off_along", f"must be <= gripper.length ({gripper.length:g}), "
+                                        f"got {gripper.w_off_along:g}")
+    kappa_max = seg.num("kappa_max", lo=0, hi=1e4, strict_lo=True)
+    channels = 2 * n + 1
+    cylinders = act.value("drive_cylinders", channels)
+    if isinstance(cylinders, bool) or cylinders != channels:
+        raise act.error("drive_cylinders", f"must be 2 per segment + gripper = {channels} "
+                                           f"(segments.count = {n}), got {cylinders!r}")
+    planner = PlannerConfig.read(top.sub("planner"), n)
+    arm = SoftArm(
+        name=top.text("name"),
         base_pose=np.array(pose, dtype=float),
-        n_segments=_int(t, "segments.count"),
-        segment_length=_num(t, "segments.length", lo=0, strict_lo=True),
-        kappa_max=_num(t, "segments.kappa_max", lo=0, strict_lo=True),
-        half_width=_num(t, "segments.half_width", lo=0),
+        n_segments=n,
+        segment_length=seg.num("length", lo=0, hi=10.0, strict_lo=True),
+        kappa_max=kappa_max,
+        half_width=seg.num("half_width", lo=0, hi=10.0),
         gripper=gripper,
         capture=CaptureSpec(
-            diameter=_num(t, "capture.diameter", lo=0, strict_lo=True),
-            nominal_object_radius=_num(t, "capture.nominal_object_radius", lo=0, strict_lo=True),
+            diameter=cap.num("diameter", lo=0, hi=10.0, strict_lo=True),
+            nominal_object_radius=cap.num("nominal_object_radius", lo=0, hi=10.0, strict_lo=True),
         ),
-        drive_cylinders=_int(t, "actuation.drive_cylinders"),
-        prepressurised_segments=_int(t, "actuation.prepressurised_segments", lo=0),
-        delta_d=_num(t, "planner.delta_d", lo=0, strict_lo=True),
-        constraint_tolerance=_num(t, "planner.constraint_tolerance", lo=0, strict_lo=True),
+        drive_cylinders=channels,
+        prepressurised_segments=act.integer("prepressurised_segments", lo=0, hi=n),
+        delta_d=planner.delta_d,
+        constraint_tolerance=planner.constraint_tolerance,
         source=source,
-        raw=t,
+        planner=planner,
+        bridge=BridgeSection.read(top.sub("bridge")),
+        emulator=EmulatorSection.read(top.sub("emulator"), planar=True),
+        controller=ControllerParams.read(top.sub("controller")),
+        trajectory=TrajectoryParams.read(top.sub("trajectory"), n),
+        state_machine=StateMachineParams.read(top.sub("state_machine")),
+        bin=BinParams.read(top.sub("bin"), n, kappa_max),
+        sim=SimParams.read(top.sub("sim"), gripper.length),
     )
+    for s in (base, seg, grip, cap, act):
+        s.finish()
+    return arm
 
 
-def _extensible(t: Mapping[str, Any], source: Path) -> ExtensibleArm:
-    rack_min = _num(t, "segments.rack_min", lo=0)
-    rack_max = _num(t, "segments.rack_max", lo=0, strict_lo=True)
+def _extensible(top: Section, source: Path) -> ExtensibleArm:
+    seg, lim, mot = top.sub("segments"), top.sub("limits"), top.sub("motors")
+    n = seg.integer("count", lo=1, hi=MAX_SEGMENTS["delta"])
+    rack_min = seg.num("rack_min", lo=0, hi=10.0)
+    rack_max = seg.num("rack_max", lo=0, hi=10.0, strict_lo=True)
     if rack_max <= rack_min:
+        raise seg.error("rack_max", f"must be > segments.rack_min ({rack_min:g}), got {rack_max:g}")
+    n_motors = mot.value("count", 3 * n)
+    if isinstance(n_motors, bool) or n_motors != 3 * n:
+        raise mot.error("count", f"must be 3 per segment ({3 * n}, segments.count = {n}), "
+                                 f"got {n_motors!r}")
+    mapping = mot.choice("mapping", ("block_upper_triangular",), default="block_upper_triangular")
+    counts_per_metre = mot.num("counts_per_metre", lo=0, hi=1e12, strict_lo=True)
+    motor_speed = lim.num("motor_speed", lo=0, hi=100.0, strict_lo=True)
+    emulator = EmulatorSection.read(top.sub("emulator"), planar=False)
+    need = motor_speed * counts_per_metre
+    if emulator.motor_speed_counts < need:  # the emulated motors must keep up with the planner
         raise RobotFileError(
-            f"segments.rack_max: must be > segments.rack_min ({rack_min:g}), got {rack_max:g}")
-    n_segments = _int(t, "segments.count")
-    n_motors = _int(t, "motors.count")
-    if n_motors != 3 * n_segments:
-        raise RobotFileError(
-            f"motors.count: must be 3 per segment ({3 * n_segments}), got {n_motors}")
-    mapping = _get(t, "motors.mapping")
-    if mapping != "block_upper_triangular":
-        raise RobotFileError(f"motors.mapping: must be 'block_upper_triangular', got {mapping!r}")
-    counts_per_metre = _num(t, "motors.counts_per_metre", lo=0, strict_lo=True)
-    motor_speed = _num(t, "limits.motor_speed", lo=0, strict_lo=True)
-    emulator = t.get("emulator")
-    if isinstance(emulator, Mapping) and "motor_speed_counts" in emulator:
-        # The emulated motors must keep up with what the planner asks of the real ones.
-        emu = check_number(emulator["motor_speed_counts"], "emulator.motor_speed_counts",
-                           lo=0, strict_lo=True)
-        need = motor_speed * counts_per_metre
-        if emu < need:
-            raise RobotFileError(
-                f"emulator.motor_speed_counts: must be >= limits.motor_speed * "
-                f"motors.counts_per_metre ({need:g} counts/s) or the emulated motors lag every "
-                f"planned path, got {emu:g}")
-    return ExtensibleArm(
-        name=str(_get(t, "name")),
-        n_segments=n_segments,
-        rack_radius=_num(t, "segments.rack_radius", lo=0, strict_lo=True),
-        phi=_num(t, "segments.phi"),
-        L0=_num(t, "segments.L0", lo=0),
+            f"{top.file}: emulator.motor_speed_counts: must be >= limits.motor_speed * "
+            f"motors.counts_per_metre ({need:g} counts/s) or the emulated motors lag every "
+            f"planned path, got {emulator.motor_speed_counts:g}")
+    arm = ExtensibleArm(
+        name=top.text("name"),
+        n_segments=n,
+        rack_radius=seg.num("rack_radius", lo=0, hi=10.0, strict_lo=True),
+        phi=seg.num("phi", lo=-2 * math.pi, hi=2 * math.pi),
+        L0=seg.num("L0", lo=0, hi=10.0),
         rack_min=rack_min,
         rack_max=rack_max,
-        theta_max=_num(t, "segments.theta_max", lo=0, hi=2 * math.pi, strict_lo=True),
-        half_width=_num(t, "segments.half_width", lo=0, strict_lo=True),
-        tip_speed=_num(t, "limits.tip_speed", lo=0, strict_lo=True),
-        rack_speed=_num(t, "limits.rack_speed", lo=0, strict_lo=True),
+        theta_max=seg.num("theta_max", lo=0, hi=2 * math.pi, strict_lo=True),
+        half_width=seg.num("half_width", lo=0, hi=10.0, strict_lo=True),
+        tip_speed=lim.num("tip_speed", lo=0, hi=100.0, strict_lo=True),
+        rack_speed=lim.num("rack_speed", lo=0, hi=100.0, strict_lo=True),
         motor_speed=motor_speed,
-        n_motors=n_motors,
+        n_motors=3 * n,
         counts_per_metre=counts_per_metre,
         motor_mapping=mapping,
         source=source,
-        raw=t,
+        bridge=BridgeSection.read(top.sub("bridge")),
+        emulator=emulator,
+        ik=IKSettings.read(top.sub("ik", required=False)),
+        paths=PathSettings.read(top.sub("paths", required=False)),
     )
+    for s in (seg, lim, mot):
+        s.finish()
+    return arm
 
 
 def available() -> list[str]:
@@ -260,12 +282,31 @@ def available() -> list[str]:
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.toml"))
 
 
+def parse(table: Mapping[str, Any], source: Path | str, *, label: str | None = None) -> Robot:
+    """Build a robot from an already-parsed TOML table (as :func:`load` does after reading).
+
+    Args:
+        table: The whole file as a table.
+        source: Where it came from (kept as ``robot.source``).
+        label: File name used in messages (default: ``source``'s name).
+
+    Raises:
+        RobotFileError: a field is missing, unknown or bad; the message names file and field.
+    """
+    source = Path(source)
+    top = Section(table, label or source.name)
+    kind = top.choice("kind", ("planar", "delta"))
+    robot: Robot = _soft_arm(top, source) if kind == "planar" else _extensible(top, source)
+    top.finish()
+    return robot
+
+
 def load(name_or_path: str | Path) -> Robot:
     """Load a robot description by shipped name (``"soft-arm"``) or by TOML path.
 
     Raises:
-        RobotFileError: the file is missing, is not TOML, or a field is missing or bad;
-            the message names the field.
+        RobotFileError: the file is missing, is not TOML, or a field is missing, unknown or bad;
+            the message names the file and the field (``section.key``).
     """
     path = Path(name_or_path)
     if path.suffix != ".toml":
@@ -277,14 +318,9 @@ def load(name_or_path: str | Path) -> Robot:
         table = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise RobotFileError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RobotFileError(f"{path}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise RobotFileError(f"{path}: not valid TOML: {exc}") from None
-    kind = table.get("kind")
-    try:
-        if kind == "planar":
-            return _soft_arm(table, path)
-        if kind == "delta":
-            return _extensible(table, path)
-    except RobotFileError as exc:
-        raise RobotFileError(f"{path.name}: {exc}") from None
-    raise RobotFileError(f"{path.name}: kind: must be 'planar' or 'delta', got {kind!r}")
+    shipped = path.resolve().parent == ROBOTS_DIR
+    return parse(table, path, label=path.name if shipped else str(path))

@@ -1,35 +1,14 @@
-"""Bridge and emulator settings read from the robot TOML (``[bridge]``, ``[emulator]``), not code."""
+"""Bridge and emulator settings from the robot TOML (``[bridge]``, ``[emulator]``), not code.
+
+:func:`core.robots.load` reads and checks both sections (``robot.bridge``, ``robot.emulator``);
+this module only turns them into the link's units (seconds) and channel count.
+"""
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from typing import Any, Mapping
 
-from core.robots import ExtensibleArm, Robot, RobotFileError, SoftArm
-
-
-def _section(robot: Robot, name: str) -> Mapping[str, Any]:
-    table = robot.raw.get(name)
-    if not isinstance(table, Mapping):
-        raise RobotFileError(f"{robot.source.name}: [{name}]: missing")
-    return table
-
-
-def _num(table: Mapping[str, Any], section: str, key: str, *, positive: bool = True) -> float:
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise RobotFileError(f"{section}.{key}: must be a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise RobotFileError(f"{section}.{key}: must be > 0, got {value!r}")
-    return float(value)
-
-
-def _int(table: Mapping[str, Any], section: str, key: str) -> int:
-    value = table.get(key)
-    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-        raise RobotFileError(f"{section}.{key}: must be an integer >= 0, got {value!r}")
-    return value
+from core.robots import ExtensibleArm, Robot, SoftArm
 
 
 def n_channels(robot: Robot) -> int:
@@ -62,21 +41,18 @@ class BridgeConfig:
 
     @classmethod
     def from_robot(cls, robot: Robot, *, n_motors: int | None = None) -> "BridgeConfig":
-        """Read ``[bridge]``; ``n_motors`` overrides the robot's channel count (benchmarks)."""
-        t = _section(robot, "bridge")
-        velocities = t.get("velocities", False)
-        if not isinstance(velocities, bool):
-            raise RobotFileError(f"bridge.velocities: must be true or false, got {velocities!r}")
+        """From ``robot.bridge``; ``n_motors`` overrides the robot's channel count (benchmarks)."""
+        b = robot.bridge
         return cls(
             n_motors=n_channels(robot) if n_motors is None else n_motors,
-            baud=_int(t, "bridge", "baud"),
-            rate_hz=_num(t, "bridge", "rate_hz"),
-            watchdog_s=_num(t, "bridge", "watchdog_ms") / 1000.0,
-            link_timeout_s=_num(t, "bridge", "link_timeout_ms") / 1000.0,
-            hello_timeout_s=_num(t, "bridge", "hello_timeout_ms") / 1000.0,
-            config_retries=_int(t, "bridge", "config_retries"),
-            config_retry_s=_num(t, "bridge", "config_retry_ms") / 1000.0,
-            velocities=velocities,
+            baud=b.baud,
+            rate_hz=b.rate_hz,
+            watchdog_s=b.watchdog_ms / 1000.0,
+            link_timeout_s=b.link_timeout_ms / 1000.0,
+            hello_timeout_s=b.hello_timeout_ms / 1000.0,
+            config_retries=b.config_retries,
+            config_retry_s=b.config_retry_ms / 1000.0,
+            velocities=b.velocities,
         )
 
 
@@ -92,15 +68,7 @@ class EmulatorConfig:
 
     @classmethod
     def from_robot(cls, robot: Robot) -> "EmulatorConfig":
-        """Read ``[emulator]``; the soft arm also needs its curvature-plant and mocap fields."""
-        t = _section(robot, "emulator")
-        speed = _num(t, "emulator", "motor_speed_counts")
-        if isinstance(robot, SoftArm):
-            return cls(
-                motor_speed_counts=speed,
-                counts_per_kappa=_num(t, "emulator", "counts_per_kappa"),
-                tau=_num(t, "emulator", "tau"),
-                mocap_port=_int(t, "emulator", "mocap_port"),
-                mocap_rate_hz=_num(t, "emulator", "mocap_rate_hz"),
-            )
-        return cls(motor_speed_counts=speed)
+        """From ``robot.emulator``; the soft arm also has its curvature-plant and mocap fields."""
+        e = robot.emulator
+        return cls(motor_speed_counts=e.motor_speed_counts, counts_per_kappa=e.counts_per_kappa,
+                   tau=e.tau, mocap_port=e.mocap_port, mocap_rate_hz=e.mocap_rate_hz)

@@ -236,7 +236,7 @@ def open_link(robot: Any, kind: DeviceKind, *, port_path: str | None = None, see
     from hw_bridge.loop import HardwareDevice
 
     n = robot.n_segments
-    radius = float(robot.raw["capture"]["nominal_object_radius"])
+    radius = robot.capture.nominal_object_radius
     if kind == "mock":
         from core.control.sim import EmulatorPlant
         from hw_bridge.mock import MockHardware

@@ -3,7 +3,6 @@ closed-form distances to unreachable targets and an independent constrained opti
 
 import dataclasses
 import math
-import tomllib
 
 import numpy as np
 import pytest
@@ -12,7 +11,9 @@ from scipy.optimize import minimize
 
 from core import robots
 from core.kinematics import delta as dk
-from core.kinematics.delta_ik import IKSettings, TipIKResult, solve_tip_ik
+from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
+from core.robot_schema import tomllib
+from core.robot_sections import IKSettings
 
 ARM = robots.load("extensible")
 LO, HI = ARM.rack_min, ARM.rack_max
@@ -243,6 +244,6 @@ def test_settings_read_from_robot_file():
                                        ({"polish_iterations": -1}, "ik.polish_iterations"),
                                        ({"bogus": 1}, "unknown")])
 def test_bad_settings_in_robot_file_raise(ik, match):
-    robot = dataclasses.replace(ARM, raw={**ARM.raw, "ik": ik})
-    with pytest.raises(ValueError, match=match):
-        solve_tip_ik(robot, [0.1, 0.0, 0.4])
+    table = tomllib.loads(ARM.source.read_text())
+    with pytest.raises(ValueError, match=match):  # refused when the file is read
+        solve_tip_ik(robots.parse({**table, "ik": ik}, ARM.source), [0.1, 0.0, 0.4])

@@ -208,7 +208,7 @@ def test_probe_counts_injected_faults(emu: Emu) -> None:
 
 def test_soft_arm_streams_mocap_shape() -> None:
     robot = load("soft-arm")
-    sim_gain = float(robot.raw["sim"]["counts_per_kappa"])  # the emulator runs core.control.sim
+    sim_gain = robot.sim.counts_per_kappa  # the emulator runs core.control.sim
     rx = UdpMocapReceiver(0)
     rx.start()
     e = Emu("--robot", "soft-arm", "--mocap-port", str(rx.addr[1]), "--seed", "1",

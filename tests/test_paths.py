@@ -11,9 +11,11 @@ from hypothesis import given, settings, strategies as st
 from core import robots
 from core.kinematics import delta as dk
 from core.planning import paths
+from core.robot_schema import tomllib
+from core.robot_sections import PathSettings
 
 ARM = robots.load("extensible")
-COARSE = paths.PathSettings(rate_hz=20.0, spacing=0.005)  # fast variants for property tests
+COARSE = PathSettings(rate_hz=20.0, spacing=0.005)  # fast variants for property tests
 
 
 def check_motion(robot, mp, ps, speed):
@@ -108,7 +110,7 @@ def test_bad_polyline(points):
 
 @pytest.mark.parametrize("kind", paths.PATH_KINDS)
 def test_fig9_paths_at_the_default_rate_follow_the_targets(kind):
-    ps = paths.PathSettings.from_robot(ARM)
+    ps = PathSettings.from_robot(ARM)
     w = paths.build_path(kind, [0.1, 0.0, 0.45], 0.06, "xy")
     mp = paths.plan_path(ARM, w)
     check_motion(ARM, mp, ps, ARM.tip_speed)
@@ -172,7 +174,7 @@ def test_motor_limit_slows_racks_moving_in_opposite_directions():
     # (m1 = L1 - L2) travels 0.4 m. Closed form: the duration is 0.4 m at the planned motor speed
     # min(margin * motor_speed, motor_speed - one count per sample), rounded up to a sample;
     # rack limit alone: 0.2 m / (margin * rack_speed), about half of that.
-    ps = paths.PathSettings.from_robot(ARM)
+    ps = PathSettings.from_robot(ARM)
     L = np.array([[[0.10] * 3, [0.30] * 3], [[0.30] * 3, [0.10] * 3]])
     targets = np.array([[0.0, 0.0, 0.4], [0.0, 0.0, 0.4]])
     mp = paths.timed_path(ARM, targets, L, settings=ps)
@@ -239,6 +241,7 @@ def test_bad_plan_input(kwargs, match):
 
 
 def test_bad_path_settings_in_robot_file():
-    robot = dataclasses.replace(ARM, raw={**ARM.raw, "paths": {"rate_hz": -5}})
-    with pytest.raises(ValueError, match="paths.rate_hz"):
-        paths.plan_path(robot, [[0, 0, 0.4], [0.05, 0, 0.4]])
+    table = tomllib.loads(ARM.source.read_text())
+    with pytest.raises(ValueError, match="paths.rate_hz"):  # refused when the file is read
+        paths.plan_path(robots.parse({**table, "paths": {"rate_hz": -5}}, ARM.source),
+                        [[0, 0, 0.4], [0.05, 0, 0.4]])

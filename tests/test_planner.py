@@ -109,7 +109,7 @@ def test_arm_body_stays_out_of_the_disk_at_waypoints_and_along_kappa_lines(plans
     tau = np.linspace(0.0, 1.0, 201)
     for plan in plans:
         gaps = body_gap(plan.kappas, plan.center, plan.radius)
-        assert np.all(gaps >= ARM.raw["planner"]["clearance_margin"] - 1e-6)
+        assert np.all(gaps >= ARM.planner.clearance_margin - 1e-6)
         # Reported clearance is the exact value (dense sampling is an upper bound on it).
         assert np.all(plan.clearance <= gaps + 1e-12)
         assert np.all(plan.clearance >= gaps - 2e-4)

@@ -18,7 +18,7 @@ from core.planning.grasp import GraspRefused, plan_grasp
 
 ARM = robots.load("soft-arm")
 L, G = ARM.lengths, ARM.gripper
-MARGIN = ARM.raw["planner"]["clearance_margin"]
+MARGIN = ARM.planner.clearance_margin
 SIZES = (0.010, 0.0175, 0.025)
 GRID = [(x, y) for x in np.arange(-0.40, -0.049, 0.05) for y in np.arange(0.05, 0.401, 0.05)]
 

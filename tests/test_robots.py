@@ -47,7 +47,7 @@ def test_bad_soft_arm_file_names_the_field(tmp_path, old, new, field):
 
 @pytest.mark.parametrize("old,new,field", [
     ("rack_max = 0.41", "rack_max = 0.01", "segments.rack_max"),
-    ("count = 6", "count = 5", "motors.count"),
+    ("counts_per_metre = 76000.0", "count = 5\ncounts_per_metre = 76000.0", "motors.count"),
     ("rack_radius = 0.03", "rack_radius = 0", "segments.rack_radius"),
 ])
 def test_bad_extensible_file_names_the_field(tmp_path, old, new, field):
@@ -74,7 +74,7 @@ def test_extensible_bending_and_motor_limits():
     assert arm.motor_speed == pytest.approx(0.05)
     assert arm.motor_speed_counts == pytest.approx(0.05 * arm.counts_per_metre)
     # The emulated motors are a bit faster than the planner's motor limit.
-    emu = arm.raw["emulator"]["motor_speed_counts"]
+    emu = arm.emulator.motor_speed_counts
     assert arm.motor_speed_counts < emu <= 1.5 * arm.motor_speed_counts
 
 

@@ -34,7 +34,8 @@ from console.panels.base import Panel, operator_only
 from console.panels.paths import _exit_with_parent
 from console.state import ArmState
 from core.kinematics import delta as dk
-from core.kinematics.delta_ik import IKSettings, TipIKResult, solve_tip_ik
+from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
+from core.robot_sections import IKSettings
 
 Array = npt.NDArray[np.float64]
 LIVE_HZ = 30.0

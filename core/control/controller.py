@@ -1,4 +1,4 @@
-"""Cascaded closed-loop curvature controller: kappa_target -> 13 drive-cylinder demands (§4.1).
+"""Cascaded closed-loop curvature controller: kappa_target -> 2N + 1 drive-cylinder demands (§4.1).
 
 Per segment ``i`` the **outer loop** turns the curvature error into a differential cylinder
 volume ``u_i`` (counts, left minus right)::

@@ -1,62 +1,27 @@
 """Control, trajectory, simulation and state-machine parameters read from the robot file, not code.
 
-Each dataclass reads one section of ``data/robots/soft-arm.toml`` through ``robot.raw``
-(``[controller]``, ``[trajectory]``, ``[sim]`` with ``[sim.mocap]`` / ``[sim.gripper]``,
-``[state_machine]``, ``[bin]``). A missing or bad field raises
-:class:`~core.robots.RobotFileError` naming it (``controller.kp: must be >= 0, got -1``).
+Each dataclass reads one section of ``data/robots/soft-arm.toml`` when :func:`core.robots.load`
+reads the file (``[controller]``, ``[trajectory]``, ``[sim]`` with ``[sim.mocap]`` /
+``[sim.gripper]``, ``[state_machine]``, ``[bin]``); ``from_robot`` returns the loaded section. A
+missing, unknown or bad field raises :class:`~core.robot_schema.RobotFileError` naming file and
+field (``soft-arm.toml: controller.kp: must be >= 0, got -1``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Literal, Mapping
+from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 import numpy as np
 import numpy.typing as npt
 
-from core.robots import RobotFileError, SoftArm, check_number
+from core.robot_schema import Section
+
+if TYPE_CHECKING:
+    from core.robots import SoftArm
 
 Array = npt.NDArray[np.float64]
-
-
-def _section(robot: SoftArm, dotted: str) -> Mapping[str, Any]:
-    node: Any = robot.raw
-    for part in dotted.split("."):
-        node = node.get(part) if isinstance(node, Mapping) else None
-    if not isinstance(node, Mapping):
-        raise RobotFileError(f"{robot.source.name}: [{dotted}]: missing")
-    return node
-
-
-def _num(t: Mapping[str, Any], sec: str, key: str, *, lo: float | None = 0.0,
-         strict: bool = False, hi: float | None = None) -> float:
-    return check_number(t.get(key), f"{sec}.{key}", lo=lo, hi=hi, strict_lo=strict)
-
-
-def _pair(t: Mapping[str, Any], sec: str, key: str) -> tuple[float, float]:
-    v = t.get(key)
-    if (not isinstance(v, list) or len(v) != 2 or not all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
-            or not 0 <= v[0] <= v[1]):
-        raise RobotFileError(f"{sec}.{key}: must be [lo, hi] with 0 <= lo <= hi, got {v!r}")
-    return float(v[0]), float(v[1])
-
-
-def _per_dof(t: Mapping[str, Any], sec: str, key: str, n: int) -> Array:
-    v = t.get(key)
-    vals = v if isinstance(v, list) else [v] * n
-    if len(vals) != n or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                 and math.isfinite(x) and x > 0 for x in vals):
-        raise RobotFileError(f"{sec}.{key}: must be > 0 (a number or {n} numbers), got {v!r}")
-    return np.array(vals, dtype=float)
-
-
-def _bool(t: Mapping[str, Any], sec: str, key: str) -> bool:
-    v = t.get(key)
-    if not isinstance(v, bool):
-        raise RobotFileError(f"{sec}.{key}: must be true or false, got {v!r}")
-    return v
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,28 +47,37 @@ class ControllerParams:
     gripper_closed: float
 
     @classmethod
-    def from_robot(cls, robot: SoftArm) -> "ControllerParams":
-        t, s = _section(robot, "controller"), "controller"
+    def read(cls, sec: Section) -> "ControllerParams":
+        """Read and check ``[controller]``."""
+        big = 1e9  # counts, gains: any larger value is a typo
         p = cls(
-            kp=_num(t, s, "kp"), ki=_num(t, s, "ki"), kd=_num(t, s, "kd"),
-            measurement_filter_s=_num(t, s, "measurement_filter_s"),
-            derivative_filter_s=_num(t, s, "derivative_filter_s", strict=True),
-            anti_windup_gain=_num(t, s, "anti_windup_gain"),
-            counts_per_kappa=_num(t, s, "counts_per_kappa", strict=True),
-            velocity_feedforward_s=_num(t, s, "velocity_feedforward_s"),
-            cylinder_min=_num(t, s, "cylinder_min", lo=None),
-            cylinder_max=_num(t, s, "cylinder_max", lo=None),
-            cylinder_rate=_num(t, s, "cylinder_rate", strict=True),
-            prepressure=_num(t, s, "prepressure"),
-            gripper_open=_num(t, s, "gripper_open", lo=None),
-            gripper_closed=_num(t, s, "gripper_closed", lo=None),
+            kp=sec.num("kp", lo=0, hi=big), ki=sec.num("ki", lo=0, hi=big),
+            kd=sec.num("kd", lo=0, hi=big),
+            measurement_filter_s=sec.num("measurement_filter_s", lo=0, hi=60),
+            derivative_filter_s=sec.num("derivative_filter_s", lo=0, hi=60, strict_lo=True),
+            anti_windup_gain=sec.num("anti_windup_gain", lo=0, hi=big),
+            counts_per_kappa=sec.num("counts_per_kappa", lo=0, hi=big, strict_lo=True),
+            velocity_feedforward_s=sec.num("velocity_feedforward_s", lo=0, hi=60),
+            cylinder_min=sec.num("cylinder_min", lo=-big, hi=big),
+            cylinder_max=sec.num("cylinder_max", lo=-big, hi=big),
+            cylinder_rate=sec.num("cylinder_rate", lo=0, hi=big, strict_lo=True),
+            prepressure=sec.num("prepressure", lo=0, hi=big),
+            gripper_open=sec.num("gripper_open", lo=-big, hi=big),
+            gripper_closed=sec.num("gripper_closed", lo=-big, hi=big),
         )
         if p.cylinder_max <= p.cylinder_min:
-            raise RobotFileError(f"controller.cylinder_max: must be > cylinder_min, got {p.cylinder_max:g}")
+            raise sec.error("cylinder_max", f"must be > cylinder_min ({p.cylinder_min:g}), "
+                                            f"got {p.cylinder_max:g}")
         if not p.cylinder_min <= p.prepressure < p.cylinder_max:
-            raise RobotFileError(f"controller.prepressure: must lie in [cylinder_min, cylinder_max), "
-                                 f"got {p.prepressure:g}")
+            raise sec.error("prepressure", f"must lie in [cylinder_min, cylinder_max), "
+                                           f"got {p.prepressure:g}")
+        sec.finish()
         return p
+
+    @classmethod
+    def from_robot(cls, robot: "SoftArm") -> "ControllerParams":
+        """The robot's ``[controller]`` (validated when the file was loaded)."""
+        return robot.controller
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,13 +90,18 @@ class TrajectoryParams:
     synchronization: Literal["phase", "time"]
 
     @classmethod
-    def from_robot(cls, robot: SoftArm) -> "TrajectoryParams":
-        t, s, n = _section(robot, "trajectory"), "trajectory", robot.n_segments
-        sync = t.get("synchronization")
-        if sync not in ("phase", "time"):
-            raise RobotFileError(f"trajectory.synchronization: must be 'phase' or 'time', got {sync!r}")
-        return cls(_per_dof(t, s, "max_velocity", n), _per_dof(t, s, "max_acceleration", n),
-                   _per_dof(t, s, "max_jerk", n), sync)
+    def read(cls, sec: Section, n: int) -> "TrajectoryParams":
+        """Read ``[trajectory]``: each limit is one number for all n segments or n numbers."""
+        lim = {key: np.array(sec.numbers(key, n, lo=0, hi=1e9, strict_lo=True))
+               for key in ("max_velocity", "max_acceleration", "max_jerk")}
+        sync = sec.choice("synchronization", ("phase", "time"), default="phase")
+        sec.finish()
+        return cls(synchronization=sync, **lim)  # type: ignore[arg-type]
+
+    @classmethod
+    def from_robot(cls, robot: "SoftArm") -> "TrajectoryParams":
+        """The robot's ``[trajectory]`` (validated when the file was loaded)."""
+        return robot.trajectory
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,21 +126,24 @@ class StateMachineParams:
     capture_check_m: float
 
     @classmethod
-    def from_robot(cls, robot: SoftArm) -> "StateMachineParams":
-        t, s = _section(robot, "state_machine"), "state_machine"
-        replans = t.get("max_replans")
-        if isinstance(replans, bool) or not isinstance(replans, int) or replans < 0:
-            raise RobotFileError(f"state_machine.max_replans: must be an integer >= 0, got {replans!r}")
-        names = [f.name for f in dataclasses.fields(cls)]
+    def read(cls, sec: Section) -> "StateMachineParams":
+        """Read ``[state_machine]``: every time and distance > 0 (and at most a day / 10 m)."""
         vals: dict[str, Any] = {}
-        for name in names:
-            if name == "max_replans":
-                vals[name] = replans
-            elif name == "pass_over":
-                vals[name] = _bool(t, s, name)
+        for f in dataclasses.fields(cls):
+            if f.name == "max_replans":
+                vals[f.name] = sec.integer(f.name, lo=0, hi=100)
+            elif f.name == "pass_over":
+                vals[f.name] = sec.flag(f.name)
             else:
-                vals[name] = _num(t, s, name, strict=True)
+                hi = 86_400.0 if f.name.endswith("_s") else 10.0 if f.name.endswith("_m") else 1e6
+                vals[f.name] = sec.num(f.name, lo=0, hi=hi, strict_lo=True)
+        sec.finish()
         return cls(**vals)
+
+    @classmethod
+    def from_robot(cls, robot: "SoftArm") -> "StateMachineParams":
+        """The robot's ``[state_machine]`` (validated when the file was loaded)."""
+        return robot.state_machine
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,22 +154,23 @@ class BinParams:
     drop_radius_m: float
 
     @classmethod
-    def from_robot(cls, robot: SoftArm) -> "BinParams":
-        t, s, n = _section(robot, "bin"), "bin", robot.n_segments
-        mode = t.get("mode")
-        if mode == "straight":
-            kappa = np.zeros(n)
-        elif mode == "kappa":
-            k = t.get("kappa")
-            if (not isinstance(k, list) or len(k) != n or not all(
-                    isinstance(x, (int, float)) and not isinstance(x, bool) and abs(x) <= robot.kappa_max
-                    for x in k)):
-                raise RobotFileError(f"bin.kappa: must be {n} curvatures within +-{robot.kappa_max:g}, "
-                                     f"got {k!r}")
-            kappa = np.array(k, dtype=float)
+    def read(cls, sec: Section, n: int, kappa_max: float) -> "BinParams":
+        """Read ``[bin]``: ``mode = "straight"``, or ``"kappa"`` with ``kappa`` = n curvatures."""
+        mode = sec.choice("mode", ("straight", "kappa"))
+        if mode == "kappa":
+            kappa = np.array(sec.numbers("kappa", n, lo=-kappa_max, hi=kappa_max, broadcast=False))
         else:
-            raise RobotFileError(f"bin.mode: must be 'straight' or 'kappa', got {mode!r}")
-        return cls(kappa, _num(t, s, "drop_radius_m", strict=True))
+            kappa = np.zeros(n)
+            if "kappa" in sec.table:
+                raise sec.error("kappa", "only used with mode = 'kappa'")
+        p = cls(kappa, sec.num("drop_radius_m", lo=0, hi=10.0, strict_lo=True))
+        sec.finish()
+        return p
+
+    @classmethod
+    def from_robot(cls, robot: "SoftArm") -> "BinParams":
+        """The robot's ``[bin]`` (validated when the file was loaded)."""
+        return robot.bin
 
 
 @dataclasses.dataclass(frozen=True)
@@ -233,39 +216,48 @@ class SimParams:
     gripper: GripperSimParams
 
     @classmethod
-    def from_robot(cls, robot: SoftArm) -> "SimParams":
-        t, s = _section(robot, "sim"), "sim"
-        m, ms = _section(robot, "sim.mocap"), "sim.mocap"
-        g, gs = _section(robot, "sim.gripper"), "sim.gripper"
-        steps = g.get("sweep_steps")
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 2:
-            raise RobotFileError(f"sim.gripper.sweep_steps: must be an integer >= 2, got {steps!r}")
+    def read(cls, sec: Section, gripper_length: float) -> "SimParams":
+        """Read ``[sim]`` with its ``[sim.mocap]`` and ``[sim.gripper]`` tables."""
+        big = 1e9
+        m, g = sec.sub("mocap"), sec.sub("gripper")
         grip = GripperSimParams(
-            palm_length=_num(g, gs, "palm_length", strict=True, hi=robot.gripper.length),
-            finger_half_width=_num(g, gs, "finger_half_width", strict=True),
-            counts_closed=_num(g, gs, "counts_closed", strict=True),
-            closed_turn=_num(g, gs, "closed_turn", strict=True, hi=2 * math.pi),
-            capture_turn=_num(g, gs, "capture_turn", strict=True, hi=2 * math.pi),
-            sweep_steps=steps)
-        return cls(
-            counts_per_kappa=_num(t, s, "counts_per_kappa", strict=True),
-            tau_s=_num(t, s, "tau_s", strict=True),
-            prepressure_stiffening=_num(t, s, "prepressure_stiffening"),
-            prepressure_ref=_num(t, s, "prepressure_ref", strict=True),
-            cylinder_rate=_num(t, s, "cylinder_rate", strict=True),
-            cylinder_min=_num(t, s, "cylinder_min", lo=None),
-            cylinder_max=_num(t, s, "cylinder_max", lo=None),
-            stall_rate_hz=_num(t, s, "stall_rate_hz"),
-            stall_duration_s=_pair(t, s, "stall_duration_s"),
-            stall_drive_threshold=_num(t, s, "stall_drive_threshold"),
-            slip_overshoot=_num(t, s, "slip_overshoot"),
-            slip_tau_s=_num(t, s, "slip_tau_s", strict=True),
-            arm_half_width=_num(t, s, "arm_half_width", strict=True),
-            mocap=MocapSimParams(
-                noise_m=_num(m, ms, "noise_m"), object_noise_m=_num(m, ms, "object_noise_m"),
-                occlusion_rate_hz=_num(m, ms, "occlusion_rate_hz"),
-                occlusion_duration_s=_pair(m, ms, "occlusion_duration_s")),
-            gripper=grip)
+            palm_length=g.num("palm_length", lo=0, strict_lo=True, hi=gripper_length),
+            finger_half_width=g.num("finger_half_width", lo=0, hi=1.0, strict_lo=True),
+            counts_closed=g.num("counts_closed", lo=0, hi=big, strict_lo=True),
+            closed_turn=g.num("closed_turn", lo=0, strict_lo=True, hi=2 * math.pi),
+            capture_turn=g.num("capture_turn", lo=0, strict_lo=True, hi=2 * math.pi),
+            sweep_steps=g.integer("sweep_steps", lo=2, hi=10_000))
+        mocap = MocapSimParams(
+            noise_m=m.num("noise_m", lo=0, hi=1.0),
+            object_noise_m=m.num("object_noise_m", lo=0, hi=1.0),
+            occlusion_rate_hz=m.num("occlusion_rate_hz", lo=0, hi=1e4),
+            occlusion_duration_s=m.interval("occlusion_duration_s"))
+        p = cls(
+            counts_per_kappa=sec.num("counts_per_kappa", lo=0, hi=big, strict_lo=True),
+            tau_s=sec.num("tau_s", lo=0, hi=100, strict_lo=True),
+            prepressure_stiffening=sec.num("prepressure_stiffening", lo=0, hi=1e3),
+            prepressure_ref=sec.num("prepressure_ref", lo=0, hi=big, strict_lo=True),
+            cylinder_rate=sec.num("cylinder_rate", lo=0, hi=big, strict_lo=True),
+            cylinder_min=sec.num("cylinder_min", lo=-big, hi=big),
+            cylinder_max=sec.num("cylinder_max", lo=-big, hi=big),
+            stall_rate_hz=sec.num("stall_rate_hz", lo=0, hi=1e4),
+            stall_duration_s=sec.interval("stall_duration_s"),
+            stall_drive_threshold=sec.num("stall_drive_threshold", lo=0, hi=big),
+            slip_overshoot=sec.num("slip_overshoot", lo=0, hi=100),
+            slip_tau_s=sec.num("slip_tau_s", lo=0, hi=100, strict_lo=True),
+            arm_half_width=sec.num("arm_half_width", lo=0, hi=1.0, strict_lo=True),
+            mocap=mocap, gripper=grip)
+        if p.cylinder_max <= p.cylinder_min:
+            raise sec.error("cylinder_max", f"must be > cylinder_min ({p.cylinder_min:g}), "
+                                            f"got {p.cylinder_max:g}")
+        for s in (g, m, sec):
+            s.finish()
+        return p
+
+    @classmethod
+    def from_robot(cls, robot: "SoftArm") -> "SimParams":
+        """The robot's ``[sim]`` (validated when the file was loaded)."""
+        return robot.sim
 
     def replace(self, **changes: Any) -> "SimParams":
         """A copy with some fields changed (``mocap=`` / ``gripper=`` take dicts of fields too)."""

@@ -2,8 +2,9 @@
 
 Model, per :meth:`SoftArmSim.step` of ``dt`` seconds (parameters in ``[sim]`` of the robot file):
 
-* **Drive cylinders**: 13 pistons follow their demands at ``cylinder_rate`` counts/s within
-  ``[cylinder_min, cylinder_max]`` (the inner position loop of the real cylinder array).
+* **Drive cylinders**: 2N + 1 pistons (13 for N = 6) follow their demands at ``cylinder_rate``
+  counts/s within ``[cylinder_min, cylinder_max]`` (the inner position loop of the real cylinder
+  array).
 * **Segments**: curvature lags the steady state ``clip((left - right) / counts_per_kappa,
   +-kappa_max)`` with first order ``d kappa/dt = (kappa_ss - kappa) / tau`` (integrated exactly),
   ``tau = tau_s / (1 + prepressure_stiffening * min(1, min(left, right) / prepressure_ref))`` so
@@ -15,8 +16,8 @@ Model, per :meth:`SoftArmSim.step` of ``dt`` seconds (parameters in ``[sim]`` of
 * **Object**: a disc on the table, pushed out of the arm body (backbone capsules of
   ``arm_half_width``) and the gripper (:mod:`core.control.gripper`); while captured it moves
   with the gripper; it is put down where it is when the gripper opens.
-* **Gripper**: channel 12 sets the finger turn ``closed_turn * c / counts_closed``; closing runs
-  the capture sweep incrementally, so only objects in the capture region are captured.
+* **Gripper**: channel 2N (12 for N = 6) sets the finger turn ``closed_turn * c / counts_closed``;
+  closing runs the capture sweep incrementally, so only objects in the capture region are captured.
 * **Motion capture** (:meth:`SoftArmSim.measure`): segment-end markers E_1..E_N and the object
   centre with Gaussian noise; each marker is occluded at ``occlusion_rate_hz`` for a uniform
   ``occlusion_duration_s`` (reported as NaN).

@@ -2,7 +2,7 @@
 
 :class:`ControlStack` is the ``update`` of the loop runner's read -> update -> write cycle. It is
 pure (no threads, no I/O, no clock): the caller passes the reading and the time, and gets the
-13 cylinder demands to write (or None while disarmed) plus a :class:`Telemetry` snapshot.
+2N + 1 cylinder demands to write (or None while disarmed) plus a :class:`Telemetry` snapshot.
 Operator commands (:meth:`arm`, :meth:`start`, :meth:`execute`, :meth:`goto`, :meth:`stop`,
 :meth:`disarm`) must be called from the same thread as :meth:`update` (the loop thread).
 """

@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -68,6 +68,7 @@ from scipy.optimize import minimize as _minimize
 
 from core.kinematics import delta as _dk
 from core.kinematics.delta_ik_seeds import arc_seed as _arc_seed, seeds as _seeds
+from core.robot_sections import IKSettings
 
 if TYPE_CHECKING:
     from core.robots import ExtensibleArm
@@ -76,60 +77,6 @@ Array = npt.NDArray[np.float64]
 
 _LAMBDA_MIN = 1e-5  # lambda^2 = 1e-10: keeps J P (J P)^T + lambda^2 I well conditioned
 _LAMBDA_MAX = 1e6
-
-
-@dataclasses.dataclass(frozen=True)
-class IKSettings:
-    """Solver settings (robot file ``[ik]``; every key optional).
-
-    Attributes:
-        tolerance: A target is reachable when the final error is <= this (m).
-        goal_tolerance: The iteration stops early once the error is <= this (m).
-        damping: Initial Levenberg-Marquardt damping lambda.
-        max_iterations: Iterations per start.
-        restart_seeds: Number of low-discrepancy seeds added to the structured restart seeds
-            (0 disables restarts from those).
-        stall_step: A start stops when its error improves by less than this per iteration (m).
-        stall_ratio: ... or by less than this fraction of its error (a local minimum).
-        polish_iterations: SLSQP iterations spent polishing the best configuration of a target
-            left above ``tolerance`` (0 disables; see :func:`_polish`).
-    """
-
-    tolerance: float = 1e-3
-    goal_tolerance: float = 1e-6
-    damping: float = 1e-3
-    max_iterations: int = 60
-    restart_seeds: int = 12
-    stall_step: float = 1e-9
-    stall_ratio: float = 1e-4
-    polish_iterations: int = 50
-
-    @classmethod
-    def from_robot(cls, robot: "ExtensibleArm") -> "IKSettings":
-        """Defaults overridden by the robot file's ``[ik]`` table; bad values raise ValueError."""
-        table: Mapping[str, Any] = robot.raw.get("ik", {}) if robot.raw else {}
-        kwargs: dict[str, Any] = {}
-        for field in dataclasses.fields(cls):
-            if field.name not in table:
-                continue
-            value = table[field.name]
-            if field.type in ("int", int):
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise ValueError(f"ik.{field.name}: must be an integer >= 0, got {value!r}")
-            elif (isinstance(value, bool) or not isinstance(value, (int, float))
-                  or not math.isfinite(value) or value <= 0):
-                raise ValueError(f"ik.{field.name}: must be a finite number > 0, got {value!r}")
-            kwargs[field.name] = value
-        unknown = set(table) - {f.name for f in dataclasses.fields(cls)}
-        if unknown:
-            raise ValueError(f"ik: unknown keys {sorted(unknown)}")
-        settings = cls(**kwargs)
-        if settings.max_iterations < 1:
-            raise ValueError("ik.max_iterations: must be >= 1")
-        if settings.goal_tolerance > settings.tolerance:
-            raise ValueError(f"ik.goal_tolerance: must be <= ik.tolerance ({settings.tolerance:g}), "
-                             f"got {settings.goal_tolerance:g}")
-        return settings
 
 
 @dataclasses.dataclass(frozen=True)

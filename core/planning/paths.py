@@ -32,13 +32,14 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any, Literal, Mapping
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from core.kinematics import delta as dk
-from core.kinematics.delta_ik import IKSettings, solve_tip_ik
+from core.kinematics.delta_ik import solve_tip_ik
+from core.robot_sections import IKSettings, PathSettings
 from core.planning.path_shapes import (PATH_KINDS, PathKind, Plane, build_path,  # noqa: F401
                                        diagonal_traverse, four_corners, linear_traverse,
                                        polyline)
@@ -47,49 +48,6 @@ if TYPE_CHECKING:
     from core.robots import ExtensibleArm
 
 Array = npt.NDArray[np.float64]
-
-
-@dataclasses.dataclass(frozen=True)
-class PathSettings:
-    """Sampling settings (robot file ``[paths]``; every key optional).
-
-    Attributes:
-        rate_hz: Output sample rate (the control loop's rate).
-        spacing: Largest tip travel between IK samples (m).
-        limit_margin: Fraction of the tip, rack and motor speed limits the time law plans for.
-        jump_ratio: Rack travel / tip travel above which an interval is bisected.
-        max_bisections: How often an interval may be bisected.
-        retry_spacing: Tip travel between restart attempts while the target is out of reach of
-            the branch being followed (m).
-    """
-
-    rate_hz: float = 100.0
-    spacing: float = 0.001
-    limit_margin: float = 0.98
-    jump_ratio: float = 20.0
-    max_bisections: int = 6
-    retry_spacing: float = 0.01
-
-    @classmethod
-    def from_robot(cls, robot: "ExtensibleArm") -> "PathSettings":
-        """Defaults overridden by the robot file's ``[paths]`` table; bad values raise ValueError."""
-        table: Mapping[str, Any] = robot.raw.get("paths", {}) if robot.raw else {}
-        names = {f.name for f in dataclasses.fields(cls)}
-        if set(table) - names:
-            raise ValueError(f"paths: unknown keys {sorted(set(table) - names)}")
-        kwargs: dict[str, Any] = {}
-        for name, value in table.items():
-            if name == "max_bisections":
-                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                    raise ValueError(f"paths.{name}: must be an integer >= 0, got {value!r}")
-            elif (isinstance(value, bool) or not isinstance(value, (int, float))
-                  or not math.isfinite(value) or value <= 0):
-                raise ValueError(f"paths.{name}: must be a finite number > 0, got {value!r}")
-            kwargs[name] = value
-        settings = cls(**kwargs)
-        if settings.limit_margin > 1:
-            raise ValueError(f"paths.limit_margin: must be <= 1, got {settings.limit_margin}")
-        return settings
 
 
 @dataclasses.dataclass(frozen=True)

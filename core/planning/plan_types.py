@@ -9,12 +9,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from core.robot_schema import Section
+
 Array = npt.NDArray[np.float64]
 
 
 @dataclasses.dataclass(frozen=True)
 class PlannerConfig:
-    """Planner settings, read from the robot file's ``[planner]`` table.
+    """Planner settings, read from the robot file's ``[planner]`` table by :func:`core.robots.load`.
 
     Attributes:
         delta_d: Allowable incremental distance between approach circles (m) [paper].
@@ -41,24 +43,30 @@ class PlannerConfig:
     seed_table: int = 2048
 
     @classmethod
-    def from_robot(cls, robot) -> "PlannerConfig":
-        """Read ``[planner]`` of a soft-arm description; unknown keys are ignored."""
-        table = dict(robot.raw.get("planner", {}))
-        n = robot.n_segments
-        weights = table.get("weights", 1.0)
-        if isinstance(weights, (int, float)) and not isinstance(weights, bool):
-            weights = [float(weights)] * n
-        kw: dict[str, Any] = {
-            "delta_d": robot.delta_d,
-            "constraint_tolerance": robot.constraint_tolerance,
-            "weights": tuple(float(v) for v in weights),
-        }
-        for f in dataclasses.fields(cls):
-            if f.name in table and f.name not in kw:
-                kw[f.name] = type(f.default)(table[f.name])
-        cfg = cls(**kw)
-        cfg.validate(n)
+    def read(cls, sec: Section, n: int) -> "PlannerConfig":
+        """Read ``[planner]`` of a soft-arm file for ``n`` segments; unknown keys are refused.
+
+        ``weights`` defaults to 1 for every segment; one number applies to all segments.
+        """
+        d = cls(delta_d=0.05, constraint_tolerance=2e-3, weights=(1.0,) * n)
+        cfg = cls(
+            delta_d=sec.num("delta_d", lo=0, hi=10.0, strict_lo=True),
+            constraint_tolerance=sec.num("constraint_tolerance", lo=0, hi=1.0, strict_lo=True),
+            weights=sec.numbers("weights", n, lo=0, hi=1e9, strict_lo=True, default=1.0),
+            clearance_margin=sec.num("clearance_margin", lo=0, hi=1.0, default=d.clearance_margin),
+            base_keepout=sec.num("base_keepout", lo=0, hi=10.0, default=d.base_keepout),
+            max_restarts=sec.integer("max_restarts", lo=0, hi=100, default=d.max_restarts),
+            max_insertions=sec.integer("max_insertions", lo=0, hi=8, default=d.max_insertions),
+            line_samples=sec.integer("line_samples", lo=1, hi=1000, default=d.line_samples),
+            seed_table=sec.integer("seed_table", lo=1, hi=65_536, default=d.seed_table),
+        )
+        sec.finish()
         return cfg
+
+    @classmethod
+    def from_robot(cls, robot) -> "PlannerConfig":
+        """The robot's ``[planner]`` (validated when the file was loaded)."""
+        return robot.planner
 
     def validate(self, n: int) -> None:
         """Raise ValueError naming the bad setting."""
