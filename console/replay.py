@@ -19,7 +19,7 @@ import viser
 from console.arm_view import ArmView, make_arm_view
 from console.datadir import BadFileName
 from console.export import draw_overlay, recording_html
-from console.recording import SUFFIX, Recording, load_recording
+from console.recording import SUFFIXES, Recording, load_recording
 
 if TYPE_CHECKING:
     from console.app import ConsoleApp
@@ -62,7 +62,7 @@ class ReplaySession:
         self.export_btn.on_click(lambda e: self.export())
 
     def _file_options(self) -> tuple[str, ...]:
-        names = self.app.data.list("recordings", SUFFIX)
+        names = [n for suffix in SUFFIXES for n in self.app.data.list("recordings", suffix)]
         return tuple(names) if names else (NONE,)
 
     def refresh_files(self) -> None:
@@ -78,7 +78,9 @@ class ReplaySession:
                        "'Start recording'.")
             return False
         try:
-            path = self.app.data.path("recordings", name, SUFFIX)
+            suffix = next((s for s in SUFFIXES if isinstance(name, str) and name.endswith(s)),
+                          SUFFIXES[0])
+            path = self.app.data.path("recordings", name, suffix)
             if not path.is_file():
                 raise BadFileName(f"no recording named {name!r}")
             rec = load_recording(path, self.app.model)
@@ -165,7 +167,8 @@ class ReplaySession:
             log.exception("export of %s failed", rec.name)
             self._tell("Export failed", str(exc), "red")
             return
-        stem = rec.name.removesuffix(SUFFIX)
+        stem = next((rec.name.removesuffix(s) for s in SUFFIXES if rec.name.endswith(s)),
+                    rec.name)
         name = self.app.data.new_name("exports", stem, ".html")
         path = self.app.data.path("exports", name, ".html")
         path.write_text(html, encoding="utf-8")
