@@ -23,6 +23,7 @@ import json
 import math
 import sys
 import time
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -79,8 +80,10 @@ def bin_drop_point(robot: SoftArm, radius: float) -> np.ndarray:
 
 def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "",
               planner: str = DEFAULT_PLANNER, time_limit_s: float = 150.0,
-              sim_overrides: dict[str, Any] | None = None) -> TrialResult:
-    """One headless grasp-and-place trial on the simulated clock."""
+              sim_overrides: dict[str, Any] | None = None,
+              observe: Callable[[Any], Any] | None = None) -> TrialResult:
+    """One headless grasp-and-place trial on the simulated clock; ``observe(snapshot)`` (if
+    given) sees every tick's loop snapshot (``core.labdata.trial_recording`` records them)."""
     from hw_bridge.loop import LoopRunner, SimClock, SimDevice, resolve
 
     x, y, r = (float(v) for v in obj)
@@ -95,12 +98,14 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
         lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
     runner = LoopRunner(SimDevice(sim), stack, 0.01, clock_ns=SimClock())
     wall = time.perf_counter()
-    runner.run_sim(0.05)
+    watch = (lambda s: bool(observe(s))) if observe else None
+    runner.run_sim(0.05, until=watch)
     runner.arm()
-    runner.run_sim(0.5)  # pre-pressurise the root segments
+    runner.run_sim(0.5, until=watch)  # pre-pressurise the root segments
     runner.start_task()
-    runner.run_sim(time_limit_s, until=lambda s: s.control is not None
-                   and s.control.phase in (Phase.RELEASED.value, Phase.STOPPED.value))
+    runner.run_sim(time_limit_s, until=lambda s: bool(watch and watch(s)) or (
+        s.control is not None and s.control.phase in (Phase.RELEASED.value,
+                                                      Phase.STOPPED.value)))
     wall = time.perf_counter() - wall
     m = stack.machine
     failure: str | None = None
@@ -227,7 +232,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--time-limit", type=float, default=150.0, help="simulated s per trial")
     ap.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE",
                     help="override a [sim] parameter, e.g. stall_rate_hz=0.5 or mocap.noise_m=5e-4")
+    ap.add_argument("--record", type=Path, default=None, metavar="PATH.mcap",
+                    help="also record the trials (arm, object, phases, timing) as MCAP")
+    ap.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
+                    help="also write one CSV row per trial (units in the header)")
     a = ap.parse_args(argv)
+    if a.record is not None and (a.record.suffix != ".mcap" or a.record.exists()):
+        ap.error(f"--record {a.record}: need a new file ending in .mcap")
     try:
         overrides = parse_overrides(a.sim)
         if overrides:
@@ -252,11 +263,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         r0 = robot.capture.nominal_object_radius
         objects = [(k, (x, y, r0)) for k, (x, y) in paper_locations().items()]
     wall = time.perf_counter()
-    progress = None if a.json else (lambda k, n, r: print(
-        f"  trial {k}/{n}: {r.label} {'ok' if r.success else 'FAILED'}", file=sys.stderr, flush=True))
-    results = run_trials(a.robot, objects, a.repeats, a.seed, workers=a.workers,
-                         planner=a.planner, time_limit_s=a.time_limit,
-                         sim_overrides=overrides or None, progress=progress)
+    from core.labdata.progress import trial_progress  # a bar on a terminal, nothing when piped
+    with trial_progress(len(objects) * a.repeats) as progress:
+        if a.record is not None:
+            from core.labdata.trial_recording import record_trials
+            results = record_trials(a.record, a.robot, objects, a.repeats, a.seed,
+                                    workers=a.workers, planner=a.planner,
+                                    time_limit_s=a.time_limit, sim_overrides=overrides or None,
+                                    progress=progress)
+        else:
+            results = run_trials(a.robot, objects, a.repeats, a.seed, workers=a.workers,
+                                 planner=a.planner, time_limit_s=a.time_limit,
+                                 sim_overrides=overrides or None, progress=progress)
+    if a.csv is not None:
+        from core.labdata.results_csv import write_trials_csv
+        write_trials_csv(a.csv, results)
     loop = summary(results, time.perf_counter() - wall, a.workers)
     if a.json:
         keys = ("object", "success", "failure", "approach_s", "return_s")

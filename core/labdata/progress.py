@@ -51,3 +51,42 @@ def progress_bar(total: float | None, desc: str, unit: str = "it", *,
         return NoBar()
     return _Bar(total=total, desc=desc, unit=unit, file=stream, leave=False,
                 dynamic_ncols=True, **kw)
+
+
+class trial_progress:  # noqa: N801 - used like a function in a with statement
+    """``with trial_progress(n) as progress:`` -- a ``progress(k, n, result)`` callback for
+    :func:`core.control.trials.run_trials` that advances a bar (successes so far as postfix) on
+    a terminal and does nothing otherwise."""
+
+    def __init__(self, total: int, force: bool | None = None) -> None:
+        self.bar = progress_bar(total, "trials", unit="trial", force=force)
+        self.ok = 0
+
+    def __call__(self, k: int, n: int, result: Any) -> None:
+        self.ok += bool(getattr(result, "success", False))
+        self.bar.set_postfix_str(f"{self.ok}/{k} ok", refresh=False)
+        self.bar.update(1)
+
+    def __enter__(self) -> trial_progress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.bar.close()
+
+
+class row_progress:  # noqa: N801 - used like a function in a with statement
+    """``with row_progress("capture grid") as progress:`` -- a ``progress(done, total)``
+    callback (``core.control.capture.characterise``) driving a bar on a terminal only."""
+
+    def __init__(self, desc: str, force: bool | None = None) -> None:
+        self.bar = progress_bar(None, desc, unit="row", force=force)
+
+    def __call__(self, done: int, total: int) -> None:
+        self.bar.total = total
+        self.bar.update(done - self.bar.n)
+
+    def __enter__(self) -> row_progress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.bar.close()
