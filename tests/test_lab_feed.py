@@ -116,3 +116,29 @@ def test_grasp_objects_and_a_real_plan_become_records_and_scene(tmp_path) -> Non
     assert cyl["size"]["x"] == 2 * obj.r and cyl["pose"]["position"]["x"] == obj.x
     loops = got["/scene/plan"][0]["entities"][0]["lines"]
     assert sum(ln["type"] == 1 for ln in loops) == len(plan.radii)
+
+
+def test_a_planned_tip_path_becomes_a_plan_record_with_its_waypoints(tmp_path) -> None:
+    from core.kinematics import delta as dk
+    from core.planning.paths import build_path, plan_path
+
+    ext = load("extensible")
+    q0 = np.zeros((ext.n_segments, 3))
+    q0[:, 2] = 0.02
+    waypoints = build_path("corners", dk.tip_position(ext, q0), 0.02, "xy")
+    path = plan_path(ext, waypoints, speed=0.02, start_delta=q0)
+    req = SimpleNamespace(kind="corners", plane="xy", size=0.02, speed=0.02)
+    model = model_for(ext)
+    rec = Recorder(DataDir(tmp_path), model)
+    out = rec.start("path")
+    rec.on_state(StateStore(model).request(q0, "jog"))
+    from console.lab_feed import path_plan_record
+    rec.log("plan", path_plan_record(req, waypoints, path))
+    rec.stop()
+    got = topics(out)
+    (plan,) = got["/plan"]
+    np.testing.assert_allclose([w["point"] for w in plan["waypoints"]], waypoints)
+    assert plan["path"] == "corners" and plan["duration_s"] == path.duration > 0
+    strip = [ln for ln in got["/scene/plan"][0]["entities"][0]["lines"] if ln["type"] == 0]
+    np.testing.assert_allclose([[p["x"], p["y"], p["z"]] for p in strip[0]["points"]],
+                               waypoints)

@@ -205,7 +205,8 @@ class ControlPanel(Panel):
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
         self._last_fault: str | None = None
-        self._feed = ControlFeed(self.app.recorder)  # phase, timing, link, faults -> lab data
+        self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
+            self.app.recorder, lambda: getattr(self.app, "bridge_controls", None) is not None)
         self._draw_lock = threading.Lock()
         self._pump_stop = threading.Event()
         self._pump = threading.Thread(target=self._pump_loop, name="control-pump", daemon=True)
