@@ -242,3 +242,58 @@ def test_a_ten_minute_session_stays_under_50_mb(tmp_path) -> None:
                 log.record({"kind": "action", "what": "jog", "who": "Alice", "client": 3,
                             "t": t})
     assert 10 * path.stat().st_size < 50e6
+
+
+def _enum(cls: Any, value: int) -> Any:
+    return next(getattr(cls, n) for n in dir(cls)
+                if not n.startswith("_") and n not in ("name", "value")
+                and getattr(cls, n).value == value)
+
+
+def to_sdk(kind: str, value: Any) -> Any:
+    """Build foxglove-sdk's own typed message ``kind`` from our JSON (field names must match)."""
+    import foxglove.messages as fm
+
+    nested = {
+        "SceneUpdate": {"deletions": "SceneEntityDeletion", "entities": "SceneEntity"},
+        "SceneEntity": {"timestamp": "Timestamp", "lifetime": "Duration",
+                        "metadata": "KeyValuePair", "spheres": "SpherePrimitive",
+                        "cylinders": "CylinderPrimitive", "lines": "LinePrimitive",
+                        "texts": "TextPrimitive"},
+        "SceneEntityDeletion": {"timestamp": "Timestamp"},
+        "LinePrimitive": {"pose": "Pose", "points": "Point3", "color": "Color",
+                          "colors": "Color"},
+        "CylinderPrimitive": {"pose": "Pose", "size": "Vector3", "color": "Color"},
+        "SpherePrimitive": {"pose": "Pose", "size": "Vector3", "color": "Color"},
+        "Pose": {"position": "Vector3", "orientation": "Quaternion"},
+        "PoseInFrame": {"timestamp": "Timestamp", "pose": "Pose"},
+        "Log": {"timestamp": "Timestamp"}}
+    enums = {("SceneEntityDeletion", "type"): fm.SceneEntityDeletionType,
+             ("LinePrimitive", "type"): fm.LinePrimitiveLineType, ("Log", "level"): fm.LogLevel}
+    fields = {}
+    for key, v in value.items():
+        sub = nested.get(kind, {}).get(key)
+        if (kind, key) in enums:
+            v = _enum(enums[(kind, key)], v)
+        elif sub is not None:
+            v = [to_sdk(sub, x) for x in v] if isinstance(v, list) else to_sdk(sub, v)
+        elif key in ("arrows", "cubes", "triangles", "models"):
+            assert v == []
+            continue
+        fields[key] = v
+    return getattr(fm, kind)(**fields)
+
+
+def test_well_known_messages_build_as_the_foxglove_sdk_types(tmp_path) -> None:
+    """Every foxglove.* message in a recording constructs (and encodes) as foxglove-sdk's typed
+    message of that name: the field names and enum values are Foxglove's."""
+    path, _, _ = record_session(tmp_path)
+    seen = set()
+    with open(path, "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if not schema.name.startswith("foxglove."):
+                continue
+            typed = to_sdk(schema.name.removeprefix("foxglove."), json.loads(message.data))
+            assert len(typed.encode()) > 0
+            seen.add(schema.name)
+    assert seen == {"foxglove.SceneUpdate", "foxglove.PoseInFrame", "foxglove.Log"}
