@@ -86,7 +86,7 @@ def markers_html(markers: Sequence[Marker]) -> str:
     items = "".join(
         f'<li data-t="{m.t:.3f}" data-category="{m.category}" style="color:{COLORS[m.category]}">'
         f"{html.escape(m.label)}</li>" for m in markers)
-    return (f'<details data-testid="run-markers" open style="position:fixed;left:8px;bottom:8px;'
+    return (f'<details data-testid="run-markers" open style="position:fixed;left:8px;bottom:64px;'
             f"max-height:40vh;max-width:40vw;overflow:auto;z-index:1000;background:#fffe;"
             f'font:12px sans-serif;padding:4px 8px;border-radius:6px">'
             f"<summary>Markers ({len(markers)})</summary><ol>{items}</ol></details>")
