@@ -9,7 +9,10 @@ clock (ns since the epoch).
 Read-only: the server is started with no capabilities (no client publish, no services, no
 parameters, no asset fetching) and no listener, so nothing a Foxglove client sends reaches the
 console; the tap only enqueues (a full queue drops and counts), and one bridge thread encodes and
-logs. foxglove-sdk's server runs in its own (Rust) threads, in a private ``foxglove.Context``.
+logs. foxglove-sdk's server runs in its own (Rust) threads, in a private ``foxglove.Context``, on
+a loopback port; the public port is a :class:`~console.foxglove_relay.SubprotocolRelay`, so
+clients asking for ``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking
+for the SDK's ``foxglove.sdk.v1`` (Foxglove, newer Lichtblick).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from typing import Any
 
 import foxglove
 
+from console.foxglove_relay import SubprotocolRelay
 from core.labdata.channels import (CHANNELS, ArmGeometry, ChannelSpec, json_safe, messages_for,
                                     spec_for)
 from core.robots import Robot
@@ -51,9 +55,10 @@ class FoxgloveBridge:
         self._channels: dict[str, foxglove.Channel] = {}
         for spec in CHANNELS:
             self._channel(spec)
-        self.server = foxglove.start_server(name=SERVER_NAME, host=host, port=port,
+        self.server = foxglove.start_server(name=SERVER_NAME, host="127.0.0.1", port=0,
                                             capabilities=[], services=None,
                                             server_listener=None, context=self.context)
+        self.relay = SubprotocolRelay(int(self.server.port), host, port)
         self._queue: queue.Queue[tuple[dict[str, Any], int] | None] = queue.Queue(max_queue)
         self._thread = threading.Thread(target=self._run, name="foxglove-bridge", daemon=True)
         self._thread.start()
@@ -61,7 +66,8 @@ class FoxgloveBridge:
 
     @property
     def port(self) -> int:
-        return int(self.server.port)
+        """The public port (the relay's)."""
+        return self.relay.port
 
     def _channel(self, spec: ChannelSpec) -> foxglove.Channel:
         ch = self._channels.get(spec.topic)
@@ -104,4 +110,5 @@ class FoxgloveBridge:
         self._stopped = True
         self._queue.put(None)
         self._thread.join(2.0)
+        self.relay.stop()
         self.server.stop()

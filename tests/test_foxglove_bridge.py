@@ -1,6 +1,6 @@
-"""Live bridge: a websocket client speaking the Foxglove WebSocket protocol (v1 messages,
-``foxglove.sdk.v1`` subprotocol name as foxglove-sdk 0.30 negotiates it) gets ``serverInfo``
-with no capabilities, the advertised lab channels with their schema names, and messages while the
+"""Live bridge: a websocket client speaking the Foxglove WebSocket protocol
+(``foxglove.websocket.v1``, or the same messages under foxglove-sdk's ``foxglove.sdk.v1``) gets
+``serverInfo`` with no capabilities, the advertised lab channels with their schema names, and messages while the
 arm moves; publishing, service calls and parameter writes from the client move nothing.
 ``serve.py --foxglove-port`` starts it (off by default)."""
 
@@ -27,7 +27,7 @@ from core.robots import load
 
 SOFT = load("soft-arm")
 REPO = Path(__file__).resolve().parent.parent
-SUBPROTOCOL = "foxglove.sdk.v1"  # = foxglove.websocket.v1's messages under the SDK's name
+SUBPROTOCOL = "foxglove.websocket.v1"
 
 
 @pytest.fixture
@@ -66,9 +66,12 @@ def messages(ws: ClientConnection, until: float) -> Iterator[tuple[int, int, Any
             yield sub, ns, json.loads(frame[13:])
 
 
-def test_client_gets_server_info_channels_and_messages_while_the_arm_moves(live) -> None:
+@pytest.mark.parametrize("subprotocol", ["foxglove.websocket.v1", "foxglove.sdk.v1"])
+def test_client_gets_server_info_channels_and_messages_while_the_arm_moves(live,
+                                                                           subprotocol) -> None:
     app, bridge = live
-    with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[SUBPROTOCOL]) as ws:
+    with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[subprotocol]) as ws:
+        assert ws.subprotocol == subprotocol
         info, channels = hello(ws)
         assert info["op"] == "serverInfo" and info["name"] == "softarm-console"
         assert info["capabilities"] == []  # no clientPublish, services, parameters, assets
