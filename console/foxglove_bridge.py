@@ -4,7 +4,8 @@
 one :class:`FoxgloveBridge`. It taps the console's recorder (``Recorder.add_tap``), so it streams
 exactly what a recording would hold -- the same topics, schemas and messages
 (``core.labdata.channels``) -- whether or not a recording runs, with log times on the console's
-clock (ns since the epoch).
+clock (ns since the epoch). While the arm rests, the newest configuration, objects, plan and
+phase are sent again once a second, so a layout opened later shows them.
 
 Read-only: the server is started with no capabilities (no client publish, no services, no
 parameters, no asset fetching) and no listener, so nothing a Foxglove client sends reaches the
@@ -21,6 +22,7 @@ import json
 import logging
 import queue
 import threading
+import time
 from typing import Any
 
 import foxglove
@@ -32,6 +34,8 @@ from core.robots import Robot
 
 log = logging.getLogger(__name__)
 SERVER_NAME = "softarm-console"
+LATCHED = ("state", "objects", "plan", "phase")  # repeated while quiet, for late joiners
+REPEAT_S = 1.0
 
 
 class FoxgloveBridge:
@@ -88,22 +92,39 @@ class FoxgloveBridge:
             self.dropped += 1
 
     def _run(self) -> None:
+        # The newest record of each latched kind, re-sent once a second while none comes, so a
+        # layout opened later shows the arm, objects, plan and phase without waiting for motion.
+        latest: dict[str, tuple[dict[str, Any], float]] = {}
         while True:
-            item = self._queue.get()
+            try:
+                item = self._queue.get(timeout=REPEAT_S / 2)
+            except queue.Empty:
+                item = ()
             if item is None:
                 return
-            record, ns = item
-            try:
-                for topic, msg in messages_for(record, ns, self.arm):
-                    ch = self._channel(spec_for(topic))
-                    try:
-                        data = json.dumps(msg, separators=(",", ":"), allow_nan=False)
-                    except (TypeError, ValueError):
-                        data = json.dumps(json_safe(msg), separators=(",", ":"))
-                    ch.log(data.encode("utf-8"), log_time=ns)
-                    self.sent += 1
-            except Exception:  # a bad record must not end the live stream
-                log.exception("foxglove bridge: record %s not sent", record.get("kind"))
+            now = time.monotonic()
+            if item:
+                record, ns = item
+                self._send(record, ns)
+                if record.get("kind") in LATCHED:
+                    latest[str(record["kind"])] = (record, now)
+            for kind, (record, at) in list(latest.items()):
+                if now - at >= REPEAT_S:
+                    self._send(record, time.time_ns())
+                    latest[kind] = (record, now)
+
+    def _send(self, record: dict[str, Any], ns: int) -> None:
+        try:
+            for topic, msg in messages_for(record, ns, self.arm):
+                ch = self._channel(spec_for(topic))
+                try:
+                    data = json.dumps(msg, separators=(",", ":"), allow_nan=False)
+                except (TypeError, ValueError):
+                    data = json.dumps(json_safe(msg), separators=(",", ":"))
+                ch.log(data.encode("utf-8"), log_time=ns)
+                self.sent += 1
+        except Exception:  # a bad record must not end the live stream
+            log.exception("foxglove bridge: record %s not sent", record.get("kind"))
 
     def stop(self) -> None:
         """Stop the server and the bridge thread (the recorder's tap then only enqueues)."""

@@ -81,10 +81,10 @@ def test_client_gets_server_info_channels_and_messages_while_the_arm_moves(live,
                    for c in channels.values())
         assert json.loads(channels["/arm/scene"]["schema"])["title"] == "foxglove.SceneUpdate"
         subs = {1: "/arm/configuration", 2: "/arm/scene", 3: "/events", 4: "/arm/tip"}
+        before = time.time_ns()
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [
             {"id": k, "channelId": channels[t]["id"]} for k, t in subs.items()]}))
         time.sleep(0.3)
-        before = time.time_ns()
         targets = [np.full(6, k) for k in (2.0, 4.0, 6.0)]
         for q in targets:
             app.store.request(q, "jog")
@@ -165,3 +165,16 @@ def test_serve_flag_is_off_by_default_and_starts_the_bridge(tmp_path: Path) -> N
     bad = subprocess.run([sys.executable, str(REPO / "serve.py"), "--foxglove-port", "70000"],
                          cwd=REPO, capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "--foxglove-port must be in 1..65535" in bad.stderr
+
+
+def test_a_client_joining_while_the_arm_rests_still_gets_its_configuration(live) -> None:
+    app, bridge = live
+    q = np.array([1.0, -2.0, 3.0, -4.0, 5.0, -6.0])
+    app.store.request(q, "jog")
+    time.sleep(0.5)  # drawn (and sent to nobody) before anyone connects
+    with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[SUBPROTOCOL]) as ws:
+        _, channels = hello(ws)
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": 1, "channelId": channels["/arm/configuration"]["id"]}]}))
+        got = [body for _, _, body in messages(ws, time.monotonic() + 2.5)]
+    assert got and [s["kappa"] for s in got[-1]["measured"]] == q.tolist()
