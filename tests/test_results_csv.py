@@ -115,3 +115,28 @@ def test_progress_shows_on_a_terminal_only() -> None:
     with trial_progress(2, force=False) as progress:  # the callback works without a bar too
         progress(1, 2, type("R", (), {"success": True})())
         assert progress.ok == 1
+
+
+def test_the_trial_sampler_takes_snapshots_or_bare_telemetry() -> None:
+    """A loop that hands ``until`` only the telemetry still gets phases, states and the object."""
+    from types import SimpleNamespace
+
+    from core.labdata.trial_recording import TrialSampler
+
+    def tel(t: float, phase: str, xy: tuple[float, float]) -> SimpleNamespace:
+        return SimpleNamespace(t=t, phase=phase, reason=None, armed=True, tracking_ok=True,
+                               gripper_closed=False, waypoint=0, n_waypoints=2, replans=0,
+                               kappa_meas=np.ones(6), kappa_ref=np.zeros(6), object_xy=xy)
+
+    bare, full = TrialSampler(hz=50.0), TrialSampler(hz=50.0)
+    for k in range(1, 7):
+        t = tel(k * 0.01, "approach" if k < 4 else "grasp", (0.1 + 0.01 * k, 0.2))
+        bare(t)
+        full(SimpleNamespace(tick=k, t=t.t, control=t, period_ms=10.0, work_ms=0.4,
+                             overruns=0, fault=None))
+    bare(None)
+    for sampler, timing in ((bare, 0), (full, 3)):
+        kinds = [r["kind"] for r in sampler.records]
+        assert kinds.count("phase") == 2 and kinds.count("state") == 3
+        assert kinds.count("timing") == timing and kinds.count("objects") == 3
+        assert [r["t"] for r in sampler.records if r["kind"] == "state"] == [0.02, 0.04, 0.06]

@@ -3,8 +3,8 @@
 :class:`LoopRecords` turns each new ``hw_bridge.loop.LoopSnapshot`` (duck-typed: ``tick``, ``t``,
 ``control`` (a ``core.control.stack.Telemetry`` or None), ``period_ms``, ``work_ms``, ...,
 ``overruns``, ``fault``) into console records: ``phase`` when the state machine's phase, reason
-or armed flag changes, ``timing`` every snapshot, ``fault`` when a new fault appears and, if
-asked, ``state`` (measured curvature, with the reference as the command).
+or armed flag changes, ``timing`` every snapshot that has timings, ``fault`` when a new fault
+appears and, if asked, ``state`` (measured curvature, with the reference as the command).
 """
 
 from __future__ import annotations
@@ -44,13 +44,14 @@ class LoopRecords:
                 meas = ref if c.kappa_meas is None else np.asarray(c.kappa_meas, dtype=float)
                 out.append({"kind": "state", "q": meas.tolist(), "command": ref.tolist(),
                             "seq": int(snap.tick), "source": "control"})
-        out.append({"kind": "timing", "data": {
-            "tick": int(snap.tick), "loop_t": float(snap.t),
-            "period_ms": float(snap.period_ms), "work_ms": float(snap.work_ms),
-            "read_ms": float(getattr(snap, "read_ms", 0.0)),
-            "update_ms": float(getattr(snap, "update_ms", 0.0)),
-            "write_ms": float(getattr(snap, "write_ms", 0.0)),
-            "overruns": int(snap.overruns)}})
+        if getattr(snap, "period_ms", None) is not None:
+            out.append({"kind": "timing", "data": {
+                "tick": int(snap.tick), "loop_t": float(snap.t),
+                "period_ms": float(snap.period_ms), "work_ms": float(snap.work_ms),
+                "read_ms": float(getattr(snap, "read_ms", 0.0)),
+                "update_ms": float(getattr(snap, "update_ms", 0.0)),
+                "write_ms": float(getattr(snap, "write_ms", 0.0)),
+                "overruns": int(snap.overruns)}})
         fault = getattr(snap, "fault", None)
         if fault != self._fault:
             self._fault = fault

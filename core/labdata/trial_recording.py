@@ -12,6 +12,7 @@ simulated clock, laid out from the wall-clock start of the run, trials 1 s apart
 from __future__ import annotations
 
 import concurrent.futures as cf
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -26,17 +27,36 @@ from core.robots import load
 GAP_S = 1.0
 
 
+@dataclasses.dataclass(frozen=True)
+class _Tick:
+    """A loop snapshot made from bare telemetry (a loop that hands its ``until`` only that)."""
+
+    tick: int
+    t: float
+    control: Any
+
+
 class TrialSampler:
     """Loop observer: phase changes and faults at every tick; configuration, loop timing and
-    the object (when it moved > 1 mm) at ``hz`` (the loop runs at 100 Hz)."""
+    the object (when it moved > 1 mm) at ``hz`` (the loop runs at 100 Hz).
+
+    It is called with each tick's ``hw_bridge.loop.LoopSnapshot``, or with each tick's
+    ``core.control.stack.Telemetry`` (or None) by a loop that passes only that (no timing then).
+    """
 
     def __init__(self, hz: float = 10.0, period_s: float = 0.01) -> None:
         self.every = max(1, round(1.0 / (hz * period_s)))
         self._loop = LoopRecords(with_state=True)
         self._obj: np.ndarray | None = None
+        self._ticks = 0
         self.records: list[dict[str, Any]] = []
 
     def __call__(self, snap: Any) -> bool:
+        self._ticks += 1
+        if snap is None:
+            return False
+        if not hasattr(snap, "control"):  # bare telemetry
+            snap = _Tick(self._ticks, float(snap.t), snap)
         sample = snap.tick % self.every == 0
         for rec in self._loop.records(snap):
             if sample or rec["kind"] in ("phase", "fault"):
