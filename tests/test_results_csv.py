@@ -14,13 +14,19 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from core.control import capture, trials
 from core.control.capture import CaptureMap
 from core.labdata.progress import progress_bar, trial_progress
 from core.labdata.results_csv import CAPTURE_COLUMNS, TRIAL_COLUMNS
 from core.robots import load
 
 SOFT = load("soft-arm")
+
+try:  # the CLIs live in the packages' __main__ once trials and capture are packages
+    from core.control.capture.__main__ import main as capture_main
+    from core.control.trials.__main__ import main as trials_main
+except ImportError:
+    from core.control.capture import main as capture_main
+    from core.control.trials import main as trials_main
 
 
 def read_csv(path: Path) -> tuple[list[str], list[dict[str, str]]]:
@@ -31,7 +37,7 @@ def read_csv(path: Path) -> tuple[list[str], list[dict[str, str]]]:
 
 def test_trials_csv_and_recording_agree_with_the_json(tmp_path, capsys) -> None:
     out_csv, out_mcap = tmp_path / "trials.csv", tmp_path / "trials.mcap"
-    assert trials.main(["--object", "-0.22", "0.20", "0.0165", "--repeats", "1", "--seed", "0",
+    assert trials_main(["--object", "-0.22", "0.20", "0.0165", "--repeats", "1", "--seed", "0",
                         "--workers", "0", "--json", "--csv", str(out_csv),
                         "--record", str(out_mcap)]) == 0
     captured = capsys.readouterr()
@@ -74,13 +80,13 @@ def test_trials_csv_and_recording_agree_with_the_json(tmp_path, capsys) -> None:
     assert np.hypot(*(final - np.array([-0.22, 0.20]))) > 0.05  # it really moved to the bin
 
     with pytest.raises(SystemExit):  # never overwrites a recording
-        trials.main(["--object", "-0.22", "0.20", "0.0165", "--record", str(out_mcap)])
+        trials_main(["--object", "-0.22", "0.20", "0.0165", "--record", str(out_mcap)])
     assert "need a new file ending in .mcap" in capsys.readouterr().err
 
 
 def test_capture_csv_has_one_row_per_grid_point_matching_the_json(tmp_path, capsys) -> None:
     out_json, out_csv = tmp_path / "cap.json", tmp_path / "cap.csv"
-    assert capture.main(["--spacing", "0.01", "--out", str(out_json), "--csv",
+    assert capture_main(["--spacing", "0.01", "--out", str(out_json), "--csv",
                          str(out_csv)]) == 0
     assert capsys.readouterr().err == ""
     cmap = CaptureMap.load(out_json)
