@@ -1,14 +1,15 @@
 """Session recording and replay, so a lab session can be kept, reviewed and shared.
 
-New recordings are MCAP files (``.mcap``, typed channels that Foxglove and Lichtblick open: see
-``core.labdata`` and ``console.recording_mcap``); :func:`load_recording` reads those and the
-older gzip'd JSON-lines files (``.jsonl.gz``), which ``python -m core.labdata convert`` turns
-into MCAP. Both hold the same records. A JSON-lines recording in ``<data-dir>/recordings/``: the
-first line is a
-header (robot, configuration shape, who started it, wall-clock start); every other line has
-``t`` (s since the start), ``kind`` and, for things people did, ``who`` and ``client``:
+Recordings live in ``<data-dir>/recordings/``. New ones are MCAP files (``.mcap``: typed
+channels that Foxglove and Lichtblick open, see ``core.labdata`` and ``console.recording_mcap``);
+:func:`load_recording` reads those and the older gzip'd JSON-lines files (``.jsonl.gz``), which
+``python -m core.labdata convert`` turns into MCAP. Both hold the same records. In a JSON-lines
+file the first line is a header (robot, configuration shape, who started it, wall-clock start);
+every other line has ``t`` (s since the start), ``kind`` and, for things people did, ``who`` and
+``client``:
 
-* ``state`` -- the displayed configuration once per render tick: ``q``, ``seq``, ``source``.
+* ``state`` -- the displayed configuration once per render tick: ``q``, ``seq``, ``source``
+  (and ``command``, the newest commanded configuration, when the caller passes it).
 * ``action`` -- an operator action or a refusal (``what``), e.g. "took control", "STOP".
 * anything else panels log with ``app.recorder.log(kind, payload, client)`` -- ``plan``,
   ``objects``, ``telemetry``, ... -- stored as ``data`` (numpy arrays become lists). Records of
