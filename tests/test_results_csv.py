@@ -79,6 +79,14 @@ def test_trials_csv_and_recording_agree_with_the_json(tmp_path, capsys) -> None:
     assert np.hypot(objects[-1]["x"] - final[0], objects[-1]["y"] - final[1]) < 0.01
     assert np.hypot(*(final - np.array([-0.22, 0.20]))) > 0.05  # it really moved to the bin
 
+    from console.model import model_for  # the console replays it, with its markers
+    from console.recording import load_recording
+    from console.replay_markers import markers_of
+    rec = load_recording(out_mcap, model_for(SOFT))
+    assert len(rec.times) == len(configs) and rec.duration == pytest.approx(span, abs=0.2)
+    cats = [m.category for m in markers_of(rec)]
+    assert cats[0] == cats[-1] == "action" and cats.count("phase") == len(phases)
+
     with pytest.raises(SystemExit):  # never overwrites a recording
         trials_main(["--object", "-0.22", "0.20", "0.0165", "--record", str(out_mcap)])
     assert "need a new file ending in .mcap" in capsys.readouterr().err
