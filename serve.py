@@ -64,6 +64,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="auto: keep the highest CPU for the soft arm's 100 Hz loop and its device "
                         "emulator, the console and planner on the others; none: no pinning "
                         "(the extensible arm's loop runs in the console process: not pinned)")
+    p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
+                   help="also stream the lab channels live over the Foxglove WebSocket protocol "
+                        "on port P, bound like --host (off by default; read-only)")
     return p.parse_args(argv)
 
 
@@ -166,9 +169,10 @@ def main(argv: list[str] | None = None) -> int:
     except RobotFileError as exc:
         print(f"serve.py: {exc}", file=sys.stderr)
         return 2
-    if not 0 < args.port < 65536:
-        print(f"serve.py: --port must be in 1..65535, got {args.port}", file=sys.stderr)
-        return 2
+    for flag, value in (("--port", args.port), ("--foxglove-port", args.foxglove_port)):
+        if value is not None and not 0 < value < 65536:
+            print(f"serve.py: {flag} must be in 1..65535, got {value}", file=sys.stderr)
+            return 2
     try:
         Path(args.data_dir).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -199,6 +203,12 @@ def main(argv: list[str] | None = None) -> int:
         print("Desk mode: the first browser to connect gets control (--lab to disable).",
               flush=True)
     print(f"Data folder: {app.data.root}", flush=True)
+    bridge = None
+    if args.foxglove_port is not None:  # Foxglove / Lichtblick: "Open connection" -> this URL
+        from console.foxglove_bridge import FoxgloveBridge
+        bridge = FoxgloveBridge(app.recorder, robot, args.host, args.foxglove_port)
+        ws_url = urls(args.host, bridge.port)[0].replace("http://", "ws://").rstrip("/")
+        print(f"Foxglove live data (read-only): {ws_url}", flush=True)
     try:
         while not done.wait(0.5):
             pass
@@ -209,6 +219,8 @@ def main(argv: list[str] | None = None) -> int:
         app.hardware.close()  # type: ignore[attr-defined]
         app.stop()
         server.stop()
+        if bridge is not None:
+            bridge.stop()
     return 0
 
 

@@ -272,7 +272,7 @@ class ConsoleApp:
                     log.exception("panel %s failed in on_state", type(panel).__name__)
         self.frames_drawn += 1
         self.last_drawn_seq = state.seq
-        self.recorder.on_state(state)
+        self.recorder.on_state(state, self.store.command)
 
     def _render_loop(self) -> None:
         last_seq = -1

@@ -8,6 +8,8 @@ the viewer's client bundle with the scene embedded as base64, opened straight fr
 * :func:`recording_html` -- a recorded run, animated: a private viser server on 127.0.0.1 (an
   ephemeral port, stopped again) draws the same scene and steps the arm through the recording's
   states with ``insert_sleep`` between frames, so the file plays back with viser's timeline.
+  Its markers (phase changes, faults, STOP, operator actions: ``console.replay_markers``) are a
+  label in the scene that changes at each marker's time and a list in the page.
 
 :func:`external_urls` lists the http(s) URLs in a file, to check it needs nothing online.
 """
@@ -21,6 +23,7 @@ import numpy as np
 import viser
 
 from console.recording import Recording
+from console.replay_markers import current_marker, markers_html, markers_of
 
 if TYPE_CHECKING:
     from core.robots import Robot
@@ -72,6 +75,11 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
         duration = rec.duration
         rate = fps if duration <= 0 else min(fps, max_frames / duration)
         grid = np.arange(0.0, duration + 1e-9, 1.0 / rate) if duration > 0 else np.zeros(1)
+        markers = markers_of(rec)
+        grid = np.union1d(grid, [m.t for m in markers if 0.0 <= m.t <= duration])
+        label = server.scene.add_label("/markers/label", "", position=(0.0, -0.06, 0.12),
+                                       visible=False)
+        shown = -1
         last_q: np.ndarray | None = None
         drawn: dict[str, int] = {}
         pending = 0.0
@@ -82,7 +90,10 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
             q = rec.q_at(float(t))
             overlays = rec.overlays_until(float(t))
             changed_overlays = {k: v for k, v in overlays.items() if drawn.get(k) != id(v)}
-            if last_q is not None and np.array_equal(q, last_q) and not changed_overlays:
+            found = current_marker(markers, float(t))
+            new_marker = found is not None and found[0] != shown
+            if last_q is not None and np.array_equal(q, last_q) and not changed_overlays \
+                    and not new_marker:
                 continue
             if pending > 0:
                 serializer.insert_sleep(pending)
@@ -92,9 +103,16 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
                 for name, data in changed_overlays.items():
                     draw_overlay(server.scene, data)
                     drawn[name] = id(data)
+                if new_marker and found is not None:
+                    shown = found[0]
+                    label.text = found[1].label
+                    label.visible = True
             last_q = q
         if pending > 0:
             serializer.insert_sleep(pending)
-        return serializer.as_html(dark_mode=dark_mode)
+        page = serializer.as_html(dark_mode=dark_mode)
+        if markers and "</body>" in page:
+            page = page.replace("</body>", markers_html(markers) + "</body>", 1)
+        return page
     finally:
         server.stop()

@@ -21,6 +21,7 @@ from collections.abc import Callable
 import numpy as np
 import viser
 
+from console.lab_feed import feed_grasp
 from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableObject,
                                start_reach_map, validate_object)
 from core.planning.grasp import GraspPlanner, GraspRefused
@@ -306,6 +307,9 @@ class GraspSession:
                 fn(view)
             except Exception:
                 log.exception("grasp panel refresh failed")
+        recorder = getattr(self.app, "recorder", None)
+        if recorder is not None:  # objects and plans into recordings and the live bridge
+            feed_grasp(recorder, view, dirty)
 
 
 def session_for(app) -> GraspSession:

@@ -1,10 +1,15 @@
 """Session recording and replay, so a lab session can be kept, reviewed and shared.
 
-A recording is a gzip'd JSON-lines file in ``<data-dir>/recordings/``. The first line is a
-header (robot, configuration shape, who started it, wall-clock start); every other line has
-``t`` (s since the start), ``kind`` and, for things people did, ``who`` and ``client``:
+Recordings live in ``<data-dir>/recordings/``. New ones are MCAP files (``.mcap``: typed
+channels that Foxglove and Lichtblick open, see ``core.labdata`` and ``console.recording_mcap``);
+:func:`load_recording` reads those and the older gzip'd JSON-lines files (``.jsonl.gz``), which
+``python -m core.labdata convert`` turns into MCAP. Both hold the same records. In a JSON-lines
+file the first line is a header (robot, configuration shape, who started it, wall-clock start);
+every other line has ``t`` (s since the start), ``kind`` and, for things people did, ``who`` and
+``client``:
 
-* ``state`` -- the displayed configuration once per render tick: ``q``, ``seq``, ``source``.
+* ``state`` -- the displayed configuration once per render tick: ``q``, ``seq``, ``source``
+  (and ``command``, the newest commanded configuration, when the caller passes it).
 * ``action`` -- an operator action or a refusal (``what``), e.g. "took control", "STOP".
 * anything else panels log with ``app.recorder.log(kind, payload, client)`` -- ``plan``,
   ``objects``, ``telemetry``, ... -- stored as ``data`` (numpy arrays become lists). Records of
@@ -40,7 +45,9 @@ from console.state import ArmState
 log = logging.getLogger(__name__)
 
 Array = npt.NDArray[np.float64]
-SUFFIX = ".jsonl.gz"
+SUFFIX = ".jsonl.gz"  # the older format (still read, and written with suffix=SUFFIX)
+MCAP_SUFFIX = ".mcap"
+SUFFIXES = (MCAP_SUFFIX, SUFFIX)
 FORMAT = "softarm-console-recording/1"
 MAX_DECOMPRESSED = 512 * 1024 * 1024
 
@@ -65,11 +72,16 @@ class Recorder:
         model: The arm model (header: robot name, kind, configuration shape).
         name_of: ``name_of(client)`` -> display name of a viser client (or None).
         max_queue: Lines buffered for the writer before new ones are dropped (and counted).
+        suffix: ``.mcap`` (default) or ``.jsonl.gz`` (the older format).
     """
 
     def __init__(self, data: DataDir | Callable[[], DataDir], model: ArmModel,
                  name_of: Callable[[Any], str] = lambda c: "server" if c is None else str(c),
-                 max_queue: int = 20000) -> None:
+                 max_queue: int = 20000, suffix: str = MCAP_SUFFIX) -> None:
+        if suffix not in SUFFIXES:
+            raise ValueError(f"suffix must be one of {SUFFIXES}, got {suffix!r}")
+        self.suffix = suffix
+        self.taps: list[Callable[[dict[str, Any], int], None]] = []
         self.data = data
         self.model = model
         self.name_of = name_of
@@ -80,6 +92,7 @@ class Recorder:
         self._queue: queue.Queue[dict[str, Any] | None] | None = None
         self._thread: threading.Thread | None = None
         self._t0 = 0.0
+        self._start_ns = 0
         self.path: Path | None = None
 
     @property
@@ -100,17 +113,20 @@ class Recorder:
                 name = self.path.name if self.path is not None else "?"
                 raise RuntimeError(f"already recording to {name}")
             data = self.data if isinstance(self.data, DataDir) else self.data()
-            name = data.new_name("recordings", stem, SUFFIX)
-            path = data.path("recordings", name, SUFFIX)
+            name = data.new_name("recordings", stem, self.suffix)
+            path = data.path("recordings", name, self.suffix)
             q: queue.Queue[dict[str, Any] | None] = queue.Queue(self._max_queue)
             robot = self.model.robot
-            q.put({"kind": "header", "format": FORMAT, "robot": robot.name,
-                   "robot_kind": self.model.kind, "shape": list(self.model.shape),
-                   "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                   "by": self.name_of(client), "t": 0.0})
+            header = {"kind": "header", "format": FORMAT, "robot": robot.name,
+                      "robot_kind": self.model.kind, "shape": list(self.model.shape),
+                      "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                      "by": self.name_of(client), "t": 0.0}
             self._t0 = time.perf_counter()
+            self._start_ns = time.time_ns()  # log time of t = 0 (the console's clock)
+            if self.suffix == SUFFIX:
+                q.put(header)
             self.path, self._queue, self.dropped, self.lines = path, q, 0, 0
-            self._thread = threading.Thread(target=self._write, args=(path, q),
+            self._thread = threading.Thread(target=self._write, args=(path, q, header),
                                             name="console-recorder", daemon=True)
             self._thread.start()
         return path
@@ -140,23 +156,45 @@ class Recorder:
         self._put({"kind": "action", "who": self.name_of(client), "client": cid, "what": what,
                    **extra})
 
-    def on_state(self, state: ArmState) -> None:
-        """Record a drawn state (the render thread calls this every frame)."""
-        if self._queue is not None:
-            self._put({"kind": "state", "q": np.asarray(state.q).tolist(), "seq": state.seq,
-                       "source": state.source})
+    def on_state(self, state: ArmState, command: ArmState | None = None) -> None:
+        """Record a drawn state (the render thread calls this every frame) and, if given, the
+        newest commanded state (with hardware the drawn one is the measurement)."""
+        if self._queue is not None or self.taps:
+            record: dict[str, Any] = {"kind": "state", "q": np.asarray(state.q).tolist(),
+                                      "seq": state.seq, "source": state.source}
+            if command is not None:
+                record["command"] = np.asarray(command.q).tolist()
+            self._put(record)
+
+    def add_tap(self, fn: Callable[[dict[str, Any], int], None]) -> None:
+        """Also hand every record, recording or not, to ``fn(record, ns)`` (ns: the console's
+        clock, ns since the epoch); ``fn`` runs on the caller's thread and must only enqueue."""
+        self.taps.append(fn)
 
     def _put(self, record: dict[str, Any]) -> None:
+        for tap in self.taps:
+            try:
+                tap(dict(record), time.time_ns())
+            except Exception:  # a live viewer must never break recording or the caller
+                log.debug("recorder tap failed", exc_info=True)
         q = self._queue
         if q is None:
             return
-        record["t"] = round(time.perf_counter() - self._t0, 4)
+        elapsed = time.perf_counter() - self._t0
+        record["t"] = round(elapsed, 4)
+        if self.suffix == MCAP_SUFFIX:  # exact log time (the console's clock, ns)
+            record["ns"] = self._start_ns + int(elapsed * 1e9)
         try:
             q.put_nowait(record)
         except queue.Full:
             self.dropped += 1
 
-    def _write(self, path: Path, q: queue.Queue[dict[str, Any] | None]) -> None:
+    def _write(self, path: Path, q: queue.Queue[dict[str, Any] | None],
+               header: dict[str, Any]) -> None:
+        if path.name.endswith(MCAP_SUFFIX):
+            from console.recording_mcap import write_queue
+            write_queue(path, q, header, self._start_ns, self.model, self._count)
+            return
         last_flush = time.monotonic()
         with gzip.open(path, "wt", encoding="utf-8", compresslevel=6) as f:
             while True:
@@ -169,10 +207,13 @@ class Recorder:
                 if record:
                     f.write(json.dumps(record, default=_json_default, separators=(",", ":")))
                     f.write("\n")
-                    self.lines += 1
+                    self._count()
                 if time.monotonic() - last_flush > 1.0:  # a crash loses at most ~1 s
                     f.flush()
                     last_flush = time.monotonic()
+
+    def _count(self) -> None:
+        self.lines += 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,6 +279,9 @@ def load_recording(path: Path, model: ArmModel) -> Recording:
     Raises:
         ValueError: not a console recording, or one of another robot; the message says which.
     """
+    if path.name.endswith(MCAP_SUFFIX):
+        from console.recording_mcap import load_mcap
+        return load_mcap(path, model)
     states_t: list[float] = []
     states_q: list[Any] = []
     sources: list[str] = []

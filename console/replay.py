@@ -15,11 +15,14 @@ import time
 from typing import TYPE_CHECKING
 
 import viser
+from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load)
 
 from console.arm_view import ArmView, make_arm_view
 from console.datadir import BadFileName
 from console.export import draw_overlay, recording_html
-from console.recording import SUFFIX, Recording, load_recording
+from console.recording import SUFFIXES, Recording, load_recording
+from console.replay_markers import (COLORS, Marker, current_marker, markers_of, next_marker,
+                                    previous_marker)
 
 if TYPE_CHECKING:
     from console.app import ConsoleApp
@@ -42,6 +45,7 @@ class ReplaySession:
         self.pos = 0.0
         self.playing = False
         self.speed = 1.0
+        self.markers: list[Marker] = []
         self._lock = threading.Lock()
         gui = client.gui
         self.folder = gui.add_folder("Replay", order=order, expand_by_default=False)
@@ -51,6 +55,10 @@ class ReplaySession:
             self.play_btn = gui.add_button("Play replay", disabled=True)
             self.timeline = gui.add_slider("Time (s)", min=0.0, max=1.0, step=0.05,
                                            initial_value=0.0, disabled=True)
+            self.prev_btn = gui.add_button("◀ Previous marker", disabled=True,
+                                           hint="Phase change, fault, STOP or operator action")
+            self.next_btn = gui.add_button("Next marker ▶", disabled=True,
+                                           hint="Phase change, fault, STOP or operator action")
             self.speed_dd = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
             self.info = gui.add_html('<small data-testid="replay-info">nothing loaded</small>')
             self.export_btn = gui.add_button("Export run (HTML)", disabled=True,
@@ -59,10 +67,12 @@ class ReplaySession:
         self.play_btn.on_click(lambda e: self.toggle())
         self.timeline.on_update(self._on_seek)
         self.speed_dd.on_update(self._on_speed)
+        self.prev_btn.on_click(lambda e: self.jump(-1))
+        self.next_btn.on_click(lambda e: self.jump(+1))
         self.export_btn.on_click(lambda e: self.export())
 
     def _file_options(self) -> tuple[str, ...]:
-        names = self.app.data.list("recordings", SUFFIX)
+        names = [n for suffix in SUFFIXES for n in self.app.data.list("recordings", suffix)]
         return tuple(names) if names else (NONE,)
 
     def refresh_files(self) -> None:
@@ -78,7 +88,9 @@ class ReplaySession:
                        "'Start recording'.")
             return False
         try:
-            path = self.app.data.path("recordings", name, SUFFIX)
+            suffix = next((s for s in SUFFIXES if isinstance(name, str) and name.endswith(s)),
+                          SUFFIXES[0])
+            path = self.app.data.path("recordings", name, suffix)
             if not path.is_file():
                 raise BadFileName(f"no recording named {name!r}")
             rec = load_recording(path, self.app.model)
@@ -94,6 +106,10 @@ class ReplaySession:
                         handle.color = GHOST_COLOR
                         handle.opacity = GHOST_OPACITY
             self.timeline.max = max(rec.duration, 0.05)
+            self.markers = markers_of(rec)
+            self.timeline._marks = tuple(  # viser 1.1.1: the slider's marks prop
+                GuiSliderMark(value=round(m.t, 3), label=None) for m in self.markers[:200])
+            self.prev_btn.disabled = self.next_btn.disabled = not self.markers
             self.timeline.disabled = False
             self.play_btn.disabled = False
             self.export_btn.disabled = False
@@ -116,6 +132,20 @@ class ReplaySession:
                 return
             self.pos = min(max(float(t), 0.0), self.rec.duration)
         self.draw(move_slider=False)
+
+    def jump(self, direction: int) -> Marker | None:
+        """Seek to the next (``direction`` > 0) or previous marker; returns it (or None)."""
+        with self._lock:
+            if self.rec is None:
+                return None
+            pick = next_marker if direction > 0 else previous_marker
+            marker = pick(self.markers, self.pos)
+            if marker is None:
+                return None
+            self.pos, self.playing = min(marker.t, self.rec.duration), False
+            self.play_btn.label = "Play replay"
+        self.draw()
+        return marker
 
     def _on_seek(self, event: viser.GuiEvent) -> None:
         if event.client is not None:
@@ -148,10 +178,16 @@ class ReplaySession:
                 if move_slider:
                     self.timeline.value = round(pos, 3)
                 lines = [f"{e.t:7.1f} s · {e.who}: {e.text}" for e in rec.events_until(pos)]
+                found = current_marker(self.markers, pos)
+                marker = "" if found is None else (
+                    f'<br><small data-testid="replay-marker" data-index="{found[0]}" '
+                    f'style="color:{COLORS[found[1].category]}">marker {found[0] + 1}/'
+                    f"{len(self.markers)}: {_escape(found[1].label)}</small>")
                 self.info.content = (
                     f'<small data-testid="replay-info" data-t="{pos:.3f}">{rec.name} · '
                     f"{pos:.1f} / {rec.duration:.1f} s · "
                     f"{'playing' if self.playing else 'paused'} {self.speed:g}x</small>"
+                    + marker
                     + "".join(f"<br><small>{_escape(line)}</small>" for line in lines))
 
     def export(self) -> None:
@@ -165,7 +201,8 @@ class ReplaySession:
             log.exception("export of %s failed", rec.name)
             self._tell("Export failed", str(exc), "red")
             return
-        stem = rec.name.removesuffix(SUFFIX)
+        stem = next((rec.name.removesuffix(s) for s in SUFFIXES if rec.name.endswith(s)),
+                    rec.name)
         name = self.app.data.new_name("exports", stem, ".html")
         path = self.app.data.path("exports", name, ".html")
         path.write_text(html, encoding="utf-8")

@@ -92,7 +92,7 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
     stop_button(alice).click()
     alice.get_by_role("button", name="Stop recording").click()
     wait_for(lambda: not app.recorder.recording)
-    names = app.data.list("recordings", ".jsonl.gz")
+    names = app.data.list("recordings", ".mcap")
     assert len(names) == 1
 
     bob.get_by_text("Replay", exact=True).click()
@@ -117,6 +117,25 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
     assert np.linalg.norm(drawn_tip[:2] - tip[:2]) < 0.03  # played on between read and draw
     assert app.store.command.source == "stop"  # replay never commands the arm
 
+    # Markers (started recording, the demo, STOP, ...): from the end, back two and on one.
+    from console.replay_markers import current_marker, next_marker, previous_marker
+    wait_for(lambda: not session.playing, timeout=15.0)  # the replay ran to its end
+    markers = session.markers
+    assert len(markers) >= 3 and any(m.category == "stop" for m in markers)
+    marker = bob.locator('[data-testid="replay-marker"]')
+    pos = session.pos
+    for name in ("◀ Previous marker", "◀ Previous marker", "Next marker ▶"):
+        target = (previous_marker if name.startswith("◀") else next_marker)(markers, pos)
+        assert target is not None
+        pos = min(target.t, rec.duration)
+        index = current_marker(markers, pos)[0]
+        bob.get_by_role("button", name=name).click()
+        wait_for(lambda: marker.count() == 1 and marker.get_attribute("data-index") == str(index))
+        assert session.pos == pytest.approx(pos, abs=1e-6)
+        assert markers[index].text in marker.inner_text()
+        np.testing.assert_allclose(rec.q_at(session.pos), rec.q_at(pos))
+    assert app.store.command.source == "stop"
+
     bob.get_by_role("button", name="Export run (HTML)").click()
     files = wait_for(lambda: list(app.data.folder("exports").glob("*.html")), timeout=15.0)
     page, requested = open_offline(lab.browser, files[0])
@@ -126,5 +145,9 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
                  timeout=10.0)  # the arm is drawn
         page.screenshot(path=str(artifacts_dir / "browser_lab_exported_run.png"))
         assert requested == []
+        items = page.locator('[data-testid="run-markers"] li')
+        assert items.count() == len(markers)
+        assert float(items.first.get_attribute("data-t") or -1) == pytest.approx(markers[0].t,
+                                                                                 abs=1e-3)
     finally:
         page.context.close()

@@ -32,6 +32,7 @@ import numpy as np
 import viser
 from viser import uplot
 
+from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
 from console.panels.control_process import DISCONNECTED, ControlProcess, ControlView
 from console.state import ArmState
@@ -204,6 +205,8 @@ class ControlPanel(Panel):
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
         self._last_fault: str | None = None
+        self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
+            self.app.recorder, lambda: getattr(self.app, "bridge_controls", None) is not None)
         self._draw_lock = threading.Lock()
         self._pump_stop = threading.Event()
         self._pump = threading.Thread(target=self._pump_loop, name="control-pump", daemon=True)
@@ -285,6 +288,7 @@ class ControlPanel(Panel):
     def _pump_once(self) -> None:
         view = self.ctl.view
         c = None if view is None else view.snapshot.control
+        self._feed.on_view(view)
         if view is not None:
             self._notify_fault(view.fault)
         if time.monotonic() - self._plot_at > 2.0 / PLOT_HZ:

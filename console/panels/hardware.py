@@ -29,6 +29,7 @@ import numpy as np
 import viser
 from viser import uplot
 
+from console.lab_feed import LinkFeed
 from console.panels.base import Panel, operator_only
 from console.state import ArmState
 from hw_bridge.controls import BridgeControls
@@ -148,6 +149,7 @@ class HardwarePanel(Panel):
         self._accepted: dict[int, Any] = {id(h): h.value for h in self._inputs}
         self._lock = threading.Lock()
         self._faults = FaultTracker()
+        self._link_feed = LinkFeed(self.app.recorder)  # link health -> lab data
         self._t0 = time.monotonic()
         self._samples: collections.deque = collections.deque(maxlen=HISTORY)
         self._received = -1
@@ -280,6 +282,7 @@ class HardwarePanel(Panel):
                 if not str(self.port_text.value).strip():
                     self.port_text.value = h.port  # the port the loop actually uses
             self._plot(h)
+            self._link_feed.on_health(self.kind or "device", h)
             new = self._faults.update(h)
         if new:
             body = "; ".join(new) + " — the arm is not commanded until the operator " \

@@ -29,6 +29,7 @@ import viser
 import viser.uplot as uplot
 
 from console.arm_view import DeltaArmView
+from console.lab_feed import path_plan_record
 from console.panels.base import Panel
 from console.state import ArmState
 from core.kinematics import delta as dk
@@ -228,6 +229,7 @@ class PathsPanel(Panel):
             self._set_status(f"⚠ Planning failed: {exc}", "error")
             return
         self._planned = (req, path)
+        self.app.recorder.log("plan", path_plan_record(req, waypoints, path))  # lab data
         self._draw_preview(path, waypoints)
         ok = path.max_error <= MAX_EXECUTE_ERROR
         summary = (f"{req.kind} {req.size * 1e3:.0f} mm in {req.plane} at "

@@ -25,14 +25,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=None, help="save .json or .npz")
     ap.add_argument("--svg", type=Path, default=None, help="write the Fig. 6 drawing")
+    ap.add_argument("--csv", type=Path, default=None,
+                    help="also write one CSV row per grid point (units in the header)")
     a = ap.parse_args(argv)
     robot = load(a.robot)
     if not isinstance(robot, SoftArm):
         ap.error(f"{a.robot} is not a soft planar arm")
+    from core.labdata.progress import row_progress  # a bar on a terminal, nothing when piped
     try:
-        cmap = characterise(robot, a.radius, spacing=a.spacing, repeats=a.repeats, seed=a.seed)
+        with row_progress("capture grid") as progress:
+            cmap = characterise(robot, a.radius, spacing=a.spacing, repeats=a.repeats,
+                                seed=a.seed, progress=progress)
     except ValueError as exc:
         ap.error(str(exc))
+    if a.csv:
+        from core.labdata.results_csv import write_capture_csv
+        write_capture_csv(a.csv, cmap)
     if a.out:
         cmap.save(a.out)
     if a.svg:

@@ -74,8 +74,10 @@ def bin_drop_point(robot: SoftArm, radius: float) -> np.ndarray:
 
 def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "",
               planner: str = DEFAULT_PLANNER, time_limit_s: float = 150.0,
-              sim_overrides: dict[str, Any] | None = None) -> TrialResult:
-    """One headless grasp-and-place trial on the simulated clock."""
+              sim_overrides: dict[str, Any] | None = None,
+              observe: Callable[[Any], Any] | None = None) -> TrialResult:
+    """One headless grasp-and-place trial on the simulated clock; ``observe(telemetry)`` (if
+    given) sees every tick's telemetry (``core.labdata.trial_recording`` records them)."""
     x, y, r = (float(v) for v in obj)
     rng = np.random.default_rng([seed, 7])
     plan_fn: Callable[..., Any] = resolve(planner)
@@ -88,12 +90,13 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
         lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
     loop = SimLoop(sim, stack, 0.01)
     wall = time.perf_counter()
-    loop.run(0.05)
+    watch = (lambda c: bool(observe(c))) if observe else None
+    loop.run(0.05, until=watch)
     loop.arm()
-    loop.run(0.5)  # pre-pressurise the root segments
+    loop.run(0.5, until=watch)  # pre-pressurise the root segments
     loop.start_task()
-    loop.run(time_limit_s, until=lambda c: c is not None
-             and c.phase in (Phase.RELEASED.value, Phase.STOPPED.value))
+    loop.run(time_limit_s, until=lambda c: bool(watch and watch(c)) or (
+        c is not None and c.phase in (Phase.RELEASED.value, Phase.STOPPED.value)))
     wall = time.perf_counter() - wall
     m = stack.machine
     failure: str | None = None

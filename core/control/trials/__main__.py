@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import argparse
 import concurrent.futures as cf
+import functools
 import json
 import math
 import sys
 import time
-from typing import Any, Sequence
+from pathlib import Path
+from typing import Any, Callable, Sequence
 
 from core.control.params import SimParams
 from core.control.planner_spec import DEFAULT_PLANNER
@@ -74,7 +76,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--time-limit", type=float, default=150.0, help="simulated s per trial")
     ap.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE",
                     help="override a [sim] parameter, e.g. stall_rate_hz=0.5 or mocap.noise_m=5e-4")
+    ap.add_argument("--record", type=Path, default=None, metavar="PATH.mcap",
+                    help="also record the trials (arm, object, phases) as MCAP")
+    ap.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
+                    help="also write one CSV row per trial (units in the header)")
     a = ap.parse_args(argv)
+    if a.record is not None and (a.record.suffix != ".mcap" or a.record.exists()):
+        ap.error(f"--record {a.record}: need a new file ending in .mcap")
     try:
         overrides = parse_overrides(a.sim)
         if overrides:
@@ -98,15 +106,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         r0 = robot.capture.nominal_object_radius
         objects = [(k, (x, y, r0)) for k, (x, y) in paper_locations().items()]
     wall = time.perf_counter()
-    progress = None if a.json else (lambda k, n, r: print(
-        f"  trial {k}/{n}: {r.label} {'ok' if r.success else 'FAILED'}", file=sys.stderr, flush=True))
-    batch = dict(planner=a.planner, time_limit_s=a.time_limit, sim_overrides=overrides or None,
-                 progress=progress)
-    if a.workers >= 1:
-        with cf.ProcessPoolExecutor(a.workers) as pool:
-            results = run_trials(a.robot, objects, a.repeats, a.seed, map_fn=pool.map, **batch)
-    else:
-        results = run_trials(a.robot, objects, a.repeats, a.seed, **batch)
+    from core.labdata.progress import trial_progress  # a bar on a terminal, nothing when piped
+    with trial_progress(len(objects) * a.repeats) as progress:
+        batch = dict(planner=a.planner, time_limit_s=a.time_limit,
+                     sim_overrides=overrides or None, progress=progress)
+        run: Callable[..., Any] = run_trials
+        if a.record is not None:
+            from core.labdata.trial_recording import record_trials
+            run = functools.partial(record_trials, a.record)
+        if a.workers >= 1:
+            with cf.ProcessPoolExecutor(a.workers) as pool:
+                results = run(a.robot, objects, a.repeats, a.seed, map_fn=pool.map, **batch)
+        else:
+            results = run(a.robot, objects, a.repeats, a.seed, **batch)
+    if a.csv is not None:
+        from core.labdata.results_csv import write_trials_csv
+        write_trials_csv(a.csv, results)
     loop = summary(results, time.perf_counter() - wall, a.workers)
     if a.json:
         keys = ("object", "success", "failure", "approach_s", "return_s")

@@ -1,0 +1,146 @@
+"""MCAP files of lab channels: a synchronous writer and a reader on the ``mcap`` package.
+
+No threads here (the console's Recorder calls :class:`McapLog` from its writer thread; the trials
+CLI from its main thread). A file holds JSON-encoded channels with JSON schemas (see
+:mod:`core.labdata.channels`), chunked and zstd-compressed, and one metadata record
+``softarm.recording`` with the header (robot, kind, shape, who started it, start time in ns).
+Log times are the console's clock in ns since the epoch, never decreasing within a file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any, BinaryIO, Iterator
+
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+
+from core.labdata.channels import ArmGeometry, ChannelSpec, json_safe, messages_for, spec_for
+
+PROFILE = ""  # plain JSON channels (no ROS profile)
+LIBRARY = "softarm-console"
+META_NAME = "softarm.recording"
+FORMAT = "softarm-console-mcap/1"
+
+
+class McapLog:
+    """Writes console records (or channel messages) to one MCAP file.
+
+    Args:
+        target: Path to create (must not exist) or a binary file object.
+        header: Recording header (robot, robot_kind, shape, by, started, ...): stored as
+            metadata, strings only (other values JSON-encoded).
+        start_ns: Log time of ``t = 0`` (ns since the epoch).
+        arm: Geometry for the arm channels (needed when ``state`` records are written).
+        chunk_size: Uncompressed bytes per chunk (256 KiB: ~2 s of a 30 Hz session, so a crash
+            loses little; ``mcap recover`` restores the chunks written).
+    """
+
+    def __init__(self, target: str | Path | BinaryIO, header: dict[str, Any], start_ns: int,
+                 arm: ArmGeometry | None = None, chunk_size: int = 256 << 10) -> None:
+        if isinstance(target, (str, Path)):
+            path = Path(target)
+            if path.exists():
+                raise FileExistsError(f"{path} exists")
+            self._file: BinaryIO = open(path, "xb")  # noqa: SIM115 - closed by close()
+            self._owned = True
+        else:
+            self._file, self._owned = target, False
+        self.start_ns = int(start_ns)
+        self.arm = arm
+        self.messages = 0
+        self.last_ns = self.start_ns
+        self._writer = Writer(self._file, chunk_size=chunk_size,
+                              compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library=LIBRARY)
+        self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._seq: dict[int, int] = {}
+        meta = {"format": FORMAT, "start_ns": str(self.start_ns)}
+        for key, value in header.items():
+            meta[str(key)] = value if isinstance(value, str) else json.dumps(value)
+        self._writer.add_metadata(META_NAME, meta)
+        self.closed = False
+
+    def _channel(self, spec: ChannelSpec) -> int:
+        cid = self._channels.get(spec.topic)
+        if cid is None:
+            sid = self._schemas.get(spec.schema_name)
+            if sid is None:
+                sid = self._writer.register_schema(
+                    spec.schema_name, "jsonschema", json.dumps(spec.schema).encode("utf-8"))
+                self._schemas[spec.schema_name] = sid
+            cid = self._writer.register_channel(spec.topic, "json", sid)
+            self._channels[spec.topic] = cid
+        return cid
+
+    def ns_of(self, t: float) -> int:
+        """Log time of ``t`` s after the start, never before the last one written."""
+        return max(self.start_ns + int(round(float(t) * 1e9)), self.last_ns)
+
+    def write(self, topic: str, message: dict[str, Any], ns: int) -> None:
+        """One channel message at log time ``ns`` (clamped so log times never decrease)."""
+        cid = self._channel(spec_for(topic))
+        ns = max(int(ns), self.last_ns)
+        seq = self._seq.get(cid, 0)
+        self._seq[cid] = seq + 1
+        try:
+            text = json.dumps(message, separators=(",", ":"), allow_nan=False)
+        except (TypeError, ValueError):  # NaN/inf (e.g. a lost measurement) -> null; numpy
+            text = json.dumps(json_safe(message), separators=(",", ":"), allow_nan=False)
+        self._writer.add_message(cid, log_time=ns, publish_time=ns, sequence=seq,
+                                 data=text.encode("utf-8"))
+        self.last_ns = ns
+        self.messages += 1
+
+    def record(self, rec: dict[str, Any]) -> None:
+        """Write console record ``rec`` on its channels, at its ``ns`` (epoch ns) if it has one,
+        else ``t`` s after the start."""
+        ns = int(rec["ns"]) if "ns" in rec else self.ns_of(rec.get("t", 0.0))
+        for topic, msg in messages_for(rec, ns, self.arm):
+            self.write(topic, msg, ns)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        self._writer.finish()
+        if self._owned:
+            self._file.close()
+
+    def __enter__(self) -> McapLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclasses.dataclass(frozen=True)
+class LabMessage:
+    """One decoded message: topic, schema name, log time (ns) and the JSON message."""
+
+    topic: str
+    schema_name: str
+    log_time: int
+    message: Any
+
+
+def read_header(f: BinaryIO) -> dict[str, str]:
+    """The ``softarm.recording`` metadata of an MCAP file (ValueError if it has none)."""
+    reader = make_reader(f)
+    for meta in reader.iter_metadata():
+        if meta.name == META_NAME:
+            return dict(meta.metadata)
+    raise ValueError("not a console recording (no softarm.recording metadata)")
+
+
+def iter_messages(f: BinaryIO, topics: list[str] | None = None) -> Iterator[LabMessage]:
+    """Decoded JSON messages in log-time order (ValueError for a non-JSON channel)."""
+    reader = make_reader(f)
+    for schema, channel, message in reader.iter_messages(topics=topics, log_time_order=True):
+        if channel.message_encoding != "json":
+            raise ValueError(f"channel {channel.topic} is {channel.message_encoding}, not json")
+        yield LabMessage(channel.topic, schema.name if schema is not None else "",
+                         message.log_time, json.loads(message.data))

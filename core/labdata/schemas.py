@@ -1,0 +1,153 @@
+"""JSON schemas of the lab channels, so Foxglove/Lichtblick render them and ROS-side tools type them.
+
+Three are Foxglove's well-known schemas in their JSON form (the subset of fields the console
+writes, with Foxglove's field names and enum values), which Foxglove and Lichtblick recognise by
+name: ``foxglove.SceneUpdate`` (3D panel), ``foxglove.PoseInFrame`` (3D panel, plots) and
+``foxglove.Log`` (Log panel). The others are the console's own (``softarm.*``), plain JSON objects
+whose numeric fields plot directly (e.g. ``/control/loop_timing.work_ms``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+Schema = dict[str, Any]
+
+NUMBER: Schema = {"type": "number"}
+INTEGER: Schema = {"type": "integer"}
+TEXT: Schema = {"type": "string"}
+BOOL: Schema = {"type": "boolean"}
+WHO: Schema = {"type": "string", "description": "display name of who did it ('server' if none)"}
+CLIENT: Schema = {"type": ["integer", "string", "null"], "description": "viser client id"}
+
+TIME: Schema = {"type": "object", "title": "time",
+                "properties": {"sec": {"type": "integer", "minimum": 0},
+                               "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}}
+DURATION: Schema = {"type": "object", "title": "duration",
+                    "properties": {"sec": INTEGER,
+                                   "nsec": {"type": "integer", "minimum": 0,
+                                            "maximum": 999999999}}}
+VECTOR3: Schema = {"type": "object", "title": "foxglove.Vector3",
+                   "properties": {"x": NUMBER, "y": NUMBER, "z": NUMBER}}
+POINT3: Schema = {"type": "object", "title": "foxglove.Point3",
+                  "properties": {"x": NUMBER, "y": NUMBER, "z": NUMBER}}
+QUATERNION: Schema = {"type": "object", "title": "foxglove.Quaternion",
+                      "properties": {"x": NUMBER, "y": NUMBER, "z": NUMBER, "w": NUMBER}}
+POSE: Schema = {"type": "object", "title": "foxglove.Pose",
+                "properties": {"position": VECTOR3, "orientation": QUATERNION}}
+COLOR: Schema = {"type": "object", "title": "foxglove.Color",
+                 "properties": {"r": NUMBER, "g": NUMBER, "b": NUMBER, "a": NUMBER}}
+
+
+def _array(items: Schema) -> Schema:
+    return {"type": "array", "items": items}
+
+
+def _object(title: str, description: str, properties: dict[str, Schema],
+            extra: bool = False) -> Schema:
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title,
+            "description": description, "type": "object", "properties": properties,
+            "additionalProperties": extra}
+
+
+LINE_PRIMITIVE: Schema = {
+    "type": "object", "title": "foxglove.LinePrimitive",
+    "properties": {"type": {"type": "integer", "enum": [0, 1, 2],
+                            "description": "0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
+                   "pose": POSE, "thickness": NUMBER, "scale_invariant": BOOL,
+                   "points": _array(POINT3), "color": COLOR, "colors": _array(COLOR),
+                   "indices": _array(INTEGER)}}
+CYLINDER_PRIMITIVE: Schema = {
+    "type": "object", "title": "foxglove.CylinderPrimitive",
+    "properties": {"pose": POSE, "size": VECTOR3, "bottom_scale": NUMBER, "top_scale": NUMBER,
+                   "color": COLOR}}
+SPHERE_PRIMITIVE: Schema = {"type": "object", "title": "foxglove.SpherePrimitive",
+                            "properties": {"pose": POSE, "size": VECTOR3, "color": COLOR}}
+TEXT_PRIMITIVE: Schema = {
+    "type": "object", "title": "foxglove.TextPrimitive",
+    "properties": {"pose": POSE, "billboard": BOOL, "font_size": NUMBER,
+                   "scale_invariant": BOOL, "color": COLOR, "text": TEXT}}
+SCENE_ENTITY: Schema = {
+    "type": "object", "title": "foxglove.SceneEntity",
+    "properties": {"timestamp": TIME, "frame_id": TEXT, "id": TEXT, "lifetime": DURATION,
+                   "frame_locked": BOOL,
+                   "metadata": _array({"type": "object", "title": "foxglove.KeyValuePair",
+                                       "properties": {"key": TEXT, "value": TEXT}}),
+                   "arrows": _array({"type": "object"}), "cubes": _array({"type": "object"}),
+                   "spheres": _array(SPHERE_PRIMITIVE), "cylinders": _array(CYLINDER_PRIMITIVE),
+                   "lines": _array(LINE_PRIMITIVE), "triangles": _array({"type": "object"}),
+                   "texts": _array(TEXT_PRIMITIVE), "models": _array({"type": "object"})}}
+SCENE_UPDATE: Schema = _object(
+    "foxglove.SceneUpdate", "An update to the entities displayed in a 3D scene",
+    {"deletions": _array({"type": "object", "title": "foxglove.SceneEntityDeletion",
+                          "properties": {"timestamp": TIME,
+                                         "type": {"type": "integer", "enum": [0, 1],
+                                                  "description": "0 MATCHING_ID, 1 ALL"},
+                                         "id": TEXT}}),
+     "entities": _array(SCENE_ENTITY)})
+POSE_IN_FRAME: Schema = _object(
+    "foxglove.PoseInFrame", "A timestamped pose for an object or reference frame in 3D space",
+    {"timestamp": TIME, "frame_id": TEXT, "pose": POSE})
+LOG: Schema = _object(
+    "foxglove.Log", "A log message",
+    {"timestamp": TIME,
+     "level": {"type": "integer", "enum": [0, 1, 2, 3, 4, 5],
+               "description": "0 UNKNOWN, 1 DEBUG, 2 INFO, 3 WARNING, 4 ERROR, 5 FATAL"},
+     "message": TEXT, "name": TEXT, "file": TEXT, "line": {"type": "integer", "minimum": 0}})
+
+SEGMENT: Schema = {
+    "type": "object",
+    "description": "one segment: planar arm {kappa} (1/m); extensible arm {dx, dy, dL} (m)",
+    "properties": {"kappa": NUMBER, "dx": NUMBER, "dy": NUMBER, "dL": NUMBER}}
+CONFIGURATION: Schema = _object(
+    "softarm.Configuration",
+    "Arm configuration per segment: measured (what the console drew: the hardware's measurement "
+    "when a device is connected) and commanded (the newest command)",
+    {"timestamp": TIME, "seq": INTEGER, "source": TEXT,
+     "kind": {"type": "string", "enum": ["planar", "delta"]},
+     "measured": _array(SEGMENT), "commanded": _array(SEGMENT)})
+OBJECTS: Schema = _object(
+    "softarm.Objects", "Objects on the table: cylinders, centre x, y and radius r in m",
+    {"timestamp": TIME, "who": WHO, "client": CLIENT,
+     "objects": _array({"type": "object", "properties": {"name": TEXT, "x": NUMBER,
+                                                         "y": NUMBER, "r": NUMBER}}),
+     "selected": {"type": ["string", "null"]}}, extra=True)
+PLAN: Schema = _object(
+    "softarm.Plan",
+    "A grasp plan (approach circles around the object, waypoints with curvatures and palm poses)"
+    " or a path plan (waypoints); lengths in m, angles in rad, curvatures in 1/m",
+    {"timestamp": TIME, "who": WHO, "client": CLIENT, "refusal": {"type": ["string", "null"]},
+     "center": _array(NUMBER), "radius": NUMBER,
+     "circles": _array({"type": "object", "properties": {"x": NUMBER, "y": NUMBER,
+                                                         "r": NUMBER}}),
+     "waypoints": _array({"type": "object",
+                          "properties": {"kappa": _array(NUMBER),
+                                         "palm": _array(NUMBER), "point": _array(NUMBER)}})},
+    extra=True)
+PHASE: Schema = _object(
+    "softarm.ControlPhase", "The control state machine's phase (Fig. 3) and flags",
+    {"timestamp": TIME, "phase": TEXT, "reason": {"type": ["string", "null"]}, "armed": BOOL,
+     "tracking_ok": BOOL, "gripper_closed": BOOL, "waypoint": INTEGER, "n_waypoints": INTEGER,
+     "replans": INTEGER, "who": WHO, "client": CLIENT}, extra=True)
+TIMING: Schema = _object(
+    "softarm.LoopTiming", "Control loop timing in ms (period and work of the last tick, p99 over "
+    "the stats window) and counts",
+    {"timestamp": TIME, "tick": INTEGER, "period_ms": NUMBER, "work_ms": NUMBER,
+     "overruns": INTEGER, "period_error_ms_p99": NUMBER, "work_ms_p99": NUMBER,
+     "who": WHO, "client": CLIENT}, extra=True)
+LINK: Schema = _object(
+    "softarm.LinkHealth", "Serial link health: lifecycle state, armed, round trip (ms), counters",
+    {"timestamp": TIME, "device": TEXT, "state": TEXT, "port": TEXT, "armed": BOOL,
+     "rtt_ms_p50": {"type": ["number", "null"]}, "rtt_ms_p99": {"type": ["number", "null"]},
+     "sent": INTEGER, "received": INTEGER, "lost": INTEGER, "crc_errors": INTEGER,
+     "who": WHO, "client": CLIENT}, extra=True)
+ACTION: Schema = _object(
+    "softarm.OperatorAction", "Something a person did or was refused, with who did it",
+    {"timestamp": TIME, "what": TEXT, "who": WHO, "client": CLIENT,
+     "details": {"type": "object"}})
+FAULT: Schema = _object(
+    "softarm.Fault", "A hardware or control fault that stopped commanding the arm",
+    {"timestamp": TIME, "fault": TEXT, "who": WHO, "client": CLIENT}, extra=True)
+RECORD: Schema = _object(
+    "softarm.Record", "Any other console record: its kind and free-form data",
+    {"timestamp": TIME, "kind": TEXT, "who": WHO, "client": CLIENT, "data": {}})

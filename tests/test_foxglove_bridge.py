@@ -1,0 +1,180 @@
+"""Live bridge: a websocket client speaking the Foxglove WebSocket protocol
+(``foxglove.websocket.v1``, or the same messages under foxglove-sdk's ``foxglove.sdk.v1``) gets
+``serverInfo`` with no capabilities, the advertised lab channels with their schema names, and messages while the
+arm moves; publishing, service calls and parameter writes from the client move nothing.
+``serve.py --foxglove-port`` starts it (off by default)."""
+
+from __future__ import annotations
+
+import json
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+import viser
+from websockets.sync.client import ClientConnection, connect
+
+from console.app import ConsoleApp
+from console.foxglove_bridge import FoxgloveBridge
+from core.labdata.channels import CHANNELS
+from core.robots import load
+
+SOFT = load("soft-arm")
+REPO = Path(__file__).resolve().parent.parent
+SUBPROTOCOL = "foxglove.websocket.v1"
+
+
+@pytest.fixture
+def live(tmp_path: Path) -> Iterator[tuple[ConsoleApp, FoxgloveBridge]]:
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = ConsoleApp(SOFT, srv, data_dir=tmp_path)
+    bridge = FoxgloveBridge(app.recorder, SOFT, "127.0.0.1", 0)
+    try:
+        with app:
+            yield app, bridge
+    finally:
+        bridge.stop()
+        srv.stop()
+
+
+def hello(ws: ClientConnection) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """serverInfo and the advertised channels by topic."""
+    info = json.loads(ws.recv(timeout=5))
+    channels: dict[str, dict[str, Any]] = {}
+    while len(channels) < len(CHANNELS):
+        msg = json.loads(ws.recv(timeout=5))
+        assert msg["op"] == "advertise"
+        channels.update({c["topic"]: c for c in msg["channels"]})
+    return info, channels
+
+
+def messages(ws: ClientConnection, until: float) -> Iterator[tuple[int, int, Any]]:
+    """(subscription id, log time, JSON body) of messageData frames until ``until``."""
+    while time.monotonic() < until:
+        try:
+            frame = ws.recv(timeout=max(0.01, until - time.monotonic()))
+        except TimeoutError:
+            return
+        if isinstance(frame, bytes) and frame[0] == 0x01:
+            sub, ns = struct.unpack_from("<IQ", frame, 1)
+            yield sub, ns, json.loads(frame[13:])
+
+
+@pytest.mark.parametrize("subprotocol", ["foxglove.websocket.v1", "foxglove.sdk.v1"])
+def test_client_gets_server_info_channels_and_messages_while_the_arm_moves(live,
+                                                                           subprotocol) -> None:
+    app, bridge = live
+    with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[subprotocol]) as ws:
+        assert ws.subprotocol == subprotocol
+        info, channels = hello(ws)
+        assert info["op"] == "serverInfo" and info["name"] == "softarm-console"
+        assert info["capabilities"] == []  # no clientPublish, services, parameters, assets
+        assert {t: c["schemaName"] for t, c in channels.items()} == \
+            {spec.topic: spec.schema_name for spec in CHANNELS}
+        assert all(c["encoding"] == "json" and c["schemaEncoding"] == "jsonschema"
+                   for c in channels.values())
+        assert json.loads(channels["/arm/scene"]["schema"])["title"] == "foxglove.SceneUpdate"
+        subs = {1: "/arm/configuration", 2: "/arm/scene", 3: "/events", 4: "/arm/tip"}
+        before = time.time_ns()
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": k, "channelId": channels[t]["id"]} for k, t in subs.items()]}))
+        time.sleep(0.3)
+        targets = [np.full(6, k) for k in (2.0, 4.0, 6.0)]
+        for q in targets:
+            app.store.request(q, "jog")
+            time.sleep(0.1)
+        app.stop_motion("test stop")
+        got: dict[str, list[tuple[int, Any]]] = {t: [] for t in subs.values()}
+        for sub, ns, body in messages(ws, time.monotonic() + 2.0):
+            got[subs[sub]].append((ns, body))
+        after = time.time_ns()
+    seen = [[s["kappa"] for s in body["measured"]] for _, body in got["/arm/configuration"]]
+    distinct = [s for i, s in enumerate(seen) if i == 0 or s != seen[i - 1]]
+    assert [s for s in distinct if s != [0.0] * 6] == [q.tolist() for q in targets]
+    assert got["/arm/scene"] and got["/arm/tip"]
+    assert all(before <= ns <= after for ns, _ in got["/arm/configuration"])
+    stamps = [ns for ns, _ in got["/arm/configuration"]]
+    assert stamps == sorted(stamps)
+    logs = [body for _, body in got["/events"]]
+    assert {"level": 3, "message": "STOP: test stop", "name": "server"}.items() <= \
+        logs[-1].items()
+
+
+def test_client_publish_service_calls_and_parameters_move_nothing(live) -> None:
+    app, bridge = live
+    time.sleep(0.2)
+    command, display = app.store.command, app.store.display
+    with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[SUBPROTOCOL]) as ws:
+        hello(ws)
+        ws.send(json.dumps({"op": "advertise", "channels": [
+            {"id": 7, "topic": "/arm/configuration", "encoding": "json",
+             "schemaName": "softarm.Configuration"}]}))
+        move = json.dumps({"measured": [{"kappa": 9.0}] * 6, "commanded": [{"kappa": 9.0}] * 6})
+        ws.send(b"\x01" + struct.pack("<I", 7) + move.encode())
+        ws.send(b"\x02" + struct.pack("<III", 1, 1, 4) + b"json" + move.encode())
+        ws.send(json.dumps({"op": "setParameters", "parameters": [{"name": "q", "value": 9}]}))
+        replies = []
+        deadline = time.monotonic() + 1.5
+        while time.monotonic() < deadline:
+            try:
+                frame = ws.recv(timeout=0.2)
+            except TimeoutError:
+                continue
+            if isinstance(frame, str):
+                replies.append(json.loads(frame))
+    assert app.store.command is command and app.store.display is display
+    assert app.store.command.q.tolist() == [0.0] * 6
+    ops = [r["op"] for r in replies]
+    assert "serviceCallFailure" in ops  # the server says it has no services
+    assert any("clientPublish" in r.get("message", "") for r in replies)
+
+
+def test_serve_flag_is_off_by_default_and_starts_the_bridge(tmp_path: Path) -> None:
+    import serve
+
+    assert serve.parse_args([]).foxglove_port is None
+    ports = []
+    for _ in range(2):
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            ports.append(s.getsockname()[1])
+    proc = subprocess.Popen(
+        [sys.executable, str(REPO / "serve.py"), "--robot", "extensible", "--hardware", "mock",
+         "--rt-cpu", "none", "--port", str(ports[0]), "--foxglove-port", str(ports[1]),
+         "--data-dir", str(tmp_path)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = ""
+        for line in proc.stdout:
+            if line.startswith("Foxglove live data"):
+                break
+        assert line.strip() == f"Foxglove live data (read-only): ws://127.0.0.1:{ports[1]}"
+        with connect(f"ws://127.0.0.1:{ports[1]}", subprotocols=[SUBPROTOCOL]) as ws:
+            info, channels = hello(ws)
+        assert info["name"] == "softarm-console" and "/arm/scene" in channels
+    finally:
+        proc.terminate()
+        proc.communicate(timeout=20)
+    bad = subprocess.run([sys.executable, str(REPO / "serve.py"), "--foxglove-port", "70000"],
+                         cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "--foxglove-port must be in 1..65535" in bad.stderr
+
+
+def test_a_client_joining_while_the_arm_rests_still_gets_its_configuration(live) -> None:
+    app, bridge = live
+    q = np.array([1.0, -2.0, 3.0, -4.0, 5.0, -6.0])
+    app.store.request(q, "jog")
+    time.sleep(0.5)  # drawn (and sent to nobody) before anyone connects
+    with connect(f"ws://127.0.0.1:{bridge.port}", subprotocols=[SUBPROTOCOL]) as ws:
+        _, channels = hello(ws)
+        ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": 1, "channelId": channels["/arm/configuration"]["id"]}]}))
+        got = [body for _, _, body in messages(ws, time.monotonic() + 2.5)]
+    assert got and [s["kappa"] for s in got[-1]["measured"]] == q.tolist()
