@@ -3,7 +3,7 @@
 ``serve.py --hardware emulator`` (the default) starts ``python -m hw_bridge.emulator`` on a
 pseudo-terminal so every demo runs through the real serial stack; ``--hardware mock`` keeps the
 device in-process (no serial); ``--port-path PATH`` talks to a real controller. The soft arm's
-100 Hz loop runs in :class:`console.panels.control_process.ControlProcess` (its own process,
+100 Hz loop runs in :class:`hw_bridge.soft_arm_process.ControlProcess` (its own process,
 which starts the emulator itself); the extensible arm's loop is
 :class:`hw_bridge.extensible_runner.ExtensibleRunner` on a :class:`hw_bridge.interface.SerialHardware`.
 
@@ -85,7 +85,7 @@ def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttac
                              baud=BridgeConfig.from_robot(robot).baud)
     app.bridge_controls = None
     if robot.kind == "planar":
-        from console.panels.control_process import ControlProcess
+        from hw_bridge.soft_arm_process import ControlProcess
 
         device = "emulator" if port_path or mode == "emulator" else "mock"
         ctl = ControlProcess(robot, device=device, port_path=port_path,

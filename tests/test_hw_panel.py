@@ -307,7 +307,7 @@ class FakeApp:
 
 
 def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
-    import console.panels.control_process as cp
+    import hw_bridge.soft_arm_process as cp
     import hw_bridge.extensible_runner as er
     import hw_bridge.soft_arm_link as sal
 

@@ -1,6 +1,6 @@
 """Control panel (soft arm): the 100 Hz closed loop on the simulated arm, grasp-and-place, STOP.
 
-:class:`~console.panels.control_process.ControlProcess` runs the seeded simulated arm, the
+:class:`~hw_bridge.soft_arm_process.ControlProcess` runs the seeded simulated arm, the
 control stack, the planner process and the real-time :class:`hw_bridge.loop.LoopRunner` thread
 in a child process (the console's own threads would delay a loop thread here); the app keeps one
 as ``app.soft_control``. The panel only sends commands (applied by the loop at its next tick)
@@ -33,7 +33,7 @@ import viser
 from viser import uplot
 
 from console.panels.base import Panel, operator_only
-from console.panels.control_process import DISCONNECTED, ControlProcess, ControlView
+from hw_bridge.soft_arm_process import DISCONNECTED, ControlProcess, ControlView
 from console.state import ArmState
 
 SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")

@@ -33,9 +33,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from console.panels.control_worlds import DISCONNECTED, NO_SERIAL_LINK  # noqa: F401 (re-export)
-from console.panels.control_worlds import HardwareWorld as _HardwareWorld
-from console.panels.control_worlds import SimWorld as _SimWorld
+from hw_bridge.soft_arm_worlds import DISCONNECTED, NO_SERIAL_LINK  # noqa: F401 (re-export)
+from hw_bridge.soft_arm_worlds import HardwareWorld as _HardwareWorld
+from hw_bridge.soft_arm_worlds import SimWorld as _SimWorld
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
 

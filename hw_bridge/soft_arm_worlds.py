@@ -3,7 +3,7 @@
 :class:`SimWorld` steps :class:`core.control.sim.SoftArmSim` inside the loop;
 :class:`HardwareWorld` is a :class:`hw_bridge.soft_arm_link.SoftArmLink` (device emulator on a
 pty, in-process mock, or a real port) with motion capture. Both offer the same operator verbs
-to :mod:`console.panels.control_process`'s child: ``arm`` / ``disarm`` / ``connect`` /
+to :mod:`hw_bridge.soft_arm_process`'s child: ``arm`` / ``disarm`` / ``connect`` /
 ``disconnect`` (run by the loop thread, the only writer to hardware) and ``scene`` (what the
 console draws, with the link health and the fault). Nothing here re-arms by itself: after a
 link error or the operator's Disconnect only the operator's Connect / Arm bring the arm back.
@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from console.panels.control_process import DeviceOptions
+    from hw_bridge.soft_arm_process import DeviceOptions
 
 
 NO_SERIAL_LINK = "simulated arm: no serial link (Connect / Disconnect do nothing)"
