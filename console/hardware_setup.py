@@ -98,7 +98,8 @@ def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttac
         # ExtensibleRunner.from_app builds an in-process MockHardware runner on first use: no
         # serial link to manage, the Hardware panel says so.
         return out
-    from hw_bridge.extensible_runner import ExtensibleRunner, StoreLink
+    from hw_bridge.extensible_jobs import StoreLink
+    from hw_bridge.extensible_runner import ExtensibleRunner
     from hw_bridge.interface import SerialHardware
 
     path = port_path

@@ -23,7 +23,11 @@ deadlines, overruns skipped): every tick reads the encoders, converts them to ra
 
 The pieces live in :mod:`hw_bridge.extensible_jobs` (encoder maths, joint moves, records),
 :mod:`hw_bridge.extensible_streamer` (per-tick logic) and :mod:`hw_bridge.extensible_link`
-(the hardware link and the operator's bridge commands); the public names are re-exported here.
+(the hardware link; its connect / arm / disarm are :class:`hw_bridge.link_supervisor.
+LinkSupervisor`'s, shared with the soft arm). Everything queued for the loop is a typed command
+(:mod:`hw_bridge.commands`: :class:`~hw_bridge.commands.RunPath`, :class:`~hw_bridge.commands.
+Hold`, :class:`~hw_bridge.commands.ConnectFactory`, :class:`~hw_bridge.commands.CloseLink`, and
+the bridge verbs) that the loop thread dispatches on its type.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ import dataclasses
 import itertools
 import threading
 from concurrent.futures import Future
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -40,17 +44,15 @@ import numpy.typing as npt
 from core.kinematics import delta as dk
 from core.planning.paths import MotionPath
 from core.robots import ExtensibleArm
+from hw_bridge.commands import (BRIDGE_COMMANDS, CloseLink, ConnectFactory, ExtensibleCommand,
+                               Hold, RunPath)
 from hw_bridge.controls import BridgeControls
-from hw_bridge.extensible_jobs import (JobResult, JobTrace, PoseLink, RunnerSnapshot,  # noqa: F401
-                                       StoreLink, concat_paths, home_counts, joint_move, measure)
+from hw_bridge.extensible_jobs import JobResult, PoseLink, RunnerSnapshot, joint_move
 from hw_bridge.extensible_link import HardwareLink
 from hw_bridge.extensible_streamer import Streamer
 from hw_bridge.interface import HardwareInterface
 from hw_bridge.loop import LoopRunner
 from hw_bridge.realtime import shorten_gil_wait
-
-__all__ = ["ExtensibleRunner", "JobResult", "JobTrace", "PoseLink", "RunnerSnapshot",
-           "StoreLink", "home_counts", "joint_move", "measure", "mock_factory"]
 
 
 class ExtensibleRunner:
@@ -90,19 +92,6 @@ class ExtensibleRunner:
         self._done = threading.Condition()
         self._start_lock = threading.Lock()
         self.connecting: Future | None = None  # the first connect, queued by start()
-
-    @classmethod
-    def from_app(cls, app: Any) -> "ExtensibleRunner":
-        """The console's runner: ``app.extensible_runner`` if set, else one built on
-        ``app.hardware_factory`` (if the app has one) or an in-process MockHardware, kept on
-        ``app.extensible_runner``. Not started: call :meth:`start`."""
-        runner = getattr(app, "extensible_runner", None)
-        if runner is None:
-            factory = getattr(app, "hardware_factory", None) or mock_factory(app.robot)
-            link = StoreLink(app.store)
-            runner = cls(app.robot, factory, link=link, follow=not link.always_report)
-            app.extensible_runner = runner
-        return runner
 
     # -- lifecycle -------------------------------------------------------------------------
     @property
@@ -153,13 +142,31 @@ class ExtensibleRunner:
     def connect(self) -> Future:
         """(Re)configure and activate the hardware from the factory, on the loop thread; the
         arm then holds (or, with ``follow``, moves to the console's command)."""
-        return self.loop.submit(lambda stack, t: self.device.open_and_arm(self.follow))
+        return self.send(ConnectFactory(self.follow))
+
+    def send(self, cmd: ExtensibleCommand) -> Future:
+        """Queue ``cmd`` for the loop thread; the Future resolves once it was applied."""
+        return self.loop.submit(lambda stack, t: self._apply(cmd, t))
+
+    def _apply(self, cmd: ExtensibleCommand, t: float) -> object:
+        """Loop thread: run one command (dispatch on its type)."""
+        if isinstance(cmd, RunPath):
+            return self.streamer.start_job(cmd.job_id, cmd.label, cmd.path, t)
+        if isinstance(cmd, Hold):
+            return self.streamer.halt(t)
+        if isinstance(cmd, ConnectFactory):
+            return self.device.open_and_arm(cmd.follow)
+        if isinstance(cmd, CloseLink):
+            return self.device.close()
+        if isinstance(cmd, BRIDGE_COMMANDS):
+            return self.device.apply(cmd)
+        raise TypeError(f"not a command for the extensible arm: {cmd!r}")
 
     def close(self) -> None:
         """Disarm and release the hardware, stop the thread (and a MockHardware's device)."""
         if self.loop.running:
             try:  # the control thread is the one that talks to the hardware
-                self.loop.submit(lambda s, t: self.device.close()).result(2)
+                self.send(CloseLink()).result(2)
             except Exception:  # noqa: BLE001 - closing anyway
                 pass
             self.loop.stop()
@@ -176,7 +183,7 @@ class ExtensibleRunner:
             raise ValueError("path must have motor counts of shape "
                              f"(K, {3 * self.robot.n_segments})")
         job_id = next(self._ids)
-        self.loop.submit(lambda s, t: s.start_job(job_id, label, path, t))
+        self.send(RunPath(job_id, label, path))
         return job_id
 
     def move_to(self, lengths: npt.ArrayLike, label: str = "move") -> int:
@@ -191,7 +198,7 @@ class ExtensibleRunner:
 
     def stop(self) -> Future:
         """Hold position (aborts the running job)."""
-        return self.loop.submit(lambda s, t: s.halt(t))
+        return self.send(Hold())
 
     def wait(self, job_id: int, timeout: float | None = None) -> JobResult | None:
         """Block until job ``job_id`` ended; None on timeout."""

@@ -2,11 +2,13 @@
 
 :class:`SimWorld` steps :class:`core.control.sim.SoftArmSim` inside the loop;
 :class:`HardwareWorld` is a :class:`hw_bridge.soft_arm_link.SoftArmLink` (device emulator on a
-pty, in-process mock, or a real port) with motion capture. Both offer the same operator verbs
-to :mod:`hw_bridge.soft_arm_process`'s child: ``arm`` / ``disarm`` / ``connect`` /
-``disconnect`` (run by the loop thread, the only writer to hardware) and ``scene`` (what the
-console draws, with the link health and the fault). Nothing here re-arms by itself: after a
-link error or the operator's Disconnect only the operator's Connect / Arm bring the arm back.
+pty, in-process mock, or a real port) with motion capture, whose link verbs are the
+:class:`hw_bridge.link_supervisor.LinkSupervisor` both arms share (:class:`StackStrategy` says
+what they mean for the soft arm's control stack). Both worlds offer :meth:`apply` (a bridge
+command, run by the loop thread, the only writer to hardware) and ``scene`` (what the console
+draws, with the link health and the fault) to :mod:`hw_bridge.soft_arm_process`'s child. Nothing
+here re-arms by itself: after a link error or the operator's Disconnect only the operator's
+Connect / Arm bring the arm back.
 """
 
 from __future__ import annotations
@@ -15,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hw_bridge.commands import Arm, BridgeCommand, Connect, Disarm, Disconnect
+from hw_bridge.link_supervisor import (DISCONNECTED, NO_SERIAL_LINK, LinkRefused, LinkSupervisor,
+                                       open_serial)
+
 if TYPE_CHECKING:
     from hw_bridge.soft_arm_process import DeviceOptions
-
-
-NO_SERIAL_LINK = "simulated arm: no serial link (Connect / Disconnect do nothing)"
-DISCONNECTED = "disconnected by the operator: Connect, then Arm, to command the arm again"
 
 
 def _sim_health(note: str) -> Any:
@@ -37,7 +39,7 @@ class SimWorld:
 
     def __init__(self, robot: Any, seed: int):
         from core.control.sim import SoftArmSim
-        from hw_bridge.loop import SimDevice
+        from hw_bridge.loop_devices import SimDevice
         self.sim = SoftArmSim(robot, seed=seed)
         self.device = SimDevice(self.sim)
         self.link_note: str | None = None  # set once Connect / Disconnect was asked for
@@ -45,19 +47,16 @@ class SimWorld:
     def configure(self) -> None:
         pass
 
-    def arm(self, stack: Any) -> None:  # loop thread
-        stack.arm(self.sim.cylinders.copy())
-
-    def disarm(self, stack: Any) -> None:  # loop thread
-        stack.disarm()
-
-    def connect(self, stack: Any, port: str, baud: int) -> None:
-        """Loop thread: there is no serial link to (re)open; say so (health shows it too)."""
-        self.link_note = NO_SERIAL_LINK
-        raise RuntimeError(NO_SERIAL_LINK)
-
-    def disconnect(self, stack: Any) -> None:
-        self.connect(stack, "", 0)
+    def apply(self, cmd: BridgeCommand, stack: Any) -> None:
+        """Loop thread: Arm / Disarm the stack; there is no serial link to (re)open or close,
+        so Connect / Disconnect say so (health shows it too)."""
+        if isinstance(cmd, Arm):
+            stack.arm(self.sim.cylinders.copy())
+        elif isinstance(cmd, Disarm):
+            stack.disarm()
+        else:
+            self.link_note = NO_SERIAL_LINK
+            raise RuntimeError(NO_SERIAL_LINK)
 
     def scene(self, runner: Any) -> tuple[Any, Any, bool, Any, Any, str | None]:
         sim = self.sim
@@ -104,6 +103,24 @@ class _Unplugged:
         return None
 
 
+class StackStrategy:
+    """The soft arm's side of the link verbs (:class:`~hw_bridge.link_supervisor.ArmStrategy`):
+    stopping disarms the control stack; holding points the loop's device at the link again and
+    arms the stack at the measured cylinders."""
+
+    def __init__(self, world: HardwareWorld, stack: Any) -> None:
+        self.world, self.stack = world, stack
+
+    def release(self, message: str) -> None:
+        self.stack.disarm()
+
+    def hold(self, hw: Any) -> None:
+        device = self.world.device
+        device.hw = hw  # (after a failed Connect the loop read motion capture only)
+        device.fault = None
+        self.stack.arm(device.cylinders())
+
+
 class HardwareWorld:
     """device="emulator" / "port" / "mock": SerialHardware (or MockHardware) + mocap."""
 
@@ -113,8 +130,8 @@ class HardwareWorld:
         self.link = open_link(robot, opts.kind, port_path=opts.port_path, seed=seed,  # type: ignore[arg-type]
                               emulator_args=opts.emulator_args)
         self.device = self.link.device
+        self.supervisor = LinkSupervisor(self.link.hw, open_serial(robot), _promote_new_threads)
         self.radius: float | None = None
-        self.disconnected = False  # the operator's Disconnect: no implicit reconnect on Arm
 
     def configure(self) -> None:
         """Before the loop starts: open the port, handshake (a failure shows as the fault)."""
@@ -129,73 +146,35 @@ class HardwareWorld:
         self.radius = r
         self.device.object_radius = r
 
-    def arm(self, stack: Any) -> None:
-        """Loop thread (an operator action, so it may block ~100 ms): (re)connect, ARM, arm."""
-        from hw_bridge.interface import LifecycleState, ReturnType
-        hw = self.link.hw
-        if self.disconnected:
-            hw.fault = f"arm refused: {DISCONNECTED}"  # shown by the Hardware panel too
-            raise RuntimeError(hw.fault)
-        if hw.state is LifecycleState.UNCONFIGURED:
-            ok = hw.configure() is ReturnType.OK
-            _promote_new_threads()
-            if not ok:
-                raise RuntimeError(f"arm refused: {hw.fault}")
-        if hw.state is LifecycleState.INACTIVE and hw.activate() is not ReturnType.OK:
-            raise RuntimeError(f"arm refused: {hw.fault}")
-        self.device.hw = hw  # (after a failed Connect the loop read motion capture only)
-        self.device.fault = None
-        stack.arm(self.device.cylinders())
+    def apply(self, cmd: BridgeCommand, stack: Any) -> None:
+        """Loop thread (an operator action, so it may block ~100 ms): run ``cmd`` through the
+        link supervisor; a refusal raises (the command's Future carries it to the console)."""
+        sup = self.supervisor
+        try:
+            sup.apply(cmd, StackStrategy(self, stack))
+        except LinkRefused as exc:
+            if isinstance(cmd, Connect) and exc.fault != str(exc):  # opened, configure failed:
+                self.device.fault = None  # the loop reads motion capture only; Arm retries
+                self.device.hw = _Unplugged(exc.fault or "not connected")
+            raise
+        else:
+            if isinstance(cmd, Connect):
+                self.device.hw, self.device.fault = sup.hw, None
+            elif isinstance(cmd, Disconnect):
+                self.device.hw = _Unplugged(DISCONNECTED)
+        finally:
+            self.link.hw = sup.hw  # (a Connect may have opened a new one: closed with the link)
 
-    def disarm(self, stack: Any) -> None:  # loop thread
-        from hw_bridge.interface import LifecycleState
-        stack.disarm()
-        if self.link.hw.state is LifecycleState.ACTIVE:
-            self.link.hw.deactivate()
-
-    def disconnect(self, stack: Any) -> None:
-        """Loop thread (operator's Disconnect): stop commanding, DISARM, close the port."""
-        stack.disarm()
-        self.link.hw.cleanup()
-        self.disconnected = True
-        self.device.hw = _Unplugged(DISCONNECTED)
-
-    def connect(self, stack: Any, port: str, baud: int) -> None:
-        """Loop thread (operator's Connect): close the link, open ``port`` at ``baud`` (0: the
-        robot file's) with a new SerialHardware and configure it: INACTIVE, telemetry only.
-
-        The mock device has no port: ``mock://`` (or an empty port) reconfigures it; its mocap
-        comes from that in-process device, so any other port is refused.
-        """
-        from hw_bridge.interface import ReturnType, SerialHardware
-        old = self.link.hw
-        port = port.strip() or (old.port if self.kind == "mock" else "")
-        if not port:
-            old.fault = "connect refused: no port given"
-            raise RuntimeError(old.fault)
-        if self.kind == "mock" and port != old.port:
-            old.fault = (f"connect refused: the mock device is {old.port} (in-process); "
-                         f"start serve.py with --port-path {port} for a real controller")
-            raise RuntimeError(old.fault)
-        stack.disarm()
-        old.cleanup()
-        hw = old if self.kind == "mock" else SerialHardware(old.config, port, baud or None)
-        self.link.hw = hw
-        self.disconnected = False
-        self.device.fault = None
-        ok = hw.configure() is ReturnType.OK
-        _promote_new_threads()
-        if not ok:
-            self.device.hw = _Unplugged(hw.fault or "not connected")  # Arm retries configure
-            raise RuntimeError(f"connect refused: {hw.fault}")
-        self.device.hw = hw
+    @property
+    def disconnected(self) -> bool:
+        return self.supervisor.disconnected
 
     def scene(self, runner: Any) -> tuple[Any, Any, bool, Any, Any, str | None]:
         hw = self.link.hw
         fault = hw.fault if hw.state.value == "unconfigured" else None
         if self.disconnected:
             fault = DISCONNECTED
-        health = hw.health()
+        health = self.supervisor.health()
         sc = self.link.scene
         emu = self.link.emulator
         if emu is not None and emu.proc.poll() is not None:

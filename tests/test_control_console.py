@@ -13,7 +13,8 @@ import viser
 from console.app import ConsoleApp
 from console.panels.capture import merge
 from console.panels.control import ControlPanel, table_point
-from hw_bridge.soft_arm_process import DISCONNECTED, ControlView
+from hw_bridge.link_supervisor import DISCONNECTED
+from hw_bridge.soft_arm_process import ControlView
 from console.panels.trials import results_markdown
 from core.control.capture import characterise
 from core.control.stack import Telemetry

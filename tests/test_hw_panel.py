@@ -20,6 +20,7 @@ from console.panels.hardware import (OTHER, FaultTracker, HardwarePanel, format_
 from core.robots import load
 from hw_bridge.controls import QueuedBridgeControls
 from hw_bridge.interface import LifecycleState, LinkHealth
+from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor
 from hw_bridge.mock import MockHardware
 from fakes import FakeClient
 
@@ -31,14 +32,25 @@ def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> Non
     ctl = QueuedBridgeControls()
     mocks: list[MockHardware] = []
 
-    def open_hw(port: str, baud: int) -> MockHardware:
+    def open_hw(port: str, baud: int, old: Any) -> MockHardware:
         mocks.append(MockHardware(ROBOT))
         return mocks[-1]
+
+    link = LinkSupervisor(None, open_hw)
+    strategy = RecordingStrategy()
+
+    def apply_pending(hw: Any, open_hw: Any) -> Any:  # what a loop thread does once per tick
+        while not ctl.commands.empty():
+            try:
+                link.apply(ctl.commands.get_nowait(), strategy)
+            except LinkRefused:
+                pass
+        return link.hw
 
     ctl.connect("mock://", 1_000_000)
     ctl.arm()
     assert not mocks  # enqueueing did nothing by itself
-    hw = ctl.apply_pending(None, open_hw)
+    hw = apply_pending(None, open_hw)
     try:
         assert hw is mocks[0] and hw.state is LifecycleState.ACTIVE
         for _ in range(5):
@@ -48,18 +60,31 @@ def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> Non
         ctl.publish(hw.health())
         assert ctl.health().armed
         ctl.disarm()
-        hw = ctl.apply_pending(hw, open_hw)
+        hw = apply_pending(hw, open_hw)
         assert hw.state is LifecycleState.INACTIVE
         ctl.arm()
         ctl.disconnect()
-        hw = ctl.apply_pending(hw, open_hw)
+        hw = apply_pending(hw, open_hw)
         assert hw.state is LifecycleState.UNCONFIGURED
         ctl.arm()  # arming while disconnected is ignored: connect first
-        hw = ctl.apply_pending(hw, open_hw)
+        hw = apply_pending(hw, open_hw)
         assert hw.state is LifecycleState.UNCONFIGURED
     finally:
         for m in mocks:
             m.shutdown()
+
+
+class RecordingStrategy:
+    """An ArmStrategy that only records what the link supervisor asked of the arm."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    def release(self, message: str) -> None:
+        self.calls.append(f"release: {message}")
+
+    def hold(self, hw: Any) -> None:
+        self.calls.append("hold")
 
 
 def test_health_text_marks_watchdog_and_estop() -> None:

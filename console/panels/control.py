@@ -33,7 +33,8 @@ import viser
 from viser import uplot
 
 from console.panels.base import Panel, operator_only
-from hw_bridge.soft_arm_process import DISCONNECTED, ControlProcess, ControlView
+from hw_bridge.link_supervisor import DISCONNECTED
+from hw_bridge.soft_arm_process import ControlProcess, ControlView
 from console.state import ArmState
 
 SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")

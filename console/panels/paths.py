@@ -33,7 +33,8 @@ from console.panels.base import Panel
 from console.state import ArmState
 from core.kinematics import delta as dk
 from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
-from hw_bridge.extensible_runner import ExtensibleRunner, JobResult
+from hw_bridge.extensible_jobs import JobResult
+from hw_bridge.extensible_runner import ExtensibleRunner
 
 Array = npt.NDArray[np.float64]
 N_GHOSTS = 5

@@ -81,7 +81,9 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
               planner: str = DEFAULT_PLANNER, time_limit_s: float = 150.0,
               sim_overrides: dict[str, Any] | None = None) -> TrialResult:
     """One headless grasp-and-place trial on the simulated clock."""
-    from hw_bridge.loop import LoopRunner, SimClock, SimDevice, resolve
+    from hw_bridge.loop import LoopRunner, SimClock
+    from hw_bridge.loop_devices import SimDevice
+    from hw_bridge.planner_process import resolve
 
     x, y, r = (float(v) for v in obj)
     rng = np.random.default_rng([seed, 7])
