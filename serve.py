@@ -31,6 +31,9 @@ from typing import Any
 
 from console.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
+from console.model import model_for
+from console.services import ConsoleServices
+from console.state import StateStore
 from core.robots import RobotFileError, available, load
 
 
@@ -112,10 +115,10 @@ def cpu_partition(args: argparse.Namespace) -> Any:
     return CpuPartition.default() if getattr(args, "rt_cpu", "auto") == "auto" else None
 
 
-def pin_console(app: Any) -> str:
+def pin_console(services: ConsoleServices) -> str:
     """Move this (console) process off the real-time CPU; returns what was done, for the log."""
     from hw_bridge.cpu_partition import pin_process
-    part = getattr(app, "cpu_partition", None)
+    part = services.cpu_partition
     if part is None:
         return "CPUs: no pinning"
     pin_process(part.other)
@@ -142,16 +145,15 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     server = viser.ViserServer(host=args.host, port=args.port, verbose=False)
     mode = getattr(args, "hardware", "mock")
     port_path = getattr(args, "port_path", None)
-    app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
-                     panels=(),
-                     mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
+    store = StateStore(model_for(robot),
+                       mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
     # (the extensible arm's loop is a thread of this process: nothing to split off for it)
-    app.cpu_partition = (  # type: ignore[attr-defined]
-        cpu_partition(args) if robot.kind == "planar" else None)
-    app.hardware = hardware_setup.attach(app, mode, port_path)  # type: ignore[attr-defined]
+    cpus = cpu_partition(args) if robot.kind == "planar" else None
+    services = hardware_setup.attach(robot, store, mode, port_path, cpus=cpus)
     if args.demo:
-        app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
-        app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
+        services = services.replace(demo=DemoMotion(store))
+    app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
+                     panels=(), store=store, services=services)
     for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
                       *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel):
         app.add_panel(panel_cls)
@@ -181,7 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     server, app, token = build(args, robot, status)
-    print(f"serve.py: {pin_console(app)}", file=sys.stderr)
+    print(f"serve.py: {pin_console(app.services)}", file=sys.stderr)
     app.start()
     port = server.get_port()  # viser moves to the next free port if --port is taken
     if port != args.port:
@@ -206,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         app.stop_motion("console shutting down")
-        app.hardware.close()  # type: ignore[attr-defined]
+        app.services.close()
         app.stop()
         server.stop()
     return 0

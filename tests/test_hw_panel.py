@@ -1,6 +1,7 @@
 """Bridge controls (queued operator commands) with MockHardware; the console's Hardware panel
 (operator-only actions, viewers' edits snapped back, faults notified once to every browser, the
-mock / no-controls explanation); and hardware_setup.attach wiring ``app.bridge_controls``."""
+mock / no-controls explanation); and hardware_setup.attach building the services (the loop's
+``bridge_controls``)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,6 @@ import pytest
 import viser
 
 from console.access import AccessControl
-from console.app import ConsoleApp
 from console.hardware_setup import HardwareAttachment, attach
 from console.panels.hardware import (OTHER, FaultTracker, HardwarePanel, format_health,
                                      no_controls_text)
@@ -22,7 +22,7 @@ from hw_bridge.controls import QueuedBridgeControls
 from hw_bridge.interface import LifecycleState, LinkHealth
 from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor
 from hw_bridge.mock import MockHardware
-from fakes import FakeClient
+from fakes import FakeClient, console_app
 
 ROBOT = load("extensible")
 SOFT = load("soft-arm")
@@ -151,11 +151,10 @@ def server() -> Iterator[viser.ViserServer]:
 
 def make_panel(server: viser.ViserServer, controls: Any, kind: str | None = "emulator",
                port_path: str | None = "/dev/pts/9", robot: Any = ROBOT) -> HardwarePanel:
-    app = ConsoleApp(robot, server, panels=(), access=AccessControl("tok"))
-    app.bridge_controls = controls  # type: ignore[attr-defined]
-    if kind is not None:
-        app.hardware = HardwareAttachment("test", kind=kind,  # type: ignore[attr-defined]
-                                          port_path=port_path, baud=1_000_000)
+    hardware = None if kind is None else HardwareAttachment("test", kind=kind,
+                                                            port_path=port_path, baud=1_000_000)
+    app = console_app(robot, server, panels=(), access=AccessControl("tok"),
+                      bridge_controls=controls, hardware=hardware)
     panel = app.add_panel(HardwarePanel)
     assert panel is not None
     return panel
@@ -325,12 +324,6 @@ def test_without_controls_the_panel_says_why_and_disables_everything(
 
 # -- hardware_setup.attach --------------------------------------------------------------------
 
-class FakeApp:
-    def __init__(self, robot: Any) -> None:
-        self.robot = robot
-        self.store = object()
-
-
 def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     import hw_bridge.soft_arm_process as cp
     import hw_bridge.extensible_runner as er
@@ -372,28 +365,32 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     monkeypatch.setattr(sal, "EmulatorProcess", FakeEmulator)
     monkeypatch.setattr(er, "ExtensibleRunner", FakeRunner)
 
-    soft = FakeApp(SOFT)
-    out = attach(soft, "emulator", None)
+    store: Any = object()  # the console's store (the extensible runner's StoreLink reads it)
+    soft = attach(SOFT, store, "emulator", None)
+    out = soft.hardware
     assert made["soft"] == ("emulator", None) and out.kind == "emulator"
     assert made["cpus"] == "auto"  # no partition chosen by the app: the control process picks
     assert soft.bridge_controls is soft.soft_control.bridge_controls
     assert out.port_path is None and out.baud == 1_000_000  # the child knows the pty
-    out = attach(FakeApp(SOFT), "mock", "/dev/ttyACM3")
+    out = attach(SOFT, store, "mock", "/dev/ttyACM3").hardware
     assert made["soft"] == ("emulator", "/dev/ttyACM3") and out.kind == "port"
     assert out.port_path == "/dev/ttyACM3"
 
-    ext = FakeApp(ROBOT)
-    out = attach(ext, "emulator", None)
+    ext = attach(ROBOT, store, "emulator", None)
+    out = ext.hardware
     assert out.kind == "emulator" and out.port_path == "/dev/pts/77" and made["started"]
     assert ext.bridge_controls is ext.extensible_runner.bridge_controls
     assert made["hardware"].port == "/dev/pts/77"
     out.close()
     assert made["runner_closed"] and made["emulator_stopped"]
 
-    mock = FakeApp(ROBOT)
-    out = attach(mock, "mock", None)  # the runner comes later, lazily, with MockHardware
-    assert out.kind == "mock" and mock.bridge_controls is None
-    assert not hasattr(mock, "extensible_runner")
+    made.clear()
+    mock = attach(ROBOT, store, "mock", None)  # a runner on MockHardware, built now, not started
+    try:
+        assert mock.hardware.kind == "mock" and mock.bridge_controls is None
+        assert isinstance(made["hardware"], MockHardware) and "started" not in made
+    finally:
+        made["hardware"].shutdown()
 
 
 def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path) -> None:
@@ -404,6 +401,6 @@ def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path)
         panel = app.panel(HardwarePanel)
         assert "in-process mock device" in panel.note.content and panel.connect_btn.disabled
     finally:
-        app.hardware.close()
+        app.services.close()
         app.stop()
         server.stop()

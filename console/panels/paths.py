@@ -5,10 +5,10 @@ The path (linear / diagonal traverse, four corners; size, plane, tip speed <= th
 ``core.planning.paths.plan_path`` in a worker *process* (planning takes seconds of CPU; in this
 process it would hold the GIL against the 100 Hz loop). The preview draws the planned tip trace
 and a few translucent ghost arms. Execute streams the path through the
-:class:`~hw_bridge.extensible_runner.ExtensibleRunner` (``ExtensibleRunner.from_app``, started
-on first use; it first joins the path from where the motors are). While it runs the panel shows
-the progress, the measured tip trace and a plot of the commanded and the measured tip's
-distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
+:class:`~hw_bridge.extensible_runner.ExtensibleRunner` (``app.services.extensible_runner``,
+started on first use; it first joins the path from where the motors are). While it runs the
+panel shows the progress, the measured tip trace and a plot of the commanded and the measured
+tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
 console-wide STOP (any client), whose hook makes the runner hold position, as does a lost lease.
 """
 
@@ -55,6 +55,16 @@ class PathRequest:
     size: float
     speed: float
     start: tuple[float, ...]  # flattened commanded posture the path starts from
+
+
+def extensible_runner(app: Any) -> ExtensibleRunner:
+    """``app.services.extensible_runner``, or a clear error when the console was built without
+    one (serve.py always builds it for the extensible arm)."""
+    runner = app.services.extensible_runner
+    if runner is None:
+        raise ValueError("the extensible arm's panels need its runner: build the console with "
+                         "services=ConsoleServices(extensible_runner=...) (serve.py does)")
+    return runner
 
 
 def _exit_with_parent(parent: int) -> None:
@@ -147,8 +157,8 @@ class PathsPanel(Panel):
 
     @property
     def runner(self) -> ExtensibleRunner:
-        """The console's runner (see ``ExtensibleRunner.from_app``)."""
-        return ExtensibleRunner.from_app(self.app)
+        """The console's runner (``app.services.extensible_runner``; serve.py builds it)."""
+        return extensible_runner(self.app)
 
     # -- callbacks -------------------------------------------------------------------------
     def _current_request(self) -> PathRequest:
@@ -192,7 +202,7 @@ class PathsPanel(Panel):
         """Stop hook (STOP, a lost lease, shutdown): no pending execute, motors hold."""
         with self._lock:
             self._execute_after_plan = False
-        runner = getattr(self.app, "extensible_runner", None)
+        runner = self.app.services.extensible_runner
         if runner is not None and runner.started:
             runner.stop()
 
@@ -300,8 +310,8 @@ class PathsPanel(Panel):
                 f"{html.escape(text)}</div>")
 
     def on_state(self, state: ArmState) -> None:
-        runner = getattr(self.app, "extensible_runner", None)
-        if runner is not None:
+        runner = self.app.services.extensible_runner
+        if runner is not None and runner.started:  # (the mock's connects on the first Execute)
             self._show_job(runner)
 
     def _show_job(self, runner: ExtensibleRunner, result: JobResult | None = None) -> None:
