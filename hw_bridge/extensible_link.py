@@ -26,8 +26,6 @@ from hw_bridge.extensible_jobs import Array, Counts
 from hw_bridge.interface import HardwareInterface, LifecycleState, ReturnType
 from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor, open_serial
 
-__all__ = ["NOT_CONNECTED", "HardwareLink", "StreamerStrategy"]
-
 NOT_CONNECTED: Counts = np.zeros(0, dtype=np.int64)
 
 
@@ -66,7 +64,7 @@ class HardwareLink:
         self.robot = robot
         self.factory = factory
         self.health_every = max(1, health_every)
-        self.link = LinkSupervisor(None, open_serial(robot))
+        self.supervisor = LinkSupervisor(None, open_serial(robot))
         self.fault: str | None = None
         self.controls = QueuedBridgeControls()
         self.streamer: Any = None  # the runner's Streamer (set by the runner)
@@ -75,7 +73,7 @@ class HardwareLink:
     @property
     def hw(self) -> HardwareInterface | None:
         """The current link (None before the first connect)."""
-        return self.link.hw
+        return self.supervisor.hw
 
     # -- loop Device ---------------------------------------------------------------------------
     def read(self, t: float) -> Counts | None:
@@ -114,7 +112,7 @@ class HardwareLink:
 
     def publish(self) -> None:
         """Make the link's health visible to ``controls.health()`` (loop thread)."""
-        health = self.link.health()
+        health = self.supervisor.health()
         if health is not None:
             self.controls.publish(health)
 
@@ -124,9 +122,8 @@ class HardwareLink:
         activate it; the streamer then holds (or follows). Returns the fault, or None."""
         stack = self.streamer
         stack.disarmed("reconnecting")  # a running job ends here
-        self.link.close()
-        hw = self.link.hw = self.factory()
-        self.link.disconnected, self.fault = False, None
+        hw = self.supervisor.adopt(self.factory())
+        self.fault = None
         stack.fault, stack.message = None, "connecting"
         for step in (hw.configure, hw.activate):
             if step() is not ReturnType.OK:
@@ -142,7 +139,7 @@ class HardwareLink:
 
     def close(self) -> None:
         """Disarm and close the link (loop thread, or after the loop stopped)."""
-        self.link.close()
+        self.supervisor.close()
 
     # -- operator commands (loop thread) -------------------------------------------------------
     def _apply_commands(self) -> bool:
@@ -157,9 +154,9 @@ class HardwareLink:
 
     def apply(self, cmd: BridgeCommand) -> None:
         """Run one operator bridge command through the link supervisor (loop thread)."""
-        before = self.link.hw
+        before = self.supervisor.hw
         try:
-            self.link.apply(cmd, StreamerStrategy(self.streamer))
+            self.supervisor.apply(cmd, StreamerStrategy(self.streamer))
         except LinkRefused as exc:
             self.fault = exc.fault
             if exc.fault != str(exc):  # the device failed (not a refusal): the streamer says so
@@ -171,6 +168,6 @@ class HardwareLink:
             if isinstance(cmd, Connect):
                 self.streamer.disarmed(f"connected to {getattr(self.hw, 'port', '')}; "
                                        "disarmed (Arm to command the arm)")
-        hw = self.link.hw
+        hw = self.supervisor.hw
         if hw is not before and hw is not None:  # a Connect opened it: the runner's from now on
             self.factory = lambda: hw

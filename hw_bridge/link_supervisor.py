@@ -167,6 +167,13 @@ class LinkSupervisor:
         if hw.deactivate() is ReturnType.ERROR:
             hw.cleanup()
 
+    def adopt(self, hw: HardwareInterface) -> HardwareInterface:
+        """Close the current link and take ``hw`` instead (not configured here): a loop's own
+        reconnect (the extensible runner's ``connect``), which also ends a Disconnect."""
+        self.close()
+        self.hw, self.disconnected = hw, False
+        return hw
+
     def close(self) -> None:
         """DISARM and close the link (loop thread, or after the loop stopped)."""
         if self.hw is not None:
