@@ -5,7 +5,7 @@ GUI callbacks call :class:`BridgeControls` methods, which only enqueue a bridge 
 its :class:`hw_bridge.link_supervisor.LinkSupervisor` and publishes a fresh
 :class:`~hw_bridge.interface.LinkHealth` for the UI. :class:`QueuedBridgeControls` is the
 in-process queue (the extensible runner's); the soft arm's control process offers the same
-verbs over its pipe (:class:`hw_bridge.soft_arm_process.ProcessBridgeControls`).
+verbs over its pipe (:class:`hw_bridge.loop_process.ProcessBridgeControls`).
 """
 
 from __future__ import annotations

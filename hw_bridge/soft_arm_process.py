@@ -24,11 +24,9 @@ with small messages:
 
 from __future__ import annotations
 
-import atexit
 import concurrent.futures as cf
 import dataclasses
 import gc
-import itertools
 import multiprocessing
 import queue
 import threading
@@ -41,6 +39,7 @@ from hw_bridge.commands import (BRIDGE_COMMANDS, SCENE_COMMANDS, Arm, Connect, D
                                StartGrasp, StopArm)
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
+from hw_bridge.loop_process import LoopProcess, ProcessBridgeControls
 from hw_bridge.soft_arm_worlds import HardwareWorld, SimWorld
 
 
@@ -213,7 +212,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         del runner, stack  # free ruckig objects before interpreter teardown
 
 
-class ControlProcess:
+class ControlProcess(LoopProcess):
     """Parent-side handle of the child control process (see the module docstring).
 
     Args:
@@ -253,59 +252,16 @@ class ControlProcess:
             cpus = CpuPartition.default()
         opts = DeviceOptions("port" if port_path else device, port_path, tuple(emulator_args),
                              cpus)
+        super().__init__("soft-arm-control")
         self.device = opts.kind
-        self.failure: str | None = None
-        ctx = multiprocessing.get_context("spawn")
         self.robot = robot
-        self._commands = ctx.Queue()
-        self._replies = ctx.Queue()
-        # Not a daemon: it starts its own planner process. close() (also at exit) ends it.
-        self._proc = ctx.Process(target=_child, name="soft-arm-control",
-                                 args=(str(robot.source), seed, self._commands, self._replies,
-                                       publish_hz, stats_ticks, sched_priority, opts))
-        self._proc.start()
-        self._ids = itertools.count(1)
-        self._pending: dict[int, cf.Future] = {}
-        self._lock = threading.Lock()
         self.view: ControlView | None = None
-        self._reader = threading.Thread(target=self._read, name="control-replies", daemon=True)
-        self._reader.start()
-        atexit.register(self.close)
-
-    def _read(self) -> None:
-        while True:
-            try:
-                msg = self._replies.get(timeout=1.0)
-            except queue.Empty:
-                if not self._proc.is_alive():
-                    return
-                continue
-            except (EOFError, OSError):
-                return
-            if msg[0] == "view":
-                self.view = msg[1]
-            elif msg[0] == "failed":
-                self.failure = msg[1]
-            elif msg[0] == "reply":
-                with self._lock:
-                    fut = self._pending.pop(msg[1], None)
-                if fut is not None:
-                    if msg[2] is None:
-                        fut.set_result(None)
-                    else:
-                        fut.set_exception(RuntimeError(msg[2]))
+        self.spawn(_child, (str(robot.source), seed, self._commands, self._replies, publish_hz,
+                            stats_ticks, sched_priority, opts))
 
     def send(self, cmd: SoftArmCommand) -> cf.Future:
         """Queue a command for the loop; the Future resolves when the loop applied it."""
-        fut: cf.Future = cf.Future()
-        if not self._proc.is_alive():
-            fut.set_exception(RuntimeError("the control process is not running"))
-            return fut
-        cid = next(self._ids)
-        with self._lock:
-            self._pending[cid] = fut
-        self._commands.put((cid, cmd))
-        return fut
+        return super().send(cmd)
 
     def arm(self) -> cf.Future:
         return self.send(Arm())
@@ -343,47 +299,3 @@ class ControlProcess:
     def bridge_controls(self) -> ProcessBridgeControls:
         """This loop as a :class:`hw_bridge.controls.BridgeControls` (the Hardware panel's)."""
         return ProcessBridgeControls(self)
-
-    @property
-    def alive(self) -> bool:
-        return self._proc.is_alive()
-
-    def close(self, timeout: float = 5.0) -> None:
-        """Stop the loop and the child process."""
-        if self._proc.is_alive():
-            self._commands.put(None)
-            self._proc.join(timeout)
-        if self._proc.is_alive():
-            self._proc.terminate()
-
-
-class ProcessBridgeControls:
-    """:class:`hw_bridge.controls.BridgeControls` over a :class:`ControlProcess`.
-
-    Every method only queues a command for the child's loop thread (the only writer to the
-    hardware) and returns at once; refusals land in ``health().fault`` (and in the link's
-    fault shown by the Control panel). Arm / Disarm are the Control panel's: the link is
-    activated (ARM) *and* the control stack starts commanding (holding where the arm is),
-    since an armed device without demands trips its watchdog within ``watchdog_ms``.
-    On the simulated arm Connect / Disconnect do nothing and health() then says so.
-    """
-
-    def __init__(self, ctl: ControlProcess):
-        self.ctl = ctl
-
-    def connect(self, port: str, baud: int) -> None:
-        self.ctl.connect_link(port, baud)
-
-    def disconnect(self) -> None:
-        self.ctl.disconnect_link()
-
-    def arm(self) -> None:
-        self.ctl.arm()
-
-    def disarm(self) -> None:
-        self.ctl.disarm()
-
-    def health(self) -> Any:
-        """The newest published :class:`~hw_bridge.interface.LinkHealth` (None: no link yet)."""
-        view = self.ctl.view
-        return None if view is None else view.link
