@@ -64,9 +64,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="serial device or pyserial URL of a real controller (overrides "
                         "--hardware)")
     p.add_argument("--rt-cpu", choices=("auto", "none"), default="auto",
-                   help="auto: keep the highest CPU for the soft arm's 100 Hz loop and its device "
-                        "emulator, the console and planner on the others; none: no pinning "
-                        "(the extensible arm's loop runs in the console process: not pinned)")
+                   help="auto: keep the highest CPU for the arm's 100 Hz loop process and its "
+                        "device emulator, the console and planner on the others; none: no "
+                        "pinning")
     return p.parse_args(argv)
 
 
@@ -147,8 +147,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     port_path = getattr(args, "port_path", None)
     store = StateStore(model_for(robot),
                        mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
-    # (the extensible arm's loop is a thread of this process: nothing to split off for it)
-    cpus = cpu_partition(args) if robot.kind == "planar" else None
+    cpus = cpu_partition(args)  # either arm's loop process (and emulator) on the real-time CPU
     services = hardware_setup.attach(robot, store, mode, port_path, cpus=cpus)
     if args.demo:
         services = services.replace(demo=DemoMotion(store))

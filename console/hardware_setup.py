@@ -5,9 +5,10 @@ pseudo-terminal so every demo runs through the real serial stack; ``--hardware m
 device in-process (no serial); ``--port-path PATH`` talks to a real controller. The soft arm's
 100 Hz loop runs in :class:`hw_bridge.soft_arm_process.ControlProcess` (its own process,
 which starts the emulator itself); the extensible arm's loop is
-:class:`hw_bridge.extensible_runner.ExtensibleRunner` on a
-:class:`hw_bridge.interface.SerialHardware` (or, with ``--hardware mock``, on an in-process
-MockHardware, started by the first Execute).
+:class:`hw_bridge.extensible_process.ExtensibleProcess` (its own process too) on a
+:class:`hw_bridge.interface.SerialHardware` to the emulator's pty or the controller (or, with
+``--hardware mock``, on an in-process MockHardware in that process, started by the first
+Execute).
 
 :func:`attach` returns the :class:`console.services.ConsoleServices` the app is built with: the
 loop, and its :class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm /
@@ -100,30 +101,28 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
         out.closers.append(ctl.close)
         return ConsoleServices(hardware=out, soft_control=ctl, bridge_controls=ctl.bridge_controls,
                                cpu_partition=None if cpus == "auto" else cpus)
-    from hw_bridge import extensible_runner
-    from hw_bridge.extensible_jobs import StoreLink
-    from hw_bridge.interface import SerialHardware
+    from hw_bridge import extensible_process
+    from hw_bridge.cpu_partition import CpuPartition, format_cpus
 
-    link = StoreLink(store)
+    part = CpuPartition.default() if cpus == "auto" else cpus
     if mode == "mock" and not port_path:
-        # An in-process MockHardware: no serial link for the Hardware panel to manage; the
-        # runner connects on the first Execute (as it always did).
-        runner = extensible_runner.ExtensibleRunner(
-            robot, extensible_runner.mock_factory(robot), link=link,
-            follow=not link.always_report)
+        # A MockHardware in the runner's process: no serial link for the Hardware panel to
+        # manage; the runner connects on the first Execute (as it always did).
+        runner = extensible_process.ExtensibleProcess(robot, store, "mock", cpus=part)
         out.closers.insert(0, runner.close)
-        return ConsoleServices(hardware=out, extensible_runner=runner)
+        return ConsoleServices(hardware=out, extensible_runner=runner, cpu_partition=part)
     path = port_path
     if path is None:
         from hw_bridge import soft_arm_link
 
-        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source)])
+        on_cpus = () if part is None else ("--cpus", format_cpus(part.realtime))
+        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus])
         out.closers.append(emulator.stop)
         path = emulator.path
         out.port_path = path
-    hardware = SerialHardware(BridgeConfig.from_robot(robot), path)
-    runner = extensible_runner.ExtensibleRunner(robot, lambda: hardware, link=link, follow=False)
+    runner = extensible_process.ExtensibleProcess(robot, store, "port", path, follow=False,
+                                                  cpus=part)
     out.closers.insert(0, runner.close)
     runner.start()
     return ConsoleServices(hardware=out, extensible_runner=runner,
-                           bridge_controls=runner.bridge_controls)
+                           bridge_controls=runner.bridge_controls, cpu_partition=part)

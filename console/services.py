@@ -17,7 +17,7 @@ if TYPE_CHECKING:
     from console.hardware_setup import HardwareAttachment
     from hw_bridge.controls import BridgeControls
     from hw_bridge.cpu_partition import CpuPartition
-    from hw_bridge.extensible_runner import ExtensibleRunner
+    from hw_bridge.extensible_process import ExtensibleProcess
     from hw_bridge.soft_arm_process import ControlProcess
 
 
@@ -29,7 +29,8 @@ class ConsoleServices:
         hardware: What :func:`console.hardware_setup.attach` started (link kind, port, baud;
             :meth:`close` stops it all). None: no hardware (kinematic simulation).
         soft_control: The soft arm's control process (its 100 Hz loop; Control panel).
-        extensible_runner: The extensible arm's 100 Hz runner (Paths, Target, Repeatability).
+        extensible_runner: The extensible arm's 100 Hz runner in its own process (Paths,
+            Target, Repeatability).
         bridge_controls: The loop's connect / disconnect / arm / disarm / health for the
             Hardware panel (None: the loop offers none, e.g. the extensible arm's in-process mock).
         cpu_partition: Where the real-time loop runs and where everything else does (None: no
@@ -39,7 +40,7 @@ class ConsoleServices:
 
     hardware: HardwareAttachment | None = None
     soft_control: ControlProcess | None = None
-    extensible_runner: ExtensibleRunner | None = None
+    extensible_runner: ExtensibleProcess | None = None
     bridge_controls: BridgeControls | None = None
     cpu_partition: CpuPartition | None = None
     demo: DemoMotion | None = None

@@ -131,4 +131,13 @@ class CloseLink:
     """DISARM and close the link (the runner is shutting down)."""
 
 
-ExtensibleCommand = Union[BridgeCommand, RunPath, Hold, ConnectFactory, CloseLink]
+@dataclasses.dataclass(frozen=True)
+class Setpoint:
+    """The console's newest commanded posture (``seq`` of the command, Delta (n, 3)), followed
+    while idle; sent to the extensible arm's process whenever the command changes."""
+
+    seq: int
+    delta: tuple[tuple[float, ...], ...]
+
+
+ExtensibleCommand = Union[BridgeCommand, RunPath, Hold, ConnectFactory, CloseLink, Setpoint]

@@ -57,14 +57,17 @@ class HardwareLink:
         factory: The runner's hardware factory (:meth:`ExtensibleRunner.connect` uses it);
             an operator's Connect replaces it by the newly opened link.
         health_every: Publish the link health every this many ticks (10: 10 Hz at 100 Hz).
+        on_new_link: Called after every configure (a new receive thread): the runner's own
+            process makes it real-time (:func:`hw_bridge.realtime.promote_new_threads`).
     """
 
     def __init__(self, robot: ExtensibleArm, factory: Callable[[], HardwareInterface],
-                 health_every: int = 10) -> None:
+                 health_every: int = 10,
+                 on_new_link: Callable[[], None] = lambda: None) -> None:
         self.robot = robot
         self.factory = factory
         self.health_every = max(1, health_every)
-        self.supervisor = LinkSupervisor(None, open_serial(robot))
+        self.supervisor = LinkSupervisor(None, open_serial(robot), on_new_link)
         self.fault: str | None = None
         self.controls = QueuedBridgeControls()
         self.streamer: Any = None  # the runner's Streamer (set by the runner)
@@ -126,7 +129,10 @@ class HardwareLink:
         self.fault = None
         stack.fault, stack.message = None, "connecting"
         for step in (hw.configure, hw.activate):
-            if step() is not ReturnType.OK:
+            ok = step() is ReturnType.OK
+            if step == hw.configure:
+                self.supervisor.on_new_link()
+            if not ok:
                 stack.fault = hw.fault or f"{step.__name__} failed"
                 stack.message = f"fault: {stack.fault}"
                 self.publish()

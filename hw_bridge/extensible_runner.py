@@ -67,12 +67,14 @@ class ExtensibleRunner:
         settle_counts: A job ends once every encoder is within this of its final demand.
         settle_timeout: ... or this long after the last sample (s), reported as not settled.
         follow: On connect, move to the link's commanded posture at once (else wait for a new one).
+        on_new_link: Called on the loop thread after every configure of a link (its new receive
+            thread): :func:`hw_bridge.realtime.promote_new_threads` in a real-time process.
     """
 
     def __init__(self, robot: ExtensibleArm, hardware_factory: Callable[[], HardwareInterface],
                  *, link: PoseLink | None = None, period_s: float | None = None,
                  settle_counts: int = 3, settle_timeout: float = 3.0,
-                 follow: bool = True) -> None:
+                 follow: bool = True, on_new_link: Callable[[], None] = lambda: None) -> None:
         if getattr(robot, "kind", None) != "delta":
             raise ValueError(f"robot must be an extensible (delta) arm, got {type(robot).__name__}")
         from hw_bridge.config import BridgeConfig
@@ -80,7 +82,8 @@ class ExtensibleRunner:
         self.follow = follow
         self.period_s = period_s or BridgeConfig.from_robot(robot).period_s
         self.device = HardwareLink(robot, hardware_factory,
-                                   health_every=max(1, round(0.1 / self.period_s)))
+                                   health_every=max(1, round(0.1 / self.period_s)),
+                                   on_new_link=on_new_link)
         self.streamer = Streamer(robot, self.period_s, link, settle_counts, settle_timeout)
         self.streamer.on_result = self._on_result
         self.device.streamer = self.streamer
@@ -159,7 +162,8 @@ class ExtensibleRunner:
         if isinstance(cmd, CloseLink):
             return self.device.close()
         if isinstance(cmd, BRIDGE_COMMANDS):
-            return self.device.apply(cmd)
+            self.device.apply(cmd)
+            return self.device.publish()
         raise TypeError(f"not a command for the extensible arm: {cmd!r}")
 
     def close(self) -> None:
@@ -179,9 +183,7 @@ class ExtensibleRunner:
     # -- jobs ------------------------------------------------------------------------------
     def execute(self, path: MotionPath, label: str = "path") -> int:
         """Queue ``path`` (from :func:`core.planning.paths.plan_path`); returns its job id."""
-        if path.motor_counts.shape[1:] != (3 * self.robot.n_segments,) or len(path.times) < 1:
-            raise ValueError("path must have motor counts of shape "
-                             f"(K, {3 * self.robot.n_segments})")
+        check_path(self.robot, path)
         job_id = next(self._ids)
         self.send(RunPath(job_id, label, path))
         return job_id
@@ -189,12 +191,7 @@ class ExtensibleRunner:
     def move_to(self, lengths: npt.ArrayLike, label: str = "move") -> int:
         """Queue a joint move from wherever the motors are to rack lengths (n, 3) (moved into
         the rack and bending limits first)."""
-        goal = np.asarray(lengths, dtype=float)
-        if goal.shape != (self.robot.n_segments, 3) or not np.all(np.isfinite(goal)):
-            raise ValueError(f"lengths must be finite with shape ({self.robot.n_segments}, 3)")
-        goal = dk.limit_rack_lengths(self.robot, goal)
-        path = joint_move(self.robot, goal, goal, rate_hz=1.0 / self.period_s)
-        return self.execute(path, label)  # the leading joint move does the travel
+        return self.execute(move_path(self.robot, lengths, self.period_s), label)
 
     def stop(self) -> Future:
         """Hold position (aborts the running job)."""
@@ -212,9 +209,30 @@ class ExtensibleRunner:
             self._done.notify_all()
 
     @property
+    def port(self) -> str:
+        """The link's port ("" before the first connect)."""
+        return str(getattr(self.device.hw, "port", "") or "")
+
+    @property
     def snapshot(self) -> RunnerSnapshot:
         """Newest telemetry (any thread)."""
         return self.streamer.snapshot
+
+
+def check_path(robot: ExtensibleArm, path: MotionPath) -> None:
+    """A job's path must carry motor counts for every motor (ValueError otherwise)."""
+    if path.motor_counts.shape[1:] != (3 * robot.n_segments,) or len(path.times) < 1:
+        raise ValueError(f"path must have motor counts of shape (K, {3 * robot.n_segments})")
+
+
+def move_path(robot: ExtensibleArm, lengths: npt.ArrayLike, period_s: float) -> MotionPath:
+    """The job of a move to rack lengths (n, 3), moved into the rack and bending limits first
+    (the leading joint move from wherever the motors are does the travel)."""
+    goal = np.asarray(lengths, dtype=float)
+    if goal.shape != (robot.n_segments, 3) or not np.all(np.isfinite(goal)):
+        raise ValueError(f"lengths must be finite with shape ({robot.n_segments}, 3)")
+    goal = dk.limit_rack_lengths(robot, goal)
+    return joint_move(robot, goal, goal, rate_hz=1.0 / period_s)
 
 
 def mock_factory(robot: ExtensibleArm, relaxed_s: float = 0.5) -> Callable[[], HardwareInterface]:

@@ -20,6 +20,7 @@ import numpy as np
 from hw_bridge.commands import Arm, BridgeCommand, Connect, Disarm, Disconnect
 from hw_bridge.link_supervisor import (DISCONNECTED, NO_SERIAL_LINK, LinkRefused, LinkSupervisor,
                                        open_serial)
+from hw_bridge.realtime import promote_new_threads
 
 if TYPE_CHECKING:
     from hw_bridge.soft_arm_process import DeviceOptions
@@ -70,20 +71,6 @@ class SimWorld:
         pass
 
 
-def _promote_new_threads() -> None:
-    """Loop thread, after a (re)configure started a new receive thread: make it real-time like
-    the loop's other helper threads (:mod:`hw_bridge.realtime`, just below the loop), or a
-    descheduled GIL holder stalls the loop past the link timeout on a loaded machine."""
-    import os
-
-    from hw_bridge.realtime import helper_priority, promote_threads, thread_policy
-    try:
-        if thread_policy() == os.SCHED_FIFO:
-            promote_threads(helper_priority(os.sched_getparam(0).sched_priority))
-    except (OSError, AttributeError):  # no real-time scheduling here: nothing to match
-        pass
-
-
 class _Unplugged:
     """The loop's hardware after the operator's Disconnect: motion capture is still read (the
     arm is drawn as measured, the telemetry stays current) but nothing reaches a device."""
@@ -130,7 +117,7 @@ class HardwareWorld:
         self.link = open_link(robot, opts.kind, port_path=opts.port_path, seed=seed,  # type: ignore[arg-type]
                               emulator_args=opts.emulator_args)
         self.device = self.link.device
-        self.supervisor = LinkSupervisor(self.link.hw, open_serial(robot), _promote_new_threads)
+        self.supervisor = LinkSupervisor(self.link.hw, open_serial(robot), promote_new_threads)
         self.radius: float | None = None
 
     def configure(self) -> None:

@@ -325,9 +325,9 @@ def test_without_controls_the_panel_says_why_and_disables_everything(
 # -- hardware_setup.attach --------------------------------------------------------------------
 
 def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
-    import hw_bridge.soft_arm_process as cp
-    import hw_bridge.extensible_runner as er
+    import hw_bridge.extensible_process as ep
     import hw_bridge.soft_arm_link as sal
+    import hw_bridge.soft_arm_process as cp
 
     made: dict[str, Any] = {}
 
@@ -351,8 +351,9 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
             made["emulator_stopped"] = True
 
     class FakeRunner:
-        def __init__(self, robot: Any, factory: Any, **_: Any) -> None:
-            made["hardware"] = factory()
+        def __init__(self, robot: Any, store: Any, kind: str, port_path: str | None = None,
+                     **_: Any) -> None:
+            made["hardware"] = (kind, port_path)
             self.bridge_controls = FakeControls()
 
         def start(self) -> None:
@@ -363,7 +364,7 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
 
     monkeypatch.setattr(cp, "ControlProcess", FakeControlProcess)
     monkeypatch.setattr(sal, "EmulatorProcess", FakeEmulator)
-    monkeypatch.setattr(er, "ExtensibleRunner", FakeRunner)
+    monkeypatch.setattr(ep, "ExtensibleProcess", FakeRunner)
 
     store: Any = object()  # the console's store (the extensible runner's StoreLink reads it)
     soft = attach(SOFT, store, "emulator", None)
@@ -380,17 +381,14 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     out = ext.hardware
     assert out.kind == "emulator" and out.port_path == "/dev/pts/77" and made["started"]
     assert ext.bridge_controls is ext.extensible_runner.bridge_controls
-    assert made["hardware"].port == "/dev/pts/77"
+    assert made["hardware"] == ("port", "/dev/pts/77")
     out.close()
     assert made["runner_closed"] and made["emulator_stopped"]
 
     made.clear()
     mock = attach(ROBOT, store, "mock", None)  # a runner on MockHardware, built now, not started
-    try:
-        assert mock.hardware.kind == "mock" and mock.bridge_controls is None
-        assert isinstance(made["hardware"], MockHardware) and "started" not in made
-    finally:
-        made["hardware"].shutdown()
+    assert mock.hardware.kind == "mock" and mock.bridge_controls is None
+    assert made["hardware"] == ("mock", None) and "started" not in made
 
 
 def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path) -> None:

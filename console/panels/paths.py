@@ -5,7 +5,7 @@ The path (linear / diagonal traverse, four corners; size, plane, tip speed <= th
 ``core.planning.paths.plan_path`` in a worker *process* (planning takes seconds of CPU; in this
 process it would hold the GIL against the 100 Hz loop). The preview draws the planned tip trace
 and a few translucent ghost arms. Execute streams the path through the
-:class:`~hw_bridge.extensible_runner.ExtensibleRunner` (``app.services.extensible_runner``,
+:class:`~hw_bridge.extensible_process.ExtensibleProcess` (``app.services.extensible_runner``,
 started on first use; it first joins the path from where the motors are). While it runs the
 panel shows the progress, the measured tip trace and a plot of the commanded and the measured
 tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
@@ -34,7 +34,7 @@ from console.state import ArmState
 from core.kinematics import delta as dk
 from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
 from hw_bridge.extensible_jobs import JobResult
-from hw_bridge.extensible_runner import ExtensibleRunner
+from hw_bridge.extensible_process import ExtensibleProcess
 
 Array = npt.NDArray[np.float64]
 N_GHOSTS = 5
@@ -57,7 +57,7 @@ class PathRequest:
     start: tuple[float, ...]  # flattened commanded posture the path starts from
 
 
-def extensible_runner(app: Any) -> ExtensibleRunner:
+def extensible_runner(app: Any) -> ExtensibleProcess:
     """``app.services.extensible_runner``, or a clear error when the console was built without
     one (serve.py always builds it for the extensible arm)."""
     runner = app.services.extensible_runner
@@ -156,7 +156,7 @@ class PathsPanel(Panel):
         self.app.add_stop_hook(self._on_stop)
 
     @property
-    def runner(self) -> ExtensibleRunner:
+    def runner(self) -> ExtensibleProcess:
         """The console's runner (``app.services.extensible_runner``; serve.py builds it)."""
         return extensible_runner(self.app)
 
@@ -291,12 +291,12 @@ class PathsPanel(Panel):
                     cast_shadow=False, receive_shadow=False))
 
     @staticmethod
-    def _hardware_html(runner: ExtensibleRunner | None, text: str | None = None) -> str:
+    def _hardware_html(runner: ExtensibleProcess | None, text: str | None = None) -> str:
         if text is None and runner is None:
             text = "not connected (connects on the first Execute)"
         elif text is None:
             snap = runner.snapshot  # type: ignore[union-attr]
-            port = getattr(runner.device.hw, "port", "")  # type: ignore[union-attr]
+            port = runner.port  # type: ignore[union-attr]
             text = f"{snap.state} · {port}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
         return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
                 f"Hardware: {html.escape(text)}</div>")
@@ -314,7 +314,7 @@ class PathsPanel(Panel):
         if runner is not None and runner.started:  # (the mock's connects on the first Execute)
             self._show_job(runner)
 
-    def _show_job(self, runner: ExtensibleRunner, result: JobResult | None = None) -> None:
+    def _show_job(self, runner: ExtensibleProcess, result: JobResult | None = None) -> None:
         """Progress, plot and measured trace of the panel's job; its outcome once ``result``."""
         job = self._job
         if job == 0:
@@ -345,7 +345,7 @@ class PathsPanel(Panel):
         else:
             self._set_status(f"⚠ {result.message}.", "stopped")
 
-    def _watch(self, runner: ExtensibleRunner, job: int) -> None:
+    def _watch(self, runner: ExtensibleProcess, job: int) -> None:
         """Worker: wait for the job's end, then show it (no frame may follow it)."""
         result = runner.wait(job)
         deadline = time.perf_counter() + 1.0
