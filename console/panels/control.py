@@ -140,6 +140,7 @@ class ControlPanel(Panel):
     kinds = ("planar",)
 
     def build(self) -> None:
+        self.ctl = control_for(self.app)  # first: without a control process, no widgets either
         gui = self.gui
         r0 = self.app.robot.capture.nominal_object_radius
         self.state_md = gui.add_markdown("**State:** –")
@@ -186,7 +187,6 @@ class ControlPanel(Panel):
         self.finger = scene.add_line_segments("/control/finger", np.zeros((1, 2, 3)),
                                               FINGER_COLOR, thickness=0.012, visible=False)
 
-        self.ctl = control_for(self.app)
         self.arm_btn.on_click(operator_only(lambda e: self._arm(e), panel=self,
                                             action="arm the arm"))
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
