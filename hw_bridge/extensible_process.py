@@ -44,7 +44,7 @@ SOURCE = "runner"  # the store's source of the runner's own commands and reports
 @dataclasses.dataclass(frozen=True)
 class ExtensibleView:
     """What the child publishes: the runner's snapshot, the link health and port, and the
-    loop's timing (the latest ``stats_ticks`` ticks; the slow ones)."""
+    loop's timing (over its latest 1000 ticks, refreshed once a second; the slow ones)."""
 
     snapshot: RunnerSnapshot
     link: Any  # hw_bridge.interface.LinkHealth (None before the first connect)
@@ -131,14 +131,17 @@ def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: A
 
     def publish() -> None:
         sent, n = 0, 0
+        loop = runner.loop
+        stats = loop.stats(last=1000)
         while not stop.wait(1.0 / opts.publish_hz):
             if link.measured_n != sent:
                 sent = link.measured_n
                 replies.put(("measured", np.asarray(link.measured_delta, float)))
-            loop = runner.loop
+            if n % int(opts.publish_hz) == 0:  # once a second: percentiles hold the GIL ~1 ms
+                stats = loop.stats(last=1000)
             replies.put(("view", ExtensibleView(runner.snapshot, runner.bridge_controls.health(),
-                                                runner.port, loop.scheduling + on_cpus,
-                                                loop.stats(last=1000), tuple(loop.slow_ticks))))
+                                                runner.port, loop.scheduling + on_cpus, stats,
+                                                tuple(loop.slow_ticks))))
             n += 1
             if helper_priority and n % int(opts.publish_hz) == 1:  # queue feeders start lazily
                 promote_threads(helper_priority)
