@@ -5,11 +5,12 @@ milliseconds at a time (mesh updates, plot serialisation): a 100 Hz loop *thread
 deadlines (measured: hundreds of overruns per minute, p99 period error tens of ms on 2 cores).
 :class:`ControlProcess` therefore runs the simulated arm, the control stack and the real-time
 :class:`hw_bridge.loop.LoopRunner` thread in a spawned child process (planning in a further
-:class:`hw_bridge.planner_process.ProcessPlanner` process). The loop drives either the in-process sim
-(``device="sim"``) or hardware through the serial stack (:mod:`hw_bridge.soft_arm_link`): the
-device emulator on a pty with its UDP mocap and scene channel (``"emulator"``), MockHardware
-with the same plant (``"mock"``), or a real controller (``port_path``). The console talks to it
-with small messages:
+:class:`hw_bridge.planner_process.ProcessPlanner` process), through the
+:class:`hw_bridge.loop_process.LoopProcess` wrapper the extensible arm's process shares. The loop
+drives either the in-process sim (``device="sim"``) or hardware through the serial stack
+(:mod:`hw_bridge.soft_arm_link`): the device emulator on a pty with its UDP mocap and scene
+channel (``"emulator"``), MockHardware with the same plant (``"mock"``), or a real controller
+(``port_path``). The console talks to it with small messages:
 
 * commands go down a queue as the typed dataclasses of :mod:`hw_bridge.commands`
   (:class:`~hw_bridge.commands.Arm`, :class:`~hw_bridge.commands.Goto`,
