@@ -31,6 +31,9 @@ from typing import Any
 
 from console.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
+from console.model import model_for
+from console.services import ConsoleServices
+from console.state import StateStore
 from core.robots import RobotFileError, available, load
 
 
@@ -61,9 +64,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="serial device or pyserial URL of a real controller (overrides "
                         "--hardware)")
     p.add_argument("--rt-cpu", choices=("auto", "none"), default="auto",
-                   help="auto: keep the highest CPU for the soft arm's 100 Hz loop and its device "
-                        "emulator, the console and planner on the others; none: no pinning "
-                        "(the extensible arm's loop runs in the console process: not pinned)")
+                   help="auto: keep the highest CPU for the arm's 100 Hz loop process and its "
+                        "device emulator, the console and planner on the others; none: no "
+                        "pinning")
     p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
                    help="also stream the lab channels live over the Foxglove WebSocket protocol "
                         "on port P, bound like --host (off by default; read-only)")
@@ -115,10 +118,10 @@ def cpu_partition(args: argparse.Namespace) -> Any:
     return CpuPartition.default() if getattr(args, "rt_cpu", "auto") == "auto" else None
 
 
-def pin_console(app: Any) -> str:
+def pin_console(services: ConsoleServices) -> str:
     """Move this (console) process off the real-time CPU; returns what was done, for the log."""
     from hw_bridge.cpu_partition import pin_process
-    part = getattr(app, "cpu_partition", None)
+    part = services.cpu_partition
     if part is None:
         return "CPUs: no pinning"
     pin_process(part.other)
@@ -145,16 +148,14 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     server = viser.ViserServer(host=args.host, port=args.port, verbose=False)
     mode = getattr(args, "hardware", "mock")
     port_path = getattr(args, "port_path", None)
-    app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
-                     panels=(),
-                     mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
-    # (the extensible arm's loop is a thread of this process: nothing to split off for it)
-    app.cpu_partition = (  # type: ignore[attr-defined]
-        cpu_partition(args) if robot.kind == "planar" else None)
-    app.hardware = hardware_setup.attach(app, mode, port_path)  # type: ignore[attr-defined]
+    store = StateStore(model_for(robot),
+                       mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
+    cpus = cpu_partition(args)  # either arm's loop process (and emulator) on the real-time CPU
+    services = hardware_setup.attach(robot, store, mode, port_path, cpus=cpus)
     if args.demo:
-        app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
-        app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
+        services = services.replace(demo=DemoMotion(store))
+    app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
+                     panels=(), store=store, services=services)
     for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
                       *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel):
         app.add_panel(panel_cls)
@@ -185,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     server, app, token = build(args, robot, status)
-    print(f"serve.py: {pin_console(app)}", file=sys.stderr)
+    print(f"serve.py: {pin_console(app.services)}", file=sys.stderr)
     app.start()
     port = server.get_port()  # viser moves to the next free port if --port is taken
     if port != args.port:
@@ -216,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
         pass
     finally:
         app.stop_motion("console shutting down")
-        app.hardware.close()  # type: ignore[attr-defined]
+        app.services.close()
         app.stop()
         server.stop()
         if bridge is not None:

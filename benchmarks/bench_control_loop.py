@@ -5,7 +5,7 @@
 Every scenario runs the full stack (mocap fit, grasp-and-place state machine, trajGen,
 curvature controller) on the in-process simulated arm (its physics counts as ``read``) while
 grasp-and-place tasks run back to back over the paper's spots A-E, planning in a worker
-process (:class:`hw_bridge.loop.ProcessPlanner`). Scenarios, each for ``--seconds``:
+process (:class:`hw_bridge.planner_process.ProcessPlanner`). Scenarios, each for ``--seconds``:
 
 * ``ours``    - :class:`hw_bridge.loop.LoopRunner` thread: absolute deadlines, sleep + spin,
   overruns skipped;
@@ -38,7 +38,9 @@ from core import robots  # noqa: E402
 from core.control.sim import SoftArmSim  # noqa: E402
 from core.control.stack import ControlStack  # noqa: E402
 from core.control.trials import paper_locations  # noqa: E402
-from hw_bridge.loop import LoopRunner, ProcessPlanner, SimDevice  # noqa: E402
+from hw_bridge.loop import LoopRunner  # noqa: E402
+from hw_bridge.loop_devices import SimDevice  # noqa: E402
+from hw_bridge.planner_process import ProcessPlanner  # noqa: E402
 
 PERIOD = 0.01
 

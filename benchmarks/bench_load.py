@@ -7,8 +7,8 @@ Each phase runs the whole console in its own child process (``serve.build``: eve
 mode, the hardware ``serve.py`` attaches, a port on 127.0.0.1) with the arm moving:
 
 * soft arm (``--motion loop``, default): grasp-and-place trials back to back over the paper's
-  spots on the console's control process (``app.soft_control``: the 100 Hz loop in its own
-  process, planning in another); the Control panel draws what it measures. Otherwise (or with
+  spots on the console's control process (``app.services.soft_control``: the 100 Hz loop in its
+  own process, planning in another); the Control panel draws what it measures. Otherwise (or with
   ``--motion demo``) the demo motion in the console process.
 * baseline phase: the same for ``--baseline-seconds`` with 0 clients; load phase: N clients --
   Playwright contexts of one headless Chromium (``--client-kind browser``), or websocket-only
@@ -75,7 +75,7 @@ def child(a: argparse.Namespace) -> int:
     argv += ["--rt-cpu", a.rt_cpu]
     args = serve.parse_args(argv)
     server, app, _ = serve.build(args, robot, "load benchmark")
-    print(f"bench_load child: {serve.pin_console(app)}", file=sys.stderr, flush=True)
+    print(f"bench_load child: {serve.pin_console(app.services)}", file=sys.stderr, flush=True)
     app.start()
     stop = threading.Event()
     ctl, tally = start_trials(app, robot, stop) if a.motion == "loop" else (None, TrialTally())
@@ -110,9 +110,7 @@ def child(a: argparse.Namespace) -> int:
     if demo is not None:
         demo.stop()
     app.stop()
-    hardware = getattr(app, "hardware", None)
-    if hardware is not None:
-        hardware.close()
+    app.services.close()
     server.stop()
     return 0
 

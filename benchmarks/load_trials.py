@@ -25,13 +25,13 @@ RUNNING = ("settling", "planning", "approach", "grasp", "move_to_bin", "release"
 def start_trials(app: Any, robot: Any, stop: threading.Event) -> tuple[Any, TrialTally]:
     """Grasp-and-place trials back to back on the console's control process (None if absent).
 
-    The soft arm's 100 Hz loop runs in ``app.soft_control`` (a ``ControlProcess``: its own
+    The soft arm's 100 Hz loop runs in ``app.services.soft_control`` (a ``ControlProcess``: its own
     process, attached by ``serve.build``); the Control panel draws what it measures. A trial
     that stops (a link fault, a lost object) is counted with its reason; the next one arms
     again, as an operator would.
     """
     tally = TrialTally()
-    ctl = getattr(app, "soft_control", None)
+    ctl = app.services.soft_control
     if ctl is None:
         return None, tally
     from core.control.trials import paper_locations

@@ -19,7 +19,10 @@ below (``kinds`` keeps it off the other robot), pass ``panels=`` to the construc
 
 Plugging in hardware: build the app with ``mirror_commands=False``; the bridge's control thread
 reads ``app.store.wait_command(seq, timeout)`` and reports measurements with
-``app.store.report(q, "hardware")``; the view then draws what the robot measured.
+``app.store.report(q, "hardware")``; the view then draws what the robot measured. The loops and
+links the panels use come in one typed :class:`console.services.ConsoleServices`
+(``services=``, built by ``serve.py``; a loop that needs the console's store before the app
+exists gets it from ``store=``); panels read ``app.services.<name>``.
 
 Sharing the console (issue 6): ``app.access`` is the operator lock (``console.access``): gate
 every callback that moves the arm with ``console.panels.base.operator_only`` (or
@@ -37,7 +40,7 @@ import logging
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Sequence, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, Sequence, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -53,10 +56,14 @@ from console.panels.base import Panel
 from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel
 from console.recording import Recorder
+from console.services import ConsoleServices
 from console.state import ArmState, StateStore
 from console.theme import load_theme
 from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
+
+if TYPE_CHECKING:
+    from console.grasp_session import GraspSession
 
 _install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
 
@@ -82,6 +89,10 @@ class ConsoleApp:
         access: The operator lock (default: no token, every browser starts as a viewer).
         data_dir: The only folder the console reads or writes files in (default ``./runs``,
             created when first used).
+        services: The loops, links and helpers the panels use (``serve.py`` builds them; the
+            default has none, and panels that need one say so).
+        store: The console's state store, when a service built before the app needs it (it
+            then carries ``initial`` and ``mirror_commands`` itself).
     """
 
     def __init__(self, robot: Robot, server: viser.ViserServer, *,
@@ -89,13 +100,19 @@ class ConsoleApp:
                  mirror_commands: bool = True, render_hz: float = 30.0,
                  status: str = "Kinematic simulation (no hardware connected)",
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
-                 data_dir: str | Path | None = None) -> None:
+                 data_dir: str | Path | None = None, services: ConsoleServices | None = None,
+                 store: StateStore | None = None) -> None:
         if render_hz <= 0:
             raise ValueError(f"render_hz must be > 0, got {render_hz}")
         self.robot = robot
         self.server = server
         self.model: ArmModel = model_for(robot)
-        self.store = StateStore(self.model, initial, mirror_commands=mirror_commands)
+        if store is not None and (initial is not None or store.model.kind != self.model.kind):
+            raise ValueError("give either store= (for this robot) or initial=, not both")
+        self.store = store if store is not None else StateStore(self.model, initial,
+                                                                 mirror_commands=mirror_commands)
+        self.services = services if services is not None else ConsoleServices()
+        self.grasp_session: GraspSession | None = None  # made by the first grasp panel
         self.render_period = 1.0 / render_hz
         self.frames_drawn = 0
         self.last_drawn_seq = -1
@@ -118,6 +135,8 @@ class ConsoleApp:
                               heard=self.access.last_heard)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
         self.access.add_listener(self._on_control_change)
+        if self.services.demo is not None:
+            self.add_stop_hook(self.services.demo.stop)
         server.on_client_connect(self.access.grant_if_free)
 
         self._setup_theme(status)

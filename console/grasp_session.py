@@ -17,6 +17,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import viser
@@ -26,6 +27,9 @@ from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableOb
                                start_reach_map, validate_object)
 from core.planning.grasp import GraspPlanner, GraspRefused
 from core.planning.reachability import ReachMap
+
+if TYPE_CHECKING:
+    from console.app import ConsoleApp
 
 log = logging.getLogger(__name__)
 
@@ -312,10 +316,9 @@ class GraspSession:
             feed_grasp(recorder, view, dirty)
 
 
-def session_for(app) -> GraspSession:
-    """The app's grasp session, created by the first grasp panel that asks for it."""
-    session = getattr(app, "grasp_session", None)
-    if session is None:
-        session = GraspSession(app)
-        app.grasp_session = session
-    return session
+def session_for(app: ConsoleApp) -> GraspSession:
+    """The app's grasp session (``app.grasp_session``), created by the first grasp panel that
+    asks for it: it belongs to the console's GUI (scene, store), so it is not a service."""
+    if app.grasp_session is None:
+        app.grasp_session = GraspSession(app)
+    return app.grasp_session

@@ -3,20 +3,29 @@
 ``serve.py --hardware emulator`` (the default) starts ``python -m hw_bridge.emulator`` on a
 pseudo-terminal so every demo runs through the real serial stack; ``--hardware mock`` keeps the
 device in-process (no serial); ``--port-path PATH`` talks to a real controller. The soft arm's
-100 Hz loop runs in :class:`console.panels.control_process.ControlProcess` (its own process,
+100 Hz loop runs in :class:`hw_bridge.soft_arm_process.ControlProcess` (its own process,
 which starts the emulator itself); the extensible arm's loop is
-:class:`hw_bridge.extensible_runner.ExtensibleRunner` on a :class:`hw_bridge.interface.SerialHardware`.
+:class:`hw_bridge.extensible_process.ExtensibleProcess` (its own process too) on a
+:class:`hw_bridge.interface.SerialHardware` to the emulator's pty or the controller (or, with
+``--hardware mock``, on an in-process MockHardware in that process, started by the first
+Execute).
 
-:func:`attach` also sets ``app.bridge_controls``: the loop's
-:class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm / health, all
-enqueue-only) for the Hardware panel (``console.panels.hardware``), or None when the loop has
-none to offer (the extensible arm's lazily built in-process mock; a loop without the property).
+:func:`attach` returns the :class:`console.services.ConsoleServices` the app is built with: the
+loop, and its :class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm /
+health, all enqueue-only) for the Hardware panel (``console.panels.hardware``), or None when
+there is no serial link to manage (the extensible arm's in-process mock).
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
+
+from console.services import ConsoleServices
+
+if TYPE_CHECKING:
+    from console.state import StateStore
+    from hw_bridge.cpu_partition import CpuPartition
 
 HardwareMode = Literal["emulator", "mock"]
 LinkKind = Literal["emulator", "mock", "port"]
@@ -71,48 +80,49 @@ def link_kind(mode: HardwareMode, port_path: str | None) -> LinkKind:
     return "port" if port_path else mode
 
 
-def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttachment:
-    """Connect ``app`` to its hardware before the panels are built (they find it on ``app``).
+def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | None,
+           cpus: CpuPartition | None | Literal["auto"] = "auto") -> ConsoleServices:
+    """Start ``robot``'s control loop on its hardware, before the app and its panels exist.
 
-    Sets ``app.soft_control`` (soft arm) or ``app.extensible_runner`` (extensible arm), and
-    ``app.bridge_controls`` (the loop's ``bridge_controls``, or None when it has none).
+    Returns the services with ``hardware`` (what to close), ``soft_control`` (soft arm) or
+    ``extensible_runner`` (extensible arm; ``store`` is the console's command/report channel),
+    ``bridge_controls`` (None for the extensible arm's in-process mock) and ``cpu_partition``.
     """
     from hw_bridge.config import BridgeConfig
 
-    robot = app.robot
     out = HardwareAttachment(describe(robot, mode, port_path), kind=link_kind(mode, port_path),
                              port_path=port_path or None,
                              baud=BridgeConfig.from_robot(robot).baud)
-    app.bridge_controls = None
     if robot.kind == "planar":
-        from console.panels.control_process import ControlProcess
+        from hw_bridge import soft_arm_process
 
         device = "emulator" if port_path or mode == "emulator" else "mock"
-        ctl = ControlProcess(robot, device=device, port_path=port_path,
-                             cpus=getattr(app, "cpu_partition", "auto"))
-        app.soft_control = ctl
-        app.bridge_controls = getattr(ctl, "bridge_controls", None)
+        ctl = soft_arm_process.ControlProcess(robot, device=device, port_path=port_path, cpus=cpus)
         out.closers.append(ctl.close)
-        return out
-    if mode == "mock" and not port_path:
-        # ExtensibleRunner.from_app builds an in-process MockHardware runner on first use: no
-        # serial link to manage, the Hardware panel says so.
-        return out
-    from hw_bridge.extensible_runner import ExtensibleRunner, StoreLink
-    from hw_bridge.interface import SerialHardware
+        return ConsoleServices(hardware=out, soft_control=ctl, bridge_controls=ctl.bridge_controls,
+                               cpu_partition=None if cpus == "auto" else cpus)
+    from hw_bridge import extensible_process
+    from hw_bridge.cpu_partition import CpuPartition, format_cpus
 
+    part = CpuPartition.default() if cpus == "auto" else cpus
+    if mode == "mock" and not port_path:
+        # A MockHardware in the runner's process: no serial link for the Hardware panel to
+        # manage; the runner connects on the first Execute (as it always did).
+        runner = extensible_process.ExtensibleProcess(robot, store, "mock", cpus=part)
+        out.closers.insert(0, runner.close)
+        return ConsoleServices(hardware=out, extensible_runner=runner, cpu_partition=part)
     path = port_path
     if path is None:
-        from hw_bridge.soft_arm_link import EmulatorProcess
+        from hw_bridge import soft_arm_link
 
-        emulator = EmulatorProcess(["--robot", str(robot.source)])
+        on_cpus = () if part is None else ("--cpus", format_cpus(part.realtime))
+        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus])
         out.closers.append(emulator.stop)
         path = emulator.path
         out.port_path = path
-    hardware = SerialHardware(BridgeConfig.from_robot(robot), path)
-    runner = ExtensibleRunner(robot, lambda: hardware, link=StoreLink(app.store), follow=False)
-    app.extensible_runner = runner
-    app.bridge_controls = getattr(runner, "bridge_controls", None)
+    runner = extensible_process.ExtensibleProcess(robot, store, "port", path, follow=False,
+                                                  cpus=part)
     out.closers.insert(0, runner.close)
     runner.start()
-    return out
+    return ConsoleServices(hardware=out, extensible_runner=runner,
+                           bridge_controls=runner.bridge_controls, cpu_partition=part)

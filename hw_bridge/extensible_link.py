@@ -1,45 +1,52 @@
-"""The extensible runner's hardware: one link that the operator may connect, arm, disarm, drop.
+"""The extensible runner's hardware: the loop Device over the arm's one supervised link.
 
 :class:`HardwareLink` is the :class:`hw_bridge.loop.Device` of
 :class:`hw_bridge.extensible_runner.ExtensibleRunner`: the loop thread (the only one that touches
 the hardware) calls :meth:`HardwareLink.read` / :meth:`HardwareLink.write` every tick. Each
 :meth:`~HardwareLink.read` first applies the operator's queued bridge commands
-(:class:`hw_bridge.controls.QueuedBridgeControls`: the GUI only enqueues), then reads the
-encoders, and publishes the link's :class:`~hw_bridge.interface.LinkHealth` a few times a second
-(and at once after a command or a fault).
-
-Commands (see :attr:`ExtensibleRunner.bridge_controls`):
-
-* ``connect(port, baud)``: stop commanding, close the link, open ``port`` with a new
-  :class:`~hw_bridge.interface.SerialHardware` (the current link's settings, else the robot's
-  ``[bridge]``, with ``baud``; 0 keeps the current one; over
-  :class:`~hw_bridge.transport.SerialTransport`, whose writes do not
-  fail on a GIL stall) and configure it: telemetry flows, nothing is armed. An empty port
-  reconnects to the current one. The in-process mock has no port: only ``mock://`` (or empty)
-  reconnects it, any other port is refused with the reason.
-* ``disconnect()``: stop commanding, DISARM, close the port; Arm is refused until a Connect.
-* ``arm()``: activate (configuring first if a fault closed the link); the arm then holds where
-  the encoders are and the console's command is set to that posture. Only ever on request:
-  nothing re-arms after a fault.
-* ``disarm()``: stop commanding and DISARM (the device holds and stops); telemetry goes on.
+(:class:`hw_bridge.controls.QueuedBridgeControls`: the GUI only enqueues) through the
+:class:`hw_bridge.link_supervisor.LinkSupervisor` both arms share, then reads the encoders, and
+publishes the link's :class:`~hw_bridge.interface.LinkHealth` a few times a second (and at once
+after a command or a fault). What Arm holds and what stopping means here is
+:class:`StreamerStrategy`: the streamer holds where the encoders are and the console's command
+is set to that posture.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import queue
 from typing import Any, Callable
 
 import numpy as np
 
 from core.robots import ExtensibleArm
-from hw_bridge.controls import BridgeCommand, QueuedBridgeControls
+from hw_bridge.commands import Arm, BridgeCommand, Connect
+from hw_bridge.controls import QueuedBridgeControls
 from hw_bridge.extensible_jobs import Array, Counts
-from hw_bridge.interface import HardwareInterface, LifecycleState, ReturnType, SerialHardware
+from hw_bridge.interface import HardwareInterface, LifecycleState, ReturnType
+from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor, open_serial
 
 NOT_CONNECTED: Counts = np.zeros(0, dtype=np.int64)
-MOCK_PORT = "mock://"
-DISCONNECTED = "disconnected by the operator: Connect, then Arm, to command the arm again"
+
+
+class StreamerStrategy:
+    """The extensible arm's side of the link verbs (:class:`~hw_bridge.link_supervisor.
+    ArmStrategy`): stopping ends the streamer's job; holding arms it at the encoders and makes
+    the console's command that posture (unless it is already armed)."""
+
+    def __init__(self, streamer: Any) -> None:
+        self.streamer = streamer
+
+    def release(self, message: str) -> None:
+        self.streamer.disarmed(message)
+
+    def hold(self, hw: HardwareInterface) -> None:
+        if self.streamer.armed:
+            return
+        pos = hw.positions()
+        assert pos is not None  # LinkSupervisor.arm checked
+        self.streamer.connected(pos, follow=False)
+        self.streamer.settle_link()
 
 
 class HardwareLink:
@@ -50,19 +57,26 @@ class HardwareLink:
         factory: The runner's hardware factory (:meth:`ExtensibleRunner.connect` uses it);
             an operator's Connect replaces it by the newly opened link.
         health_every: Publish the link health every this many ticks (10: 10 Hz at 100 Hz).
+        on_new_link: Called after every configure (a new receive thread): the runner's own
+            process makes it real-time (:func:`hw_bridge.realtime.promote_new_threads`).
     """
 
     def __init__(self, robot: ExtensibleArm, factory: Callable[[], HardwareInterface],
-                 health_every: int = 10) -> None:
+                 health_every: int = 10,
+                 on_new_link: Callable[[], None] = lambda: None) -> None:
         self.robot = robot
         self.factory = factory
         self.health_every = max(1, health_every)
-        self.hw: HardwareInterface | None = None
+        self.supervisor = LinkSupervisor(None, open_serial(robot), on_new_link)
         self.fault: str | None = None
         self.controls = QueuedBridgeControls()
         self.streamer: Any = None  # the runner's Streamer (set by the runner)
-        self.disconnected = False
         self._ticks = 0
+
+    @property
+    def hw(self) -> HardwareInterface | None:
+        """The current link (None before the first connect)."""
+        return self.supervisor.hw
 
     # -- loop Device ---------------------------------------------------------------------------
     def read(self, t: float) -> Counts | None:
@@ -100,16 +114,9 @@ class HardwareLink:
         return None if pos is None else np.asarray(pos, dtype=float)
 
     def publish(self) -> None:
-        """Make the link's health visible to ``controls.health()`` (loop thread).
-
-        ``armed`` is the device's last reported status only while the link is ACTIVE: after a
-        fault or a Disconnect the last STATE received may still say ARMED, but nothing is.
-        """
-        hw = self.hw
-        if hw is not None:
-            health = hw.health()
-            if health.armed and hw.state is not LifecycleState.ACTIVE:
-                health = dataclasses.replace(health, armed=False)
+        """Make the link's health visible to ``controls.health()`` (loop thread)."""
+        health = self.supervisor.health()
+        if health is not None:
             self.controls.publish(health)
 
     # -- lifecycle (loop thread) ---------------------------------------------------------------
@@ -118,13 +125,14 @@ class HardwareLink:
         activate it; the streamer then holds (or follows). Returns the fault, or None."""
         stack = self.streamer
         stack.disarmed("reconnecting")  # a running job ends here
-        if self.hw is not None:
-            self.hw.cleanup()
-        hw = self.hw = self.factory()
-        self.disconnected, self.fault = False, None
+        hw = self.supervisor.adopt(self.factory())
+        self.fault = None
         stack.fault, stack.message = None, "connecting"
         for step in (hw.configure, hw.activate):
-            if step() is not ReturnType.OK:
+            ok = step() is ReturnType.OK
+            if step == hw.configure:
+                self.supervisor.on_new_link()
+            if not ok:
                 stack.fault = hw.fault or f"{step.__name__} failed"
                 stack.message = f"fault: {stack.fault}"
                 self.publish()
@@ -137,8 +145,7 @@ class HardwareLink:
 
     def close(self) -> None:
         """Disarm and close the link (loop thread, or after the loop stopped)."""
-        if self.hw is not None:
-            self.hw.cleanup()
+        self.supervisor.close()
 
     # -- operator commands (loop thread) -------------------------------------------------------
     def _apply_commands(self) -> bool:
@@ -149,71 +156,24 @@ class HardwareLink:
             except queue.Empty:
                 return applied
             applied = True
-            getattr(self, f"_{cmd.action}")(cmd)
+            self.apply(cmd)
 
-    def _refuse(self, reason: str) -> None:
-        if self.hw is not None:
-            self.hw.fault = reason
-        self.fault = reason
-
-    def _connect(self, cmd: BridgeCommand) -> None:
-        old = self.hw
-        old_port = getattr(old, "port", "") if old is not None else ""
-        port = cmd.port.strip() or old_port
-        if not port:
-            self._refuse("connect refused: no port given")
-            return
-        if old_port == MOCK_PORT and port != MOCK_PORT:
-            self._refuse(f"connect refused: the mock device is {MOCK_PORT} (in-process); start "
-                         f"serve.py with --port-path {port} for a real controller")
-            return
-        self.streamer.disarmed(f"connecting to {port}")
-        if old is not None:
-            old.cleanup()
-        if old is not None and old_port == MOCK_PORT:
-            hw: HardwareInterface = old
+    def apply(self, cmd: BridgeCommand) -> None:
+        """Run one operator bridge command through the link supervisor (loop thread)."""
+        before = self.supervisor.hw
+        try:
+            self.supervisor.apply(cmd, StreamerStrategy(self.streamer))
+        except LinkRefused as exc:
+            self.fault = exc.fault
+            if exc.fault != str(exc):  # the device failed (not a refusal): the streamer says so
+                failed = f"connect failed: {exc.fault}" if isinstance(cmd, Connect) else str(exc)
+                self.streamer.disarmed(failed, exc.fault)
         else:
-            from hw_bridge.config import BridgeConfig
-            config = getattr(old, "config", None) or BridgeConfig.from_robot(self.robot)
-            if cmd.baud:
-                config = dataclasses.replace(config, baud=cmd.baud)
-            hw = SerialHardware(config, port, config.baud)
-        self.hw, self.factory = hw, (lambda: hw)
-        self.disconnected, self.fault = False, None
-        if hw.configure() is ReturnType.OK:
-            self.streamer.disarmed(f"connected to {port}; disarmed (Arm to command the arm)")
-        else:
-            self.fault = hw.fault
-            self.streamer.disarmed(f"connect failed: {hw.fault}", hw.fault)
-
-    def _disconnect(self, cmd: BridgeCommand) -> None:
-        self.streamer.disarmed(DISCONNECTED)
-        if self.hw is not None:
-            self.hw.cleanup()
-        self.disconnected = True
-
-    def _arm(self, cmd: BridgeCommand) -> None:
-        hw = self.hw
-        if hw is None or self.disconnected:
-            self._refuse(f"arm refused: {DISCONNECTED if self.disconnected else 'not connected'}")
-            return
-        if hw.state is LifecycleState.ACTIVE:
-            return
-        ok = hw.state is LifecycleState.INACTIVE or hw.configure() is ReturnType.OK
-        ok = ok and hw.activate() is ReturnType.OK
-        pos = hw.positions() if ok else None
-        if pos is None:
-            self.fault = hw.fault or "arm failed"
-            self.streamer.disarmed(f"arm refused: {self.fault}", self.fault)
-            return
-        self.fault = None
-        self.streamer.connected(pos, follow=False)
-        self.streamer.settle_link()  # the console's command becomes the held posture
-
-    def _disarm(self, cmd: BridgeCommand) -> None:
-        hw = self.hw
-        if hw is None or hw.state is not LifecycleState.ACTIVE:
-            return
-        self.streamer.disarmed("disarmed by the operator; Arm to command the arm again")
-        if hw.deactivate() is ReturnType.ERROR:
-            hw.cleanup()
+            if isinstance(cmd, (Connect, Arm)):
+                self.fault = None
+            if isinstance(cmd, Connect):
+                self.streamer.disarmed(f"connected to {getattr(self.hw, 'port', '')}; "
+                                       "disarmed (Arm to command the arm)")
+        hw = self.supervisor.hw
+        if hw is not before and hw is not None:  # a Connect opened it: the runner's from now on
+            self.factory = lambda: hw

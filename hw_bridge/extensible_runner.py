@@ -23,7 +23,11 @@ deadlines, overruns skipped): every tick reads the encoders, converts them to ra
 
 The pieces live in :mod:`hw_bridge.extensible_jobs` (encoder maths, joint moves, records),
 :mod:`hw_bridge.extensible_streamer` (per-tick logic) and :mod:`hw_bridge.extensible_link`
-(the hardware link and the operator's bridge commands); the public names are re-exported here.
+(the hardware link; its connect / arm / disarm are :class:`hw_bridge.link_supervisor.
+LinkSupervisor`'s, shared with the soft arm). Everything queued for the loop is a typed command
+(:mod:`hw_bridge.commands`: :class:`~hw_bridge.commands.RunPath`, :class:`~hw_bridge.commands.
+Hold`, :class:`~hw_bridge.commands.ConnectFactory`, :class:`~hw_bridge.commands.CloseLink`, and
+the bridge verbs) that the loop thread dispatches on its type.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ import dataclasses
 import itertools
 import threading
 from concurrent.futures import Future
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -40,17 +44,15 @@ import numpy.typing as npt
 from core.kinematics import delta as dk
 from core.planning.paths import MotionPath
 from core.robots import ExtensibleArm
+from hw_bridge.commands import (BRIDGE_COMMANDS, CloseLink, ConnectFactory, ExtensibleCommand,
+                               Hold, RunPath)
 from hw_bridge.controls import BridgeControls
-from hw_bridge.extensible_jobs import (JobResult, JobTrace, PoseLink, RunnerSnapshot,  # noqa: F401
-                                       StoreLink, concat_paths, home_counts, joint_move, measure)
+from hw_bridge.extensible_jobs import JobResult, PoseLink, RunnerSnapshot, joint_move
 from hw_bridge.extensible_link import HardwareLink
 from hw_bridge.extensible_streamer import Streamer
 from hw_bridge.interface import HardwareInterface
 from hw_bridge.loop import LoopRunner
 from hw_bridge.realtime import shorten_gil_wait
-
-__all__ = ["ExtensibleRunner", "JobResult", "JobTrace", "PoseLink", "RunnerSnapshot",
-           "StoreLink", "home_counts", "joint_move", "measure", "mock_factory"]
 
 
 class ExtensibleRunner:
@@ -65,12 +67,14 @@ class ExtensibleRunner:
         settle_counts: A job ends once every encoder is within this of its final demand.
         settle_timeout: ... or this long after the last sample (s), reported as not settled.
         follow: On connect, move to the link's commanded posture at once (else wait for a new one).
+        on_new_link: Called on the loop thread after every configure of a link (its new receive
+            thread): :func:`hw_bridge.realtime.promote_new_threads` in a real-time process.
     """
 
     def __init__(self, robot: ExtensibleArm, hardware_factory: Callable[[], HardwareInterface],
                  *, link: PoseLink | None = None, period_s: float | None = None,
                  settle_counts: int = 3, settle_timeout: float = 3.0,
-                 follow: bool = True) -> None:
+                 follow: bool = True, on_new_link: Callable[[], None] = lambda: None) -> None:
         if getattr(robot, "kind", None) != "delta":
             raise ValueError(f"robot must be an extensible (delta) arm, got {type(robot).__name__}")
         from hw_bridge.config import BridgeConfig
@@ -78,7 +82,8 @@ class ExtensibleRunner:
         self.follow = follow
         self.period_s = period_s or BridgeConfig.from_robot(robot).period_s
         self.device = HardwareLink(robot, hardware_factory,
-                                   health_every=max(1, round(0.1 / self.period_s)))
+                                   health_every=max(1, round(0.1 / self.period_s)),
+                                   on_new_link=on_new_link)
         self.streamer = Streamer(robot, self.period_s, link, settle_counts, settle_timeout)
         self.streamer.on_result = self._on_result
         self.device.streamer = self.streamer
@@ -90,19 +95,6 @@ class ExtensibleRunner:
         self._done = threading.Condition()
         self._start_lock = threading.Lock()
         self.connecting: Future | None = None  # the first connect, queued by start()
-
-    @classmethod
-    def from_app(cls, app: Any) -> "ExtensibleRunner":
-        """The console's runner: ``app.extensible_runner`` if set, else one built on
-        ``app.hardware_factory`` (if the app has one) or an in-process MockHardware, kept on
-        ``app.extensible_runner``. Not started: call :meth:`start`."""
-        runner = getattr(app, "extensible_runner", None)
-        if runner is None:
-            factory = getattr(app, "hardware_factory", None) or mock_factory(app.robot)
-            link = StoreLink(app.store)
-            runner = cls(app.robot, factory, link=link, follow=not link.always_report)
-            app.extensible_runner = runner
-        return runner
 
     # -- lifecycle -------------------------------------------------------------------------
     @property
@@ -153,13 +145,32 @@ class ExtensibleRunner:
     def connect(self) -> Future:
         """(Re)configure and activate the hardware from the factory, on the loop thread; the
         arm then holds (or, with ``follow``, moves to the console's command)."""
-        return self.loop.submit(lambda stack, t: self.device.open_and_arm(self.follow))
+        return self.send(ConnectFactory(self.follow))
+
+    def send(self, cmd: ExtensibleCommand) -> Future:
+        """Queue ``cmd`` for the loop thread; the Future resolves once it was applied."""
+        return self.loop.submit(lambda stack, t: self._apply(cmd, t))
+
+    def _apply(self, cmd: ExtensibleCommand, t: float) -> object:
+        """Loop thread: run one command (dispatch on its type)."""
+        if isinstance(cmd, RunPath):
+            return self.streamer.start_job(cmd.job_id, cmd.label, cmd.path, t)
+        if isinstance(cmd, Hold):
+            return self.streamer.halt(t)
+        if isinstance(cmd, ConnectFactory):
+            return self.device.open_and_arm(cmd.follow)
+        if isinstance(cmd, CloseLink):
+            return self.device.close()
+        if isinstance(cmd, BRIDGE_COMMANDS):
+            self.device.apply(cmd)
+            return self.device.publish()
+        raise TypeError(f"not a command for the extensible arm: {cmd!r}")
 
     def close(self) -> None:
         """Disarm and release the hardware, stop the thread (and a MockHardware's device)."""
         if self.loop.running:
             try:  # the control thread is the one that talks to the hardware
-                self.loop.submit(lambda s, t: self.device.close()).result(2)
+                self.send(CloseLink()).result(2)
             except Exception:  # noqa: BLE001 - closing anyway
                 pass
             self.loop.stop()
@@ -172,26 +183,19 @@ class ExtensibleRunner:
     # -- jobs ------------------------------------------------------------------------------
     def execute(self, path: MotionPath, label: str = "path") -> int:
         """Queue ``path`` (from :func:`core.planning.paths.plan_path`); returns its job id."""
-        if path.motor_counts.shape[1:] != (3 * self.robot.n_segments,) or len(path.times) < 1:
-            raise ValueError("path must have motor counts of shape "
-                             f"(K, {3 * self.robot.n_segments})")
+        check_path(self.robot, path)
         job_id = next(self._ids)
-        self.loop.submit(lambda s, t: s.start_job(job_id, label, path, t))
+        self.send(RunPath(job_id, label, path))
         return job_id
 
     def move_to(self, lengths: npt.ArrayLike, label: str = "move") -> int:
         """Queue a joint move from wherever the motors are to rack lengths (n, 3) (moved into
         the rack and bending limits first)."""
-        goal = np.asarray(lengths, dtype=float)
-        if goal.shape != (self.robot.n_segments, 3) or not np.all(np.isfinite(goal)):
-            raise ValueError(f"lengths must be finite with shape ({self.robot.n_segments}, 3)")
-        goal = dk.limit_rack_lengths(self.robot, goal)
-        path = joint_move(self.robot, goal, goal, rate_hz=1.0 / self.period_s)
-        return self.execute(path, label)  # the leading joint move does the travel
+        return self.execute(move_path(self.robot, lengths, self.period_s), label)
 
     def stop(self) -> Future:
         """Hold position (aborts the running job)."""
-        return self.loop.submit(lambda s, t: s.halt(t))
+        return self.send(Hold())
 
     def wait(self, job_id: int, timeout: float | None = None) -> JobResult | None:
         """Block until job ``job_id`` ended; None on timeout."""
@@ -205,9 +209,30 @@ class ExtensibleRunner:
             self._done.notify_all()
 
     @property
+    def port(self) -> str:
+        """The link's port ("" before the first connect)."""
+        return str(getattr(self.device.hw, "port", "") or "")
+
+    @property
     def snapshot(self) -> RunnerSnapshot:
         """Newest telemetry (any thread)."""
         return self.streamer.snapshot
+
+
+def check_path(robot: ExtensibleArm, path: MotionPath) -> None:
+    """A job's path must carry motor counts for every motor (ValueError otherwise)."""
+    if path.motor_counts.shape[1:] != (3 * robot.n_segments,) or len(path.times) < 1:
+        raise ValueError(f"path must have motor counts of shape (K, {3 * robot.n_segments})")
+
+
+def move_path(robot: ExtensibleArm, lengths: npt.ArrayLike, period_s: float) -> MotionPath:
+    """The job of a move to rack lengths (n, 3), moved into the rack and bending limits first
+    (the leading joint move from wherever the motors are does the travel)."""
+    goal = np.asarray(lengths, dtype=float)
+    if goal.shape != (robot.n_segments, 3) or not np.all(np.isfinite(goal)):
+        raise ValueError(f"lengths must be finite with shape ({robot.n_segments}, 3)")
+    goal = dk.limit_rack_lengths(robot, goal)
+    return joint_move(robot, goal, goal, rate_hz=1.0 / period_s)
 
 
 def mock_factory(robot: ExtensibleArm, relaxed_s: float = 0.5) -> Callable[[], HardwareInterface]:

@@ -365,8 +365,3 @@ class LoopRunner:
                          pct(err, 50), pct(err, 99), float(err.max()), pct(b[1], 99),
                          pct(b[5], 50), pct(b[5], 99), pct(b[2], 99), pct(b[3], 99), pct(b[4], 99))
 
-
-# Planning in another process lives in hw_bridge.planner_process, the devices in
-# hw_bridge.loop_devices; re-exported here.
-from hw_bridge.loop_devices import HardwareDevice, SimDevice  # noqa: E402,F401
-from hw_bridge.planner_process import ProcessPlanner, resolve  # noqa: E402,F401

@@ -142,6 +142,17 @@ def demote_tty_workers(pids: list[int], priority: int) -> None:
             continue
 
 
+def promote_new_threads() -> None:
+    """Loop thread, after a (re)configure started a new receive thread: make it real-time like
+    the loop's other helper threads (just below the loop), or a
+    descheduled GIL holder stalls the loop past the link timeout on a loaded machine."""
+    try:
+        if thread_policy() == os.SCHED_FIFO:
+            promote_threads(helper_priority(os.sched_getparam(0).sched_priority))
+    except (OSError, AttributeError):  # no real-time scheduling here: nothing to match
+        pass
+
+
 class TtyWorkerKeeper:
     """Keeps the ``kworker/u*`` workers real-time while a real-time pty user runs.
 

@@ -2,7 +2,7 @@
 
 :func:`open_link` builds a :class:`SoftArmLink`: the :class:`~hw_bridge.interface.SerialHardware`
 (or :class:`~hw_bridge.mock.MockHardware`), a motion-capture source and the loop's
-:class:`~hw_bridge.loop.HardwareDevice`, plus a *scene* handle that places the object in the
+:class:`~hw_bridge.loop_devices.HardwareDevice`, plus a *scene* handle that places the object in the
 simulated world (emulator: its UDP scene channel on 127.0.0.1; mock: the in-process sim; a real
 device has none - the object is put down by hand). :meth:`SoftArmLink.close` tears it all down,
 including the emulator process (which also gets SIGTERM if this process dies: PR_SET_PDEATHSIG).
@@ -233,7 +233,7 @@ def open_link(robot: Any, kind: DeviceKind, *, port_path: str | None = None, see
         emulator_args: Extra emulator arguments (fault injection, ``--baud``).
     """
     from hw_bridge.interface import SerialHardware
-    from hw_bridge.loop import HardwareDevice
+    from hw_bridge.loop_devices import HardwareDevice
 
     n = robot.n_segments
     radius = robot.capture.nominal_object_radius

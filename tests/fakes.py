@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 
 class FakeClient:
     """What operator_only, app.refuse and app.notify_all use of a viser ClientHandle."""
@@ -12,3 +14,30 @@ class FakeClient:
 
     def add_notification(self, title: str, body: str, **_: object) -> None:
         self.notes.append((title, body))
+
+
+def console_app(robot: Any, server: Any, *, soft_control: Any = None,
+                extensible_runner: Any = None, bridge_controls: Any = None, hardware: Any = None,
+                demo: bool = False, mirror_commands: bool = True, **kwargs: Any) -> Any:
+    """A ConsoleApp with exactly the services a test names -- the one place tests build them.
+
+    ``soft_control="process"`` starts a real :class:`hw_bridge.soft_arm_process.ControlProcess`
+    (simulated arm, default scheduling and CPUs) as ``serve.py`` does; anything else is used as
+    given (a fake). ``demo=True`` adds the demo motion (``serve.py --demo``). Nothing else is
+    created: a service left out is None, as in production.
+    """
+    from console.app import ConsoleApp
+    from console.demo_motion import DemoMotion
+    from console.model import model_for
+    from console.services import ConsoleServices
+    from console.state import StateStore
+
+    if soft_control == "process":
+        from hw_bridge.soft_arm_process import ControlProcess
+        soft_control = ControlProcess(robot)
+    store = StateStore(model_for(robot), mirror_commands=mirror_commands)
+    services = ConsoleServices(hardware=hardware, soft_control=soft_control,
+                               extensible_runner=extensible_runner,
+                               bridge_controls=bridge_controls,
+                               demo=DemoMotion(store) if demo else None)
+    return ConsoleApp(robot, server, store=store, services=services, **kwargs)

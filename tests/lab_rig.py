@@ -86,20 +86,21 @@ def press(page: Any, name: str) -> Any:
     return page.mouse
 
 
-def lab_app(tmp_path: Path) -> tuple[Any, Any, str]:
+def lab_app(tmp_path: Path, **services: Any) -> tuple[Any, Any, str]:
     """A viser server on a free port and a soft-arm ConsoleApp in lab mode with a fresh operator
-    token (no panels yet); returns (server, app, token)."""
+    token and the given ``services`` (``fakes.console_app``; no panels yet); returns
+    (server, app, token)."""
     import secrets
 
     import viser
 
     from console.access import AccessControl
-    from console.app import ConsoleApp
+    from fakes import console_app
 
     token = secrets.token_urlsafe(9)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(token),
-                     data_dir=tmp_path / "runs", status="lab test")
+    app = console_app(SOFT, server, panels=(), access=AccessControl(token),
+                      data_dir=tmp_path / "runs", status="lab test", **services)
     return server, app, token
 
 
@@ -110,13 +111,10 @@ def lab(browser, tmp_path: Path) -> Iterator[Lab]:
     process), Session -- rather than all of them: the full console takes twice as long to load
     in software-rendered Chromium, and the other panels play no part here."""
     from console.app import DEFAULT_PANELS
-    from console.demo_motion import DemoMotion
     from console.panels.control import ControlPanel
     from console.panels.session import SessionPanel
 
-    server, app, token = lab_app(tmp_path)
-    app.demo = DemoMotion(app.store)  # type: ignore[attr-defined]
-    app.add_stop_hook(app.demo.stop)  # type: ignore[attr-defined]
+    server, app, token = lab_app(tmp_path, soft_control="process", demo=True)
     for panel_cls in (*DEFAULT_PANELS, ControlPanel, SessionPanel):
         app.add_panel(panel_cls)
     app.start()
@@ -128,7 +126,6 @@ def lab(browser, tmp_path: Path) -> Iterator[Lab]:
             context.close()
         app.stop_motion("test over")
         app.stop()
-        ctl = getattr(app, "soft_control", None)
-        if ctl is not None:
-            ctl.close()
+        app.services.close()
+        app.services.soft_control.close()
         server.stop()

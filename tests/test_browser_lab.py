@@ -54,13 +54,13 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     texts = notifications(bob)
     assert any("Only the operator can jog — Alice holds control; ask them or take control "
                "with the token" in n for n in texts), texts
-    assert app.store.command is before and not app.demo.running
-    view = app.soft_control.view  # the control process: never armed, no task started
+    assert app.store.command is before and not app.services.demo.running
+    view = app.services.soft_control.view  # the control process: never armed, no task started
     assert view is None or view.snapshot.control is None or (
         not view.snapshot.control.armed and view.snapshot.control.phase == "idle")
 
     alice.get_by_role("button", name="Run demo motion").click()
-    wait_for(lambda: app.demo.running and app.store.command.source == "demo")
+    wait_for(lambda: app.services.demo.running and app.store.command.source == "demo")
     wait_for(lambda: app.store.command.seq > before.seq + 10)
     stop_button(bob).click()
     wait_for(lambda: lab.stops)
@@ -68,7 +68,7 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     assert who and int(who.group(1)) != app.access.holder.client_id, lab.stops  # Bob, not Alice
     stopped = app.store.command
     time.sleep(0.5)
-    assert not app.demo.running and app.store.command.seq == stopped.seq
+    assert not app.services.demo.running and app.store.command.seq == stopped.seq
     assert app.access.holder is not None and app.access.holder.name == "Alice"
     wait_for(lambda: any("stopped the arm" in n for n in notifications(alice)))
     bob.screenshot(path=str(artifacts_dir / "browser_lab_viewer.png"))
@@ -77,11 +77,11 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     # The hotkey: Esc in the viewer's page stops the motion too.
     n_stops = len(lab.stops)
     alice.get_by_role("button", name="Run demo motion").click()
-    wait_for(lambda: app.demo.running)
+    wait_for(lambda: app.services.demo.running)
     bob.mouse.click(300, 700)  # focus the 3D view, not a text field
     bob.keyboard.press("Escape")
     wait_for(lambda: len(lab.stops) > n_stops, timeout=3.0)
-    assert not app.demo.running
+    assert not app.services.demo.running
 
 
 def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> None:
@@ -117,12 +117,12 @@ def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(l
     alice, bob = lab.page(), lab.page()
     lab.take_control(alice, "Alice")
     alice.get_by_role("button", name="Run demo motion").click()
-    wait_for(lambda: app.demo.running)
+    wait_for(lambda: app.services.demo.running)
     closed = time.monotonic()
     alice.context.close()
     wait_for(lambda: lab.stops, timeout=3.0)
     assert lab.stops[-1][0] - closed < 2.0 and "Alice's tab" in lab.stops[-1][1]
-    assert app.access.holder is None and not app.demo.running
+    assert app.access.holder is None and not app.services.demo.running
     wait_for(lambda: "nobody" in bob.locator('[data-testid="holder"]').inner_text())
 
     carol = lab.page()
@@ -150,10 +150,9 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     from hw_bridge.controls import QueuedBridgeControls
 
     planner.GraspSession.compute_reach = False
-    server, app, token = lab_app(tmp_path)
-    app.bridge_controls = QueuedBridgeControls()  # type: ignore[attr-defined]
-    app.hardware = HardwareAttachment("test", kind="emulator",  # type: ignore[attr-defined]
-                                      port_path="/dev/pts/99")
+    server, app, token = lab_app(
+        tmp_path, bridge_controls=QueuedBridgeControls(),
+        hardware=HardwareAttachment("test", kind="emulator", port_path="/dev/pts/99"))
     for panel_cls in (*planner.grasp_panels(), HardwarePanel, SessionPanel):
         app.add_panel(panel_cls)
     app.start()
@@ -204,7 +203,7 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
     bob.screenshot(path=str(artifacts_dir / "browser_lab_viewer_refused.png"))
     time.sleep(0.3)
     assert session.view().objects == objects and session.view().outcome.seq == planned.seq
-    assert app.bridge_controls.commands.empty()  # type: ignore[attr-defined]
+    assert app.services.bridge_controls.commands.empty()  # type: ignore[union-attr]
     assert alice.get_by_label("x (m)", exact=True).input_value() == shown
     assert not any("Only the operator" in n for n in notifications(alice))
 

@@ -87,7 +87,7 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
     alice.get_by_role("button", name="Start recording").click()
     wait_for(lambda: app.recorder.recording)
     alice.get_by_role("button", name="Run demo motion").click()
-    wait_for(lambda: app.demo.running)
+    wait_for(lambda: app.services.demo.running)
     time.sleep(0.8)
     stop_button(alice).click()
     alice.get_by_role("button", name="Stop recording").click()

@@ -218,3 +218,27 @@ def test_panels_plug_in_by_class_and_a_broken_panel_does_not_stop_drawing(server
     assert ConsoleApp(EXT, server, panels=[PlanarOnlyPanel]).panels == ()
     with pytest.raises(KeyError):
         app.panel(type("Missing", (Panel,), {}))
+
+
+def test_services_come_in_typed_and_nothing_is_made_behind_the_callers_back(server) -> None:
+    from console.panels.control import ControlPanel
+    from console.panels.paths import PathsPanel
+    from fakes import console_app
+
+    app = console_app(SOFT, server, panels=(), demo=True)
+    demo = app.services.demo
+    assert demo is not None and app.services.soft_control is None
+    demo.start()
+    deadline = time.monotonic() + 5.0
+    while app.store.command.source != "demo" and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert demo.running and app.store.command.source == "demo"
+    app.stop_motion("test STOP")  # the demo's stop hook was registered by the app
+    assert not demo.running
+    with pytest.raises(ValueError, match="control process"):
+        app.add_panel(ControlPanel)  # no process started for it: a clear error instead
+    ext = console_app(EXT, server, panels=())
+    with pytest.raises(ValueError, match="runner"):
+        ext.add_panel(PathsPanel).runner  # type: ignore[union-attr]
+    with pytest.raises(ValueError, match="store= .* or initial="):
+        ConsoleApp(SOFT, server, store=app.store, initial=np.zeros(6))

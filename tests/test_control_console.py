@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import viser
 
-from console.app import ConsoleApp
 from console.panels.capture import merge
 from console.panels.control import ControlPanel, table_point
-from console.panels.control_process import DISCONNECTED, ControlView
+from hw_bridge.link_supervisor import DISCONNECTED
+from hw_bridge.soft_arm_process import ControlView
 from console.panels.trials import results_markdown
 from core.control.capture import characterise
 from core.control.stack import Telemetry
@@ -21,6 +21,7 @@ from core.control.trials import TrialResult
 from core.robots import load
 from hw_bridge.interface import LinkHealth
 from hw_bridge.loop import LoopSnapshot, LoopStats
+from fakes import console_app
 
 SOFT = load("soft-arm")
 
@@ -36,7 +37,7 @@ def wait_for(pred, timeout=30.0):
 @pytest.fixture
 def app():
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    a = ConsoleApp(SOFT, srv, panels=(ControlPanel,))
+    a = console_app(SOFT, srv, panels=(ControlPanel,), soft_control="process")
     a.start()
     try:
         yield a
@@ -119,15 +120,14 @@ def fake_view(device="mock", fault=None, link_state="inactive", armed=False, sta
 @pytest.fixture
 def fake_panel():
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    a = ConsoleApp(SOFT, srv, panels=())
-    a.soft_control = FakeControl()
+    a = console_app(SOFT, srv, panels=(), soft_control=FakeControl())
     clients = {1: FakeClient(1), 2: FakeClient(2)}
     srv.get_clients = lambda: clients  # viser notifications are per client: two browsers
     panel = a.add_panel(ControlPanel)
     panel._pump_stop.set()  # the test drives the pump itself
     panel._pump.join(2.0)
     try:
-        yield panel, a.soft_control, clients
+        yield panel, a.services.soft_control, clients
     finally:
         panel.close()
         srv.stop()

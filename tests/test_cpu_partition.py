@@ -106,7 +106,7 @@ def _cmdline(pid: int) -> str:
 
 @needs_two_cpus
 def test_control_process_runs_the_loop_and_emulator_on_the_real_time_cpu() -> None:
-    from console.panels.control_process import ControlProcess
+    from hw_bridge.soft_arm_process import ControlProcess
     from core.robots import load
 
     part = CpuPartition.default(frozenset(os.sched_getaffinity(0)))

@@ -20,7 +20,8 @@ from core.kinematics import delta as dk
 pytest.register_assert_rewrite("extensible_rig")  # before its import: it holds fixtures
 from extensible_rig import (N, Q0, ROBOT, TIP_TOL, Emulator,  # noqa: E402
                             serial_to, short_path, tip_from_counts)
-from hw_bridge.extensible_runner import ExtensibleRunner, home_counts, joint_move, measure  # noqa: E402
+from hw_bridge.extensible_jobs import home_counts, joint_move, measure  # noqa: E402
+from hw_bridge.extensible_runner import ExtensibleRunner  # noqa: E402
 from hw_bridge.interface import LifecycleState  # noqa: E402
 from hw_bridge.mock import MockHardware  # noqa: E402
 
@@ -87,11 +88,14 @@ def test_joint_move_goal_bent_beyond_the_limit_is_brought_within_it() -> None:
                                                [0, 0, 0.1]], atol=1e-9)
 
 
-def test_public_names_stay_importable_from_the_runner_module() -> None:
+def test_public_names_are_importable_from_the_modules_that_define_them() -> None:
+    import hw_bridge.extensible_jobs as ej
     import hw_bridge.extensible_runner as er
-    for name in ("ExtensibleRunner", "StoreLink", "PoseLink", "RunnerSnapshot", "JobResult",
-                 "JobTrace", "home_counts", "measure", "joint_move", "mock_factory"):
-        assert hasattr(er, name), name
+    for module, names in ((er, ("ExtensibleRunner", "mock_factory")),
+                          (ej, ("StoreLink", "PoseLink", "RunnerSnapshot", "JobResult",
+                                "JobTrace", "home_counts", "measure", "joint_move"))):
+        for name in names:
+            assert getattr(module, name).__module__ == module.__name__, name
 
 
 def test_bad_jobs_raise_and_queue_nothing(mock: MockHardware) -> None:

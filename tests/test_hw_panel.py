@@ -1,6 +1,7 @@
 """Bridge controls (queued operator commands) with MockHardware; the console's Hardware panel
 (operator-only actions, viewers' edits snapped back, faults notified once to every browser, the
-mock / no-controls explanation); and hardware_setup.attach wiring ``app.bridge_controls``."""
+mock / no-controls explanation); and hardware_setup.attach building the services (the loop's
+``bridge_controls``)."""
 
 from __future__ import annotations
 
@@ -13,15 +14,15 @@ import pytest
 import viser
 
 from console.access import AccessControl
-from console.app import ConsoleApp
 from console.hardware_setup import HardwareAttachment, attach
 from console.panels.hardware import (OTHER, FaultTracker, HardwarePanel, format_health,
                                      no_controls_text)
 from core.robots import load
 from hw_bridge.controls import QueuedBridgeControls
 from hw_bridge.interface import LifecycleState, LinkHealth
+from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor
 from hw_bridge.mock import MockHardware
-from fakes import FakeClient
+from fakes import FakeClient, console_app
 
 ROBOT = load("extensible")
 SOFT = load("soft-arm")
@@ -31,14 +32,25 @@ def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> Non
     ctl = QueuedBridgeControls()
     mocks: list[MockHardware] = []
 
-    def open_hw(port: str, baud: int) -> MockHardware:
+    def open_hw(port: str, baud: int, old: Any) -> MockHardware:
         mocks.append(MockHardware(ROBOT))
         return mocks[-1]
+
+    link = LinkSupervisor(None, open_hw)
+    strategy = RecordingStrategy()
+
+    def apply_pending(hw: Any, open_hw: Any) -> Any:  # what a loop thread does once per tick
+        while not ctl.commands.empty():
+            try:
+                link.apply(ctl.commands.get_nowait(), strategy)
+            except LinkRefused:
+                pass
+        return link.hw
 
     ctl.connect("mock://", 1_000_000)
     ctl.arm()
     assert not mocks  # enqueueing did nothing by itself
-    hw = ctl.apply_pending(None, open_hw)
+    hw = apply_pending(None, open_hw)
     try:
         assert hw is mocks[0] and hw.state is LifecycleState.ACTIVE
         for _ in range(5):
@@ -48,18 +60,31 @@ def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> Non
         ctl.publish(hw.health())
         assert ctl.health().armed
         ctl.disarm()
-        hw = ctl.apply_pending(hw, open_hw)
+        hw = apply_pending(hw, open_hw)
         assert hw.state is LifecycleState.INACTIVE
         ctl.arm()
         ctl.disconnect()
-        hw = ctl.apply_pending(hw, open_hw)
+        hw = apply_pending(hw, open_hw)
         assert hw.state is LifecycleState.UNCONFIGURED
         ctl.arm()  # arming while disconnected is ignored: connect first
-        hw = ctl.apply_pending(hw, open_hw)
+        hw = apply_pending(hw, open_hw)
         assert hw.state is LifecycleState.UNCONFIGURED
     finally:
         for m in mocks:
             m.shutdown()
+
+
+class RecordingStrategy:
+    """An ArmStrategy that only records what the link supervisor asked of the arm."""
+
+    def __init__(self) -> None:
+        self.calls: list[str] = []
+
+    def release(self, message: str) -> None:
+        self.calls.append(f"release: {message}")
+
+    def hold(self, hw: Any) -> None:
+        self.calls.append("hold")
 
 
 def test_health_text_marks_watchdog_and_estop() -> None:
@@ -126,11 +151,10 @@ def server() -> Iterator[viser.ViserServer]:
 
 def make_panel(server: viser.ViserServer, controls: Any, kind: str | None = "emulator",
                port_path: str | None = "/dev/pts/9", robot: Any = ROBOT) -> HardwarePanel:
-    app = ConsoleApp(robot, server, panels=(), access=AccessControl("tok"))
-    app.bridge_controls = controls  # type: ignore[attr-defined]
-    if kind is not None:
-        app.hardware = HardwareAttachment("test", kind=kind,  # type: ignore[attr-defined]
-                                          port_path=port_path, baud=1_000_000)
+    hardware = None if kind is None else HardwareAttachment("test", kind=kind,
+                                                            port_path=port_path, baud=1_000_000)
+    app = console_app(robot, server, panels=(), access=AccessControl("tok"),
+                      bridge_controls=controls, hardware=hardware)
     panel = app.add_panel(HardwarePanel)
     assert panel is not None
     return panel
@@ -300,16 +324,10 @@ def test_without_controls_the_panel_says_why_and_disables_everything(
 
 # -- hardware_setup.attach --------------------------------------------------------------------
 
-class FakeApp:
-    def __init__(self, robot: Any) -> None:
-        self.robot = robot
-        self.store = object()
-
-
 def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
-    import console.panels.control_process as cp
-    import hw_bridge.extensible_runner as er
+    import hw_bridge.extensible_process as ep
     import hw_bridge.soft_arm_link as sal
+    import hw_bridge.soft_arm_process as cp
 
     made: dict[str, Any] = {}
 
@@ -333,8 +351,9 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
             made["emulator_stopped"] = True
 
     class FakeRunner:
-        def __init__(self, robot: Any, factory: Any, **_: Any) -> None:
-            made["hardware"] = factory()
+        def __init__(self, robot: Any, store: Any, kind: str, port_path: str | None = None,
+                     **_: Any) -> None:
+            made["hardware"] = (kind, port_path)
             self.bridge_controls = FakeControls()
 
         def start(self) -> None:
@@ -345,30 +364,31 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
 
     monkeypatch.setattr(cp, "ControlProcess", FakeControlProcess)
     monkeypatch.setattr(sal, "EmulatorProcess", FakeEmulator)
-    monkeypatch.setattr(er, "ExtensibleRunner", FakeRunner)
+    monkeypatch.setattr(ep, "ExtensibleProcess", FakeRunner)
 
-    soft = FakeApp(SOFT)
-    out = attach(soft, "emulator", None)
+    store: Any = object()  # the console's store (the extensible runner's StoreLink reads it)
+    soft = attach(SOFT, store, "emulator", None)
+    out = soft.hardware
     assert made["soft"] == ("emulator", None) and out.kind == "emulator"
     assert made["cpus"] == "auto"  # no partition chosen by the app: the control process picks
     assert soft.bridge_controls is soft.soft_control.bridge_controls
     assert out.port_path is None and out.baud == 1_000_000  # the child knows the pty
-    out = attach(FakeApp(SOFT), "mock", "/dev/ttyACM3")
+    out = attach(SOFT, store, "mock", "/dev/ttyACM3").hardware
     assert made["soft"] == ("emulator", "/dev/ttyACM3") and out.kind == "port"
     assert out.port_path == "/dev/ttyACM3"
 
-    ext = FakeApp(ROBOT)
-    out = attach(ext, "emulator", None)
+    ext = attach(ROBOT, store, "emulator", None)
+    out = ext.hardware
     assert out.kind == "emulator" and out.port_path == "/dev/pts/77" and made["started"]
     assert ext.bridge_controls is ext.extensible_runner.bridge_controls
-    assert made["hardware"].port == "/dev/pts/77"
+    assert made["hardware"] == ("port", "/dev/pts/77")
     out.close()
     assert made["runner_closed"] and made["emulator_stopped"]
 
-    mock = FakeApp(ROBOT)
-    out = attach(mock, "mock", None)  # the runner comes later, lazily, with MockHardware
-    assert out.kind == "mock" and mock.bridge_controls is None
-    assert not hasattr(mock, "extensible_runner")
+    made.clear()
+    mock = attach(ROBOT, store, "mock", None)  # a runner on MockHardware, built now, not started
+    assert mock.hardware.kind == "mock" and mock.bridge_controls is None
+    assert made["hardware"] == ("mock", None) and "started" not in made
 
 
 def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path) -> None:
@@ -379,6 +399,6 @@ def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path)
         panel = app.panel(HardwarePanel)
         assert "in-process mock device" in panel.note.content and panel.connect_btn.disabled
     finally:
-        app.hardware.close()
+        app.services.close()
         app.stop()
         server.stop()

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from console.datadir import DataDir
 from console.lab_feed import ControlFeed, feed_grasp
 from console.model import model_for
-from console.panels.control_process import ControlView
+from hw_bridge.soft_arm_process import ControlView
 from console.plan_view import Outcome, SessionView, TableObject
 from console.recording import Recorder, load_recording
 from console.state import StateStore

@@ -11,7 +11,9 @@ from core import robots
 from core.control.grasp_place import PlanRequest, immediate
 from core.control.sim import SoftArmSim
 from core.control.stack import ControlStack
-from hw_bridge.loop import HardwareDevice, LoopRunner, ProcessPlanner, SimClock, SimDevice
+from hw_bridge.loop import LoopRunner, SimClock
+from hw_bridge.loop_devices import HardwareDevice, SimDevice
+from hw_bridge.planner_process import ProcessPlanner
 
 MS = 1_000_000
 

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from console.panels.control_process import DISCONNECTED, NO_SERIAL_LINK, ControlProcess
+from hw_bridge.link_supervisor import DISCONNECTED, NO_SERIAL_LINK
+from hw_bridge.soft_arm_process import ControlProcess
 from core.robots import load
 from hw_bridge import protocol as p
 

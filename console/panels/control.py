@@ -1,10 +1,10 @@
 """Control panel (soft arm): the 100 Hz closed loop on the simulated arm, grasp-and-place, STOP.
 
-:class:`~console.panels.control_process.ControlProcess` runs the seeded simulated arm, the
+:class:`~hw_bridge.soft_arm_process.ControlProcess` runs the seeded simulated arm, the
 control stack, the planner process and the real-time :class:`hw_bridge.loop.LoopRunner` thread
-in a child process (the console's own threads would delay a loop thread here); the app keeps one
-as ``app.soft_control``. The panel only sends commands (applied by the loop at its next tick)
-and reads the newest published view, never locks.
+in a child process (the console's own threads would delay a loop thread here); ``serve.py``
+starts it and hands it over as ``app.services.soft_control``. The panel only sends commands
+(applied by the loop at its next tick) and reads the newest published view, never locks.
 
 Widgets: Arm / Disarm, object x, y, r and *Place object*, *Execute* (the full grasp-and-place
 for the placed object: settle, plan in the planner process, approach, grasp, carry, release),
@@ -34,7 +34,8 @@ from viser import uplot
 
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
-from console.panels.control_process import DISCONNECTED, ControlProcess, ControlView
+from hw_bridge.link_supervisor import DISCONNECTED
+from hw_bridge.soft_arm_process import ControlProcess, ControlView
 from console.state import ArmState
 
 SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")
@@ -53,11 +54,12 @@ _CELL = "padding:0 2px;text-align:right;font-variant-numeric:tabular-nums"
 
 
 def control_for(app: Any) -> ControlProcess:
-    """``app.soft_control``, the app's control process, started on first use."""
-    ctl = getattr(app, "soft_control", None)
-    if ctl is None or not ctl.alive:
-        ctl = ControlProcess(app.robot, cpus=getattr(app, "cpu_partition", "auto"))
-        app.soft_control = ctl
+    """``app.services.soft_control``, the soft arm's control process (serve.py starts it)."""
+    ctl = app.services.soft_control
+    if ctl is None:
+        raise ValueError("the Control panel needs the soft arm's control process: build the "
+                         "console with services=ConsoleServices(soft_control=ControlProcess(...))"
+                         " (serve.py does)")
     return ctl
 
 
@@ -139,6 +141,7 @@ class ControlPanel(Panel):
     kinds = ("planar",)
 
     def build(self) -> None:
+        self.ctl = control_for(self.app)  # first: without a control process, no widgets either
         gui = self.gui
         r0 = self.app.robot.capture.nominal_object_radius
         self.state_md = gui.add_markdown("**State:** –")
@@ -185,7 +188,6 @@ class ControlPanel(Panel):
         self.finger = scene.add_line_segments("/control/finger", np.zeros((1, 2, 3)),
                                               FINGER_COLOR, thickness=0.012, visible=False)
 
-        self.ctl = control_for(self.app)
         self.arm_btn.on_click(operator_only(lambda e: self._arm(e), panel=self,
                                             action="arm the arm"))
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
@@ -311,11 +313,12 @@ class ControlPanel(Panel):
     def _notify_fault(self, fault: str | None) -> None:
         """Tell every browser once when a new hardware fault appears (not the operator's
         own Disconnect); a fault that clears and comes back is told again. With the Hardware
-        panel composed (``app.bridge_controls``) it tells them instead: one notification."""
+        panel's controls (``app.services.bridge_controls``) it tells them instead: one
+        notification."""
         if fault == self._last_fault:
             return
         self._last_fault = fault
-        if getattr(self.app, "bridge_controls", None) is not None:
+        if self.app.services.bridge_controls is not None:
             return
         if fault and fault != DISCONNECTED:
             self.app.notify_all("Hardware fault",

@@ -2,9 +2,8 @@
 
 ``EXTENSIBLE_PANELS`` = tip target (gizmo / typed, IK), paths (preview, execute, stop, error
 plot) and repeatability (Table I). Each has ``kinds = ("delta",)``, so composing them for the
-soft arm adds nothing. Execution goes through ``ExtensibleRunner.from_app(app)``: the runner the
-app carries as ``app.extensible_runner`` (set it before the first Execute to use the emulator or
-the board), else one on ``app.hardware_factory``, else an in-process MockHardware.
+soft arm adds nothing. Execution goes through ``app.services.extensible_runner``, the runner
+``console.hardware_setup.attach`` built on the emulator, the board or an in-process MockHardware.
 """
 
 from __future__ import annotations

@@ -1,10 +1,10 @@
 """Hardware panel (both robots): pick the serial port, connect, arm/disarm the device, link health.
 
 The panel drives the control loop's :class:`hw_bridge.controls.BridgeControls`, which
-``console.hardware_setup.attach`` puts on ``app.bridge_controls`` (the soft arm's control
-process or the extensible arm's runner). Its methods only enqueue; the loop thread applies them.
-Without controls (the extensible arm's in-process mock, or a loop that offers none) the panel
-says why and disables its inputs.
+``console.hardware_setup.attach`` puts into ``app.services.bridge_controls`` (the soft arm's
+control process or the extensible arm's runner). Its methods only enqueue; the loop thread
+applies them. Without controls (the extensible arm's in-process mock, or a loop that offers
+none) the panel says why and disables its inputs.
 
 Sharing: Connect, Disconnect, Arm device, Disarm device and every change of port or baud are
 :func:`~console.panels.base.operator_only`; a viewer's edit of the shared port / baud fields snaps
@@ -110,11 +110,11 @@ class HardwarePanel(Panel):
 
     def build(self) -> None:
         gui = self.gui
-        attachment = getattr(self.app, "hardware", None)
-        self.kind: str | None = getattr(attachment, "kind", None)
+        attachment = self.app.services.hardware
+        self.kind: str | None = None if attachment is None else attachment.kind
         self.owner = "Control" if self.app.robot.kind == "planar" else "Paths"
-        default_port = getattr(attachment, "port_path", None) or ""
-        default_baud = str(getattr(attachment, "baud", None) or BAUDS[0])
+        default_port = (attachment and attachment.port_path) or ""
+        default_baud = str((attachment and attachment.baud) or BAUDS[0])
         try:
             ports = [p.device for p in list_ports()]
         except Exception:  # no port listing: free text still works
@@ -170,8 +170,8 @@ class HardwarePanel(Panel):
 
     # -- what the panel talks to -------------------------------------------------------------
     def controls(self) -> BridgeControls | None:
-        """The loop's bridge controls (looked up each time: a loop may offer them later)."""
-        return getattr(self.app, "bridge_controls", None)
+        """The loop's bridge controls (None: no serial link to manage)."""
+        return self.app.services.bridge_controls
 
     def selected_port(self) -> str:
         """The port Connect uses: the typed path, else the picked device ("" for none)."""

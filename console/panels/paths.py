@@ -5,10 +5,10 @@ The path (linear / diagonal traverse, four corners; size, plane, tip speed <= th
 ``core.planning.paths.plan_path`` in a worker *process* (planning takes seconds of CPU; in this
 process it would hold the GIL against the 100 Hz loop). The preview draws the planned tip trace
 and a few translucent ghost arms. Execute streams the path through the
-:class:`~hw_bridge.extensible_runner.ExtensibleRunner` (``ExtensibleRunner.from_app``, started
-on first use; it first joins the path from where the motors are). While it runs the panel shows
-the progress, the measured tip trace and a plot of the commanded and the measured tip's
-distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
+:class:`~hw_bridge.extensible_process.ExtensibleProcess` (``app.services.extensible_runner``,
+started on first use; it first joins the path from where the motors are). While it runs the
+panel shows the progress, the measured tip trace and a plot of the commanded and the measured
+tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
 console-wide STOP (any client), whose hook makes the runner hold position, as does a lost lease.
 """
 
@@ -34,7 +34,8 @@ from console.panels.base import Panel
 from console.state import ArmState
 from core.kinematics import delta as dk
 from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
-from hw_bridge.extensible_runner import ExtensibleRunner, JobResult
+from hw_bridge.extensible_jobs import JobResult
+from hw_bridge.extensible_process import ExtensibleProcess
 
 Array = npt.NDArray[np.float64]
 N_GHOSTS = 5
@@ -55,6 +56,16 @@ class PathRequest:
     size: float
     speed: float
     start: tuple[float, ...]  # flattened commanded posture the path starts from
+
+
+def extensible_runner(app: Any) -> ExtensibleProcess:
+    """``app.services.extensible_runner``, or a clear error when the console was built without
+    one (serve.py always builds it for the extensible arm)."""
+    runner = app.services.extensible_runner
+    if runner is None:
+        raise ValueError("the extensible arm's panels need its runner: build the console with "
+                         "services=ConsoleServices(extensible_runner=...) (serve.py does)")
+    return runner
 
 
 def _exit_with_parent(parent: int) -> None:
@@ -146,9 +157,9 @@ class PathsPanel(Panel):
         self.app.add_stop_hook(self._on_stop)
 
     @property
-    def runner(self) -> ExtensibleRunner:
-        """The console's runner (see ``ExtensibleRunner.from_app``)."""
-        return ExtensibleRunner.from_app(self.app)
+    def runner(self) -> ExtensibleProcess:
+        """The console's runner (``app.services.extensible_runner``; serve.py builds it)."""
+        return extensible_runner(self.app)
 
     # -- callbacks -------------------------------------------------------------------------
     def _current_request(self) -> PathRequest:
@@ -192,7 +203,7 @@ class PathsPanel(Panel):
         """Stop hook (STOP, a lost lease, shutdown): no pending execute, motors hold."""
         with self._lock:
             self._execute_after_plan = False
-        runner = getattr(self.app, "extensible_runner", None)
+        runner = self.app.services.extensible_runner
         if runner is not None and runner.started:
             runner.stop()
 
@@ -282,12 +293,12 @@ class PathsPanel(Panel):
                     cast_shadow=False, receive_shadow=False))
 
     @staticmethod
-    def _hardware_html(runner: ExtensibleRunner | None, text: str | None = None) -> str:
+    def _hardware_html(runner: ExtensibleProcess | None, text: str | None = None) -> str:
         if text is None and runner is None:
             text = "not connected (connects on the first Execute)"
         elif text is None:
             snap = runner.snapshot  # type: ignore[union-attr]
-            port = getattr(runner.device.hw, "port", "")  # type: ignore[union-attr]
+            port = runner.port  # type: ignore[union-attr]
             text = f"{snap.state} · {port}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
         return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
                 f"Hardware: {html.escape(text)}</div>")
@@ -301,11 +312,11 @@ class PathsPanel(Panel):
                 f"{html.escape(text)}</div>")
 
     def on_state(self, state: ArmState) -> None:
-        runner = getattr(self.app, "extensible_runner", None)
-        if runner is not None:
+        runner = self.app.services.extensible_runner
+        if runner is not None and runner.started:  # (the mock's connects on the first Execute)
             self._show_job(runner)
 
-    def _show_job(self, runner: ExtensibleRunner, result: JobResult | None = None) -> None:
+    def _show_job(self, runner: ExtensibleProcess, result: JobResult | None = None) -> None:
         """Progress, plot and measured trace of the panel's job; its outcome once ``result``."""
         job = self._job
         if job == 0:
@@ -336,7 +347,7 @@ class PathsPanel(Panel):
         else:
             self._set_status(f"⚠ {result.message}.", "stopped")
 
-    def _watch(self, runner: ExtensibleRunner, job: int) -> None:
+    def _watch(self, runner: ExtensibleProcess, job: int) -> None:
         """Worker: wait for the job's end, then show it (no frame may follow it)."""
         result = runner.wait(job)
         deadline = time.perf_counter() + 1.0

@@ -22,6 +22,7 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel
+from console.panels.paths import extensible_runner
 from console.state import ArmState
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -166,12 +167,12 @@ class RepeatabilityPanel(Panel):
     def _halt(self, reason: str = "") -> None:
         """Stop hook: end the run after the current move, which the runner stops now."""
         self._stop.set()
-        runner = getattr(self.app, "extensible_runner", None)
+        runner = self.app.services.extensible_runner
         if runner is not None and runner.started:
             runner.stop()
 
     def _work(self, point: Array, n: int) -> None:
-        runner = ExtensibleRunner.from_app(self.app)
+        runner = extensible_runner(self.app)
         self.progress.value = 0.0
 
         def progress(i: int, text: str) -> None:

@@ -60,7 +60,7 @@ class SessionPanel(Panel):
         self.stop_cmd.on_trigger(self._on_stop)
         self.status = gui.add_html("", order=1.0)
         self.demo_btn = None
-        if getattr(self.app, "demo", None) is not None:
+        if self.app.services.demo is not None:
             self.demo_btn = gui.add_button("Run demo motion", order=20.0,
                                            hint="A slow looping motion (STOP ends it).")
             self.demo_btn.on_click(self._on_demo)
@@ -160,7 +160,7 @@ class SessionPanel(Panel):
     @operator_only(action="run the demo motion")
     def _on_demo(self, event: viser.GuiEvent) -> None:
         self.app.recorder.action("started the demo motion", event.client)
-        self.app.demo.start()  # type: ignore[attr-defined]
+        self.app.services.demo.start()  # type: ignore[union-attr]
 
     @operator_only(action="start or stop a recording")
     def _on_record(self, event: viser.GuiEvent) -> None:

@@ -179,7 +179,7 @@ class TargetPanel(Panel):
     # -- worker ----------------------------------------------------------------------------
     def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
         """Worker thread: IK to ``target``, then move there (unless a job runs or STOP came)."""
-        runner = getattr(self.app, "extensible_runner", None)
+        runner = self.app.services.extensible_runner
         if runner is not None and runner.snapshot.busy:
             self.report_error("A path is running: stop it before moving the target.")
             return

@@ -5,14 +5,18 @@ milliseconds at a time (mesh updates, plot serialisation): a 100 Hz loop *thread
 deadlines (measured: hundreds of overruns per minute, p99 period error tens of ms on 2 cores).
 :class:`ControlProcess` therefore runs the simulated arm, the control stack and the real-time
 :class:`hw_bridge.loop.LoopRunner` thread in a spawned child process (planning in a further
-:class:`hw_bridge.loop.ProcessPlanner` process). The loop drives either the in-process sim
-(``device="sim"``) or hardware through the serial stack (:mod:`hw_bridge.soft_arm_link`): the
-device emulator on a pty with its UDP mocap and scene channel (``"emulator"``), MockHardware
-with the same plant (``"mock"``), or a real controller (``port_path``). The console talks to it
-with small messages:
+:class:`hw_bridge.planner_process.ProcessPlanner` process), through the
+:class:`hw_bridge.loop_process.LoopProcess` wrapper the extensible arm's process shares. The loop
+drives either the in-process sim (``device="sim"``) or hardware through the serial stack
+(:mod:`hw_bridge.soft_arm_link`): the device emulator on a pty with its UDP mocap and scene
+channel (``"emulator"``), MockHardware with the same plant (``"mock"``), or a real controller
+(``port_path``). The console talks to it with small messages:
 
-* commands go down a queue (``("arm",)``, ``("goto", q)``, ``("grasp_at", x, y, r)``, ...), are
-  applied by the child's loop thread at its next tick, and each returns a Future that the reply
+* commands go down a queue as the typed dataclasses of :mod:`hw_bridge.commands`
+  (:class:`~hw_bridge.commands.Arm`, :class:`~hw_bridge.commands.Goto`,
+  :class:`~hw_bridge.commands.GraspAt`, ...), are applied by the child's loop thread at its next
+  tick (dispatched on their type; the link verbs by the world's
+  :class:`~hw_bridge.link_supervisor.LinkSupervisor`), and each returns a Future that the reply
   resolves (with the loop's error, if it refused);
 * the child publishes a :class:`ControlView` (the loop snapshot, recent stats, the true object
   and the gripper finger for drawing) at ``publish_hz``; :attr:`ControlProcess.view` is the newest
@@ -21,11 +25,9 @@ with small messages:
 
 from __future__ import annotations
 
-import atexit
 import concurrent.futures as cf
 import dataclasses
 import gc
-import itertools
 import multiprocessing
 import queue
 import threading
@@ -33,11 +35,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from console.panels.control_worlds import DISCONNECTED, NO_SERIAL_LINK  # noqa: F401 (re-export)
-from console.panels.control_worlds import HardwareWorld as _HardwareWorld
-from console.panels.control_worlds import SimWorld as _SimWorld
+from hw_bridge.commands import (BRIDGE_COMMANDS, SCENE_COMMANDS, Arm, Connect, Disarm, Disconnect,
+                               ExecutePlan, Goto, GraspAt, PlaceObject, SoftArmCommand,
+                               StartGrasp, StopArm)
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
+from hw_bridge.loop_process import LoopProcess, ProcessBridgeControls
+from hw_bridge.soft_arm_worlds import HardwareWorld, SimWorld
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,7 +83,8 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             *opts.emulator_args, "--cpus", format_cpus(opts.cpus.realtime)))
     from core.control.stack import ControlStack
     from core.robots import load
-    from hw_bridge.loop import LoopRunner, ProcessPlanner
+    from hw_bridge.loop import LoopRunner
+    from hw_bridge.planner_process import ProcessPlanner
     from hw_bridge.realtime import helper_priority as realtime_helper_priority
     from hw_bridge.realtime import promote_threads, shorten_gil_wait
 
@@ -93,7 +98,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         shorten_gil_wait()
         promote_threads(helper_priority)
     try:
-        world: Any = _SimWorld(robot, seed) if opts.kind == "sim" else _HardwareWorld(robot, seed, opts)
+        world: Any = SimWorld(robot, seed) if opts.kind == "sim" else HardwareWorld(robot, seed, opts)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which shows it
         replies.put(("failed", f"{opts.kind} device: {exc}"))
         return
@@ -108,43 +113,39 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         if world.kind == "sim":
             world.sim.place_object(x, y, r)
 
-    def arm(s: ControlStack) -> None:
-        world.arm(s)
-        runner.fault = None
+    def link(s: ControlStack, cmd: Any) -> None:
+        world.apply(cmd, s)
+        if isinstance(cmd, (Arm, Connect)):
+            runner.fault = None  # armed, or a fresh link: the old fault is history
 
-    def connect(s: ControlStack, port: str, baud: int) -> None:
-        world.connect(s, port, baud)
-        runner.fault = None  # a fresh link: the old fault is history (nothing is armed)
+    def apply(s: ControlStack, t: float, cmd: SoftArmCommand) -> None:
+        """Loop thread: one command, dispatched on its type."""
+        if isinstance(cmd, BRIDGE_COMMANDS):
+            link(s, cmd)
+        elif isinstance(cmd, Goto):
+            s.goto(np.asarray(cmd.q, float), t)
+        elif isinstance(cmd, StopArm):
+            s.stop(t, cmd.reason)
+        elif isinstance(cmd, StartGrasp):
+            s.start(t)
+        elif isinstance(cmd, PlaceObject):
+            place(cmd.x, cmd.y, cmd.r)
+        elif isinstance(cmd, (GraspAt, ExecutePlan)):
+            place(cmd.x, cmd.y, cmd.r)
+            if not s.armed:
+                link(s, Arm())
+            if isinstance(cmd, GraspAt):
+                s.start(t)
+            else:
+                from core.control.grasp_place import WaypointPlan
+                s.execute(WaypointPlan(np.asarray(cmd.kappas, float),
+                                       np.asarray(cmd.palms, float)), (cmd.x, cmd.y), t)
+        else:
+            raise TypeError(f"not a soft-arm command: {cmd!r}")
 
-    def grasp_at(s: ControlStack, t: float, x: float, y: float, r: float) -> None:
-        place(x, y, r)
-        if not s.armed:
-            arm(s)
-        s.start(t)
-
-    def execute(s: ControlStack, t: float, kappas: list, palms: list, x: float, y: float,
-                r: float) -> None:
-        from core.control.grasp_place import WaypointPlan
-        place(x, y, r)
-        if not s.armed:
-            arm(s)
-        s.execute(WaypointPlan(np.asarray(kappas, float), np.asarray(palms, float)), (x, y), t)
-
-    actions = {
-        "execute": execute,
-        "arm": lambda s, t: arm(s),
-        "disarm": lambda s, t: world.disarm(s),
-        "goto": lambda s, t, q: s.goto(np.asarray(q, float), t),
-        "stop": lambda s, t, reason: s.stop(t, reason),
-        "start": lambda s, t: s.start(t),
-        "place_object": lambda s, t, x, y, r: place(x, y, r),
-        "grasp_at": grasp_at,
-        "connect": lambda s, t, port, baud: connect(s, port, baud),
-        "disconnect": lambda s, t: world.disconnect(s),
-    }
     # With hardware the simulated object lives in the emulator / mock plant: placed from this
     # (command) thread before the loop's part runs, so the loop never waits on the scene channel.
-    scene_first = {"place_object", "grasp_at", "execute"} if world.kind != "sim" else set()
+    scene_first = SCENE_COMMANDS if world.kind != "sim" else ()
     stop = threading.Event()
     on_cpus = "" if opts.cpus is None else f" on CPU {format_cpus(opts.cpus.realtime)}"
 
@@ -190,22 +191,17 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
                 continue
             if msg is None:
                 break
-            cid, name, args = msg
-            fn = actions.get(name)
-            if fn is None:
-                replies.put(("reply", cid, f"unknown command {name!r}"))
-                continue
-            if name in scene_first:
-                x, y, r = args[-3:]
+            cid, cmd = msg
+            if isinstance(cmd, scene_first):
                 try:
-                    world.place_object(x, y, r)
+                    world.place_object(cmd.x, cmd.y, cmd.r)
                 except (RuntimeError, OSError, ValueError) as exc:
                     replies.put(("reply", cid, str(exc)))
                     continue
-                if name == "place_object":
+                if isinstance(cmd, PlaceObject):
                     replies.put(("reply", cid, None))
                     continue
-            fut = runner.submit(lambda s, t, fn=fn, args=args: fn(s, t, *args))
+            fut = runner.submit(lambda s, t, cmd=cmd: apply(s, t, cmd))
             fut.add_done_callback(lambda f, cid=cid: replies.put(
                 ("reply", cid, None if f.exception() is None else str(f.exception()))))
     finally:
@@ -214,10 +210,10 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         pub.join(2.0)
         world.close()
         planner.close()
-        del runner, stack, actions  # free ruckig objects before interpreter teardown
+        del runner, stack  # free ruckig objects before interpreter teardown
 
 
-class ControlProcess:
+class ControlProcess(LoopProcess):
     """Parent-side handle of the child control process (see the module docstring).
 
     Args:
@@ -257,136 +253,50 @@ class ControlProcess:
             cpus = CpuPartition.default()
         opts = DeviceOptions("port" if port_path else device, port_path, tuple(emulator_args),
                              cpus)
+        super().__init__("soft-arm-control")
         self.device = opts.kind
-        self.failure: str | None = None
-        ctx = multiprocessing.get_context("spawn")
         self.robot = robot
-        self._commands = ctx.Queue()
-        self._replies = ctx.Queue()
-        # Not a daemon: it starts its own planner process. close() (also at exit) ends it.
-        self._proc = ctx.Process(target=_child, name="soft-arm-control",
-                                 args=(str(robot.source), seed, self._commands, self._replies,
-                                       publish_hz, stats_ticks, sched_priority, opts))
-        self._proc.start()
-        self._ids = itertools.count(1)
-        self._pending: dict[int, cf.Future] = {}
-        self._lock = threading.Lock()
         self.view: ControlView | None = None
-        self._reader = threading.Thread(target=self._read, name="control-replies", daemon=True)
-        self._reader.start()
-        atexit.register(self.close)
+        self.spawn(_child, (str(robot.source), seed, self._commands, self._replies, publish_hz,
+                            stats_ticks, sched_priority, opts))
 
-    def _read(self) -> None:
-        while True:
-            try:
-                msg = self._replies.get(timeout=1.0)
-            except queue.Empty:
-                if not self._proc.is_alive():
-                    return
-                continue
-            except (EOFError, OSError):
-                return
-            if msg[0] == "view":
-                self.view = msg[1]
-            elif msg[0] == "failed":
-                self.failure = msg[1]
-            elif msg[0] == "reply":
-                with self._lock:
-                    fut = self._pending.pop(msg[1], None)
-                if fut is not None:
-                    if msg[2] is None:
-                        fut.set_result(None)
-                    else:
-                        fut.set_exception(RuntimeError(msg[2]))
-
-    def send(self, name: str, *args: Any) -> cf.Future:
+    def send(self, cmd: SoftArmCommand) -> cf.Future:
         """Queue a command for the loop; the Future resolves when the loop applied it."""
-        fut: cf.Future = cf.Future()
-        if not self._proc.is_alive():
-            fut.set_exception(RuntimeError("the control process is not running"))
-            return fut
-        cid = next(self._ids)
-        with self._lock:
-            self._pending[cid] = fut
-        self._commands.put((cid, name, tuple(args)))
-        return fut
+        return super().send(cmd)
 
     def arm(self) -> cf.Future:
-        return self.send("arm")
+        return self.send(Arm())
 
     def disarm(self) -> cf.Future:
-        return self.send("disarm")
+        return self.send(Disarm())
 
     def goto(self, q: Any) -> cf.Future:
-        return self.send("goto", [float(v) for v in np.asarray(q).ravel()])
+        return self.send(Goto(tuple(float(v) for v in np.asarray(q).ravel())))
 
     def stop_arm(self, reason: str = "operator STOP") -> cf.Future:
-        return self.send("stop", reason)
+        return self.send(StopArm(reason))
 
     def place_object(self, x: float, y: float, r: float) -> cf.Future:
-        return self.send("place_object", float(x), float(y), float(r))
+        return self.send(PlaceObject(float(x), float(y), float(r)))
 
     def grasp_at(self, x: float, y: float, r: float) -> cf.Future:
-        return self.send("grasp_at", float(x), float(y), float(r))
+        return self.send(GraspAt(float(x), float(y), float(r)))
 
     def execute(self, plan: Any, x: float, y: float, r: float) -> cf.Future:
         """Place the object at (x, y) and run ``plan`` (a GraspPlan for it), then place it."""
-        return self.send("execute", np.asarray(plan.kappas, float).tolist(),
-                         np.asarray(plan.palm_poses, float).tolist(), float(x), float(y), float(r))
+        rows = lambda a: tuple(tuple(float(v) for v in row) for row in np.asarray(a, float))  # noqa: E731
+        return self.send(ExecutePlan(rows(plan.kappas), rows(plan.palm_poses), float(x),
+                                     float(y), float(r)))
 
     def connect_link(self, port: str, baud: int = 0) -> cf.Future:
         """Close the link and open ``port`` at ``baud`` (0: the robot file's); inactive."""
-        return self.send("connect", str(port), int(baud))
+        return self.send(Connect(str(port), int(baud)))
 
     def disconnect_link(self) -> cf.Future:
         """Stop commanding, DISARM and close the port; Arm refuses until :meth:`connect_link`."""
-        return self.send("disconnect")
+        return self.send(Disconnect())
 
     @property
     def bridge_controls(self) -> ProcessBridgeControls:
         """This loop as a :class:`hw_bridge.controls.BridgeControls` (the Hardware panel's)."""
         return ProcessBridgeControls(self)
-
-    @property
-    def alive(self) -> bool:
-        return self._proc.is_alive()
-
-    def close(self, timeout: float = 5.0) -> None:
-        """Stop the loop and the child process."""
-        if self._proc.is_alive():
-            self._commands.put(None)
-            self._proc.join(timeout)
-        if self._proc.is_alive():
-            self._proc.terminate()
-
-
-class ProcessBridgeControls:
-    """:class:`hw_bridge.controls.BridgeControls` over a :class:`ControlProcess`.
-
-    Every method only queues a command for the child's loop thread (the only writer to the
-    hardware) and returns at once; refusals land in ``health().fault`` (and in the link's
-    fault shown by the Control panel). Arm / Disarm are the Control panel's: the link is
-    activated (ARM) *and* the control stack starts commanding (holding where the arm is),
-    since an armed device without demands trips its watchdog within ``watchdog_ms``.
-    On the simulated arm Connect / Disconnect do nothing and health() then says so.
-    """
-
-    def __init__(self, ctl: ControlProcess):
-        self.ctl = ctl
-
-    def connect(self, port: str, baud: int) -> None:
-        self.ctl.connect_link(port, baud)
-
-    def disconnect(self) -> None:
-        self.ctl.disconnect_link()
-
-    def arm(self) -> None:
-        self.ctl.arm()
-
-    def disarm(self) -> None:
-        self.ctl.disarm()
-
-    def health(self) -> Any:
-        """The newest published :class:`~hw_bridge.interface.LinkHealth` (None: no link yet)."""
-        view = self.ctl.view
-        return None if view is None else view.link

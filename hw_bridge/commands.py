@@ -1,0 +1,143 @@
+"""Every command the console sends to an arm's control loop, as one small frozen dataclass each.
+
+GUI callbacks only build one of these and enqueue it; the loop thread (the only writer to the
+hardware) applies it at its next tick and dispatches on its type. They cross the soft arm's
+process pipe as they are (plain fields: picklable), and go straight into the extensible runner's
+queue. Grouped by who understands them:
+
+* :data:`BridgeCommand` -- the Hardware panel's link verbs, the same for both arms
+  (:class:`hw_bridge.link_supervisor.LinkSupervisor` runs them);
+* :data:`SoftArmCommand` -- the soft arm's control stack (Control panel, grasp planner);
+* :data:`ExtensibleCommand` -- the extensible arm's streamer (paths, moves, STOP).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING, Union
+
+if TYPE_CHECKING:
+    from core.planning.paths import MotionPath
+
+
+# -- the link (both arms) ------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Connect:
+    """Close the link and open ``port`` at ``baud`` (0: unchanged); configured, not armed."""
+
+    port: str = ""
+    baud: int = 0
+
+
+@dataclasses.dataclass(frozen=True)
+class Disconnect:
+    """Stop commanding, DISARM and close the port; Arm is refused until a Connect."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Arm:
+    """Activate the link (configuring first if needed) and hold where the arm is."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Disarm:
+    """Stop commanding and DISARM; telemetry goes on."""
+
+
+BridgeCommand = Union[Connect, Disconnect, Arm, Disarm]
+BRIDGE_COMMANDS = (Connect, Disconnect, Arm, Disarm)
+
+
+# -- the soft arm's control stack ----------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Goto:
+    """Move to curvatures ``q`` (1/m, one per segment) when no task runs."""
+
+    q: tuple[float, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class StopArm:
+    """Controlled stop: hold, abort the task with ``reason`` (the operator's STOP)."""
+
+    reason: str = "operator STOP"
+
+
+@dataclasses.dataclass(frozen=True)
+class StartGrasp:
+    """Start the grasp-and-place task for the placed object."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PlaceObject:
+    """Put the (simulated) object at ``(x, y)`` with radius ``r`` (m)."""
+
+    x: float
+    y: float
+    r: float
+
+
+@dataclasses.dataclass(frozen=True)
+class GraspAt:
+    """Place the object at ``(x, y)`` (radius ``r``), arm if needed and run the grasp task."""
+
+    x: float
+    y: float
+    r: float
+
+
+@dataclasses.dataclass(frozen=True)
+class ExecutePlan:
+    """Place the object at ``(x, y)`` (radius ``r``), arm if needed and run a planner's plan:
+    ``kappas`` (K, n) waypoint curvatures, ``palms`` (K, 3) palm poses."""
+
+    kappas: tuple[tuple[float, ...], ...]
+    palms: tuple[tuple[float, ...], ...]
+    x: float
+    y: float
+    r: float
+
+
+SoftArmCommand = Union[BridgeCommand, Goto, StopArm, StartGrasp, PlaceObject, GraspAt,
+                       ExecutePlan]
+SCENE_COMMANDS = (PlaceObject, GraspAt, ExecutePlan)  # they put the object into the world first
+
+
+# -- the extensible arm's streamer ---------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class RunPath:
+    """Stream ``path``'s motor counts (after a joint move to its first sample) as job ``job_id``."""
+
+    job_id: int
+    label: str
+    path: MotionPath
+
+
+@dataclasses.dataclass(frozen=True)
+class Hold:
+    """Hold position where the motors are (aborts the running job)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ConnectFactory:
+    """Reconnect to the runner's hardware factory and arm (``follow``: move to the console's
+    command at once, else hold)."""
+
+    follow: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class CloseLink:
+    """DISARM and close the link (the runner is shutting down)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Setpoint:
+    """The console's newest commanded posture (``seq`` of the command, Delta (n, 3)), followed
+    while idle; sent to the extensible arm's process whenever the command changes."""
+
+    seq: int
+    delta: tuple[tuple[float, ...], ...]
+
+
+ExtensibleCommand = Union[BridgeCommand, RunPath, Hold, ConnectFactory, CloseLink, Setpoint]

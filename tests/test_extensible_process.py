@@ -1,0 +1,84 @@
+"""The extensible arm's runner in its own process (hw_bridge.extensible_process): connects and
+holds, runs a move to the commanded posture within a few mm, reports it to the console's store,
+follows the console's newer commands (not its own settled one), obeys the Hardware panel's
+bridge verbs and refuses bad jobs before anything is sent."""
+
+from __future__ import annotations
+
+import time
+from typing import Iterator
+
+import numpy as np
+import pytest
+
+from console.model import model_for
+from console.state import StateStore
+from core.kinematics import delta as dk
+from core.robots import load
+from hw_bridge.extensible_process import ExtensibleProcess
+
+ROBOT = load("extensible")
+Q0 = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.03]])
+Q1 = np.array([[0.01, 0.0, 0.05], [0.0, -0.01, 0.04]])
+TIP_TOL = 0.003  # m
+
+
+def wait_for(pred, timeout: float = 20.0, what: str = "") -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < end, f"timed out waiting for {what}"
+        time.sleep(0.02)
+
+
+@pytest.fixture
+def proc() -> Iterator[tuple[ExtensibleProcess, StateStore]]:
+    store = StateStore(model_for(ROBOT), mirror_commands=True)
+    p = ExtensibleProcess(ROBOT, store, "mock", cpus=None, sched_priority=None)
+    try:
+        yield p, store
+    finally:
+        p.close()
+
+
+def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
+    p, store = proc
+    assert not p.started and p.snapshot.state == "disconnected"
+    p.start()
+    assert p.connecting is not None and p.connecting.result(30) is None  # no fault
+    wait_for(lambda: p.snapshot.state in ("holding", "following"), what="armed")
+    assert p.port == "mock://" and p.bridge_controls.health().armed
+
+    job = p.move_to(dk.robot_rack_lengths(ROBOT, Q0))
+    result = p.wait(job, timeout=30)
+    assert result is not None and result.ok and result.error < TIP_TOL, result
+    wait_for(lambda: store.command.source == "runner", what="settled command")
+    np.testing.assert_allclose(store.command.q, Q0, atol=1e-6)  # the job's end is the command
+    tip = p.snapshot.measured_tip
+    assert tip is not None and np.linalg.norm(tip - dk.tip_position(ROBOT, Q0)) < TIP_TOL
+
+    store.request(Q1, "jog")  # the console's newer command: followed while idle
+    wait_for(lambda: np.linalg.norm(p.snapshot.measured_tip - dk.tip_position(ROBOT, Q1))
+             < TIP_TOL, what="following the console")
+
+    p.bridge_controls.disarm()
+    wait_for(lambda: p.snapshot.state == "disarmed", what="disarmed")
+    wait_for(lambda: not p.bridge_controls.health().armed, what="health: disarmed")
+    p.bridge_controls.disconnect()
+    p.bridge_controls.arm()  # refused until Connect
+    wait_for(lambda: "disconnected by the operator" in (p.bridge_controls.health().fault or ""),
+             what="refusal")
+    p.bridge_controls.connect("mock://", 0)
+    p.bridge_controls.arm()
+    wait_for(lambda: p.snapshot.state == "holding", what="armed again")
+
+    p.close()
+    assert not p.alive
+    with pytest.raises(RuntimeError, match="not running"):
+        p.stop().result(1)
+
+
+def test_bad_jobs_raise_before_anything_is_sent(proc) -> None:
+    p, _ = proc
+    with pytest.raises(ValueError, match="lengths"):
+        p.move_to(np.full((ROBOT.n_segments, 3), np.nan))
+    assert not p.started
