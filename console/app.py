@@ -44,6 +44,8 @@ import viser
 
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
+from console.client_guard import ClientGuard
+from console.client_guard import install as _install_client_guard
 from console.datadir import DataDir
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
@@ -57,6 +59,7 @@ from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
 
 _install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
+_install_client_guard()  # every browser message is checked before viser stores it (the module)
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +106,7 @@ class ConsoleApp:
         self.refusals = 0
         self.last_stop: tuple[float, str] | None = None
         self._refused_at: dict[tuple[Any, str], float] = {}
+        self._notified_at: dict[tuple[str, str], float] = {}
         self._panels: list[Panel] = []
         self._panel_lock = threading.Lock()
         self._stop = threading.Event()
@@ -113,6 +117,8 @@ class ConsoleApp:
         self.data_root = Path("runs" if data_dir is None else data_dir)
         self._data: DataDir | None = None
         self.access = access if access is not None else AccessControl()
+        self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
+                                 refusal=self.access.refusal)
         self.lease = LeaseMonitor(server, self.access)
         self.hold = HoldToRun(self.store, allowed=self.access.is_operator,
                               heard=self.access.last_heard)
@@ -207,8 +213,19 @@ class ConsoleApp:
         if client is not None and hasattr(client, "add_notification"):
             client.add_notification("Not allowed", reason, color="red", auto_close_seconds=8.0)
 
-    def notify_all(self, title: str, body: str, color: str = "blue") -> None:
-        """A notification on every connected browser."""
+    def notify_all(self, title: str, body: str, color: str = "blue",
+                   coalesce_s: float = 0.0) -> None:
+        """A notification on every connected browser; with ``coalesce_s``, the same title and
+        body again within that many seconds is not repeated (a burst of STOP clicks shows one).
+        """
+        if coalesce_s > 0:
+            now = time.monotonic()
+            with self._hook_lock:
+                if now - self._notified_at.get((title, body), -1e9) < coalesce_s:
+                    return
+                self._notified_at[(title, body)] = now
+                if len(self._notified_at) > 1000:
+                    self._notified_at.clear()
         for client in self.server.get_clients().values():
             try:
                 client.add_notification(title, body, color=color, auto_close_seconds=8.0)
