@@ -67,6 +67,12 @@ class Refused(ValueError):
     """A value a widget must not take; the message says why, for the user."""
 
 
+class OutOfBounds(Refused):
+    """A number outside the widget's min / max. A browser sends these while someone types
+    (each keystroke: "0" on the way to "0.03"), and clamps the field when it loses focus; so the
+    value is only not stored -- no value sent back, which would overwrite the typing."""
+
+
 @dataclasses.dataclass(frozen=True)
 class GuardLimits:
     """What one browser may send.
@@ -185,7 +191,7 @@ class ClientGuard:
     def _forget(self, client: Any) -> None:
         cid = client.client_id
         self._clients.pop(cid, None)
-        for key in [k for k in self._logged if k[0] == cid]:
+        for key in [k for k in list(self._logged) if k[0] == cid]:  # (another thread)
             self._logged.pop(key, None)
 
     # -- the gate ----------------------------------------------------------------------------
@@ -344,6 +350,10 @@ class ClientGuard:
             return False
         try:
             value = validate_value(handle, updates["value"], self.limits)
+        except OutOfBounds as exc:
+            self.counts["invalid"] += 1
+            self.log(client_id, "bounds", f"“{label}”: {exc}")
+            return False
         except Refused as exc:
             self._restore(client_id, handle)
             self.counts["invalid"] += 1
@@ -483,9 +493,9 @@ def _number(value: Any, what: str, limits: GuardLimits) -> float:
 
 def _bounded(value: float, lo: Any, hi: Any, integer: bool) -> float | int:
     if lo is not None and value < lo:
-        raise Refused(f"{value:g} is below the minimum {lo:g}")
+        raise OutOfBounds(f"{value:g} is below the minimum {lo:g}")
     if hi is not None and value > hi:
-        raise Refused(f"{value:g} is above the maximum {hi:g}")
+        raise OutOfBounds(f"{value:g} is above the maximum {hi:g}")
     if integer:
         if value != int(value):
             raise Refused(f"{value:g} is not a whole number")
