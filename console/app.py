@@ -28,6 +28,9 @@ registers its controlled stop there) and ends all jogging (``app.hold``, hold-to
 caps, ``console.hold_to_run``). It also runs when the operator's lease is lost, control is
 released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
 recording (``console.recording``); files live under ``app.data`` (``console.datadir``).
+``app.guard`` (``console.client_guard``) checks every message a browser sends before viser
+stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
+calls ``allow_viewers(handle)``, per-client rate and size limits.
 """
 
 from __future__ import annotations

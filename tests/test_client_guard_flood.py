@@ -182,6 +182,9 @@ def test_unknown_ids_and_message_types_are_dropped(lab: tuple) -> None:
     assert app.stops == 0
     viewer.update(stop._impl.uuid, value=True)
     wait_for(lambda: app.stops == 1, what="STOP")
+    time.sleep(0.2)
+    viewer.send(_messages.CommandTriggerMessage(app.panel(SessionPanel).stop_cmd._impl.uuid))
+    wait_for(lambda: app.stops == 2, what="STOP from the command palette (Esc)")
 
 
 def test_a_short_burst_is_rate_limited_without_a_disconnect(lab: tuple) -> None:
