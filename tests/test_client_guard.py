@@ -340,6 +340,7 @@ def test_uploads_and_gizmos_are_the_operators(console: tuple, trio: tuple) -> No
                                                       "application/json", 1, 10))
         viewer.send(_messages.FileTransferPart(h._impl.uuid, "t-1", 0, b"{}"))
     gizmos = dict(server.scene._handle_from_transform_controls_name)
+    assert gizmos and len(uploads) == (0 if app.robot.kind == "delta" else 1)  # Load scene
     poses = {n: (tuple(g.position), tuple(g.wxyz)) for n, g in gizmos.items()}
     for name in gizmos:
         viewer.send(_messages.TransformControlsUpdateMessage(name, (1.0, 0.0, 0.0, 0.0),
@@ -355,3 +356,59 @@ def test_guard_limits_are_sane() -> None:
     lim = GuardLimits()
     assert lim.max_message_bytes >= 512 * 1024 + 1024  # a browser's upload part fits
     assert lim.burst >= 60 and lim.rate >= 60  # a slider drag at 60 Hz is never dropped
+
+
+def test_validate_value_by_widget_kind() -> None:
+    """The value check on its own, against each kind's own bounds and types."""
+    import viser
+
+    from console.client_values import OutOfBounds, Refused, validate_value
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        g, lim = server.gui, GuardLimits()
+        count = g.add_number("n", 5, min=1, max=50, step=1)
+        assert validate_value(count, 7.0, lim) == 7 and isinstance(validate_value(count, 7.0, lim), int)
+        for bad in (2.5, 1e308, math.nan, "7", True, None):
+            with pytest.raises(Refused):
+                validate_value(count, bad, lim)
+        with pytest.raises(OutOfBounds):
+            validate_value(count, 51, lim)
+        free = g.add_number("x (m)", 0.2, step=0.001)  # no bounds of its own: the guard's
+        assert validate_value(free, -0.35, lim) == -0.35
+        with pytest.raises(Refused):
+            validate_value(free, 1e10, lim)
+        vec = g.add_vector3("p", (1.0, 2.0, 3.0), min=(0.0, 0.0, 0.0), max=(5.0, 5.0, 5.0))
+        assert validate_value(vec, [1, 1, 1], lim) == (1.0, 1.0, 1.0)
+        for bad in ([1, 1], [1, 1, 6], [1, 1, math.inf], "abc"):
+            with pytest.raises(Refused):
+                validate_value(vec, bad, lim)
+        rgb = g.add_rgb("c", (1, 2, 3))
+        assert validate_value(rgb, [0, 128, 255], lim) == (0, 128, 255)
+        for bad in ([0, 0, 256], [0, 0, -1], [0, 0, 0.5], [0, 0]):
+            with pytest.raises(Refused):
+                validate_value(rgb, bad, lim)
+        dd = g.add_dropdown("d", ("a", "b"))
+        assert validate_value(dd, "b", lim) == "b"
+        with pytest.raises(Refused):
+            validate_value(dd, "c", lim)
+        box = g.add_checkbox("b", False)
+        assert validate_value(box, True, lim) is True
+        with pytest.raises(Refused):
+            validate_value(box, 1, lim)
+        text = g.add_text("t", "")
+        assert validate_value(text, "x" * lim.max_text, lim) == "x" * lim.max_text
+        with pytest.raises(Refused):
+            validate_value(text, "x" * (lim.max_text + 1), lim)
+        multi = g.add_multi_slider("m", min=0, max=10, step=1, initial_value=(1, 5))
+        assert validate_value(multi, [2, 3], lim) == (2, 3)
+        with pytest.raises(Refused):
+            validate_value(multi, [2, 11], lim)
+        button = g.add_button("go")
+        assert validate_value(button, True, lim) is True
+        with pytest.raises(Refused):
+            validate_value(button, False, lim)
+        with pytest.raises(Refused):
+            validate_value(g.add_upload_button("u"), True, lim)
+    finally:
+        server.stop()
