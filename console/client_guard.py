@@ -17,7 +17,8 @@ What upstream viser 1.1.1 does with a client's message (checked by ``tests/test_
 * Messages up to 50 MB are accepted; a frame that does not decode closes only its own connection.
 
 The fix sits at the one place every client frame passes before viser decodes and dispatches it:
-``viser.infra._infra._message_consumer``, which :func:`install` replaces by :func:`_guarded_consumer`
+``viser.infra._infra._message_consumer``, which :func:`install` replaces by
+:func:`_guarded_consumer`
 (a module-level function looked up per connection, so one patch covers every server). A server
 with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each frame checked by
 :meth:`ClientGuard.admit`; servers without one behave as upstream. Rules, in order:
@@ -232,7 +233,7 @@ class ClientGuard:
         if isinstance(value, bool) or value is None:
             return
         if isinstance(value, float) or isinstance(value, int):
-            if not math.isfinite(value) or abs(value) > lim.max_abs:
+            if abs(value) > lim.max_abs or not math.isfinite(value):  # (abs first: big ints)
                 raise Refused(f"number out of range: {short(value)}")
         elif isinstance(value, str):
             if len(value) > text_limit:
@@ -274,7 +275,8 @@ class ClientGuard:
 
     def _refuse_use(self, client_id: int, handle: Any, label: str, is_button: bool) -> None:
         self.counts["refused"] += 1
-        action = _action_of(handle) or (f"press “{label}”" if is_button else f"change “{label}”")
+        verb = "press" if is_button else "change"
+        action = _action_of(handle) or f"{verb} “{label}”"
         self.log(client_id, "refused", f"viewer refused: {action}")
         client = self._client(client_id)
         if client is not None:
@@ -335,7 +337,7 @@ class ClientGuard:
         if getattr(handle._impl.props, "disabled", False):
             return False
         if not self._may_use(client_id, handle, shared, handle._impl.uuid):
-            self._refuse_use(client_id, handle, str(getattr(handle._impl.props, "label", "?"))[:40], True)
+            self._refuse_use(client_id, handle, _label(handle), True)
             return False
         return True
 
@@ -344,7 +346,7 @@ class ClientGuard:
         if handle is None:
             raise Refused(f"no command {short(msg.uuid)}")
         if not self._may_use(client_id, handle, shared, handle._impl.uuid):
-            self._refuse_use(client_id, handle, str(getattr(handle._impl.props, "label", "?"))[:40], True)
+            self._refuse_use(client_id, handle, _label(handle), True)
             return False
         return True
 
@@ -408,7 +410,7 @@ class ClientGuard:
         if not 0 <= parts <= size // _UPLOAD_CHUNK + 1:
             raise Refused(f"{parts} parts for {size} bytes")
         if not self._may_use(client_id, handle, shared, handle._impl.uuid):
-            self._refuse_use(client_id, handle, str(getattr(handle._impl.props, "label", "?"))[:40], True)
+            self._refuse_use(client_id, handle, _label(handle), True)
             return False
         state.uploads.add(msg.transfer_uuid)
         return True
@@ -419,6 +421,10 @@ class ClientGuard:
         if len(msg.content) > _UPLOAD_CHUNK:
             raise Refused(f"upload part of {len(msg.content)} bytes")
         return True
+
+
+def _label(handle: Any) -> str:
+    return str(getattr(handle._impl.props, "label", type(handle).__name__))[:40]
 
 
 def _action_of(handle: Any) -> str | None:

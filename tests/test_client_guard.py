@@ -237,7 +237,8 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
     server, app, token = console
     op, viewer, watcher = trio
     shared = _inputs(server)
-    allowed = {getattr(h._impl.props, "label", None) for h in shared.values() if app.guard.viewer_allowed(h)}
+    allowed = {getattr(h._impl.props, "label", None) for h in shared.values()
+               if app.guard.viewer_allowed(h)}
     assert allowed <= VIEWER_ALLOWED and "STOP" in allowed
     targets = {u: h for u, h in shared.items()
                if not app.guard.viewer_allowed(h) and _other_valid(h) is not None
@@ -368,7 +369,8 @@ def test_validate_value_by_widget_kind() -> None:
     try:
         g, lim = server.gui, GuardLimits()
         count = g.add_number("n", 5, min=1, max=50, step=1)
-        assert validate_value(count, 7.0, lim) == 7 and isinstance(validate_value(count, 7.0, lim), int)
+        seven = validate_value(count, 7.0, lim)
+        assert seven == 7 and isinstance(seven, int)
         for bad in (2.5, 1e308, math.nan, "7", True, None):
             with pytest.raises(Refused):
                 validate_value(count, bad, lim)
