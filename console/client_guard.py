@@ -430,7 +430,8 @@ def _label(handle: Any) -> str:
 def _action_of(handle: Any) -> str | None:
     """The ``operator_only`` action of one of ``handle``'s callbacks (the refusal's wording)."""
     impl = handle._impl
-    for cb in (*getattr(impl, "update_cb", ()), *getattr(impl, "trigger_cb", ())):
+    holds = [cb for cbs in getattr(impl, "hold_cbs_from_freq", {}).values() for cb in cbs]
+    for cb in (*holds, *getattr(impl, "update_cb", ()), *getattr(impl, "trigger_cb", ())):
         what = getattr(cb, "operator_only", None)
         if what:
             return str(what)

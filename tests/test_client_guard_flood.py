@@ -221,3 +221,24 @@ def test_wrong_tokens_from_one_browser_do_not_lock_out_another(lab: tuple) -> No
     operator.update(o.take._impl.uuid, value=True)
     wait_for(lambda: app.access.holder is not None
              and app.access.holder.client_id == operator.client_id, what="operator in")
+
+
+def test_a_viewers_jog_is_refused_in_the_panels_own_words(lab: tuple) -> None:
+    """The guard names the action the panel gave ``operator_only`` ("jog"), as before."""
+    server, app, token = lab
+    op = _operator(server, app, token)
+    viewer = RawClient(server)
+    _ready(app, viewer)
+    plus = next(h for h in server.gui._gui_input_handle_from_uuid.values()
+                if getattr(h._impl.props, "label", "") == "κ₁ +")
+    before = app.store.command
+    for _ in range(5):
+        viewer.send(_messages.GuiButtonHoldMessage(plus._impl.uuid, 20.0))
+        time.sleep(0.05)
+    viewer.update(plus._impl.uuid, value=True)
+    note = wait_for(lambda: viewer.received("NotificationShowMessage"), what="a refusal")
+    assert "Only the operator can jog — Olivia holds control" in note[0]["props"]["body"]
+    time.sleep(0.3)
+    assert len(viewer.received("NotificationShowMessage")) == 1  # coalesced
+    assert app.store.command is before
+    assert op.alive()
