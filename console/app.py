@@ -243,7 +243,7 @@ class ConsoleApp:
             self.stop_motion(reason)
             if new is None:
                 self.notify_all("Control released", f"{reason}. The arm was stopped; nobody "
-                                "holds control.", color="orange")
+                                "holds control.", color="orange", coalesce_s=3.0)
 
     # -- lifecycle ---------------------------------------------------------------------------
 

@@ -149,7 +149,7 @@ class SessionPanel(Panel):
     def _on_control_change(self, new: Operator | None, previous: Operator | None,
                            reason: str) -> None:
         if new is not None:
-            self.app.notify_all("Control", f"{reason}.", color="blue")
+            self.app.notify_all("Control", f"{reason}.", color="blue", coalesce_s=3.0)
         self.refresh()
 
     # -- shared actions ----------------------------------------------------------------------
