@@ -104,6 +104,10 @@ def test_a_burst_disconnects_only_the_sender_and_the_operator_keeps_control(
     stops = app.stops
     watcher.update(_stop_uuid(app), value=True)  # STOP still works for everyone else
     wait_for(lambda: app.stops == stops + 1, what="the watcher's STOP")
+    mine = f"client {watcher.client_id} stopped the arm."
+    wait_for(lambda: watcher.received("NotificationShowMessage",
+                                      lambda m: m["props"]["body"] == mine),
+             what="the watcher still receiving")
 
 
 def test_a_10_mb_message_disconnects_only_the_sender(lab: tuple,
