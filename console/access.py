@@ -77,15 +77,19 @@ class AccessControl:
             gets this long for its first answer, then ``lease_s`` applies.
         first_client_takes_control: Desk mode: a client that connects while nobody holds
             control gets it without a token (only for a console bound to the loopback address).
-        max_failures: Wrong tokens accepted per ``failure_window`` s (all clients together)
-            before further attempts are refused outright, to make guessing slow.
+        max_failures: Wrong tokens accepted per ``failure_window`` s from one client before
+            its further attempts are refused outright, to make guessing slow. Counted per
+            client and per remote address (``address_failures``), never for all clients
+            together: one viewer typing wrong tokens must not keep the operator out.
+        address_failures: Wrong tokens accepted per ``failure_window`` s from one address
+            (all its tabs and reconnections together).
         clock: Monotonic time source (tests pass a fake one).
     """
 
     def __init__(self, token: str | None = None, *, lease_s: float = 2.0,
                  first_answer_s: float = 10.0,
                  first_client_takes_control: bool = False, max_failures: int = 5,
-                 failure_window: float = 10.0,
+                 failure_window: float = 10.0, address_failures: int = 20,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if token is not None and not token:
             raise ValueError("token must be a non-empty string or None")
@@ -98,6 +102,7 @@ class AccessControl:
         self.first_answer_s = first_answer_s
         self.first_client_takes_control = first_client_takes_control
         self.max_failures = max_failures
+        self.address_failures = address_failures
         self.failure_window = failure_window
         self._clock = clock
         self._lock = threading.RLock()
@@ -106,7 +111,7 @@ class AccessControl:
         self._answered = False  # has the holder's tab answered a probe yet?
         self._lapsed: int | None = None  # desk mode: whose lease lapsed by silence
         self._names: dict[int, str] = {}
-        self._failures: list[float] = []
+        self._failures: dict[object, list[float]] = {}  # per client id and per ("addr", host)
         self._listeners: list[Listener] = []
 
     # -- queries -----------------------------------------------------------------------------
@@ -183,11 +188,24 @@ class AccessControl:
             except Exception:  # one broken listener must not keep the others from stopping
                 log.exception("access listener failed")
 
-    def take(self, client: Any, token: str | None = None, name: str | None = None) -> Operator:
+    def _recent_failures(self, key: object, now: float) -> list[float]:
+        times = [t for t in self._failures.get(key, ()) if now - t < self.failure_window]
+        if times:
+            self._failures[key] = times
+        else:
+            self._failures.pop(key, None)
+        return times
+
+    def take(self, client: Any, token: str | None = None, name: str | None = None,
+             address: str | None = None) -> Operator:
         """Make ``client`` the operator (taking over from any other holder).
 
+        ``address`` is the browser's remote host, if known: wrong tokens are limited per client
+        and per address.
+
         Raises:
-            NotOperator: wrong or missing token, or too many wrong tokens recently.
+            NotOperator: wrong or missing token, or too many wrong tokens recently from this
+                client or its address.
         """
         cid = client_id_of(client)
         if cid is None:
@@ -195,13 +213,19 @@ class AccessControl:
         now = self._clock()
         with self._lock:
             if self.token is not None:
-                self._failures = [t for t in self._failures if now - t < self.failure_window]
-                if len(self._failures) >= self.max_failures:
+                keys: list[tuple[object, int]] = [(cid, self.max_failures)]
+                if address is not None:
+                    keys.append((("addr", address), self.address_failures))
+                if any(len(self._recent_failures(k, now)) >= limit for k, limit in keys):
                     raise NotOperator("Too many wrong tokens in the last "
                                       f"{self.failure_window:.0f} s; wait and try again.")
                 given = (token or "").strip()
                 if not hmac.compare_digest(given.encode(), self.token.encode()):
-                    self._failures.append(now)
+                    for k, _ in keys:
+                        self._failures.setdefault(k, []).append(now)
+                    if len(self._failures) > 10_000:  # bounded: forget the oldest keys
+                        for k in list(self._failures)[:5_000]:
+                            self._failures.pop(k, None)
                     raise NotOperator("Wrong operator token: copy it from the terminal "
                                       "where serve.py runs.")
             if name is not None:

@@ -32,6 +32,9 @@ registers its controlled stop there) and ends all jogging (``app.hold``, hold-to
 caps, ``console.hold_to_run``). It also runs when the operator's lease is lost, control is
 released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
 recording (``console.recording``); files live under ``app.data`` (``console.datadir``).
+``app.guard`` (``console.client_guard``) checks every message a browser sends before viser
+stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
+calls ``allow_viewers(handle)``, per-client rate and size limits.
 """
 
 from __future__ import annotations
@@ -48,6 +51,8 @@ import viser
 
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
+from console.client_guard import ClientGuard
+from console.client_guard import install as _install_client_guard
 from console.datadir import DataDir
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
@@ -66,6 +71,7 @@ if TYPE_CHECKING:
     from console.grasp_session import GraspSession
 
 _install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
+_install_client_guard()  # every browser message is checked before viser stores it (the module)
 
 log = logging.getLogger(__name__)
 
@@ -120,6 +126,7 @@ class ConsoleApp:
         self.refusals = 0
         self.last_stop: tuple[float, str] | None = None
         self._refused_at: dict[tuple[Any, str], float] = {}
+        self._notified_at: dict[tuple[str, str], float] = {}
         self._panels: list[Panel] = []
         self._panel_lock = threading.Lock()
         self._stop = threading.Event()
@@ -130,6 +137,8 @@ class ConsoleApp:
         self.data_root = Path("runs" if data_dir is None else data_dir)
         self._data: DataDir | None = None
         self.access = access if access is not None else AccessControl()
+        self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
+                                 refusal=self.access.refusal)
         self.lease = LeaseMonitor(server, self.access)
         self.hold = HoldToRun(self.store, allowed=self.access.is_operator,
                               heard=self.access.last_heard)
@@ -226,8 +235,19 @@ class ConsoleApp:
         if client is not None and hasattr(client, "add_notification"):
             client.add_notification("Not allowed", reason, color="red", auto_close_seconds=8.0)
 
-    def notify_all(self, title: str, body: str, color: str = "blue") -> None:
-        """A notification on every connected browser."""
+    def notify_all(self, title: str, body: str, color: str = "blue",
+                   coalesce_s: float = 0.0) -> None:
+        """A notification on every connected browser; with ``coalesce_s``, the same title and
+        body again within that many seconds is not repeated (a burst of STOP clicks shows one).
+        """
+        if coalesce_s > 0:
+            now = time.monotonic()
+            with self._hook_lock:
+                if now - self._notified_at.get((title, body), -1e9) < coalesce_s:
+                    return
+                self._notified_at[(title, body)] = now
+                if len(self._notified_at) > 1000:
+                    self._notified_at.clear()
         for client in self.server.get_clients().values():
             try:
                 client.add_notification(title, body, color=color, auto_close_seconds=8.0)
@@ -242,7 +262,7 @@ class ConsoleApp:
             self.stop_motion(reason)
             if new is None:
                 self.notify_all("Control released", f"{reason}. The arm was stopped; nobody "
-                                "holds control.", color="orange")
+                                "holds control.", color="orange", coalesce_s=3.0)
 
     # -- lifecycle ---------------------------------------------------------------------------
 

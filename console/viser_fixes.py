@@ -13,6 +13,9 @@ to that browser for good (pages that never finished loading).
 ``set()`` from any other thread is handed to the event loop (``call_soon_threadsafe``); nothing
 in viser reads the event synchronously (it is only awaited and cleared by the buffer's window
 generator). Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
+
+What viser 1.1.1 does with what browsers *send* (it trusts them) is fixed in
+``console.client_guard``, which ``ConsoleApp`` installs beside this module.
 """
 
 from __future__ import annotations

@@ -61,16 +61,35 @@ def test_only_the_right_token_gives_control_and_refusals_name_the_holder() -> No
     assert access.release(8) and access.holder is None
 
 
-def test_wrong_tokens_are_throttled_across_clients() -> None:
+def test_wrong_tokens_are_throttled_across_clients_of_one_address() -> None:
+    # Issue 20: the limit was global (one wrong token every 2 s kept the operator out); it is
+    # now per client and per address, so guessing from many tabs of one machine still waits.
     clock = FakeClock()
-    access = AccessControl("tok", max_failures=3, failure_window=10.0, clock=clock)
+    access = AccessControl("tok", max_failures=3, address_failures=3, failure_window=10.0,
+                           clock=clock)
     for cid in range(3):
         with pytest.raises(NotOperator, match="Wrong"):
-            access.take(cid, "nope")
+            access.take(cid, "nope", address="10.0.0.5")
     with pytest.raises(NotOperator, match="Too many"):
-        access.take(9, "tok")  # even the right token waits
+        access.take(9, "tok", address="10.0.0.5")  # even the right token waits
+    assert access.take(10, "tok", address="10.0.0.6").client_id == 10  # another desk does not
     clock.t += 10.5
-    assert access.take(9, "tok").client_id == 9
+    assert access.take(9, "tok", address="10.0.0.5").client_id == 9
+
+
+def test_wrong_tokens_from_one_client_do_not_lock_out_another() -> None:
+    clock = FakeClock()
+    access = AccessControl("tok", max_failures=3, failure_window=10.0, clock=clock)
+    for _ in range(3):
+        with pytest.raises(NotOperator, match="Wrong"):
+            access.take(1, "nope", address="127.0.0.1")
+    with pytest.raises(NotOperator, match="Too many"):
+        access.take(1, "tok", address="127.0.0.1")  # this client waits, even with the token
+    for _ in range(5):  # one wrong token every 2 s, as in the issue
+        clock.t += 2.0
+        with pytest.raises(NotOperator):
+            access.take(1, "nope", address="127.0.0.1")
+    assert access.take(2, "tok", address="127.0.0.1").client_id == 2  # the operator gets in
 
 
 def test_lease_expires_after_two_silent_seconds_and_heartbeats_renew_it() -> None:

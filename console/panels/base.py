@@ -27,6 +27,10 @@ the check cannot be forgotten and is the same everywhere::
         def _on_execute(self, event: viser.GuiEvent) -> None:
             ...  # runs only for the operator's clicks
 
+Below the callbacks, ``console.client_guard`` refuses a viewer's edit of any shared input
+before viser stores or broadcasts it, unless the panel marked the widget with
+:meth:`Panel.allow_viewers` (STOP, Save scene, exports); a browser's own ``client.gui`` widgets
+are its own. ``operator_only`` stays as the second line (and names the action in the refusal).
 A viewer's event never reaches the callback: the viewer gets a notification ("Only the operator
 can execute a plan -- Alice holds control; ask them or take control with the token"), the
 refusal is recorded, and :meth:`Panel.on_refused` runs so input widgets can snap back (viser
@@ -91,6 +95,13 @@ class Panel:
 
     def on_refused(self, event: Any) -> None:
         """A viewer's event was refused by :func:`operator_only`; undo what it showed (optional)."""
+
+    def allow_viewers(self, *handles: Any) -> None:
+        """Let viewers use these shared widgets (STOP, downloads); every other shared input is
+        the operator's, refused by ``console.client_guard`` before viser stores it."""
+        guard = getattr(self.app, "guard", None)
+        if guard is not None:
+            guard.allow_viewers(*handles)
 
     def operator_only(self, callback: F, action: str | None = None) -> F:
         """``callback`` wrapped by :func:`operator_only` for this panel (for lambdas)."""

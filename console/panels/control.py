@@ -34,6 +34,7 @@ from viser import uplot
 
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
+from console.plan_view import TableObject, validate_object
 from hw_bridge.link_supervisor import DISCONNECTED
 from hw_bridge.soft_arm_process import ControlProcess, ControlView
 from console.state import ArmState
@@ -193,7 +194,8 @@ class ControlPanel(Panel):
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
                                                action="disarm the arm"))
         self.stop_btn.on_click(self._on_stop)  # STOP: any client
-        self.place_btn.on_click(operator_only(lambda e: self._place(), panel=self,
+        self.allow_viewers(self.stop_btn)
+        self.place_btn.on_click(operator_only(lambda e: self._place(e), panel=self,
                                               action="place the object"))
         self.execute_btn.on_click(operator_only(lambda e: self._execute(e), panel=self,
                                                 action="run grasp-and-place"))
@@ -225,13 +227,37 @@ class ControlPanel(Panel):
         fut = self.ctl.disarm()
         fut.add_done_callback(lambda f: self._report(event, f))
 
-    def _place(self) -> None:
-        self.ctl.place_object(float(self.obj_x.value), float(self.obj_y.value), float(self.obj_r.value))
+    def _object(self, event: Any, x: float, y: float) -> tuple[float, float, float] | None:
+        """(x, y, r) of the object to grasp, or None after telling the user why (nothing is
+        sent: a radius of 1e308 must not arm the arm)."""
+        r = float(self.obj_r.value)
+        lo, hi = float(self.obj_r.min or 0.0), float(self.obj_r.max or 0.2)
+        try:
+            if not all(math.isfinite(v) for v in (x, y, r)):
+                raise ValueError("object position and radius must be finite numbers")
+            if not lo <= r <= hi:
+                raise ValueError(f"object radius must be between {lo * 1e3:g} and {hi * 1e3:g} "
+                                 f"mm, got {r * 1e3:.4g} mm")
+            validate_object(TableObject("object", x, y, r), self.app.robot)
+        except ValueError as exc:
+            client = getattr(event, "client", None)
+            if client is not None:
+                client.add_notification("Refused", str(exc), color="red",
+                                        auto_close_seconds=8.0)
+            return None
+        return x, y, r
+
+    def _place(self, event: Any = None) -> None:
+        obj = self._object(event, float(self.obj_x.value), float(self.obj_y.value))
+        if obj is not None:
+            self.ctl.place_object(*obj)
 
     def _execute(self, event: Any) -> None:
+        obj = self._object(event, float(self.obj_x.value), float(self.obj_y.value))
+        if obj is None:
+            return
         self._stopped = False
-        fut = self.ctl.grasp_at(float(self.obj_x.value), float(self.obj_y.value),
-                                float(self.obj_r.value))
+        fut = self.ctl.grasp_at(*obj)
         fut.add_done_callback(lambda f: self._report(event, f))
 
     def _execute_plan(self, event: Any) -> None:
@@ -266,9 +292,12 @@ class ControlPanel(Panel):
         p = table_point(event.ray_origin, event.ray_direction)
         if p is None:
             return
+        obj = self._object(event, float(p[0]), float(p[1]))
+        if obj is None:
+            return
         self.obj_x.value, self.obj_y.value = round(p[0], 4), round(p[1], 4)
         self._stopped = False
-        fut = self.ctl.grasp_at(p[0], p[1], float(self.obj_r.value))
+        fut = self.ctl.grasp_at(*obj)
         fut.add_done_callback(lambda f: self._report(event, f))
 
     @staticmethod

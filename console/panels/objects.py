@@ -63,6 +63,7 @@ class ObjectsPanel(Panel):
         self.add_button.on_click(self._on_add)
         self.remove_button.on_click(self._on_remove)
         self.save_button.on_click(self._on_save)
+        self.allow_viewers(self.save_button)  # a download for the one who asks
         self.load_button.on_upload(self._on_load)
         self.app.server.scene.on_click()(self._on_scene_click)
         self.session.gizmo_handler = self._on_gizmo

@@ -152,6 +152,7 @@ class PathsPanel(Panel):
         self.execute_btn.on_click(self.operator_only(self._on_execute, "execute a path"))
         # Stop is everyone's: the console-wide STOP, which calls _on_stop among its hooks.
         self.stop_btn.on_click(lambda e: self.app.stop_motion("Stop (Paths panel)", e.client))
+        self.allow_viewers(self.stop_btn)
         self.reconnect_btn.on_click(self.operator_only(lambda _: self._reconnect(),
                                                        "connect the hardware"))
         self.app.add_stop_hook(self._on_stop)

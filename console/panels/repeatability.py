@@ -143,6 +143,7 @@ class RepeatabilityPanel(Panel):
                                                  "run a repeatability test"))
         self.stop_btn.on_click(lambda e: self.app.stop_motion("Stop (Repeatability panel)",
                                                               e.client))
+        self.allow_viewers(self.stop_btn)
         self.app.add_stop_hook(self._halt)
 
     def _use_tip(self) -> None:

@@ -71,6 +71,7 @@ class SessionPanel(Panel):
         self.export_btn = gui.add_button("Export scene (HTML)", order=40.0,
                                          hint="The 3D scene as one file that opens offline.")
         self.export_btn.on_click(self._on_export_scene)
+        self.allow_viewers(self.stop_btn, self.stop_cmd, self.export_btn)  # the rest: operator
         self.app.access.add_listener(self._on_control_change)
         self.app.server.on_client_connect(self._on_connect)
         self.app.server.on_client_disconnect(self._on_disconnect)
@@ -128,7 +129,9 @@ class SessionPanel(Panel):
     def _on_take(self, client: viser.ClientHandle, w: _ClientWidgets) -> None:
         token = None if w.token is None else str(w.token.value)
         try:
-            op = self.app.access.take(client, token, str(w.name.value))
+            guard = getattr(self.app, "guard", None)
+            op = self.app.access.take(client, token, str(w.name.value),
+                                      address=None if guard is None else guard.address_of(client))
         except NotOperator as exc:
             self.app.refuse(client, exc, "take control")
             return
@@ -146,7 +149,7 @@ class SessionPanel(Panel):
     def _on_control_change(self, new: Operator | None, previous: Operator | None,
                            reason: str) -> None:
         if new is not None:
-            self.app.notify_all("Control", f"{reason}.", color="blue")
+            self.app.notify_all("Control", f"{reason}.", color="blue", coalesce_s=3.0)
         self.refresh()
 
     # -- shared actions ----------------------------------------------------------------------
@@ -155,7 +158,7 @@ class SessionPanel(Panel):
         client = event.client
         who = self.app.access.name_of(client)
         self.app.stop_motion(f"STOP pressed by {who}", client)
-        self.app.notify_all("STOP", f"{who} stopped the arm.", color="red")
+        self.app.notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)
 
     @operator_only(action="run the demo motion")
     def _on_demo(self, event: viser.GuiEvent) -> None:

@@ -1,0 +1,413 @@
+"""Issues 14 and 20: every value a browser sends is checked before viser stores or broadcasts it.
+
+A full console (as ``serve.py --lab --hardware mock`` builds it) for each robot, and raw
+websocket clients speaking viser's protocol (``tests/ws_client.py``): an operator who took
+control with the token (and answers the lease probes like a tab), a viewer who sends what a
+hostile client can, and a watcher who must keep receiving and see nothing of it. The expected
+values are the widgets' own state before the attack: nothing may change.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Iterator
+
+import numpy as np
+import pytest
+from viser import _messages
+
+from console.client_guard import GuardLimits
+from console.panels.control import ControlPanel
+from console.panels.session import SessionPanel
+from tests.fakes import FakeClient
+from tests.ws_client import RawClient, wait_for
+
+PACE = 1.0 / 80  # below the guard's 100 messages/s per client: every message is judged
+VIEWER_ALLOWED = {"STOP", "STOP arm", "Stop (hold)", "Save scene", "Export scene (HTML)"}
+
+
+@pytest.fixture(scope="module", params=["soft-arm", "extensible"])
+def console(request: Any, serve_module: Any, tmp_path_factory: Any) -> Iterator[tuple]:
+    from core.robots import load
+
+    data = tmp_path_factory.mktemp("runs")
+    args = serve_module.parse_args(["--robot", request.param, "--hardware", "mock", "--port",
+                                    "0", "--lab", "--rt-cpu", "none", "--data-dir", str(data)])
+    server, app, token = serve_module.build(args, load(request.param), "guard test")
+    app.start()
+    try:
+        yield server, app, token
+    finally:
+        app.stop_motion("test over")
+        app.services.close()
+        app.stop()
+        server.stop()
+
+
+@pytest.fixture
+def trio(console: tuple) -> Iterator[tuple[RawClient, RawClient, RawClient]]:
+    """(operator holding control, viewer, watcher) connected to ``console``."""
+    server, app, token = console
+    op, viewer, watcher = RawClient(server), RawClient(server), RawClient(server)
+    session = app.panel(SessionPanel)
+    wait_for(lambda: {c.client_id for c in (op, viewer, watcher)} <= set(session.clients),
+             what="per-browser widgets built")
+    app.access.take(op.client_id, token, "Olivia")
+    try:
+        yield op, viewer, watcher
+    finally:
+        for c in (op, viewer, watcher):
+            c.close()
+        wait_for(lambda: app.access.holder is None, what="control released on close")
+
+
+def _inputs(server: Any) -> dict[str, Any]:
+    return dict(server.gui._gui_input_handle_from_uuid)
+
+
+def _own_inputs(server: Any, client: RawClient) -> dict[str, Any]:
+    return dict(server.get_clients()[client.client_id].gui._gui_input_handle_from_uuid)
+
+
+def _snapshot(handle: Any) -> tuple:
+    impl = handle._impl
+    p = impl.props
+    value = impl.value
+    if type(handle).__name__ == "GuiUploadButtonHandle":
+        value = (value.name, value.content)
+    return (repr(value), impl.removed, getattr(p, "disabled", None), getattr(p, "visible", None),
+            getattr(p, "label", None), len(impl.update_cb), impl.is_button)
+
+
+def _settled(handles: dict[str, Any], timeout: float = 20.0) -> dict[str, tuple]:
+    """The widgets' state once the console has finished starting (the hardware panel fills in
+    its port, the planner enables the waypoint slider ...): unchanged for two seconds."""
+    deadline = time.monotonic() + timeout
+    snap = {u: _snapshot(h) for u, h in handles.items()}
+    while time.monotonic() < deadline:
+        time.sleep(2.0)
+        again = {u: _snapshot(h) for u, h in handles.items()}
+        if again == snap:
+            return snap
+        snap = again
+    raise AssertionError("the console's widgets never settled")
+
+
+def _hostile(updates: dict[str, Any]) -> bool:
+    """Whether a broadcast update carries what only the attack sent (the console itself changes
+    ``max``, ``disabled`` or a value now and then, never to these)."""
+    if set(updates) & {"removed", "update_cb", "props", "is_button", "label"}:
+        return True
+    value = updates.get("value")
+    flat = value if isinstance(value, (list, tuple)) else [value]
+    return any((isinstance(v, float) and (not math.isfinite(v) or abs(v) > 1e12))
+               or (isinstance(v, str) and len(v) > 256) or isinstance(v, dict) or v is None
+               for v in flat) if "value" in updates else False
+
+
+def _changed(before: dict[str, tuple], after: dict[str, tuple]) -> dict[str, tuple]:
+    """Widgets whose state differs, except one the console itself enabled meanwhile (e.g. the
+    waypoint slider once the first plan is in): `disabled` going True -> False is the server's
+    doing, never an attack's."""
+    def same_but_enabled(b: tuple, a: tuple) -> bool:
+        return b[2] and not a[2] and b[:2] + b[3:] == a[:2] + a[3:]
+    return {u: (before[u], after[u]) for u in before
+            if before[u] != after[u] and not same_but_enabled(before[u], after[u])}
+
+
+def _kind(handle: Any) -> str:
+    return type(handle).__name__.removeprefix("Gui").removesuffix("Handle")
+
+
+def _bad_values(handle: Any) -> list[Any]:
+    """Values the widget must refuse, from its own type and bounds."""
+    kind, impl = _kind(handle), handle._impl
+    bad: list[Any] = [1e308, -1e308, math.nan, math.inf, -math.inf, None, {"a": 1}, [1e308]]
+    if kind != "Text":
+        bad += ["str", "x" * 5000]
+    else:
+        bad += ["x" * 5000, 7]
+    if kind in ("Number", "Slider"):
+        p = impl.props
+        if p.max is not None:
+            bad.append(p.max + 1)
+        if p.min is not None:
+            bad.append(p.min - 1)
+        if isinstance(impl.value, int):
+            bad.append(impl.value + 0.5)
+        bad.append(True)
+    if kind == "Checkbox":
+        bad += [1, "true"]
+    if kind in ("Dropdown", "ButtonGroup"):
+        bad.append("not one of the options")
+    if kind in ("Vector2", "Vector3", "MultiSlider"):
+        bad += [[math.nan] * len(impl.value), [0.0] * (len(impl.value) + 1)]
+    return bad
+
+
+def _other_valid(handle: Any) -> Any:
+    """A value the widget accepts that differs from its current one (None: there is none)."""
+    kind, impl = _kind(handle), handle._impl
+    p, v = impl.props, impl.value
+    if impl.is_button:
+        return True
+    if kind in ("Number", "Slider"):
+        for cand in (p.max, p.min, v + (p.step or 1)):
+            if cand is not None and cand != v and (p.max is None or cand <= p.max) and (
+                    p.min is None or cand >= p.min):
+                return int(cand) if isinstance(v, int) else float(cand)
+        return None
+    if kind == "Checkbox":
+        return not v
+    if kind == "Text":
+        return v + "x"
+    if kind in ("Dropdown", "ButtonGroup"):
+        others = [o for o in p.options if o != v]
+        return others[0] if others else None
+    if kind in ("Vector2", "Vector3"):
+        lo = p.min if p.min is not None else tuple(c - 1.0 for c in v)
+        return tuple(float(c) for c in lo) if tuple(lo) != tuple(v) else None
+    return None
+
+
+def test_non_value_keys_and_bad_values_are_refused_for_every_widget(console: tuple,
+                                                                    trio: tuple) -> None:
+    """Issue 20.1 (``removed`` on STOP) and 14 (1e308, NaN, inf, strings): for every input of
+    the full console and every per-browser input, nothing is stored, nobody is disconnected, the
+    arm does not move, and STOP still works afterwards."""
+    server, app, token = console
+    op, viewer, watcher = trio
+    shared, own = _inputs(server), _own_inputs(server, viewer)
+    op_own = _own_inputs(server, op)
+    everything = {**shared, **own, **op_own}
+    assert len(shared) >= 20 and len(own) >= 5
+    before = _settled(everything)
+    q0, seq0 = np.array(app.store.command.q), app.store.command.seq
+    stops0 = app.stops
+    watcher.clear()
+    attacks = [{"removed": True}, {"value": True, "removed": True}, {"update_cb": []},
+               {"disabled": True}, {"visible": False}, {"label": "pwned"}, {"props": None},
+               {"is_button": False}, {}]
+    for uuid in [*shared, *own]:  # the viewer names other attributes ...
+        for updates in attacks:
+            assert viewer.update(uuid, **updates)
+            time.sleep(PACE)
+    for uuid, handle in [*shared.items(), *op_own.items()]:  # ... the operator sends bad values
+        for i, value in enumerate(_bad_values(handle)):
+            assert op.update(uuid, value=value)
+            if i < 5 and uuid in shared:  # (1e308, -1e308, NaN, inf, -inf from the viewer too)
+                assert viewer.update(uuid, value=value)
+            time.sleep(PACE)
+    for uuid, handle in own.items():  # and the viewer to its own widgets
+        for value in _bad_values(handle):
+            assert viewer.update(uuid, value=value)
+            time.sleep(PACE)
+    time.sleep(0.5)
+    after = {u: _snapshot(h) for u, h in everything.items()}
+    changed = _changed(before, after)
+    assert changed == {}, "\n".join(f"{b} -> {a}" for b, a in changed.values())
+    assert op.alive() and viewer.alive() and watcher.alive()
+    assert app.access.holder is not None and app.access.holder.client_id == op.client_id
+    assert np.array_equal(app.store.command.q, q0) and app.store.command.seq == seq0
+    assert app.stops == stops0  # no button ran: STOP takes `true` only
+    broadcast = watcher.received("GuiUpdateMessage",
+                                 lambda m: m["uuid"] in everything and _hostile(m["updates"]))
+    assert broadcast == []
+    assert app.guard.counts["invalid"] >= len(shared) * len(attacks)
+    # A browser arriving now gets the console (upstream: closed with 1011 on every reconnect).
+    late = RawClient(server)
+    time.sleep(1.0)
+    assert late.alive() and late.frames > 0
+    late.close()
+    # STOP still works, from the viewer.
+    stop = next(h for h in shared.values() if getattr(h._impl.props, "label", None) == "STOP")
+    viewer.update(stop._impl.uuid, value=True)
+    wait_for(lambda: app.stops == stops0 + 1, what="STOP ran")
+
+
+def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(console: tuple,
+                                                                          trio: tuple) -> None:
+    """Issue 20.2: every shared input is the operator's unless marked (STOP, Save scene,
+    exports); a viewer's valid edit is refused before it is stored, only the viewer gets its
+    old value back, with a notification; the operator's same edit is accepted."""
+    server, app, token = console
+    op, viewer, watcher = trio
+    shared = _inputs(server)
+    allowed = {getattr(h._impl.props, "label", None) for h in shared.values()
+               if app.guard.viewer_allowed(h)}
+    assert allowed <= VIEWER_ALLOWED and "STOP" in allowed
+    targets = {u: h for u, h in shared.items()
+               if not app.guard.viewer_allowed(h) and _other_valid(h) is not None
+               and not getattr(h._impl.props, "disabled", False)}
+    assert len(targets) >= 15
+    _settled(shared)
+    targets = {u: h for u, h in targets.items() if not getattr(h._impl.props, "disabled", 0)}
+    before = _settled(shared)
+    q0, seq0 = np.array(app.store.command.q), app.store.command.seq
+    refused0 = app.guard.counts["refused"]
+    watcher.clear()
+    viewer.clear()
+    for uuid, handle in targets.items():
+        viewer.update(uuid, value=_other_valid(handle))
+        time.sleep(PACE)
+    wait_for(lambda: app.guard.counts["refused"] == refused0 + len(targets),
+             what="every edit refused")
+    time.sleep(0.3)
+    assert _changed(before, {u: _snapshot(h) for u, h in shared.items()}) == {}
+    assert np.array_equal(app.store.command.q, q0) and app.store.command.seq == seq0
+    assert watcher.received("GuiUpdateMessage", lambda m: m["uuid"] in targets) == []
+    restored = {m["uuid"]: m["updates"]["value"]
+                for m in viewer.received("GuiUpdateMessage", lambda m: m["uuid"] in targets)}
+    inputs = {u for u, h in targets.items() if not h._impl.is_button}
+    assert set(restored) == inputs
+    notes = viewer.received("NotificationShowMessage")
+    assert notes and all("operator" in m["props"]["body"] for m in notes)
+    assert len(notes) <= len(targets)
+    assert watcher.received("NotificationShowMessage") == []
+    # The operator's edit of the same kind of field is stored and shown to everyone.
+    field = next(h for h in targets.values() if _kind(h) == "Checkbox")
+    old = field.value
+    op.update(field._impl.uuid, value=not old)
+    wait_for(lambda: field.value == (not old), what="operator's edit stored")
+    wait_for(lambda: watcher.received("GuiUpdateMessage",
+                                      lambda m: m["uuid"] == field._impl.uuid),
+             what="operator's edit broadcast")
+    op.update(field._impl.uuid, value=old)
+    wait_for(lambda: field.value == old)
+
+
+def test_a_viewer_cannot_tick_click_to_grasp(console: tuple, trio: tuple) -> None:
+    """Issue 20.2 as reported: a viewer ticked 'Click to grasp' and the operator's next table
+    click ran a grasp."""
+    server, app, _ = console
+    if app.robot.kind != "planar":
+        pytest.skip("the Control panel is the soft arm's")
+    op, viewer, watcher = trio
+    box = app.panel(ControlPanel).click_mode
+    viewer.update(box._impl.uuid, value=True)
+    wait_for(lambda: viewer.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid),
+             what="the viewer's box unticked again")
+    assert box.value is False
+    assert viewer.received("GuiUpdateMessage",
+                           lambda m: m["uuid"] == box._impl.uuid)[-1]["updates"] == {"value": False}
+    assert watcher.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid) == []
+
+
+def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) -> None:
+    """Issue 20.8: 'Object r' has bounds; 1e308 is refused by the guard (for the operator too)
+    and, should a bad radius get into the field some other way, by the panel before it sends."""
+    server, app, _ = console
+    if app.robot.kind != "planar":
+        pytest.skip("the Control panel is the soft arm's")
+    op, viewer, watcher = trio
+    panel = app.panel(ControlPanel)
+    r0 = panel.obj_r.value
+    op.update(panel.obj_r._impl.uuid, value=1e308)
+    wait_for(lambda: op.received("GuiUpdateMessage", lambda m: m["uuid"] == panel.obj_r._impl.uuid))
+    assert panel.obj_r.value == r0
+    sent: list[tuple] = []
+    real = panel.ctl.grasp_at, panel.ctl.place_object
+    panel.ctl.grasp_at = lambda *a: sent.append(a)  # type: ignore[method-assign]
+    panel.ctl.place_object = lambda *a: sent.append(a)  # type: ignore[method-assign]
+    client = FakeClient(op.client_id)
+    event = type("E", (), {"client": client, "client_id": op.client_id})()
+    try:
+        for r in (1e308, math.nan, 0.5):
+            panel.obj_r.value = r
+            panel._execute(event)
+            panel._place(event)
+        assert sent == []
+        assert len(client.notes) == 6 and all(t == "Refused" for t, _ in client.notes)
+        assert "radius" in client.notes[0][1] or "finite" in client.notes[0][1]
+    finally:
+        panel.ctl.grasp_at, panel.ctl.place_object = real  # type: ignore[method-assign]
+        panel.obj_r.value = r0
+
+
+def test_uploads_and_gizmos_are_the_operators(console: tuple, trio: tuple) -> None:
+    """A viewer cannot upload a scene (Load scene) nor drag a shared transform control; parts of
+    an upload it did not start are dropped."""
+    server, app, _ = console
+    op, viewer, watcher = trio
+    uploads = [h for h in _inputs(server).values() if _kind(h) == "UploadButton"]
+    states = server.gui._current_file_upload_states
+    refused0 = app.guard.counts["refused"]
+    for h in uploads:
+        viewer.send(_messages.FileTransferStartUpload(h._impl.uuid, "t-1", "s.json",
+                                                      "application/json", 1, 10))
+        viewer.send(_messages.FileTransferPart(h._impl.uuid, "t-1", 0, b"{}"))
+    gizmos = dict(server.scene._handle_from_transform_controls_name)
+    assert gizmos and len(uploads) == (0 if app.robot.kind == "delta" else 1)  # Load scene
+    poses = {n: (tuple(g.position), tuple(g.wxyz)) for n, g in gizmos.items()}
+    for name in gizmos:
+        viewer.send(_messages.TransformControlsUpdateMessage(name, (1.0, 0.0, 0.0, 0.0),
+                                                             (0.3, 0.3, 0.0)))
+    time.sleep(0.5)
+    assert "t-1" not in states
+    assert app.guard.counts["refused"] >= refused0 + len(uploads) + len(gizmos)
+    assert {n: (tuple(g.position), tuple(g.wxyz)) for n, g in gizmos.items()} == poses
+    assert viewer.alive()
+
+
+def test_guard_limits_are_sane() -> None:
+    lim = GuardLimits()
+    assert lim.max_message_bytes >= 512 * 1024 + 1024  # a browser's upload part fits
+    assert lim.burst >= 60 and lim.rate >= 60  # a slider drag at 60 Hz is never dropped
+
+
+def test_validate_value_by_widget_kind() -> None:
+    """The value check on its own, against each kind's own bounds and types."""
+    import viser
+
+    from console.client_values import OutOfBounds, Refused, validate_value
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        g, lim = server.gui, GuardLimits()
+        count = g.add_number("n", 5, min=1, max=50, step=1)
+        seven = validate_value(count, 7.0, lim)
+        assert seven == 7 and isinstance(seven, int)
+        for bad in (2.5, 1e308, math.nan, "7", True, None):
+            with pytest.raises(Refused):
+                validate_value(count, bad, lim)
+        with pytest.raises(OutOfBounds):
+            validate_value(count, 51, lim)
+        free = g.add_number("x (m)", 0.2, step=0.001)  # no bounds of its own: the guard's
+        assert validate_value(free, -0.35, lim) == -0.35
+        with pytest.raises(Refused):
+            validate_value(free, 1e10, lim)
+        vec = g.add_vector3("p", (1.0, 2.0, 3.0), min=(0.0, 0.0, 0.0), max=(5.0, 5.0, 5.0))
+        assert validate_value(vec, [1, 1, 1], lim) == (1.0, 1.0, 1.0)
+        for bad in ([1, 1], [1, 1, 6], [1, 1, math.inf], "abc"):
+            with pytest.raises(Refused):
+                validate_value(vec, bad, lim)
+        rgb = g.add_rgb("c", (1, 2, 3))
+        assert validate_value(rgb, [0, 128, 255], lim) == (0, 128, 255)
+        for bad in ([0, 0, 256], [0, 0, -1], [0, 0, 0.5], [0, 0]):
+            with pytest.raises(Refused):
+                validate_value(rgb, bad, lim)
+        dd = g.add_dropdown("d", ("a", "b"))
+        assert validate_value(dd, "b", lim) == "b"
+        with pytest.raises(Refused):
+            validate_value(dd, "c", lim)
+        box = g.add_checkbox("b", False)
+        assert validate_value(box, True, lim) is True
+        with pytest.raises(Refused):
+            validate_value(box, 1, lim)
+        text = g.add_text("t", "")
+        assert validate_value(text, "x" * lim.max_text, lim) == "x" * lim.max_text
+        with pytest.raises(Refused):
+            validate_value(text, "x" * (lim.max_text + 1), lim)
+        multi = g.add_multi_slider("m", min=0, max=10, step=1, initial_value=(1, 5))
+        assert validate_value(multi, [2, 3], lim) == (2, 3)
+        with pytest.raises(Refused):
+            validate_value(multi, [2, 11], lim)
+        button = g.add_button("go")
+        assert validate_value(button, True, lim) is True
+        with pytest.raises(Refused):
+            validate_value(button, False, lim)
+        with pytest.raises(Refused):
+            validate_value(g.add_upload_button("u"), True, lim)
+    finally:
+        server.stop()

@@ -1,0 +1,140 @@
+"""A raw websocket client speaking viser's protocol (what a hostile or buggy viewer can send).
+
+It connects with the browser's subprotocol, says hello with a camera message, decodes every
+frame the server sends (zstd msgpack, see ``viser.infra._infra._message_producer``) and, like a
+browser tab, answers the lease's localStorage probes (so an operator built from it keeps
+control). Shared by the client-guard tests and usable from a REPL.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable
+
+import msgspec
+import viser
+import zstandard
+from viser import _messages
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+CAMERA = _messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, 0.01, 100.0,
+                                       480, 640, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def encode(message: Any) -> bytes:
+    """A viser message object or a plain dict (anything a client could send) as a frame."""
+    if isinstance(message, dict):
+        return msgspec.msgpack.encode(message)
+    return msgspec.msgpack.encode(message.as_serializable_dict())
+
+
+def decode_frame(frame: bytes) -> list[dict[str, Any]]:
+    """The messages in one server frame (binary buffers are left out)."""
+    size = int.from_bytes(frame[:8], "little")
+    csize = int.from_bytes(frame[8:16], "little")
+    inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + csize], max_output_size=size)
+    return list(msgspec.msgpack.decode(inner)["messages"])
+
+
+class RawClient:
+    """One websocket connection to a viser server, receiving on a thread.
+
+    Args:
+        server: The viser server (to learn this connection's client id).
+        answer_probes: Answer localStorage reads like a browser tab (the operator's lease).
+    """
+
+    def __init__(self, server: viser.ViserServer, answer_probes: bool = True) -> None:
+        before = set(server.get_clients())
+        self.url = f"ws://127.0.0.1:{server.get_port()}"
+        self.ws = connect(self.url, max_size=None, open_timeout=20,
+                          subprotocols=[f"viser-v{viser.__version__}"])  # type: ignore[list-item]
+        self.answer_probes = answer_probes
+        self.messages: list[dict[str, Any]] = []
+        self.closed: ConnectionClosed | None = None
+        self.frames = 0
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._receive, daemon=True)
+        self._thread.start()
+        self.send(CAMERA)
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            new = set(server.get_clients()) - before
+            if new:
+                self.client_id = max(new)
+                break
+            time.sleep(0.02)
+        else:
+            raise AssertionError("the server never registered this client")
+
+    def _receive(self) -> None:
+        while True:
+            try:
+                frame = self.ws.recv(timeout=0.2)
+            except TimeoutError:
+                continue
+            except ConnectionClosed as exc:
+                self.closed = exc
+                return
+            assert isinstance(frame, bytes)
+            messages = decode_frame(frame)
+            with self._lock:
+                self.frames += 1
+                self.messages.extend(messages)
+            if self.answer_probes:
+                for m in messages:
+                    if m.get("type") == "LocalStorageGetItemRequestMessage":
+                        self.send(_messages.LocalStorageGetItemResponseMessage(
+                            None, None, m["request_uuid"]))
+
+    def send(self, message: Any) -> bool:
+        """Send one message (object, dict or raw bytes / str); False if the socket is closed."""
+        data = message if isinstance(message, (bytes, str)) else encode(message)
+        try:
+            self.ws.send(data)
+            return True
+        except ConnectionClosed as exc:
+            self.closed = exc
+            return False
+
+    def update(self, uuid: str, **updates: Any) -> bool:
+        """A ``GuiUpdateMessage`` as a browser would send it (any keys a hostile one names)."""
+        return self.send({"type": "GuiUpdateMessage", "uuid": uuid, "updates": updates})
+
+    def received(self, kind: str, where: Callable[[dict[str, Any]], bool] = lambda m: True
+                 ) -> list[dict[str, Any]]:
+        with self._lock:
+            return [m for m in self.messages if m.get("type") == kind and where(m)]
+
+    def clear(self) -> None:
+        with self._lock:
+            self.messages.clear()
+
+    def alive(self) -> bool:
+        return self.closed is None and self._thread.is_alive()
+
+    def wait_closed(self, timeout: float = 10.0) -> ConnectionClosed | None:
+        self._thread.join(timeout)
+        return self.closed
+
+    def close(self) -> None:
+        try:
+            self.ws.close()
+        except Exception:
+            pass
+        self._thread.join(5.0)
+
+
+def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition"
+             ) -> Any:
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what} not reached in {timeout} s")
+        time.sleep(0.02)
+
