@@ -16,6 +16,8 @@ none to offer (the extensible arm's lazily built in-process mock; a loop without
 from __future__ import annotations
 
 import dataclasses
+import html
+from pathlib import Path
 from typing import Any, Literal
 
 HardwareMode = Literal["emulator", "mock"]
@@ -71,6 +73,29 @@ def link_kind(mode: HardwareMode, port_path: str | None) -> LinkKind:
     return "port" if port_path else mode
 
 
+def report_device_log(app: Any) -> list[str]:
+    """Point the emulator's event log at ``<data-dir>/device-events.jsonl`` and say what it
+    logged after the previous console's last start: a host that died and whether the device
+    watchdog tripped (terminal and the status line). Returns those lines."""
+    import os
+    import sys
+
+    from hw_bridge.device_events import (EVENT_LOG_ENV, EVENT_LOG_NAME, describe_loss,
+                                         unreported_host_losses)
+    data = getattr(app, "data", None)
+    if data is None:
+        return []
+    log = Path(data.root) / EVENT_LOG_NAME
+    os.environ[EVENT_LOG_ENV] = str(log)  # inherited by the control process and the emulator
+    lines = [describe_loss(ev) for ev in unreported_host_losses(log)]
+    for line in lines:
+        print(f"serve.py: device log {log}: {line}", file=sys.stderr, flush=True)
+    status = getattr(app, "status", None)
+    if lines and status is not None:
+        status.content += "<br><small><b>Device log:</b> " + html.escape(lines[-1]) + "</small>"
+    return lines
+
+
 def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttachment:
     """Connect ``app`` to its hardware before the panels are built (they find it on ``app``).
 
@@ -84,6 +109,8 @@ def attach(app: Any, mode: HardwareMode, port_path: str | None) -> HardwareAttac
                              port_path=port_path or None,
                              baud=BridgeConfig.from_robot(robot).baud)
     app.bridge_controls = None
+    if mode == "emulator" and not port_path:
+        report_device_log(app)
     if robot.kind == "planar":
         from console.panels.control_process import ControlProcess
 

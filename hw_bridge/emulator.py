@@ -48,12 +48,16 @@ from typing import Any, Callable
 from core.robots import ExtensibleArm, Robot, load
 from hw_bridge.config import BridgeConfig, EmulatorConfig
 from hw_bridge.device import DeviceCore
+from hw_bridge.device_events import EventSink, HostWatch
 from hw_bridge.mocap import encode_mocap_packet
 from hw_bridge.plants import MotorBank
 
 
+_SINK = EventSink.from_env()  # stdout, + log file and stderr when a console started us
+
+
 def _emit(event: str, **fields: Any) -> None:
-    print(json.dumps({"event": event, "t": round(time.monotonic(), 4), **fields}), flush=True)
+    _SINK.emit(event, **fields)
 
 
 class _Writer(threading.Thread):
@@ -303,7 +307,8 @@ class Emulator:
         """Serve the protocol until :attr:`stop`."""
         period = self.bridge.period_s
         next_tick = time.monotonic() + period
-        while not self.stop:
+        host_watch = HostWatch(_SINK)  # host died: log the watchdog's trip, then exit
+        while not self.stop and not host_watch.poll(time.monotonic(), self.core):
             now = time.monotonic()
             wake = next_tick if not self.rx_pending else min(next_tick, self.rx_pending[0][0])
             if self.host_present:

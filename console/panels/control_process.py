@@ -38,6 +38,7 @@ from console.panels.control_worlds import HardwareWorld as _HardwareWorld
 from console.panels.control_worlds import SimWorld as _SimWorld
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
+from hw_bridge.parent_watch import exit_reason
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,6 +74,8 @@ class DeviceOptions:
 
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,
            stats_ticks: int, sched_priority: int | None, opts: DeviceOptions = DeviceOptions()) -> None:
+    from hw_bridge.parent_watch import watch_parent
+    watch_parent()  # the console died (any signal): SIGKILL this one, its children follow
     if opts.cpus is not None:  # start-up work (this and the children's imports) off the
         pin_process(opts.cpus.other)  # real-time CPU; the loop moves there once all started
         opts = dataclasses.replace(opts, emulator_args=(
@@ -281,7 +284,8 @@ class ControlProcess:
             try:
                 msg = self._replies.get(timeout=1.0)
             except queue.Empty:
-                if not self._proc.is_alive():
+                if not self._proc.is_alive():  # killed or crashed: the panel says so
+                    self.failure = self.failure or exit_reason(self._proc.exitcode)
                     return
                 continue
             except (EOFError, OSError):

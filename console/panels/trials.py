@@ -16,6 +16,7 @@ import viser
 
 from console.panels.base import Panel, operator_only
 from core.control.trials import TrialResult, paper_locations, run_trials
+from hw_bridge.parent_watch import pool_initializer
 
 SPOTS = ("A-E (paper)", "custom")
 
@@ -93,7 +94,7 @@ class TrialsPanel(Panel):
         try:
             src = str(self.app.robot.source)
             self.results = run_trials(src, objects, repeats, seed, workers=1, progress=progress,
-                                      mp_context="spawn")
+                                      mp_context="spawn", initializer=pool_initializer)
             loop: dict[str, Any] = summary(self.results, time.perf_counter() - t0, 1)
             self.table.content = results_markdown(self.results, loop)
             self.status.content = "<small>done</small>"

@@ -157,12 +157,14 @@ def run_trials(robot_src: str, objects: Sequence[tuple[str, Sequence[float]]], r
                seed: int, *, workers: int = 2, planner: str = DEFAULT_PLANNER,
                time_limit_s: float = 150.0, sim_overrides: dict[str, Any] | None = None,
                progress: Callable[[int, int, TrialResult], None] | None = None,
-               mp_context: str | None = None) -> list[TrialResult]:
+               mp_context: str | None = None,
+               initializer: Callable[[], Any] | None = None) -> list[TrialResult]:
     """All objects x repeats; trial ``i`` uses seed ``seed * 1000 + i`` (independent of workers).
 
     ``workers >= 1`` runs the trials in that many worker processes (so a caller such as the
     console keeps its own interpreter free; a threaded caller should pass
-    ``mp_context="spawn"``); ``workers <= 0`` runs them in this process.
+    ``mp_context="spawn"``); ``workers <= 0`` runs them in this process. ``initializer`` runs
+    in each worker first (the console's makes a worker end with it).
     """
     jobs = [(robot_src, list(map(float, obj)), seed * 1000 + i, label, planner, time_limit_s,
              sim_overrides)
@@ -176,7 +178,7 @@ def run_trials(robot_src: str, objects: Sequence[tuple[str, Sequence[float]]], r
     else:
         import multiprocessing
         ctx = multiprocessing.get_context(mp_context) if mp_context else None
-        with cf.ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+        with cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=initializer) as pool:
             futs = {pool.submit(_run_one, job): i for i, job in enumerate(jobs)}
             for k, fut in enumerate(cf.as_completed(futs)):
                 results[futs[fut]] = fut.result()

@@ -1,0 +1,151 @@
+"""Every child the console starts ends within 1 s of its parent's death, whatever killed it.
+
+A child that outlives the console is dangerous: the soft arm's control process runs
+``SCHED_FIFO`` on the real-time CPU and, once nobody reads its queue, blocks for ever writing
+a full pipe (its own copy of the pipe's read end keeps the write from failing). So every child
+watches its parent:
+
+* :func:`watch_parent` (in the child): a daemon thread compares ``os.getppid()`` with the pid
+  of the parent that started it every ``period`` s; once it differs (the parent died and the
+  child was re-parented to init or a subreaper) it runs ``on_gone`` - by default SIGKILL to
+  itself, which also ends threads blocked in a write. ``getppid`` (not ``PR_SET_PDEATHSIG``)
+  because the kernel sends the parent-death signal when the *thread* that forked the child
+  exits: pool workers started from a short-lived callback thread would die with that thread.
+  The expected pid is passed in, so a parent that died before the watch started is seen too.
+* :func:`set_death_signal`: ``PR_SET_PDEATHSIG`` for children forked from a thread that lives
+  as long as its process (then the kernel delivers it even when no Python thread can run).
+* :func:`child_env` / :func:`parent_pid_from_env`: a plain subprocess (the device emulator)
+  learns its parent's pid from ``HW_BRIDGE_PARENT_PID`` and polls it in its own loop.
+* :func:`pool_initializer`: for ``ProcessPoolExecutor(initializer=...)`` workers.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing
+import os
+import signal
+import threading
+from typing import Any, Callable
+
+PARENT_PID_ENV = "HW_BRIDGE_PARENT_PID"
+_PR_SET_PDEATHSIG = 1
+
+
+def parent_gone(expected_ppid: int) -> bool:
+    """Whether the process that started this one has died (this one was re-parented)."""
+    return os.getppid() != expected_ppid
+
+
+def _kill_self() -> None:
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def watch_parent(expected_ppid: int | None = None, on_gone: Callable[[], Any] | None = None,
+                 period: float = 0.1) -> threading.Thread | None:
+    """Start a daemon thread that runs ``on_gone`` (default: SIGKILL to this process) once the
+    parent process is gone.
+
+    Args:
+        expected_ppid: The parent's pid (default: ``multiprocessing.parent_process()``'s, else
+            the current ``os.getppid()``). Pass it when known so a parent that died before this
+            call is noticed.
+        on_gone: Called once, in the watch thread; if it returns, this process is killed.
+        period: Poll interval in seconds.
+
+    Returns:
+        The thread, or None when there is no parent to watch (pid 1 started us).
+    """
+    if expected_ppid is None:
+        parent = multiprocessing.parent_process()
+        expected_ppid = parent.pid if parent is not None and parent.pid else os.getppid()
+    if expected_ppid <= 1:
+        return None
+
+    def run() -> None:
+        stop = threading.Event()
+        while not parent_gone(expected_ppid):
+            stop.wait(period)
+        try:
+            if on_gone is not None:
+                on_gone()
+        finally:
+            _kill_self()
+
+    t = threading.Thread(target=run, name="parent-watch", daemon=True)
+    t.start()
+    return t
+
+
+def set_death_signal(sig: int = signal.SIGKILL, expected_ppid: int | None = None) -> bool:
+    """``PR_SET_PDEATHSIG``: the kernel sends ``sig`` when the forking *thread* exits.
+
+    Only for children forked from a thread that lives as long as its process. Checks
+    ``expected_ppid`` afterwards (the parent may have died before the call). Returns whether
+    the signal was set (False off Linux).
+    """
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
+            return False
+    except (OSError, AttributeError):
+        return False
+    if expected_ppid is not None and parent_gone(expected_ppid):
+        os.kill(os.getpid(), sig)
+    return True
+
+
+def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
+    """Environment for a subprocess that should watch this process (``HW_BRIDGE_PARENT_PID``)."""
+    out = dict(os.environ if env is None else env)
+    out[PARENT_PID_ENV] = str(os.getpid())
+    return out
+
+
+def parent_pid_from_env() -> int | None:
+    """The parent pid :func:`child_env` passed, or None (started by hand: nothing to watch)."""
+    raw = os.environ.get(PARENT_PID_ENV, "")
+    return int(raw) if raw.isdigit() and int(raw) > 1 else None
+
+
+def pool_initializer(init: Callable[..., Any] | None = None, *args: Any) -> None:
+    """Worker initializer: watch the parent, then run ``init(*args)`` (picklable by name).
+
+    Use as ``ProcessPoolExecutor(initializer=pool_initializer, initargs=(init, *args))``.
+    """
+    watch_parent()
+    if init is not None:
+        init(*args)
+
+
+def exit_reason(exitcode: int | None) -> str | None:
+    """Why a child process ended, for the operator (None: still running or a clean exit)."""
+    if exitcode is None or exitcode == 0:
+        return None
+    if exitcode < 0:
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = f"signal {-exitcode}"
+        return f"the control process was killed ({name})"
+    return f"the control process exited with code {exitcode}"
+
+
+def death_signal_preexec(sig: int = signal.SIGKILL) -> Callable[[], None] | None:
+    """A ``Popen(preexec_fn=...)`` that sets ``PR_SET_PDEATHSIG`` in the child (None off Linux).
+
+    Only for a child whose forking thread lives as long as the child is wanted, e.g. a thread
+    that waits for it. libc is loaded here, in the parent, so the child calls no ``dlopen``
+    between fork and exec.
+    """
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    ppid = os.getpid()
+
+    def preexec() -> None:
+        prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0)
+        if os.getppid() != ppid:  # the parent died between fork and prctl
+            os._exit(1)
+    return preexec
