@@ -149,3 +149,19 @@ def death_signal_preexec(sig: int = signal.SIGKILL) -> Callable[[], None] | None
         if os.getppid() != ppid:  # the parent died between fork and prctl
             os._exit(1)
     return preexec
+
+
+def run_reporting(target: Callable[..., Any], replies: Any, *args: Any) -> Any:
+    """Run a child process's ``target(*args)``; if it raises, put ``("failed", reason)`` on
+    ``replies`` first, so the console shows the reason (not only the terminal's traceback).
+
+    Use as ``ctx.Process(target=run_reporting, args=(target, replies, *args))``.
+    """
+    try:
+        return target(*args)
+    except BaseException as exc:
+        try:
+            replies.put(("failed", f"{type(exc).__name__}: {exc}"[:500]))
+        except Exception:  # noqa: BLE001 - the queue itself is broken: the traceback remains
+            pass
+        raise

@@ -224,3 +224,59 @@ def wait_tree_of(pid: int, want: list[str], timeout: float = 60.0) -> dict[int, 
             return tree
         assert time.monotonic() < deadline, f"{want} not up under {pid}: {tree}"
         time.sleep(0.1)
+
+
+def test_control_panel_shows_a_dead_control_process_and_tells_every_browser_once():
+    """The panel's pump (driven here) notices the death: no stale state, one notification."""
+    import viser
+
+    from console.app import ConsoleApp
+    from console.panels.control import ControlPanel
+    from core.robots import load
+    from test_control_console import FakeClient, FakeControl, fake_view
+
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = ConsoleApp(load("soft-arm"), srv, panels=())
+    ctl = app.soft_control = FakeControl()
+    clients = {1: FakeClient(1), 2: FakeClient(2)}
+    srv.get_clients = lambda: clients
+    panel = app.add_panel(ControlPanel)
+    panel._pump_stop.set()
+    panel._pump.join(2.0)
+    try:
+        ctl.view = fake_view()
+        panel._plot_at = 0.0
+        panel._pump_once()
+        assert 'data-phase="idle"' in panel.state_md.content
+        ctl.alive, ctl.failure = False, "the control process was killed (SIGKILL)"
+        for _ in range(3):
+            panel._plot_at = 0.0
+            panel._pump_once()
+        assert panel.state_md.content.startswith("**Control process died:** the control "
+                                                 "process was killed (SIGKILL)")
+        assert panel.arm_btn.disabled and panel.execute_btn.disabled
+        for c in clients.values():
+            assert [(t, col) for t, _, col in c.notes] == [("Control process died", "red")]
+    finally:
+        panel.close()
+        srv.stop()
+
+
+def test_control_process_start_up_failure_reaches_the_panel_with_its_reason(tmp_path):
+    """A control process that fails while starting says why (not 'starting…' for ever)."""
+    from console.panels.control_process import ControlProcess
+    from core.robots import load
+
+    src = tmp_path / "gone.toml"
+    src.write_text((ROOT / "data" / "robots" / "soft-arm.toml").read_text())
+    robot = load(src)
+    src.unlink()  # the child loads the file again: it is gone
+    ctl = ControlProcess(robot, device="sim", cpus=None, sched_priority=None)
+    try:
+        deadline = time.monotonic() + 60
+        while ctl.alive or ctl.failure is None:
+            assert time.monotonic() < deadline, "no failure reported"
+            time.sleep(0.1)
+        assert "gone.toml" in ctl.failure and ctl.view is None, ctl.failure
+    finally:
+        ctl.close()

@@ -38,7 +38,7 @@ from console.panels.control_worlds import HardwareWorld as _HardwareWorld
 from console.panels.control_worlds import SimWorld as _SimWorld
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
-from hw_bridge.parent_watch import exit_reason
+from hw_bridge.parent_watch import exit_reason, run_reporting
 
 
 @dataclasses.dataclass(frozen=True)
@@ -267,8 +267,9 @@ class ControlProcess:
         self._commands = ctx.Queue()
         self._replies = ctx.Queue()
         # Not a daemon: it starts its own planner process. close() (also at exit) ends it.
-        self._proc = ctx.Process(target=_child, name="soft-arm-control",
-                                 args=(str(robot.source), seed, self._commands, self._replies,
+        self._proc = ctx.Process(target=run_reporting, name="soft-arm-control",  # (a failure's
+                                 args=(_child, self._replies,  # reason -> self.failure)
+                                       str(robot.source), seed, self._commands, self._replies,
                                        publish_hz, stats_ticks, sched_priority, opts))
         self._proc.start()
         self._ids = itertools.count(1)
