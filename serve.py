@@ -21,16 +21,17 @@ from __future__ import annotations
 
 import argparse
 import ipaddress
+import os
 import secrets
-import signal
 import socket
 import sys
-import threading
+import traceback
 from pathlib import Path
 from typing import Any
 
 from console.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
+from console.serve_lifecycle import Lifecycle, port_in_use
 from core.robots import RobotFileError, available, load
 
 
@@ -43,7 +44,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1: this machine only; 0.0.0.0 serves "
                         "the lab network and prints the URLs to open)")
-    p.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
+    p.add_argument("--port", type=int, default=8080,
+                   help="HTTP/websocket port (default 8080); if it is busy serve.py exits 2")
+    p.add_argument("--next-free-port", action="store_true",
+                   help="if --port is busy, serve on the next free port (printed) instead")
     p.add_argument("--data-dir", default="runs",
                    help="the only folder the console reads or writes (recordings, exports); "
                         "default ./runs")
@@ -178,14 +182,29 @@ def main(argv: list[str] | None = None) -> int:
     status = describe(robot, args.hardware, args.port_path)
     print(f"serve.py: hardware: {status}", file=sys.stderr)
 
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    server, app, token = build(args, robot, status)
+    busy = port_in_use(args.host, args.port)
+    if busy and not args.next_free_port:
+        print(f"serve.py: {busy}; choose another with --port, or give --next-free-port",
+              file=sys.stderr)
+        return 2
+    life = Lifecycle().install()  # a signal while starting: exit at once
+    try:
+        server, app, token = build(args, robot, status)
+    except Exception as exc:  # noqa: BLE001 - say why, plainly, and leave no children behind
+        traceback.print_exc()
+        print(f"serve.py: start-up failed: {exc}", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(1)  # (not a normal exit: that would wait for a half-started control process)
     print(f"serve.py: {pin_console(app)}", file=sys.stderr)
     app.start()
+    life.serving()  # from now on SIGTERM / Ctrl-C shut down in order, within 2 s
     port = server.get_port()  # viser moves to the next free port if --port is taken
     if port != args.port:
-        print(f"serve.py: port {args.port} is busy, serving on {port}", file=sys.stderr)
+        print(f"serve.py: PORT {args.port} IS BUSY: serving on {port} instead", file=sys.stderr,
+              flush=True)
+        if not args.next_free_port:  # taken between the check and the bind
+            life.shutdown(_shutdown_steps(app, server))
+            return 2
     found = urls(args.host, port)
     print(f"Console for '{robot.name}' at {found[0]}  (Ctrl-C to stop)", flush=True)
     for url in found[1:]:
@@ -200,16 +219,18 @@ def main(argv: list[str] | None = None) -> int:
               flush=True)
     print(f"Data folder: {app.data.root}", flush=True)
     try:
-        while not done.wait(0.5):
-            pass
-    except KeyboardInterrupt:
-        pass
+        life.wait()
     finally:
-        app.stop_motion("console shutting down")
-        app.hardware.close()  # type: ignore[attr-defined]
-        app.stop()
-        server.stop()
+        life.shutdown(_shutdown_steps(app, server))
     return 0
+
+
+def _shutdown_steps(app: Any, server: Any) -> list[tuple[str, Any]]:
+    """What shutting down does, in order (:meth:`Lifecycle.shutdown` bounds it)."""
+    return [("STOP", lambda: app.stop_motion("console shutting down")),
+            ("hardware", app.hardware.close),  # type: ignore[attr-defined]
+            ("console threads", app.stop),
+            ("web server", server.stop)]
 
 
 if __name__ == "__main__":
