@@ -163,11 +163,16 @@ def _num(table: Mapping[str, Any], dotted: str, *, lo: float | None = None,
     return check_number(_get(table, dotted), dotted, lo=lo, hi=hi, strict_lo=strict_lo)
 
 
-def _int(table: Mapping[str, Any], dotted: str, *, lo: int = 1) -> int:
+def _int(table: Mapping[str, Any], dotted: str, *, lo: int = 1, hi: int | None = None) -> int:
     value = _get(table, dotted)
     if isinstance(value, bool) or not isinstance(value, int) or value < lo:
         raise RobotFileError(f"{dotted}: must be an integer >= {lo}, got {value!r}")
+    if hi is not None and value > hi:
+        raise RobotFileError(f"{dotted}: must be an integer in {lo}..{hi}, got {value!r}")
     return value
+
+
+MAX_SEGMENTS = 32  # the serial protocol carries at most 32 channels (hw_bridge.protocol)
 
 
 def _soft_arm(t: Mapping[str, Any], source: Path) -> SoftArm:
@@ -189,7 +194,7 @@ def _soft_arm(t: Mapping[str, Any], source: Path) -> SoftArm:
     return SoftArm(
         name=str(_get(t, "name")),
         base_pose=np.array(pose, dtype=float),
-        n_segments=_int(t, "segments.count"),
+        n_segments=_int(t, "segments.count", hi=MAX_SEGMENTS),
         segment_length=_num(t, "segments.length", lo=0, strict_lo=True),
         kappa_max=_num(t, "segments.kappa_max", lo=0, strict_lo=True),
         half_width=_num(t, "segments.half_width", lo=0),
@@ -213,7 +218,7 @@ def _extensible(t: Mapping[str, Any], source: Path) -> ExtensibleArm:
     if rack_max <= rack_min:
         raise RobotFileError(
             f"segments.rack_max: must be > segments.rack_min ({rack_min:g}), got {rack_max:g}")
-    n_segments = _int(t, "segments.count")
+    n_segments = _int(t, "segments.count", hi=MAX_SEGMENTS)
     n_motors = _int(t, "motors.count")
     if n_motors != 3 * n_segments:
         raise RobotFileError(
