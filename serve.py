@@ -5,7 +5,8 @@
 
 Network: ``--host`` is the address to bind (default 127.0.0.1: only this machine can connect;
 ``0.0.0.0`` serves every interface and prints the URL(s) to open from other machines) and
-``--port`` the HTTP/websocket port. viser's share tunnel is off (button hidden, request
+``--port`` the HTTP/websocket port: if it is busy serve.py exits 2 (``--next-free-port``: take
+the next free one and say so). viser's share tunnel is off (button hidden, request
 ignored). Control: every browser starts as a viewer; "Take control" in the Session panel needs
 the operator token printed here (``--no-token`` for a closed lab). On a loopback-only console
 (a single desk) the first browser gets control without the token unless ``--lab`` is given.
@@ -15,6 +16,11 @@ Hardware: ``--hardware emulator`` (default) starts the device emulator on a pseu
 the demo runs through the real serial stack; ``--hardware mock`` keeps the device in-process;
 ``--port-path PATH`` talks to a real controller (see ``console.hardware_setup``). The Hardware
 panel (both robots) picks the port, connects, arms the device and shows the link's health.
+
+Lifecycle (``console.serve_lifecycle``): SIGTERM / Ctrl-C while starting exit at once; once
+serving they shut down in order within 2 s. Every child process ends within 1 s of this one's
+death by any signal (``hw_bridge.parent_watch``); the device emulator logs its watchdog's trip
+to the terminal and ``<data-dir>/device-events.jsonl``, and the next start reports it.
 """
 
 from __future__ import annotations

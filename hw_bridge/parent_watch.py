@@ -165,3 +165,14 @@ def run_reporting(target: Callable[..., Any], replies: Any, *args: Any) -> Any:
         except Exception:  # noqa: BLE001 - the queue itself is broken: the traceback remains
             pass
         raise
+
+
+def quiesce_blas_on_fork() -> None:
+    """``Popen(preexec_fn=...)`` for children of a real-time process (does nothing itself).
+
+    Any ``preexec_fn`` makes Python start the child with ``fork()`` instead of ``vfork()``, and
+    OpenBLAS's fork handler then ends its idle worker thread in the parent. That thread was
+    started at numpy's import with ordinary scheduling; left in the soft arm's ``SCHED_FIFO``
+    control process it would be the one thread the loop could wait for at normal priority
+    (``tests/test_cpu_partition.py`` checks every thread's priority).
+    """

@@ -31,7 +31,7 @@ from typing import Any, Literal
 
 from hw_bridge.config import BridgeConfig, EmulatorConfig
 from hw_bridge.mocap import MocapFrame, UdpMocapReceiver
-from hw_bridge.parent_watch import child_env
+from hw_bridge.parent_watch import child_env, quiesce_blas_on_fork
 
 DeviceKind = Literal["emulator", "port", "mock"]
 _ROOT = Path(__file__).resolve().parent.parent
@@ -52,7 +52,7 @@ class EmulatorProcess:
             args = [*args, "--sched-priority", str(sched_priority)]
         self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", *args],
                                      cwd=_ROOT, stdout=subprocess.PIPE, text=True,
-                                     env=child_env())
+                                     env=child_env(), preexec_fn=quiesce_blas_on_fork)
         assert self.proc.stdout is not None
         self.path = self.proc.stdout.readline().strip()
         if not self.path.startswith("/dev/"):

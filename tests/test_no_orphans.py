@@ -76,8 +76,9 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def start_console(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, Path]:
-    data = tmp_path / "runs"
+def start_console(tmp_path: Path, *args: str, data: Path | None = None
+                  ) -> tuple[subprocess.Popen, Path]:
+    data = data or tmp_path / "runs"
     err = open(tmp_path / "serve.stderr", "w")
     proc = subprocess.Popen([sys.executable, "serve.py", "--port", str(free_port()),
                              "--data-dir", str(data), "--no-token", *args],
@@ -153,6 +154,13 @@ def test_sigkill_of_soft_arm_console_leaves_nothing(tmp_path):
     log = [json.loads(line) for line in
            (tmp_path / "runs" / "device-events.jsonl").read_text().splitlines()]
     assert any(ev["event"] == "host_gone_exit" for ev in log), log
+    # the next console on this data folder says what the device did, once
+    (tmp_path / "again").mkdir()
+    again, again_err = start_console(tmp_path / "again", "--robot", "soft-arm",
+                                     data=tmp_path / "runs")
+    again.terminate()
+    again.wait(30)
+    assert "previous console's control process died" in again_err.read_text()
 
 
 def test_sigkill_of_extensible_console_leaves_nothing(tmp_path):
