@@ -12,11 +12,13 @@ watches its parent:
   because the kernel sends the parent-death signal when the *thread* that forked the child
   exits: pool workers started from a short-lived callback thread would die with that thread.
   The expected pid is passed in, so a parent that died before the watch started is seen too.
-* :func:`set_death_signal`: ``PR_SET_PDEATHSIG`` for children forked from a thread that lives
-  as long as its process (then the kernel delivers it even when no Python thread can run).
+* :func:`death_signal_preexec`: ``PR_SET_PDEATHSIG`` for a subprocess whose forking thread
+  waits for it (the reachability map's): the kernel delivers it even if no Python thread runs.
 * :func:`child_env` / :func:`parent_pid_from_env`: a plain subprocess (the device emulator)
   learns its parent's pid from ``HW_BRIDGE_PARENT_PID`` and polls it in its own loop.
 * :func:`pool_initializer`: for ``ProcessPoolExecutor(initializer=...)`` workers.
+* :func:`run_reporting` / :func:`exit_reason`: a child's start-up failure, or its death, in
+  words for the console.
 """
 
 from __future__ import annotations
@@ -75,24 +77,6 @@ def watch_parent(expected_ppid: int | None = None, on_gone: Callable[[], Any] | 
     t = threading.Thread(target=run, name="parent-watch", daemon=True)
     t.start()
     return t
-
-
-def set_death_signal(sig: int = signal.SIGKILL, expected_ppid: int | None = None) -> bool:
-    """``PR_SET_PDEATHSIG``: the kernel sends ``sig`` when the forking *thread* exits.
-
-    Only for children forked from a thread that lives as long as its process. Checks
-    ``expected_ppid`` afterwards (the parent may have died before the call). Returns whether
-    the signal was set (False off Linux).
-    """
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        if libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
-            return False
-    except (OSError, AttributeError):
-        return False
-    if expected_ppid is not None and parent_gone(expected_ppid):
-        os.kill(os.getpid(), sig)
-    return True
 
 
 def child_env(env: dict[str, str] | None = None) -> dict[str, str]:

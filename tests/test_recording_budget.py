@@ -10,7 +10,6 @@ from __future__ import annotations
 import gzip
 import json
 import resource
-import threading
 import time
 import zlib
 from pathlib import Path
