@@ -30,6 +30,7 @@ EVENT_LOG_ENV = "HW_BRIDGE_EVENT_LOG"
 EVENT_LOG_NAME = "device-events.jsonl"
 LOUD_EVENTS = frozenset({"watchdog_tripped", "host_gone", "host_gone_exit"})
 _MAX_TAIL_BYTES = 256 * 1024
+_ROTATE_BYTES = 16 * 1024 * 1024
 
 
 class EventSink:
@@ -114,9 +115,11 @@ class HostWatch:
 def unreported_host_losses(log_path: Path) -> list[dict[str, Any]]:
     """``host_gone_exit`` records after the last ``console_start`` marker; then adds one.
 
-    Called once by the console at start-up; reads only the file's last 256 kB.
+    Called once by the console at start-up; reads only the file's last 256 kB. A log past
+    ``_ROTATE_BYTES`` is renamed to ``<name>.1`` (replacing the one before) after reading.
     """
     found: list[dict[str, Any]] = []
+    size = 0
     try:
         with open(log_path, "rb") as f:
             f.seek(0, os.SEEK_END)
@@ -136,6 +139,11 @@ def unreported_host_losses(log_path: Path) -> list[dict[str, Any]]:
             found = []
         elif ev.get("event") == "host_gone_exit":
             found.append(ev)
+    try:
+        if size > _ROTATE_BYTES:
+            os.replace(log_path, f"{log_path}.1")
+    except OSError:
+        pass
     try:
         with open(log_path, "a", encoding="utf-8") as f:
             f.write(json.dumps({"event": "console_start", "wall": time.strftime(

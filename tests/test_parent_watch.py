@@ -77,3 +77,25 @@ def test_exit_reason_names_the_signal():
     assert exit_reason(None) is None and exit_reason(0) is None
     assert exit_reason(-9) == "the control process was killed (SIGKILL)"
     assert exit_reason(1) == "the control process exited with code 1"
+
+
+def test_device_log_reports_each_host_loss_once_and_rotates(tmp_path, monkeypatch):
+    import json
+
+    from hw_bridge import device_events
+
+    log = tmp_path / device_events.EVENT_LOG_NAME
+    gone = {"event": "host_gone_exit", "wall": "2026-12-03T01:00:00+0000", "armed": True,
+            "watchdog_tripped": True, "after_ms": 51.0}
+    log.write_text("x" * 100 + "\n" + json.dumps(gone) + "\nnot json\n")
+    (ev,) = device_events.unreported_host_losses(log)
+    assert device_events.describe_loss(ev) == (
+        "At 2026-12-03T01:00:00+0000 the previous console's control process died while the arm "
+        "was armed; the device watchdog tripped 51.0 ms later and stopped the motors.")
+    assert device_events.unreported_host_losses(log) == []  # told once
+    monkeypatch.setattr(device_events, "_ROTATE_BYTES", 10)
+    with open(log, "a") as f:
+        f.write(json.dumps(gone) + "\n")
+    assert len(device_events.unreported_host_losses(log)) == 1
+    assert (tmp_path / f"{log.name}.1").exists()
+    assert [json.loads(x)["event"] for x in log.read_text().splitlines()] == ["console_start"]
