@@ -5,7 +5,8 @@
 
 Network: ``--host`` is the address to bind (default 127.0.0.1: only this machine can connect;
 ``0.0.0.0`` serves every interface and prints the URL(s) to open from other machines) and
-``--port`` the HTTP/websocket port. viser's share tunnel is off (button hidden, request
+``--port`` the HTTP/websocket port: if it is busy serve.py exits 2 (``--next-free-port``: take
+the next free one and say so). viser's share tunnel is off (button hidden, request
 ignored). Control: every browser starts as a viewer; "Take control" in the Session panel needs
 the operator token printed here (``--no-token`` for a closed lab). On a loopback-only console
 (a single desk) the first browser gets control without the token unless ``--lab`` is given.
@@ -15,23 +16,30 @@ Hardware: ``--hardware emulator`` (default) starts the device emulator on a pseu
 the demo runs through the real serial stack; ``--hardware mock`` keeps the device in-process;
 ``--port-path PATH`` talks to a real controller (see ``console.hardware_setup``). The Hardware
 panel (both robots) picks the port, connects, arms the device and shows the link's health.
+
+Lifecycle (``console.serve_lifecycle``): SIGTERM / Ctrl-C while starting exit at once; once
+serving they shut down in order within 2 s. Every child process ends within 1 s of this one's
+death by any signal (``hw_bridge.parent_watch``); the device emulator logs its watchdog's trip
+to the terminal and ``<data-dir>/device-events.jsonl``, and the next start reports it.
 """
 
 from __future__ import annotations
 
 import argparse
+import html
 import ipaddress
+import os
 import secrets
-import signal
 import socket
 import sys
-import threading
+import traceback
 from pathlib import Path
 from typing import Any
 
 from console.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
 from console.model import model_for
+from console.serve_lifecycle import Lifecycle, port_in_use
 from console.services import ConsoleServices
 from console.state import StateStore
 from core.robots import RobotFileError, available, load
@@ -46,7 +54,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default 127.0.0.1: this machine only; 0.0.0.0 serves "
                         "the lab network and prints the URLs to open)")
-    p.add_argument("--port", type=int, default=8080, help="HTTP/websocket port (default 8080)")
+    p.add_argument("--port", type=int, default=8080,
+                   help="HTTP/websocket port (default 8080); if it is busy serve.py exits 2")
+    p.add_argument("--next-free-port", action="store_true",
+                   help="if --port is busy, serve on the next free port (printed) instead")
     p.add_argument("--data-dir", default="runs",
                    help="the only folder the console reads or writes (recordings, exports); "
                         "default ./runs")
@@ -151,11 +162,17 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     store = StateStore(model_for(robot),
                        mirror_commands=hardware_setup.mirrors_commands(robot, mode, port_path))
     cpus = cpu_partition(args)  # either arm's loop process (and emulator) on the real-time CPU
+    device_log: list[str] = []
+    if mode == "emulator" and not port_path:  # what the emulator logged after the last start
+        device_log = hardware_setup.report_device_log(Path(args.data_dir))
     services = hardware_setup.attach(robot, store, mode, port_path, cpus=cpus)
     if args.demo:
         services = services.replace(demo=DemoMotion(store))
     app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
                      panels=(), store=store, services=services)
+    if device_log:
+        app.status.content += ("<br><small><b>Device log:</b> " + html.escape(device_log[-1])
+                               + "</small>")
     for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
                       *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel):
         app.add_panel(panel_cls)
@@ -183,14 +200,29 @@ def main(argv: list[str] | None = None) -> int:
     status = describe(robot, args.hardware, args.port_path)
     print(f"serve.py: hardware: {status}", file=sys.stderr)
 
-    done = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: done.set())
-    server, app, token = build(args, robot, status)
+    busy = port_in_use(args.host, args.port)
+    if busy and not args.next_free_port:
+        print(f"serve.py: {busy}; choose another with --port, or give --next-free-port",
+              file=sys.stderr)
+        return 2
+    life = Lifecycle().install()  # a signal while starting: exit at once
+    try:
+        server, app, token = build(args, robot, status)
+    except Exception as exc:  # noqa: BLE001 - say why, plainly, and leave no children behind
+        traceback.print_exc()
+        print(f"serve.py: start-up failed: {exc}", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(1)  # (not a normal exit: that would wait for a half-started control process)
     print(f"serve.py: {pin_console(app.services)}", file=sys.stderr)
     app.start()
+    life.serving()  # from now on SIGTERM / Ctrl-C shut down in order, within 2 s
     port = server.get_port()  # viser moves to the next free port if --port is taken
     if port != args.port:
-        print(f"serve.py: port {args.port} is busy, serving on {port}", file=sys.stderr)
+        print(f"serve.py: PORT {args.port} IS BUSY: serving on {port} instead", file=sys.stderr,
+              flush=True)
+        if not args.next_free_port:  # taken between the check and the bind
+            life.shutdown(_shutdown_steps(app, server))
+            return 2
     found = urls(args.host, port)
     print(f"Console for '{robot.name}' at {found[0]}  (Ctrl-C to stop)", flush=True)
     for url in found[1:]:
@@ -211,18 +243,21 @@ def main(argv: list[str] | None = None) -> int:
         ws_url = urls(args.host, bridge.port)[0].replace("http://", "ws://").rstrip("/")
         print(f"Foxglove live data (read-only): {ws_url}", flush=True)
     try:
-        while not done.wait(0.5):
-            pass
-    except KeyboardInterrupt:
-        pass
+        life.wait()
     finally:
-        app.stop_motion("console shutting down")
-        app.services.close()
-        app.stop()
-        server.stop()
+        steps = _shutdown_steps(app, server)
         if bridge is not None:
-            bridge.stop()
+            steps.append(("foxglove bridge", bridge.stop))
+        life.shutdown(steps)
     return 0
+
+
+def _shutdown_steps(app: Any, server: Any) -> list[tuple[str, Any]]:
+    """What shutting down does, in order (:meth:`Lifecycle.shutdown` bounds it)."""
+    return [("STOP", lambda: app.stop_motion("console shutting down")),
+            ("hardware", app.services.close),
+            ("console threads", app.stop),
+            ("web server", server.stop)]
 
 
 if __name__ == "__main__":

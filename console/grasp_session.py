@@ -311,9 +311,8 @@ class GraspSession:
                 fn(view)
             except Exception:
                 log.exception("grasp panel refresh failed")
-        recorder = getattr(self.app, "recorder", None)
-        if recorder is not None:  # objects and plans into recordings and the live bridge
-            feed_grasp(recorder, view, dirty)
+        # objects and plans into recordings and the live bridge
+        feed_grasp(self.app.recorder, view, dirty)
 
 
 def session_for(app: ConsoleApp) -> GraspSession:

@@ -19,6 +19,7 @@ there is no serial link to manage (the extensible arm's in-process mock).
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from console.services import ConsoleServices
@@ -78,6 +79,24 @@ def mirrors_commands(robot: Any, mode: HardwareMode, port_path: str | None) -> b
 def link_kind(mode: HardwareMode, port_path: str | None) -> LinkKind:
     """What the link is: a real port (``--port-path`` wins), the emulator, or the mock."""
     return "port" if port_path else mode
+
+
+def report_device_log(data_root: Path) -> list[str]:
+    """Point the emulator's event log at ``<data-dir>/device-events.jsonl`` and say what it
+    logged after the previous console's last start: a host that died and whether the device
+    watchdog tripped (printed to the terminal; ``serve.py`` adds the last to the status line).
+    Returns those lines."""
+    import os
+    import sys
+
+    from hw_bridge.device_events import (EVENT_LOG_ENV, EVENT_LOG_NAME, describe_loss,
+                                         unreported_host_losses)
+    log = Path(data_root) / EVENT_LOG_NAME
+    os.environ[EVENT_LOG_ENV] = str(log)  # inherited by the control process and the emulator
+    lines = [describe_loss(ev) for ev in unreported_host_losses(log)]
+    for line in lines:
+        print(f"serve.py: device log {log}: {line}", file=sys.stderr, flush=True)
+    return lines
 
 
 def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | None,

@@ -34,6 +34,7 @@ import numpy.typing as npt
 from core.kinematics import planar as pk
 from core.planning.plan_types import GraspPlan
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap, from_json
+from hw_bridge.parent_watch import death_signal_preexec
 
 Array = npt.NDArray[np.float64]
 LIVE_HZ = 20.0
@@ -202,8 +203,11 @@ def start_reach_map(robot, radius: float, done: Callable[[ReachMap | Exception],
                *map(repr, REACH_Y), "--step", repr(REACH_STEP), "--nice", "15",
                "--parent", str(os.getpid())]
         try:
+            # (killed with this thread's process: this thread waits for it, so it lives as
+            # long as the map is wanted - see hw_bridge.parent_watch)
             out = subprocess.run(cmd, capture_output=True, text=True, timeout=600,
-                                 cwd=str(Path(__file__).resolve().parent.parent), check=True)
+                                 cwd=str(Path(__file__).resolve().parent.parent), check=True,
+                                 preexec_fn=death_signal_preexec())
             result: ReachMap | Exception = from_json(out.stdout)
             with _REACH_LOCK:
                 _REACH_CACHE[key] = result

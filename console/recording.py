@@ -18,7 +18,9 @@ every other line has ``t`` (s since the start), ``kind`` and, for things people 
 
 :class:`Recorder` is cheap to call from any thread (``log`` only enqueues; a writer thread
 encodes and writes); :func:`load_recording` reads a file back into a :class:`Recording` with a
-timeline for the replay panel and the HTML export.
+timeline for the replay panel and the HTML export. It streams within a :class:`ReadBudget`
+(uncompressed bytes, records, one line's length, event bytes) and checks every record as it
+goes, so a huge or corrupt file is refused quickly with the line that is wrong.
 """
 
 from __future__ import annotations
@@ -49,7 +51,21 @@ SUFFIX = ".jsonl.gz"  # the older format (still read, and written with suffix=SU
 MCAP_SUFFIX = ".mcap"
 SUFFIXES = (MCAP_SUFFIX, SUFFIX)
 FORMAT = "softarm-console-recording/1"
-MAX_DECOMPRESSED = 512 * 1024 * 1024
+MAX_DECOMPRESSED = 256 * 1024 * 1024
+
+
+@dataclasses.dataclass(frozen=True)
+class ReadBudget:
+    """What :func:`load_recording` reads at most before refusing a file.
+
+    A recording stores one state per render tick (about 150 bytes at 30 Hz: 16 MB and 110 000
+    records an hour), so the defaults hold about 9 hours; a longer session is several files.
+    """
+
+    max_bytes: int = MAX_DECOMPRESSED       # uncompressed bytes
+    max_records: int = 1_000_000
+    max_line_bytes: int = 1024 * 1024       # one record (a plan overlay is a few kB)
+    max_event_bytes: int = 64 * 1024 * 1024  # non-state records, kept as parsed JSON
 
 
 def _json_default(obj: Any) -> Any:
@@ -273,56 +289,130 @@ def _describe(rec: dict[str, Any]) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-def load_recording(path: Path, model: ArmModel) -> Recording:
-    """Read a recording for ``model``'s robot.
+def _finite_time(rec: dict[str, Any], where: str) -> float:
+    t = rec.get("t")
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not np.isfinite(t):
+        raise ValueError(f"{where}: 't' is {json.dumps(t)[:40]}, not a finite number of seconds")
+    return float(t)
+
+
+def _state_q(rec: dict[str, Any], shape: tuple[int, ...], where: str) -> Array:
+    if "q" not in rec:
+        raise ValueError(f"{where}: a state without 'q'")
+    try:
+        q = np.asarray(rec["q"], dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: 'q' is not a list of numbers") from None
+    if q.shape != shape:
+        raise ValueError(f"{where}: 'q' has shape {q.shape}, this arm's is {shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError(f"{where}: 'q' holds NaN or infinite values")
+    return q
+
+
+def _lines(f: Any, name: str, budget: ReadBudget) -> Any:
+    """Lines of a binary stream within the budget (never reads more than one line ahead)."""
+    total = 0
+    n = 0
+    while True:
+        line = f.readline(budget.max_line_bytes + 1)
+        if not line:
+            return
+        n += 1
+        total += len(line)
+        if len(line) > budget.max_line_bytes:
+            raise ValueError(f"{name}: line {n} is longer than "
+                             f"{budget.max_line_bytes >> 10} kB: not a console recording")
+        if total > budget.max_bytes:
+            raise ValueError(f"{name}: larger than {budget.max_bytes >> 20} MB uncompressed "
+                             "(the replay limit)")
+        if n > budget.max_records:
+            raise ValueError(f"{name}: more than {budget.max_records:,} records (the replay "
+                             "limit)")
+        yield n, line
+
+
+def load_recording(path: Path, model: ArmModel, budget: ReadBudget | None = None) -> Recording:
+    """Read a recording for ``model``'s robot, streaming within ``budget``.
+
+    Every record is checked as it is read (``t`` a finite number; a state's ``q`` of this arm's
+    shape and finite), so a corrupt file is refused with the line that is wrong and nothing of
+    it is replayed; a huge file is refused once it passes the budget, without reading further.
 
     Raises:
-        ValueError: not a console recording, or one of another robot; the message says which.
+        ValueError: not a console recording, one of another robot, a corrupt record, or past
+            the budget; the message says which.
     """
     if path.name.endswith(MCAP_SUFFIX):
         from console.recording_mcap import load_mcap
         return load_mcap(path, model)
-    states_t: list[float] = []
-    states_q: list[Any] = []
+    budget = budget or ReadBudget()
+    shape = tuple(model.shape)
+    times = np.empty(1024)
+    qs = np.empty((1024, *shape))
+    lines = np.empty(1024, dtype=np.int64)  # line number of each state, for messages
+    n_states = 0
     sources: list[str] = []
+    known: dict[str, str] = {}  # one string object per distinct source
     events: list[Event] = []
+    event_bytes = 0
     header: dict[str, Any] | None = None
-    size = 0
+    name = path.name
     try:
-        with gzip.open(path, "rt", encoding="utf-8") as f:
-            for n, line in enumerate(f):
-                size += len(line)
-                if size > MAX_DECOMPRESSED:
-                    raise ValueError(f"{path.name}: larger than {MAX_DECOMPRESSED >> 20} MB")
-                rec = json.loads(line)
+        with gzip.open(path, "rb") as f:
+            for n, raw in _lines(f, name, budget):
+                where = f"{name}: line {n}"
+                rec = json.loads(raw)
                 if not isinstance(rec, dict):
-                    raise ValueError(f"{path.name}: line {n + 1} is not an object")
-                if n == 0:
+                    raise ValueError(f"{where} is not an object")
+                if n == 1:
                     if rec.get("kind") != "header" or rec.get("format") != FORMAT:
-                        raise ValueError(f"{path.name} is not a console recording")
+                        raise ValueError(f"{name} is not a console recording")
+                    if (rec.get("robot_kind") != model.kind
+                            or tuple(rec.get("shape", ())) != shape):
+                        raise ValueError(f"{name} was recorded on '{rec.get('robot')}' "
+                                         f"({rec.get('robot_kind')}), not on this console's "
+                                         f"'{model.robot.name}'")
                     header = rec
                     continue
-                t = float(rec.get("t", 0.0))
+                t = _finite_time(rec, where)
                 if rec.get("kind") == "state":
-                    states_t.append(t)
-                    states_q.append(rec["q"])
-                    sources.append(str(rec.get("source", "")))
+                    if n_states == len(times):  # grow by doubling: no per-record lists
+                        times = np.resize(times, 2 * len(times))
+                        qs = np.resize(qs, (2 * len(qs), *shape))
+                        lines = np.resize(lines, 2 * len(lines))
+                    q = rec.get("q")
+                    try:  # fast path: a list of this arm's length copied into the row
+                        if not isinstance(q, list) or len(q) != shape[0]:
+                            raise ValueError
+                        qs[n_states] = q
+                    except (ValueError, TypeError):
+                        qs[n_states] = _state_q(rec, shape, where)  # says what is wrong
+                    times[n_states] = t
+                    lines[n_states] = n
+                    n_states += 1
+                    source = rec.get("source", "")
+                    sources.append(known.setdefault(source, str(source)) if isinstance(
+                        source, str) else str(source))
                 else:
+                    event_bytes += len(raw)
+                    if event_bytes > budget.max_event_bytes:
+                        raise ValueError(f"{name}: more than {budget.max_event_bytes >> 20} MB "
+                                         "of events (the replay limit)")
                     events.append(Event(t, str(rec.get("kind")), str(rec.get("who", "")),
                                         _describe(rec), rec.get("data")))
     except (OSError, EOFError, zlib.error, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path.name}: cannot read ({exc})") from None
+        raise ValueError(f"{name}: cannot read ({exc})") from None
+    except RecursionError:
+        raise ValueError(f"{name}: a record is nested too deeply") from None
     if header is None:
-        raise ValueError(f"{path.name} is empty")
-    if header.get("robot_kind") != model.kind or tuple(header.get("shape", ())) != model.shape:
-        raise ValueError(f"{path.name} was recorded on '{header.get('robot')}' "
-                         f"({header.get('robot_kind')}), not on this console's "
-                         f"'{model.robot.name}'")
-    if not states_t:
-        raise ValueError(f"{path.name} holds no arm states")
-    qs = np.array(states_q, dtype=float)
-    if qs.shape[1:] != model.shape or not np.all(np.isfinite(qs)):
-        raise ValueError(f"{path.name}: states have the wrong shape or are not finite")
-    order = np.argsort(np.array(states_t), kind="stable")
-    return Recording(path.name, header, np.array(states_t)[order], qs[order],
+        raise ValueError(f"{name} is empty")
+    if not n_states:
+        raise ValueError(f"{name} holds no arm states")
+    finite = np.isfinite(qs[:n_states].reshape(n_states, -1)).all(axis=1)
+    if not finite.all():
+        bad = int(lines[int(np.argmin(finite))])
+        raise ValueError(f"{name}: line {bad}: 'q' holds NaN or infinite values")
+    order = np.argsort(times[:n_states], kind="stable")
+    return Recording(name, header, times[:n_states][order], qs[:n_states][order],
                      [sources[i] for i in order], sorted(events, key=lambda e: e.t))

@@ -63,7 +63,8 @@ class ReplaySession:
             self.info = gui.add_html('<small data-testid="replay-info">nothing loaded</small>')
             self.export_btn = gui.add_button("Export run (HTML)", disabled=True,
                                              hint="One file that plays this run offline.")
-        self.load_btn.on_click(lambda e: self.load(self.files.value))
+        self._loading = False
+        self.load_btn.on_click(lambda e: self.load_in_background(self.files.value))
         self.play_btn.on_click(lambda e: self.toggle())
         self.timeline.on_update(self._on_seek)
         self.speed_dd.on_update(self._on_speed)
@@ -81,6 +82,25 @@ class ReplaySession:
     def _tell(self, title: str, body: str, color: str = "blue") -> None:
         self.client.add_notification(title, body, color=color, auto_close_seconds=8.0)
 
+    def load_in_background(self, name: str) -> threading.Thread | None:
+        """:meth:`load` in a thread of its own, so a big file never holds up the callbacks
+        (one load per browser at a time; None when one is already running)."""
+        with self._lock:
+            if self._loading:
+                self._tell("Still loading", "The previous recording is still being read.")
+                return None
+            self._loading = True
+        self.info.content = f'<small data-testid="replay-info">loading {_escape(name)}…</small>'
+
+        def run() -> None:
+            try:
+                self.load(name)
+            finally:
+                self._loading = False
+        t = threading.Thread(target=run, name="replay-load", daemon=True)
+        t.start()
+        return t
+
     def load(self, name: str) -> bool:
         """Load recording ``name`` (a file in the data folder's recordings); False on refusal."""
         if name == NONE:
@@ -96,6 +116,10 @@ class ReplaySession:
             rec = load_recording(path, self.app.model)
         except ValueError as exc:  # BadFileName is a ValueError too
             self._tell("Cannot load recording", str(exc), "red")
+            return False
+        except Exception as exc:  # noqa: BLE001 - whatever went wrong, the browser hears it
+            log.exception("loading recording %s failed", name)
+            self._tell("Cannot load recording", f"{name}: {type(exc).__name__}: {exc}", "red")
             return False
         with self._lock:
             self.rec, self.pos, self.playing = rec, 0.0, False

@@ -34,6 +34,7 @@ emulator itself is :class:`hw_bridge.pty_emulator.Emulator`.
 from __future__ import annotations
 
 import argparse
+import os
 import dataclasses
 import json
 import math
@@ -43,12 +44,46 @@ import time
 from typing import Any
 
 from core.robots import load
+from hw_bridge.device_events import EVENT_LOG_ENV, LOUD_EVENTS, HostWatch, describe_event
+from hw_bridge.parent_watch import parent_pid_from_env
 from hw_bridge.pty_emulator import Emulator, EmulatorOptions
 
 
-def print_event(event: str, **fields: Any) -> None:
-    """One stdout JSON line: ``{"event": ..., "t": monotonic s, **fields}``."""
-    print(json.dumps({"event": event, "t": round(time.monotonic(), 4), **fields}), flush=True)
+class EventSink:
+    """stdout (the host's pipe) + the log file + stderr for :data:`LOUD_EVENTS`."""
+
+    def __init__(self, log_path: str | None, loud: bool):
+        self.log_path = log_path or None
+        self.loud = loud
+        self.stdout_open = True
+
+    @classmethod
+    def from_env(cls) -> "EventSink":
+        """Configured by the starting console (log path; loud when a console started us)."""
+        return cls(os.environ.get(EVENT_LOG_ENV), parent_pid_from_env() is not None)
+
+    def emit(self, event: str, **fields: Any) -> None:
+        record = {"event": event, "t": round(time.monotonic(), 4), **fields}
+        line = json.dumps(record)
+        if self.stdout_open:
+            try:
+                print(line, flush=True)
+            except (BrokenPipeError, OSError, ValueError):
+                self.stdout_open = False  # the host is gone: the file and stderr remain
+        if self.log_path:
+            stamped = {"wall": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "pid": os.getpid(), **record}
+            try:
+                with open(self.log_path, "a", encoding="utf-8") as f:
+                    f.write(json.dumps(stamped) + "\n")
+            except OSError:
+                pass
+        if self.loud and event in LOUD_EVENTS:
+            try:
+                print(f"device emulator (pid {os.getpid()}): {describe_event(record)}", file=sys.stderr,
+                      flush=True)
+            except (OSError, ValueError):
+                pass
+
 
 
 def options_from_args(args: argparse.Namespace) -> EmulatorOptions:
@@ -111,13 +146,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         robot = load(args.robot)
-        emu = Emulator(robot, options_from_args(args), print_event)
+        sink = EventSink.from_env()  # stdout, + log file and stderr when a console started us
+        emu = Emulator(robot, options_from_args(args), sink.emit)
+        emu.host_watch = HostWatch(sink)  # host died: log the watchdog's trip, then exit
     except Exception as exc:  # noqa: BLE001 - report any setup failure plainly
         print(f"emulator: {exc}", file=sys.stderr)
         return 2
     print(emu.path, flush=True)
     if emu.control is not None:
-        print_event("control", port=emu.control.getsockname()[1])
+        sink.emit("control", port=emu.control.getsockname()[1])
 
     def _stop(signum: int, frame: object) -> None:
         emu.stop = True

@@ -101,6 +101,8 @@ def _hardware(robot: ExtensibleArm, opts: ExtensibleOptions) -> Any:
 
 
 def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: Any) -> None:
+    from hw_bridge.parent_watch import watch_parent
+    watch_parent()  # the console died (any signal): SIGKILL this one, its children follow
     if opts.cpus is not None:  # start-up off the real-time CPU; the loop moves there later
         pin_process(opts.cpus.other)
     from core.robots import load

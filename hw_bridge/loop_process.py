@@ -26,6 +26,7 @@ import threading
 from typing import Any, Callable
 
 from hw_bridge.commands import Arm, Connect, Disarm, Disconnect
+from hw_bridge.parent_watch import exit_reason, run_reporting
 
 
 class LoopProcess:
@@ -52,7 +53,8 @@ class LoopProcess:
         """Start ``target(*args)`` in the child (``args`` include this handle's
         ``_commands`` / ``_replies`` queues where the child expects them) and the reader."""
         # Not a daemon: the child starts processes of its own. close() (also at exit) ends it.
-        self._proc = self._ctx.Process(target=target, name=self.name, args=args)
+        self._proc = self._ctx.Process(target=run_reporting, name=self.name,  # (a failure's
+                                       args=(target, self._replies, *args))  # reason -> failure)
         self._proc.start()
         threading.Thread(target=self._read, name=f"{self.name}-replies", daemon=True).start()
         atexit.register(self.close)
@@ -62,7 +64,8 @@ class LoopProcess:
             try:
                 msg = self._replies.get(timeout=1.0)
             except queue.Empty:
-                if not self._proc.is_alive():
+                if not self._proc.is_alive():  # killed or crashed: the panel says so
+                    self.failure = self.failure or exit_reason(self._proc.exitcode)
                     return
                 continue
             except (EOFError, OSError):

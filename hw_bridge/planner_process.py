@@ -14,6 +14,7 @@ from typing import Any
 
 from core.control.grasp_place import PlanRequest
 from core.control.planner_spec import DEFAULT_PLANNER, resolve
+from hw_bridge.parent_watch import pool_initializer  # a worker ends with its parent
 
 _WORKER_ROBOT: Any = None  # per worker process: the robot loaded once by the initializer
 
@@ -54,8 +55,8 @@ class ProcessPlanner:
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         workers, robot_source, plan_spec, cpus = self._args
         ctx = multiprocessing.get_context("spawn")
-        pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                                      initargs=(robot_source, plan_spec, cpus))
+        pool = cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=pool_initializer,
+                                      initargs=(_worker_init, robot_source, plan_spec, cpus))
         self.warm = pool.submit(int)  # start the worker now (without waiting for it)
         return pool
 

@@ -87,6 +87,9 @@ class Emulator:
     def __init__(self, robot: Robot, options: EmulatorOptions, emit: EventSink):
         self.options = options
         self.emit = emit
+        # Set by the command line: a hw_bridge.device_events.HostWatch whose poll() is true once
+        # the host process died and the watchdog's outcome was logged (the emulator then exits).
+        self.host_watch: Any = None
         self.rng = random.Random(options.seed)
         self.bridge = BridgeConfig.from_robot(robot, n_motors=options.motors)
         emu = EmulatorConfig.from_robot(robot)
@@ -306,7 +309,8 @@ class Emulator:
         """Serve the protocol until :attr:`stop`."""
         period = self.bridge.period_s
         next_tick = time.monotonic() + period
-        while not self.stop:
+        watch = self.host_watch
+        while not self.stop and not (watch is not None and watch.poll(time.monotonic(), self.core)):
             now = time.monotonic()
             wake = next_tick if not self.rx_pending else min(next_tick, self.rx_pending[0][0])
             if self.host_present:

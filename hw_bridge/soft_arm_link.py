@@ -5,7 +5,8 @@
 :class:`~hw_bridge.loop_devices.HardwareDevice`, plus a *scene* handle that places the object in the
 simulated world (emulator: its UDP scene channel on 127.0.0.1; mock: the in-process sim; a real
 device has none - the object is put down by hand). :meth:`SoftArmLink.close` tears it all down,
-including the emulator process (which also gets SIGTERM if this process dies: PR_SET_PDEATHSIG).
+including the emulator process (which also exits, after logging its watchdog's trip, if this
+process dies: :mod:`hw_bridge.device_events`).
 
 * ``"emulator"``: spawns ``python -m hw_bridge.emulator --robot R --mocap-port P
   --control-port 0 --seed S``, reads the pty path from its first stdout line and the
@@ -17,7 +18,6 @@ including the emulator process (which also gets SIGTERM if this process dies: PR
 
 from __future__ import annotations
 
-import ctypes
 import json
 import queue
 import signal
@@ -31,16 +31,10 @@ from typing import Any, Literal
 
 from hw_bridge.config import BridgeConfig, EmulatorConfig
 from hw_bridge.mocap import MocapFrame, UdpMocapReceiver
+from hw_bridge.parent_watch import child_env, quiesce_blas_on_fork
 
 DeviceKind = Literal["emulator", "port", "mock"]
 _ROOT = Path(__file__).resolve().parent.parent
-
-
-def _die_with_parent() -> None:  # runs in the emulator child between fork and exec
-    try:
-        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    except OSError:
-        pass
 
 
 class EmulatorProcess:
@@ -49,6 +43,8 @@ class EmulatorProcess:
     The emulator stands in for a microcontroller, which nothing on the host can delay: it runs
     under ``SCHED_FIFO`` at ``sched_priority`` (below the control loop's 50; ignored without the
     permission), so a loaded machine does not make the link look lost (> 40 ms silent).
+    It watches this process (``HW_BRIDGE_PARENT_PID``): if this one dies, even by SIGKILL, it
+    waits for its watchdog to trip, logs that (stderr, the event log) and exits within 0.4 s.
     """
 
     def __init__(self, args: list[str], start_timeout: float = 10.0, sched_priority: int = 45):
@@ -56,7 +52,7 @@ class EmulatorProcess:
             args = [*args, "--sched-priority", str(sched_priority)]
         self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", *args],
                                      cwd=_ROOT, stdout=subprocess.PIPE, text=True,
-                                     preexec_fn=_die_with_parent)
+                                     env=child_env(), preexec_fn=quiesce_blas_on_fork)
         assert self.proc.stdout is not None
         self.path = self.proc.stdout.readline().strip()
         if not self.path.startswith("/dev/"):

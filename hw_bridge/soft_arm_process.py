@@ -77,6 +77,8 @@ class DeviceOptions:
 
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,
            stats_ticks: int, sched_priority: int | None, opts: DeviceOptions = DeviceOptions()) -> None:
+    from hw_bridge.parent_watch import watch_parent
+    watch_parent()  # the console died (any signal): SIGKILL this one, its children follow
     if opts.cpus is not None:  # start-up work (this and the children's imports) off the
         pin_process(opts.cpus.other)  # real-time CPU; the loop moves there once all started
         opts = dataclasses.replace(opts, emulator_args=(

@@ -37,6 +37,7 @@ def _write(tmp_path, name, old, new):
     ("length = 0.0627", "length = -1", "segments.length"),
     ("kappa_max = 16.7", "kappa_max = \"high\"", "segments.kappa_max"),
     ("count = 6 ", "count = 0 ", "segments.count"),
+    ("count = 6 ", "count = 100000 ", r"segments.count: must be an integer in \[1, 15\]"),
     ("pose = [0.0, 0.0, 1.5707963267948966]", "pose = [0.0, 0.0]", "base.pose"),
     ("g_off = 0.010", "", "gripper.g_off"),
 ])

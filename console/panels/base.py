@@ -99,9 +99,7 @@ class Panel:
     def allow_viewers(self, *handles: Any) -> None:
         """Let viewers use these shared widgets (STOP, downloads); every other shared input is
         the operator's, refused by ``console.client_guard`` before viser stores it."""
-        guard = getattr(self.app, "guard", None)
-        if guard is not None:
-            guard.allow_viewers(*handles)
+        self.app.guard.allow_viewers(*handles)
 
     def operator_only(self, callback: F, action: str | None = None) -> F:
         """``callback`` wrapped by :func:`operator_only` for this panel (for lambdas)."""

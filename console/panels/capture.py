@@ -19,6 +19,7 @@ import viser
 from console.panels.base import Panel, operator_only
 from core.control.capture import CaptureMap, characterise
 from core.robots import load
+from hw_bridge.parent_watch import pool_initializer
 
 CHUNKS = 8
 
@@ -84,7 +85,7 @@ class CapturePanel(Panel):
         bounds = [(float(c[0]), float(c[-1])) for c in np.array_split(ys, min(CHUNKS, len(ys)))]
         try:
             ctx = multiprocessing.get_context("spawn")
-            with cf.ProcessPoolExecutor(1, mp_context=ctx) as pool:
+            with cf.ProcessPoolExecutor(1, mp_context=ctx, initializer=pool_initializer) as pool:
                 futs = [pool.submit(_chunk, str(robot.source), radius, spacing, repeats, b, i)
                         for i, b in enumerate(bounds)]
                 parts = []

@@ -210,7 +210,8 @@ class ControlPanel(Panel):
         self._stopped = False
         self._last_fault: str | None = None
         self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
-            self.app.recorder, lambda: getattr(self.app, "bridge_controls", None) is not None)
+            self.app.recorder, lambda: self.app.services.bridge_controls is not None)
+        self._told_died = False
         self._draw_lock = threading.Lock()
         self._pump_stop = threading.Event()
         self._pump = threading.Thread(target=self._pump_loop, name="control-pump", daemon=True)
@@ -316,7 +317,22 @@ class ControlPanel(Panel):
             except Exception:  # never let a display hiccup end the pump
                 time.sleep(0.5)
 
+    def _died(self) -> str | None:
+        """Why the control process ended on its own (None while it runs or closed cleanly)."""
+        failure = getattr(self.ctl, "failure", None)
+        return failure if failure and not getattr(self.ctl, "alive", True) else None
+
     def _pump_once(self) -> None:
+        died = self._died()
+        if died:
+            if not self._told_died:  # once: the panel shows it from now on
+                self._told_died = True
+                self.app.notify_all("Control process died", f"{died}. The arm is not commanded "
+                                    "(the device's watchdog stops it); restart the console.",
+                                    color="red")
+                self.app.recorder.action(f"control process died: {died}", None)
+                self._refresh()
+            return
         view = self.ctl.view
         c = None if view is None else view.snapshot.control
         self._feed.on_view(view)
@@ -370,6 +386,13 @@ class ControlPanel(Panel):
             self._draw_lock.release()
 
     def _show(self, view: ControlView | None) -> None:
+        died = self._died()
+        if died:
+            self.state_md.content = (f"**Control process died:** {died}. The arm is not "
+                                     "commanded; restart the console.")
+            for btn in (self.arm_btn, self.disarm_btn, self.execute_btn, self.plan_btn):
+                btn.disabled = True
+            return
         if view is None:
             failure = getattr(self.ctl, "failure", None)
             self.state_md.content = ("**State:** starting the control process…" if not failure

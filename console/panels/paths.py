@@ -71,11 +71,8 @@ def extensible_runner(app: Any) -> ExtensibleProcess:
 def _exit_with_parent(parent: int) -> None:
     """Planner worker initializer: leave when the console process is gone, even SIGKILLed
     (a spawned worker holds its own queue's write end, so it would wait forever)."""
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(0)
-    threading.Thread(target=watch, daemon=True, name="parent-watch").start()
+    from hw_bridge.parent_watch import watch_parent
+    watch_parent(parent)
 
 
 def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:

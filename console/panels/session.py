@@ -129,9 +129,8 @@ class SessionPanel(Panel):
     def _on_take(self, client: viser.ClientHandle, w: _ClientWidgets) -> None:
         token = None if w.token is None else str(w.token.value)
         try:
-            guard = getattr(self.app, "guard", None)
             op = self.app.access.take(client, token, str(w.name.value),
-                                      address=None if guard is None else guard.address_of(client))
+                                      address=self.app.guard.address_of(client))
         except NotOperator as exc:
             self.app.refuse(client, exc, "take control")
             return

@@ -18,6 +18,7 @@ import viser
 
 from console.panels.base import Panel, operator_only
 from core.control.trials import TrialResult, paper_locations, run_trials
+from hw_bridge.parent_watch import pool_initializer
 
 SPOTS = ("A-E (paper)", "custom")
 
@@ -94,7 +95,8 @@ class TrialsPanel(Panel):
         t0 = time.perf_counter()
         try:
             src = str(self.app.robot.source)
-            with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+            with cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                        initializer=pool_initializer) as pool:
                 self.results = run_trials(src, objects, repeats, seed, progress=progress,
                                           map_fn=pool.map)
             loop: dict[str, Any] = summary(self.results, time.perf_counter() - t0, 1)
