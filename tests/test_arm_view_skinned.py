@@ -187,3 +187,34 @@ def test_console_renders_the_skinned_arm_by_moving_the_same_bones(server) -> Non
     got = np.array([b.position for b in view.backbone.bones])
     np.testing.assert_allclose(got, poses[:, :3, 3], atol=2.0**-16)
     np.testing.assert_allclose(view.tip.position, view.geometry(q)["tip_position"], atol=1e-9)
+
+
+def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_idle(
+        server) -> None:
+    from console.app import ConsoleApp
+    from console.panels.readout import READOUT_HZ, ReadoutPanel
+
+    app = ConsoleApp(SOFT, server)
+    readout = app.panel(ReadoutPanel)
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    first = app.store.request(q, "test")
+    app.render(first)
+    shown = readout.html.content
+    assert app.view.frames_sent >= 2 and shown
+    # Sub-band noise: nothing drawn, the readout stays as it was.
+    for k in range(5):
+        app.render(app.store.report(q + 1e-4 * (k + 1), "mocap"))
+    assert readout.html.content == shown
+    # Two moves within 1 / READOUT_HZ: the second is held back ...
+    time.sleep(1.1 / READOUT_HZ)
+    moved = app.store.report(q + 0.5, "mocap")
+    app.render(moved)
+    after_first_move = readout.html.content
+    assert after_first_move != shown
+    last = app.store.report(q + 1.0, "mocap")
+    app.render(last)
+    assert readout.html.content == after_first_move
+    # ... and shown once the display goes idle.
+    app._idle()
+    assert f"#{last.seq}" in readout.source.content
+    assert readout.html.content == readout._render(last)
