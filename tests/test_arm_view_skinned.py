@@ -218,3 +218,18 @@ def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_id
     app._idle()
     assert f"#{last.seq}" in readout.source.content
     assert readout.html.content == readout._render(last)
+
+
+def test_plot_columns_are_thinned_to_float32_keeping_the_newest_sample() -> None:
+    from console.panels.plot_data import thin
+
+    t = np.arange(1000) * 0.01
+    y = np.sin(t)
+    tt, yy = thin((t, y), 100)
+    assert len(tt) <= 100 and tt.dtype == np.float32 and yy.dtype == np.float32
+    assert tt[-1] == np.float32(t[-1]) and np.all(np.diff(tt) > 0)
+    np.testing.assert_allclose(yy, np.sin(tt.astype(float)), atol=1e-5)  # samples, not means
+    short = thin((t[:50], y[:50]), 100)
+    np.testing.assert_array_equal(short[0], t[:50].astype(np.float32))
+    with pytest.raises(ValueError):
+        thin((t, y[:-1]))

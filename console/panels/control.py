@@ -34,6 +34,7 @@ from viser import uplot
 
 from console.panels.base import Panel, operator_only
 from console.panels.control_process import DISCONNECTED, ControlProcess, ControlView
+from console.panels.plot_data import thin
 from console.state import ArmState
 
 SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")
@@ -41,6 +42,8 @@ OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 20.0
 PLOT_HZ = 4.0
+PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a curvature moved more than this
+LOOP_PLOT_HZ = 1.0  # loop timing is noise on a still arm too: once a second is enough
 HISTORY_S = 10.0
 STATS_TICKS = 1000
 IDLE_PHASES = ("idle", "released", "stopped")
@@ -201,6 +204,8 @@ class ControlPanel(Panel):
 
         self._hist: collections.deque = collections.deque(maxlen=int(HISTORY_S * PUMP_HZ))
         self._plot_at = 0.0
+        self._plotted: np.ndarray | None = None
+        self._loop_plot_at = 0.0
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
         self._last_fault: str | None = None
@@ -382,11 +387,21 @@ class ControlPanel(Panel):
         t = np.array([h[0] for h in hist])
         ref = np.array([h[1] for h in hist])
         meas = np.array([h[2] for h in hist])
-        cols: list[np.ndarray] = [t]
-        for i in range(ref.shape[1]):
-            cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
-        self.kappa_plot.data = tuple(cols)
-        self.loop_plot.data = (t, np.array([h[3] for h in hist]), np.array([h[4] for h in hist]))
+        # A still arm (curvatures within the band since the last drawn plot) sends nothing.
+        newest = np.concatenate([ref[-1], meas[-1]])
+        drawn = self._plotted
+        if (drawn is None or drawn.shape != newest.shape
+                or not np.allclose(newest, drawn, rtol=0.0, atol=PLOT_BAND, equal_nan=True)):
+            self._plotted = newest
+            cols: list[np.ndarray] = [t]
+            for i in range(ref.shape[1]):
+                cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
+            self.kappa_plot.data = thin(cols)
+        now = time.monotonic()
+        if now - self._loop_plot_at >= 1.0 / LOOP_PLOT_HZ:
+            self._loop_plot_at = now
+            self.loop_plot.data = thin((t, np.array([h[3] for h in hist]),
+                                        np.array([h[4] for h in hist])))
 
     def close(self) -> None:
         self._pump_stop.set()
