@@ -9,8 +9,11 @@ Each (robot, method) runs the whole console in a child process (``serve.build``:
 lab mode, the emulator, as ``serve.py`` serves it) with websocket-only viewers (they register
 like a browser and count what arrives, without decoding or rendering):
 
-* still: the arm stands at a bent pose while a 100 Hz "motion capture" reports it with noise
-  (tip noise ~0.05 mm rms, the console's dead band is 0.2 mm / 0.1 deg);
+* still: the soft arm is armed and holds still on its control process, drawn from what the
+  simulated motion capture measures (0.2 mm marker noise: ~0.8 mm / 1.7 deg at the tip); the
+  extensible arm stands at a bent pose while a 100 Hz "motion capture" reports it with noise
+  (tip ~0.05 mm rms). The console's dead band: 0.5 mm / 0.5 deg on frames averaged while
+  they jitter (``console.arm_view.DeadBand``);
 * moving: the soft arm runs grasp-and-place trials back to back on its control process (the
   100 Hz loop in its own process, which publishes its period error p99); the extensible arm's
   demo motion (``console.demo_motion``) is reported at 100 Hz with the same noise (its loop is
@@ -109,8 +112,12 @@ def child(a: argparse.Namespace) -> int:
     for line in sys.stdin:
         cmd = line.strip()
         if cmd == "still":
-            app.store.request(q0, "bench")
-            threading.Thread(target=mocap, args=(stop_noise, False), daemon=True).start()
+            soft = getattr(app, "soft_control", None)
+            if soft is not None:  # armed and holding: the Control panel draws what it measures
+                soft.arm().result(30)
+            else:
+                app.store.request(q0, "bench")
+                threading.Thread(target=mocap, args=(stop_noise, False), daemon=True).start()
         elif cmd == "move":
             stop_noise.set()
             time.sleep(0.1)

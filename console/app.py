@@ -275,6 +275,11 @@ class ConsoleApp:
         self.recorder.on_state(state)
 
     def _idle(self) -> None:
+        with self.server.atomic():
+            try:
+                self.view.flush()  # the newest state, if the dead band held it back
+            except Exception:
+                log.exception("arm view flush failed")
         for panel in self.panels:
             try:
                 panel.on_idle()

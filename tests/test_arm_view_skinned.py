@@ -125,14 +125,13 @@ def count_scene_messages(server: viser.ViserServer) -> list[object]:
 def test_noise_below_the_dead_band_sends_nothing_and_a_move_above_it_sends(
         server, robot, method) -> None:
     model = model_for(robot)
-    view = make_arm_view(server.scene, model, method=method)
+    band = DeadBand(2e-4, np.deg2rad(0.1), settle_s=0.0)  # a band alone, no averaging
+    view = make_arm_view(server.scene, model, method=method, dead_band=band)
     q = np.asarray(model.zero(), dtype=float) + 0.5 * (
         np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0]) if robot is SOFT
         else np.array([[0.01, 0.0, 0.1], [0.0, 0.01, 0.05]]))
-    view.update(q)
+    assert view.update(q)
     sent = count_scene_messages(server)
-    band = view.dead_band
-    assert band == DeadBand(2e-4, np.deg2rad(0.1))
     rng = np.random.default_rng(1)
     # Noise whose largest effect on any drawn frame stays inside the band.
     scale = 1e-3 if robot is SOFT else 2e-6  # 1/m of curvature, m of rack length
@@ -145,6 +144,51 @@ def test_noise_below_the_dead_band_sends_nothing_and_a_move_above_it_sends(
     assert band.moved(view.frames(q), view.frames(bigger))
     assert view.update(bigger) is True
     assert len(sent) > 0
+
+
+def test_averaged_dead_band_holds_a_noisy_still_arm_and_follows_a_move(server, monkeypatch,
+                                                                      ) -> None:
+    """Noise that crosses the band frame by frame (the soft arm's mocap in the simulator:
+    ~0.8 mm and ~1.7 deg at the tip) averages out; a clean move is drawn frame by frame; a
+    state held back is drawn exactly when the display goes idle."""
+    import console.arm_view as arm_view
+
+    clock = [100.0]
+    monkeypatch.setattr(arm_view.time, "monotonic", lambda: clock[0])
+    model = model_for(SOFT)
+    view = make_arm_view(server.scene, model)
+    band = view.dead_band
+    assert band == DeadBand(5e-4, np.deg2rad(0.5), 2.0)
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    clock[0] += 5.0
+    assert view.update(q)
+    rng = np.random.default_rng(2)
+    sigma = np.array([0.035, 0.11, 0.19, 0.25, 0.31, 0.35])  # 1/m, measured on the sim, armed
+    frames, sent_before = [], view.frames_sent
+    for _ in range(200):  # 10 s at 20 frames/s
+        clock[0] += 0.05
+        noisy = q + sigma * rng.standard_normal(6)
+        frames.append(view.frames(noisy))
+        view.update(noisy)
+    # The noise alone crosses the band in most frames ...
+    crossing = np.mean([band.moved(view.frames(q), f) for f in frames])
+    assert crossing > 0.8
+    # ... but fewer than 2 frames a second are sent instead of 20.
+    assert view.frames_sent - sent_before < 20
+    # A clean move at ~14 mm/s of the tip after a pause: every frame is drawn.
+    clock[0] += 5.0
+    start = view.frames_sent
+    for k in range(1, 21):
+        clock[0] += 0.05
+        view.update(q + 0.01 * k)
+    assert view.frames_sent - start >= 19
+    # A tiny last step is held back, then drawn exactly when the display goes idle.
+    clock[0] += 0.05
+    last = q + 0.01 * 20 + 1e-3
+    assert view.update(last) is False
+    assert view.flush() is True
+    assert view.flush() is False
+    np.testing.assert_allclose(view.palm.position, view.geometry(last)["palm"], atol=1e-9)
 
 
 def test_dead_band_measures_translation_and_rotation() -> None:

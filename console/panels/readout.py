@@ -133,21 +133,20 @@ class ReadoutPanel(Panel):
         return delta_readout_html(model, q)
 
     def on_state(self, state: ArmState) -> None:
-        if getattr(self.app.view, "frames_sent", None) == self._frame_shown:
-            return  # the drawn arm did not change
         self._pending = state
         if time.monotonic() - self._shown_at >= 1.0 / READOUT_HZ:
             self._show()
 
     def on_idle(self) -> None:
-        if self._pending is not None:
-            self._show()
+        self._show()
 
     def _show(self) -> None:
-        state, self._pending = self._pending, None
-        if state is None:
-            return
+        state = self._pending
+        frame = getattr(self.app.view, "frames_sent", None)
+        if state is None or frame == self._frame_shown:
+            return  # nothing new, or the drawn arm did not change
+        self._pending = None
         self._shown_at = time.monotonic()
-        self._frame_shown = getattr(self.app.view, "frames_sent", -1)
+        self._frame_shown = frame
         self.html.content = self._render(state)
         self.source.content = f"<small>shown: {html.escape(state.source)} · #{state.seq}</small>"
