@@ -42,7 +42,9 @@ OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 20.0
 PLOT_HZ = 4.0
-PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a curvature moved more than this
+PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a target moved more than this,
+MEAS_BAND = 1.0  # 1/m: ... a measured curvature more than this (the sim's noise: <= 0.35 rms),
+STILL_PLOT_S = 5.0  # s: ... or this long after the last redraw
 LOOP_PLOT_HZ = 1.0  # loop timing is noise on a still arm too: once a second is enough
 HISTORY_S = 10.0
 STATS_TICKS = 1000
@@ -204,7 +206,8 @@ class ControlPanel(Panel):
 
         self._hist: collections.deque = collections.deque(maxlen=int(HISTORY_S * PUMP_HZ))
         self._plot_at = 0.0
-        self._plotted: np.ndarray | None = None
+        self._plotted: tuple[np.ndarray, np.ndarray] | None = None
+        self._plotted_at = 0.0
         self._loop_plot_at = 0.0
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
@@ -356,7 +359,8 @@ class ControlPanel(Panel):
         self.fault_md.content = fault
         self.fault_md.visible = bool(fault)
         self.link_md.content = link_line(view)
-        self.kappa_md.content = kappa_html(view)
+        if len(self._hist) < 2:  # else the table is redrawn with the plot (_draw_plots)
+            self.kappa_md.content = kappa_html(view)
         st = view.stats
         self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
                                 f"ticks · overruns "
@@ -387,21 +391,30 @@ class ControlPanel(Panel):
         t = np.array([h[0] for h in hist])
         ref = np.array([h[1] for h in hist])
         meas = np.array([h[2] for h in hist])
-        # A still arm (curvatures within the band since the last drawn plot) sends nothing.
-        newest = np.concatenate([ref[-1], meas[-1]])
-        drawn = self._plotted
-        if (drawn is None or drawn.shape != newest.shape
-                or not np.allclose(newest, drawn, rtol=0.0, atol=PLOT_BAND, equal_nan=True)):
-            self._plotted = newest
+        now = time.monotonic()
+        if self._plot_moved(ref[-1], meas[-1], now):
             cols: list[np.ndarray] = [t]
             for i in range(ref.shape[1]):
                 cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
             self.kappa_plot.data = thin(cols)
-        now = time.monotonic()
+            self.kappa_md.content = kappa_html(self.ctl.view) if self.ctl.view else ""
         if now - self._loop_plot_at >= 1.0 / LOOP_PLOT_HZ:
             self._loop_plot_at = now
             self.loop_plot.data = thin((t, np.array([h[3] for h in hist]),
                                         np.array([h[4] for h in hist])))
+
+    def _plot_moved(self, ref: np.ndarray, meas: np.ndarray, now: float) -> bool:
+        """Whether the curvatures moved enough to redraw the plot and table: a target moved
+        by PLOT_BAND, a measurement by MEAS_BAND (beyond mocap noise), or STILL_PLOT_S passed.
+        A still arm's noise then costs a redraw every STILL_PLOT_S, not PLOT_HZ of them."""
+        last = self._plotted
+        moved = (last is None or last[0].shape != ref.shape
+                 or now - self._plotted_at >= STILL_PLOT_S
+                 or not np.allclose(ref, last[0], rtol=0.0, atol=PLOT_BAND)
+                 or not np.allclose(meas, last[1], rtol=0.0, atol=MEAS_BAND, equal_nan=True))
+        if moved:
+            self._plotted, self._plotted_at = (ref.copy(), meas.copy()), now
+        return moved
 
     def close(self) -> None:
         self._pump_stop.set()

@@ -30,6 +30,7 @@ import viser
 from viser import uplot
 
 from console.panels.base import Panel, operator_only
+from console.panels.plot_data import thin
 from console.state import ArmState
 from hw_bridge.controls import BridgeControls
 from hw_bridge.interface import LinkHealth
@@ -294,7 +295,7 @@ class HardwarePanel(Panel):
         p99 = h.rtt_ms_p99 if h.rtt_ms_p99 is not None else float("nan")
         self._samples.append((time.monotonic() - self._t0, h.rtt_ms_p50, p99))
         data = np.asarray(self._samples, dtype=float)
-        self.plot.data = (data[:, 0], data[:, 1], data[:, 2])
+        self.plot.data = thin((data[:, 0], data[:, 1], data[:, 2]))
 
     def close(self) -> None:
         self._quit.set()
