@@ -44,8 +44,8 @@ PUMP_HZ = 20.0
 PLOT_HZ = 4.0
 PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a target moved more than this,
 MEAS_BAND = 1.0  # 1/m: ... a measured curvature more than this (the sim's noise: <= 0.35 rms),
-STILL_PLOT_S = 5.0  # s: ... or this long after the last redraw
-LOOP_PLOT_HZ = 1.0  # loop timing is noise on a still arm too: once a second is enough
+STILL_PLOT_S = 10.0  # s: ... or this long after the last redraw
+LOOP_PLOT_HZ = 0.2  # loop timing is noise on a still arm too: every 5 s is enough
 HISTORY_S = 10.0
 STATS_TICKS = 1000
 IDLE_PHASES = ("idle", "released", "stopped")

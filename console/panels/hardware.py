@@ -42,6 +42,7 @@ OTHER = "(type a path or URL below)"
 BAUDS = ("1000000", "115200", "230400", "460800", "921600", "2000000")
 REFRESH_HZ = 4.0
 HISTORY = 240  # round-trip samples in the plot (a minute at REFRESH_HZ)
+PLOT_STILL_S = 5.0  # s between redraws of a round-trip plot that does not change
 
 
 def format_health(h: LinkHealth | None) -> str:
@@ -151,6 +152,8 @@ class HardwarePanel(Panel):
         self._faults = FaultTracker()
         self._t0 = time.monotonic()
         self._samples: collections.deque = collections.deque(maxlen=HISTORY)
+        self._plotted: np.ndarray | None = None
+        self._plotted_at = 0.0
         self._received = -1
         self._refreshed_at = 0.0
         self._fill_port = not default_port  # once: the path the loop reports (soft-arm pty)
@@ -293,7 +296,16 @@ class HardwarePanel(Panel):
             return  # no new telemetry: do not stretch the plot with stale numbers
         self._received = h.received
         p99 = h.rtt_ms_p99 if h.rtt_ms_p99 is not None else float("nan")
-        self._samples.append((time.monotonic() - self._t0, h.rtt_ms_p50, p99))
+        now = time.monotonic()
+        self._samples.append((now - self._t0, h.rtt_ms_p50, p99))
+        # Redraw when the round trip changed (0.1 ms) or every PLOT_STILL_S: a steady link's
+        # plot costs each viewer a redraw every few seconds, not REFRESH_HZ of them.
+        last = self._plotted
+        newest = np.array([h.rtt_ms_p50, p99])
+        if (last is not None and now - self._plotted_at < PLOT_STILL_S
+                and np.allclose(newest, last, rtol=0.0, atol=0.1, equal_nan=True)):
+            return
+        self._plotted, self._plotted_at = newest, now
         data = np.asarray(self._samples, dtype=float)
         self.plot.data = thin((data[:, 0], data[:, 1], data[:, 2]))
 
