@@ -42,6 +42,10 @@ OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 20.0
 PLOT_HZ = 4.0
+# The curvature plot has 13 series, which viser sends as float64: 60 points, at most 2 Hz,
+# cost ~12 KB/s per viewer while the arm moves.
+KAPPA_PLOT_POINTS = 60
+KAPPA_PLOT_HZ = 2.0
 PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a target moved more than this,
 MEAS_BAND = 1.0  # 1/m: ... a measured curvature more than this (the sim's noise: <= 0.35 rms),
 STILL_PLOT_S = 10.0  # s: ... or this long after the last redraw
@@ -392,11 +396,12 @@ class ControlPanel(Panel):
         ref = np.array([h[1] for h in hist])
         meas = np.array([h[2] for h in hist])
         now = time.monotonic()
-        if self._plot_moved(ref[-1], meas[-1], now):
+        if now - self._plotted_at >= 1.0 / KAPPA_PLOT_HZ and self._plot_moved(
+                ref[-1], meas[-1], now):
             cols: list[np.ndarray] = [t]
             for i in range(ref.shape[1]):
                 cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
-            self.kappa_plot.data = thin(cols)
+            self.kappa_plot.data = thin(cols, KAPPA_PLOT_POINTS)
             self.kappa_md.content = kappa_html(self.ctl.view) if self.ctl.view else ""
         if now - self._loop_plot_at >= 1.0 / LOOP_PLOT_HZ:
             self._loop_plot_at = now

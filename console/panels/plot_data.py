@@ -1,8 +1,9 @@
 """Plot columns thinned for the wire: a live uPlot is re-sent whole on every update, so its
 cost per viewer is (points x series x bytes) times the update rate.
 
-At most :data:`PLOT_POINTS` evenly spaced samples (the newest always kept) as float32: ~100
-points is what a 300 px wide panel shows, and float32's 7 digits are more than a plot resolves.
+At most :data:`PLOT_POINTS` evenly spaced samples (the newest always kept): ~100 points is
+what a 300 px wide panel shows. Returned as float32 (7 digits are more than a plot resolves),
+though viser 1.1.1 sends a uPlot's columns as float64 (8 bytes a value) whatever they are.
 """
 
 from __future__ import annotations
