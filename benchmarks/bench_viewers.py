@@ -281,7 +281,8 @@ def main() -> int:
         print(f"{robot:10s} {method:8s} | {m['kbps']:11.1f} {m['msgs']:6.1f} {m['frames']:8.1f} | "
               f"{s['kbps']:10.2f} {s['msgs']:6.1f} {s['frames']:8.1f}")
     print(f"goal (skinned)      | {'<= ' + str(GOALS['moving_kbps']):>11s} "
-          f"{'':6s} {'>= ' + str(GOALS['moving_ups']):>8s} | {'<= ' + str(GOALS['still_kbps']):>10s}")
+          f"{'':6s} {'>= ' + str(GOALS['moving_ups']):>8s} | "
+          f"{'<= ' + str(GOALS['still_kbps']):>10s}")
     print(f"\n{a.viewers} viewers, arm moving (skinned)")
     print(f"{'robot':10s} | {'KB/s/viewer':>11s} {'frames/s':>8s} {'console CPU %':>13s} "
           f"{'loop p99 ms':>11s}")

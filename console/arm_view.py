@@ -1,6 +1,6 @@
 """3D drawing of the selected arm, built once and then moved by a few numbers per frame.
 
-:class:`ArmView` subclasses create their viser scene nodes in ``__init__`` and :meth:`ArmView.update`
+:class:`ArmView` subclasses create their viser scene nodes in ``__init__``; :meth:`ArmView.update`
 only assigns to them, so no node is ever re-created while the arm moves. Two ways to draw:
 
 * ``method="skinned"`` (default): every tube is a skinned mesh sent once (``console.skin``); a
@@ -11,10 +11,10 @@ only assigns to them, so no node is ever re-created while the arm moves. Two way
   for the viewer benchmark and as the reference the skinned tubes are tested against).
 
 A dead band (:class:`DeadBand`: 0.5 mm, 0.5 deg, on the drawn frames averaged over up to 2 s
-while they jitter) skips a frame when nothing drawn moved more than it since the last one sent, so a still arm with
-measurement noise costs (almost) nothing; a held-back frame is sent when the display goes idle. The geometry itself comes
-from pure ``geometry(q)`` / ``frames(q)`` methods (vectorised numpy, no viser), which tests check
-against the kinematics without a server.
+while they jitter) skips a frame when nothing drawn moved more than it since the last one sent,
+so a still arm with measurement noise costs (almost) nothing; a held-back frame is sent when the
+display goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frames(q)`` methods
+(vectorised numpy, no viser), which tests check against the kinematics without a server.
 
 * Soft planar arm: the backbone as a tube lying on the table (z = half-width), dark rings at the
   segment boundaries, the straight gripper in a contrasting colour and the palm point w_t.
@@ -135,6 +135,15 @@ class Steadiness:
         if self._jitter <= 1e-12:
             return 1.0
         return float(np.linalg.norm(self._drift)) / self._jitter
+
+
+def batched_color(rgb: tuple[int, int, int]) -> tuple[int, int, int]:
+    """``rgb`` (sRGB, as every other colour here) for viser 1.1.1's batched meshes, whose client
+    reads ``batched_colors`` as linear RGB (``new THREE.Color(r, g, b)``): without this the
+    segment rings and platforms are drawn much lighter than the same colour on a mesh."""
+    c = np.asarray(rgb, dtype=float) / 255.0
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return tuple(int(v) for v in np.round(linear * 255.0))  # type: ignore[return-value]
 
 
 def wxyzs(frames: Array) -> Array:
@@ -293,8 +302,8 @@ class PlanarArmView(ArmView):
                 f"{root}/segment_rings",
                 band.vertices([[0, 0, -self.ring_half_length], [0, 0, self.ring_half_length]],
                               [[1, 0, 0]] * 2, [[0, 1, 0]] * 2, self.radius * 1.18),
-                band.faces, wxyzs(ends), ends[:, :3, 3], batched_colors=RING_COLOR,
-                lod="off")
+                band.faces, wxyzs(ends), ends[:, :3, 3],
+                batched_colors=batched_color(RING_COLOR), lod="off")
             self.gripper = scene.add_mesh_simple(
                 f"{root}/gripper",
                 self.gripper_topology.vertices([[0, 0, 0], [0, 0, r.gripper.length]],
@@ -420,8 +429,8 @@ class DeltaArmView(ArmView):
                 f"{root}/platforms",
                 disc.vertices([[0, 0, -t / 2], [0, 0, t / 2]], [[1, 0, 0]] * 2, [[0, 1, 0]] * 2,
                               r.half_width),
-                disc.faces, wxyzs(ends), ends[:, :3, 3], batched_colors=PLATFORM_COLOR,
-                lod="off")
+                disc.faces, wxyzs(ends), ends[:, :3, 3],
+                batched_colors=batched_color(PLATFORM_COLOR), lod="off")
         self.tip = scene.add_frame(f"{root}/tip", axes_length=0.05, axes_radius=0.003,
                                    origin_radius=0.006, position=g["tip_position"],
                                    wxyz=g["tip_wxyz"])

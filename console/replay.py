@@ -89,7 +89,8 @@ class ReplaySession:
             self.rec, self.pos, self.playing = rec, 0.0, False
             if self.ghost is None:
                 self.ghost = make_arm_view(self.client.scene, self.app.model, root="/replay",
-                                           method="vertices")  # one browser only
+                                           method="vertices", dead_band=None)  # one browser:
+                # a seek draws exactly the recorded configuration
                 for handle in vars(self.ghost).values():
                     if hasattr(handle, "opacity") and hasattr(handle, "color"):
                         handle.color = GHOST_COLOR
