@@ -108,14 +108,14 @@ def child(a: argparse.Namespace) -> int:
             app.store.report(q + scale * rng.standard_normal(q0.shape), "mocap")
 
     ctl: Any = None
+    soft = getattr(app, "soft_control", None)
+    if soft is not None:  # armed and holding: the Control panel draws what it measures
+        soft.arm().result(60)
     print(f"READY {server.get_port()}", flush=True)
     for line in sys.stdin:
         cmd = line.strip()
         if cmd == "still":
-            soft = getattr(app, "soft_control", None)
-            if soft is not None:  # armed and holding: the Control panel draws what it measures
-                soft.arm().result(30)
-            else:
+            if soft is None:
                 app.store.request(q0, "bench")
                 threading.Thread(target=mocap, args=(stop_noise, False), daemon=True).start()
         elif cmd == "move":

@@ -153,13 +153,16 @@ def wxyzs(frames: Array) -> Array:
 
 def add_skinned_tube(scene: viser.SceneApi, name: str, skin: TubeSkin, topology: TubeTopology,
                      radius: float, color: tuple[int, int, int], each: bool = False,
-                     ) -> viser.MeshSkinnedHandle:
+                     segments: int = 0) -> viser.MeshSkinnedHandle:
     """A straight tube bound to ``skin``'s bones (bind pose); move it with :func:`pose_bones`.
 
     ``each``: every tube of ``topology`` gets bones of its own (``TubeSkin.bind_each``);
+    ``segments``: one tube of that many pieces, a bone set each (``TubeSkin.bind_segments``);
     otherwise the tubes are consecutive pieces of one skin.
     """
-    if each:
+    if segments:
+        vertices, weights, bind = skin.bind_segments(topology, segments, radius)
+    elif each:
         vertices, weights, bind = skin.bind_each(topology, radius)
     else:
         first = topology.n_rings * np.arange(topology.n_tubes) - np.arange(topology.n_tubes)
@@ -384,7 +387,7 @@ class DeltaArmView(ArmView):
     rack_radius = 0.0035
     platform_thickness = 0.008
 
-    bone_stride = 4  # samples between bones: 8 bones per segment
+    bone_stride = 8  # samples between bones: 4 bones per segment
 
     def __init__(self, scene: viser.SceneApi, model: DeltaModel, root: str = "/arm",
                  method: Method = "skinned", dead_band: DeadBand | None = DeadBand()) -> None:
@@ -396,9 +399,10 @@ class DeltaArmView(ArmView):
         self.rack_topology = TubeTopology(s + 1, 8, n_tubes=n)
         self.platform_topology = TubeTopology(2, 40, n_tubes=n + 1)
         q0 = model.zero()
-        self.skin = TubeSkin(n * s + 1, self.bone_stride,
+        # A bone set per segment (backbone and racks): the bend changes sharply at a
+        # platform, and the racks' ends stay on it.
+        self.skin = TubeSkin(s + 1, self.bone_stride,
                              float(r.L0 + np.mean(q0[:, 2])) / s * self.bone_stride)
-        self.rack_skin = TubeSkin(s + 1, self.bone_stride, self.skin.spacing)
         g = self.geometry(q0)
         if method == "vertices":
             self.backbone = scene.add_mesh_simple(
@@ -414,11 +418,9 @@ class DeltaArmView(ArmView):
         else:
             self.backbone = add_skinned_tube(scene, f"{root}/backbone", self.skin,
                                              self.backbone_topology, self.backbone_radius,
-                                             BACKBONE_COLOR)
-            # A rack is one tube per segment, each with bones of its own: the racks' bend
-            # changes sharply at a platform and their ends stay on it.
+                                             BACKBONE_COLOR, segments=n)
             self.racks = [
-                add_skinned_tube(scene, f"{root}/rack_{j + 1}", self.rack_skin,
+                add_skinned_tube(scene, f"{root}/rack_{j + 1}", self.skin,
                                  self.rack_topology, self.rack_radius, RACK_COLORS[j],
                                  each=True)
                 for j in range(3)]
@@ -451,10 +453,8 @@ class DeltaArmView(ArmView):
 
     def rack_bone_poses(self, frames: Array, j: int) -> Array:
         """Bone poses of rack ``j``: one bone set per segment, on the rack's centre line."""
-        s = self.samples_per_segment
-        f = self.rack_frames(frames, j)
-        return np.concatenate([self.rack_skin.bone_poses(f[i * s:(i + 1) * s + 1])
-                               for i in range(len(f) // s)])
+        return self.skin.bone_poses_segments(self.rack_frames(frames, j),
+                                                  (len(frames) - 1) // self.samples_per_segment)
 
     def _platform_frames(self, frames: Array) -> Array:
         ends = frames[::self.samples_per_segment].copy()
@@ -512,7 +512,7 @@ class DeltaArmView(ArmView):
                 handle.vertices = verts
             self.platforms.vertices = g["platforms"]
         else:
-            pose_bones(self.backbone, self.skin.bone_poses(frames))
+            pose_bones(self.backbone, self.skin.bone_poses_segments(frames, len(q)))
             for j, handle in enumerate(self.racks):
                 pose_bones(handle, self.rack_bone_poses(frames, j))
             ends = self._platform_frames(frames)

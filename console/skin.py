@@ -135,6 +135,50 @@ class TubeSkin:
                   i * self.n_bones:(i + 1) * self.n_bones] = weights
         return np.tile(vertices, (t, 1)), dense, np.tile(self.bind_poses(), (t, 1, 1))
 
+    def bind_segments(self, topology: TubeTopology, n_segments: int, radius: float,
+                      ) -> tuple[npt.NDArray[np.float32], Array, Array]:
+        """Bind one tube of ``n_segments`` consecutive pieces of ``n_samples`` rings (shared
+        end rings) to a bone set per piece: a curvature jump at a piece's end stays sharp.
+
+        Ring ``i`` belongs to piece ``min(i // (n_samples - 1), n_segments - 1)``.
+
+        Returns:
+            Bind vertices (V, 3), dense skin weights (V, n_segments B) and bind poses.
+        """
+        per = self.n_samples - 1
+        if topology.n_tubes != 1 or topology.n_rings != n_segments * per + 1:
+            raise ValueError(f"need one tube of {n_segments * per + 1} rings, got "
+                             f"{topology.n_tubes} of {topology.n_rings}")
+        shape = (1, topology.n_rings, 3)
+        normals = np.broadcast_to([1.0, 0.0, 0.0], shape)
+        binormals = np.broadcast_to([0.0, 1.0, 0.0], shape)
+        centres = np.zeros(shape)
+        centres[..., 2] = np.arange(topology.n_rings)
+        ring = topology.vertices(centres, normals, binormals, 0.0)[:, 2].astype(float)
+        piece = np.minimum(np.round(ring).astype(int) // per, n_segments - 1)
+        u = (ring - piece * per) / self.stride
+        centres[..., 2] = np.arange(topology.n_rings) / self.stride * self.spacing
+        vertices = topology.vertices(centres, normals, binormals, radius)
+        idx, w = bspline_weights(u, self.n_knots)
+        dense = np.zeros((len(vertices), n_segments * self.n_bones))
+        np.put_along_axis(dense, idx + (piece * self.n_bones)[:, None], w, axis=1)
+        bind = np.concatenate([self.bind_poses() + self._shift(k * per) for k in
+                               range(n_segments)])
+        return vertices, dense, bind
+
+    def _shift(self, samples: int) -> Array:
+        """A (4, 4) offset moving bind poses ``samples`` backbone samples along +z."""
+        out = np.zeros((4, 4))
+        out[2, 3] = samples / self.stride * self.spacing
+        return out
+
+    def bone_poses_segments(self, frames: npt.ArrayLike, n_segments: int) -> Array:
+        """Bone poses of :meth:`bind_segments` / :meth:`bind_each`: one set per piece."""
+        f = np.asarray(frames, dtype=float)
+        per = self.n_samples - 1
+        return np.concatenate([self.bone_poses(f[k * per:(k + 1) * per + 1])
+                               for k in range(n_segments)])
+
     def bone_poses(self, frames: npt.ArrayLike, iterations: int = 3) -> Array:
         """(B, 4, 4) bone poses whose skinned centre line passes through the knot frames.
 
