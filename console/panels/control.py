@@ -49,6 +49,7 @@ KAPPA_PLOT_HZ = 2.0
 PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a target moved more than this,
 MEAS_BAND = 1.0  # 1/m: ... a measured curvature more than this (the sim's noise: <= 0.35 rms),
 STILL_PLOT_S = 10.0  # s: ... or this long after the last redraw
+COUNTERS_HZ = 1.0  # link and loop lines (their counters change on every refresh)
 LOOP_PLOT_HZ = 0.2  # loop timing is noise on a still arm too: every 5 s is enough
 HISTORY_S = 10.0
 STATS_TICKS = 1000
@@ -213,6 +214,8 @@ class ControlPanel(Panel):
         self._plotted: tuple[np.ndarray, np.ndarray] | None = None
         self._plotted_at = 0.0
         self._loop_plot_at = 0.0
+        self._counters_at = 0.0
+        self._link_key: Any = None
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
         self._last_fault: str | None = None
@@ -362,15 +365,25 @@ class ControlPanel(Panel):
         fault = fault_markdown(view.fault)
         self.fault_md.content = fault
         self.fault_md.visible = bool(fault)
-        self.link_md.content = link_line(view)
+        now = time.monotonic()
+        # Counters (ticks, round trips) change on every refresh: once a second is readable;
+        # a change of the link's state, arming or losses is shown at once.
+        h = view.link
+        link_key = (view.device, None if h is None else (h.state, h.armed, h.lost))
+        counters = now - self._counters_at >= 1.0 / COUNTERS_HZ
+        if counters or link_key != self._link_key:
+            self._link_key = link_key
+            self.link_md.content = link_line(view)
         if len(self._hist) < 2:  # else the table is redrawn with the plot (_draw_plots)
             self.kappa_md.content = kappa_html(view)
-        st = view.stats
-        self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
-                                f"ticks · overruns "
-                                f"{st.overruns} · last {STATS_TICKS // 100} s: period error p99 "
-                                f"{st.period_error_ms_p99:.3f} ms · tick work p99 "
-                                f"{st.work_ms_p99:.3f} ms</small>")
+        if counters:
+            self._counters_at = now
+            st = view.stats
+            self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
+                                    f"ticks · overruns {st.overruns} · last "
+                                    f"{STATS_TICKS // 100} s: period error p99 "
+                                    f"{st.period_error_ms_p99:.3f} ms · tick work p99 "
+                                    f"{st.work_ms_p99:.3f} ms</small>")
         self._draw_scene(view)
         self._draw_plots()
 

@@ -154,6 +154,8 @@ class HardwarePanel(Panel):
         self._samples: collections.deque = collections.deque(maxlen=HISTORY)
         self._plotted: np.ndarray | None = None
         self._plotted_at = 0.0
+        self._readout_key: Any = ()
+        self._readout_at = 0.0
         self._received = -1
         self._refreshed_at = 0.0
         self._fill_port = not default_port  # once: the path the loop reports (soft-arm pty)
@@ -276,7 +278,14 @@ class HardwarePanel(Panel):
             self.disarm_btn.disabled = ctl is None or state != "active"
             if ctl is None:
                 return
-            self.readout.content = format_health(h)
+            # Counters change on every refresh: once a second is readable; a change of state,
+            # arming, fault, watchdog or e-stop is shown at once.
+            now = time.monotonic()
+            key = None if h is None else (h.state, h.armed, h.fault, h.watchdog_tripped, h.estop,
+                                          h.port)
+            if key != self._readout_key or now - self._readout_at >= 1.0:
+                self._readout_key, self._readout_at = key, now
+                self.readout.content = format_health(h)
             if h is None:
                 return
             if self._fill_port and h.port:
