@@ -313,12 +313,25 @@ class ConsoleApp:
         self.last_drawn_seq = state.seq
         self.recorder.on_state(state, self.store.command)
 
+    def _idle(self) -> None:
+        with self.server.atomic():
+            try:
+                self.view.flush()  # the newest state, if the dead band held it back
+            except Exception:
+                log.exception("arm view flush failed")
+        for panel in self.panels:
+            try:
+                panel.on_idle()
+            except Exception:
+                log.exception("panel %s failed in on_idle", type(panel).__name__)
+
     def _render_loop(self) -> None:
         last_seq = -1
         next_frame = 0.0
         while not self._stop.is_set():
             state = self.store.wait_display(last_seq, timeout=0.2)
             if state is None:
+                self._idle()
                 continue
             wait = next_frame - time.perf_counter()
             if wait > 0 and self._stop.wait(wait):

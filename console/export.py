@@ -66,11 +66,14 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
         max_frames: Upper bound on animation frames (bounds the file size).
     """
     from console.app import ConsoleApp  # the same scene set-up as the live console
+    from console.arm_view import make_arm_view
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         app = ConsoleApp(robot, server, panels=(), status=f"Recording {rec.name}",
                          initial=rec.qs[0])
+        # A file plays back without a server: keep it to plain meshes (no bone messages).
+        app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
         serializer = server.get_scene_serializer()
         duration = rec.duration
         rate = fps if duration <= 0 else min(fps, max_frames / duration)

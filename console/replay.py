@@ -124,7 +124,9 @@ class ReplaySession:
         with self._lock:
             self.rec, self.pos, self.playing = rec, 0.0, False
             if self.ghost is None:
-                self.ghost = make_arm_view(self.client.scene, self.app.model, root="/replay")
+                self.ghost = make_arm_view(self.client.scene, self.app.model, root="/replay",
+                                           method="vertices", dead_band=None)  # one browser:
+                # a seek draws exactly the recorded configuration
                 for handle in vars(self.ghost).values():
                     if hasattr(handle, "opacity") and hasattr(handle, "color"):
                         handle.color = GHOST_COLOR

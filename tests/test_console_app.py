@@ -12,7 +12,7 @@ import pytest
 import viser
 
 from console.app import ConsoleApp
-from console.arm_view import DeltaArmView, PlanarArmView
+from console.arm_view import DeltaArmView, PlanarArmView, make_arm_view
 from console.panels.base import Panel
 from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel
@@ -97,6 +97,7 @@ def test_extensible_racks_are_drawn_with_their_commanded_lengths(server) -> None
 
 def test_render_updates_the_same_handles_in_place(server) -> None:
     app = ConsoleApp(EXT, server)
+    app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
     view = app.view
     handles = (view.backbone, *view.racks, view.platforms, view.tip)
     before = [h.vertices.copy() for h in handles[:-1]]
@@ -112,6 +113,7 @@ def test_render_updates_the_same_handles_in_place(server) -> None:
 
 def test_a_burst_of_requests_draws_the_newest_state_at_a_bounded_rate(server) -> None:
     app = ConsoleApp(SOFT, server, render_hz=20.0)
+    app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
     with app:
         start = time.perf_counter()
         for k in np.linspace(0.0, 10.0, 200):  # a request every ~2 ms for ~0.4 s
@@ -170,6 +172,7 @@ def test_bad_request_raises_and_moves_nothing(server) -> None:
 
 def test_with_hardware_the_view_shows_reported_not_commanded_state(server) -> None:
     app = ConsoleApp(SOFT, server, mirror_commands=False)
+    app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
     commanded = app.store.request(np.full(6, 5.0), "jog")
     assert app.store.display.seq == 0  # nothing measured yet
     assert app.store.wait_command(0, timeout=1.0) is commanded  # what a bridge would read

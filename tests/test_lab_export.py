@@ -16,6 +16,7 @@ import viser
 import zstandard
 
 from console.app import ConsoleApp
+from console.arm_view import make_arm_view
 from console.export import draw_overlay, external_urls, recording_html, scene_html
 from console.recording import Event, Recording
 from core.kinematics import planar as pk
@@ -77,6 +78,7 @@ def test_external_urls_finds_resources_but_not_namespace_names() -> None:
 
 def test_scene_export_is_standalone_and_contains_the_arm_and_the_plan(server) -> None:
     app = ConsoleApp(SOFT, server)
+    app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
     q = np.array([4.0, -2.0, 6.0, 0.0, -8.0, 3.0])
     with app:
         state = app.store.request(q, "planner")

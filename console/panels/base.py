@@ -89,6 +89,9 @@ class Panel:
     def on_state(self, state: ArmState) -> None:
         """Show the newest displayed state; runs on the render thread, keep it cheap."""
 
+    def on_idle(self) -> None:
+        """No new displayed state for a while (render thread): show anything held back."""
+
     def close(self) -> None:
         """Remove the panel's widgets."""
         self.folder.remove()

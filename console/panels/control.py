@@ -34,6 +34,7 @@ from viser import uplot
 
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
+from console.panels.plot_data import thin
 from console.plan_view import TableObject, validate_object
 from hw_bridge.link_supervisor import DISCONNECTED
 from hw_bridge.soft_arm_process import ControlProcess, ControlView
@@ -44,6 +45,15 @@ OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 20.0
 PLOT_HZ = 4.0
+# The curvature plot has 13 series, which viser sends as float64: 60 points, at most 2 Hz,
+# cost ~12 KB/s per viewer while the arm moves.
+KAPPA_PLOT_POINTS = 60
+KAPPA_PLOT_HZ = 2.0
+PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a target moved more than this,
+MEAS_BAND = 1.0  # 1/m: ... a measured curvature more than this (the sim's noise: <= 0.35 rms),
+STILL_PLOT_S = 10.0  # s: ... or this long after the last redraw
+COUNTERS_HZ = 1.0  # link and loop lines (their counters change on every refresh)
+LOOP_PLOT_HZ = 0.2  # loop timing is noise on a still arm too: every 5 s is enough
 HISTORY_S = 10.0
 STATS_TICKS = 1000
 IDLE_PHASES = ("idle", "released", "stopped")
@@ -206,6 +216,11 @@ class ControlPanel(Panel):
 
         self._hist: collections.deque = collections.deque(maxlen=int(HISTORY_S * PUMP_HZ))
         self._plot_at = 0.0
+        self._plotted: tuple[np.ndarray, np.ndarray] | None = None
+        self._plotted_at = 0.0
+        self._loop_plot_at = 0.0
+        self._counters_at = 0.0
+        self._link_key: Any = None
         self._fwd_seq = self.app.store.command.seq
         self._stopped = False
         self._last_fault: str | None = None
@@ -409,14 +424,25 @@ class ControlPanel(Panel):
         fault = fault_markdown(view.fault)
         self.fault_md.content = fault
         self.fault_md.visible = bool(fault)
-        self.link_md.content = link_line(view)
-        self.kappa_md.content = kappa_html(view)
-        st = view.stats
-        self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
-                                f"ticks · overruns "
-                                f"{st.overruns} · last {STATS_TICKS // 100} s: period error p99 "
-                                f"{st.period_error_ms_p99:.3f} ms · tick work p99 "
-                                f"{st.work_ms_p99:.3f} ms</small>")
+        now = time.monotonic()
+        # Counters (ticks, round trips) change on every refresh: once a second is readable;
+        # a change of the link's state, arming or losses is shown at once.
+        h = view.link
+        link_key = (view.device, None if h is None else (h.state, h.armed, h.lost))
+        counters = now - self._counters_at >= 1.0 / COUNTERS_HZ
+        if counters or link_key != self._link_key:
+            self._link_key = link_key
+            self.link_md.content = link_line(view)
+        if len(self._hist) < 2:  # else the table is redrawn with the plot (_draw_plots)
+            self.kappa_md.content = kappa_html(view)
+        if counters:
+            self._counters_at = now
+            st = view.stats
+            self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
+                                    f"ticks · overruns {st.overruns} · last "
+                                    f"{STATS_TICKS // 100} s: period error p99 "
+                                    f"{st.period_error_ms_p99:.3f} ms · tick work p99 "
+                                    f"{st.work_ms_p99:.3f} ms</small>")
         self._draw_scene(view)
         self._draw_plots()
 
@@ -441,11 +467,31 @@ class ControlPanel(Panel):
         t = np.array([h[0] for h in hist])
         ref = np.array([h[1] for h in hist])
         meas = np.array([h[2] for h in hist])
-        cols: list[np.ndarray] = [t]
-        for i in range(ref.shape[1]):
-            cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
-        self.kappa_plot.data = tuple(cols)
-        self.loop_plot.data = (t, np.array([h[3] for h in hist]), np.array([h[4] for h in hist]))
+        now = time.monotonic()
+        if now - self._plotted_at >= 1.0 / KAPPA_PLOT_HZ and self._plot_moved(
+                ref[-1], meas[-1], now):
+            cols: list[np.ndarray] = [t]
+            for i in range(ref.shape[1]):
+                cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
+            self.kappa_plot.data = thin(cols, KAPPA_PLOT_POINTS)
+            self.kappa_md.content = kappa_html(self.ctl.view) if self.ctl.view else ""
+        if now - self._loop_plot_at >= 1.0 / LOOP_PLOT_HZ:
+            self._loop_plot_at = now
+            self.loop_plot.data = thin((t, np.array([h[3] for h in hist]),
+                                        np.array([h[4] for h in hist])))
+
+    def _plot_moved(self, ref: np.ndarray, meas: np.ndarray, now: float) -> bool:
+        """Whether the curvatures moved enough to redraw the plot and table: a target moved
+        by PLOT_BAND, a measurement by MEAS_BAND (beyond mocap noise), or STILL_PLOT_S passed.
+        A still arm's noise then costs a redraw every STILL_PLOT_S, not PLOT_HZ of them."""
+        last = self._plotted
+        moved = (last is None or last[0].shape != ref.shape
+                 or now - self._plotted_at >= STILL_PLOT_S
+                 or not np.allclose(ref, last[0], rtol=0.0, atol=PLOT_BAND)
+                 or not np.allclose(meas, last[1], rtol=0.0, atol=MEAS_BAND, equal_nan=True))
+        if moved:
+            self._plotted, self._plotted_at = (ref.copy(), meas.copy()), now
+        return moved
 
     def close(self) -> None:
         self._pump_stop.set()

@@ -31,6 +31,7 @@ from viser import uplot
 
 from console.lab_feed import LinkFeed
 from console.panels.base import Panel, operator_only
+from console.panels.plot_data import thin
 from console.state import ArmState
 from hw_bridge.controls import BridgeControls
 from hw_bridge.interface import LinkHealth
@@ -42,6 +43,7 @@ OTHER = "(type a path or URL below)"
 BAUDS = ("1000000", "115200", "230400", "460800", "921600", "2000000")
 REFRESH_HZ = 4.0
 HISTORY = 240  # round-trip samples in the plot (a minute at REFRESH_HZ)
+PLOT_STILL_S = 5.0  # s between redraws of a round-trip plot that does not change
 
 
 def format_health(h: LinkHealth | None) -> str:
@@ -152,6 +154,10 @@ class HardwarePanel(Panel):
         self._link_feed = LinkFeed(self.app.recorder)  # link health -> lab data
         self._t0 = time.monotonic()
         self._samples: collections.deque = collections.deque(maxlen=HISTORY)
+        self._plotted: np.ndarray | None = None
+        self._plotted_at = 0.0
+        self._readout_key: Any = ()
+        self._readout_at = 0.0
         self._received = -1
         self._refreshed_at = 0.0
         self._fill_port = not default_port  # once: the path the loop reports (soft-arm pty)
@@ -274,7 +280,14 @@ class HardwarePanel(Panel):
             self.disarm_btn.disabled = ctl is None or state != "active"
             if ctl is None:
                 return
-            self.readout.content = format_health(h)
+            # Counters change on every refresh: once a second is readable; a change of state,
+            # arming, fault, watchdog or e-stop is shown at once.
+            now = time.monotonic()
+            key = None if h is None else (h.state, h.armed, h.fault, h.watchdog_tripped, h.estop,
+                                          h.port)
+            if key != self._readout_key or now - self._readout_at >= 1.0:
+                self._readout_key, self._readout_at = key, now
+                self.readout.content = format_health(h)
             if h is None:
                 return
             if self._fill_port and h.port:
@@ -295,9 +308,18 @@ class HardwarePanel(Panel):
             return  # no new telemetry: do not stretch the plot with stale numbers
         self._received = h.received
         p99 = h.rtt_ms_p99 if h.rtt_ms_p99 is not None else float("nan")
-        self._samples.append((time.monotonic() - self._t0, h.rtt_ms_p50, p99))
+        now = time.monotonic()
+        self._samples.append((now - self._t0, h.rtt_ms_p50, p99))
+        # Redraw when the round trip changed (0.1 ms) or every PLOT_STILL_S: a steady link's
+        # plot costs each viewer a redraw every few seconds, not REFRESH_HZ of them.
+        last = self._plotted
+        newest = np.array([h.rtt_ms_p50, p99])
+        if (last is not None and now - self._plotted_at < PLOT_STILL_S
+                and np.allclose(newest, last, rtol=0.0, atol=0.1, equal_nan=True)):
+            return
+        self._plotted, self._plotted_at = newest, now
         data = np.asarray(self._samples, dtype=float)
-        self.plot.data = (data[:, 0], data[:, 1], data[:, 2])
+        self.plot.data = thin((data[:, 0], data[:, 1], data[:, 2]))
 
     def close(self) -> None:
         self._quit.set()

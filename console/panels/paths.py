@@ -30,6 +30,7 @@ import viser.uplot as uplot
 
 from console.arm_view import DeltaArmView
 from console.lab_feed import path_plan_record
+from console.panels.plot_data import thin
 from console.panels.base import Panel
 from console.state import ArmState
 from core.kinematics import delta as dk
@@ -327,9 +328,9 @@ class PathsPanel(Panel):
             if trace is not None and n >= 2 and (now - self._plot_at >= 1.0 / PLOT_HZ or result):
                 self._plot_at = now
                 target = trace.targets[:n]
-                self.plot.data = (trace.times[:n],
-                                  np.linalg.norm(trace.commanded[:n] - target, axis=1) * 1e3,
-                                  np.linalg.norm(trace.measured[:n] - target, axis=1) * 1e3)
+                self.plot.data = thin((trace.times[:n],
+                                       np.linalg.norm(trace.commanded[:n] - target, axis=1) * 1e3,
+                                       np.linalg.norm(trace.measured[:n] - target, axis=1) * 1e3))
                 m = trace.measured[:n]
                 self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
                 self.measured.visible = True

@@ -4,12 +4,17 @@ Values are computed from the displayed configuration with ``core.kinematics`` an
 and degrees. Planar arm: arm tip (gripper root) [x, y, theta] and the palm point w_t. Extensible
 arm: tip position, tilt of the tip axis from vertical, and every rack's length as a bar between
 rack_min and rack_max, flagged when within ``NEAR_LIMIT`` of a limit.
+
+The readout follows the drawn arm: it changes only when the arm view sent a new frame (a still
+arm inside the view's dead band costs nothing), at most ``READOUT_HZ`` times a second (a person
+reads no faster); a state held back is shown when the display goes idle.
 """
 
 from __future__ import annotations
 
 import html
 import math
+import time
 
 import numpy as np
 
@@ -19,6 +24,7 @@ from console.panels.base import Panel
 from console.state import ArmState
 
 NEAR_LIMIT = 0.005  # m
+READOUT_HZ = 10.0
 _CELL = "padding:1px 6px;text-align:right;white-space:nowrap"
 
 
@@ -114,6 +120,9 @@ class ReadoutPanel(Panel):
     def build(self) -> None:
         self.html = self.gui.add_html(self._render(self.app.store.display))
         self.source = self.gui.add_markdown("")
+        self._pending: ArmState | None = None
+        self._shown_at = -1e9
+        self._frame_shown = -1
 
     def _render(self, state: ArmState) -> str:
         model = self.app.model
@@ -124,5 +133,20 @@ class ReadoutPanel(Panel):
         return delta_readout_html(model, q)
 
     def on_state(self, state: ArmState) -> None:
+        self._pending = state
+        if time.monotonic() - self._shown_at >= 1.0 / READOUT_HZ:
+            self._show()
+
+    def on_idle(self) -> None:
+        self._show()
+
+    def _show(self) -> None:
+        state = self._pending
+        frame = getattr(self.app.view, "frames_sent", None)
+        if state is None or frame == self._frame_shown:
+            return  # nothing new, or the drawn arm did not change
+        self._pending = None
+        self._shown_at = time.monotonic()
+        self._frame_shown = frame
         self.html.content = self._render(state)
         self.source.content = f"<small>shown: {html.escape(state.source)} · #{state.seq}</small>"

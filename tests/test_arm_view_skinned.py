@@ -1,0 +1,278 @@
+"""Skinned arm drawing: the client's linear blend skinning of the bone poses lands on today's
+vertex geometry at full bend (both arms), and the dead band sends nothing for sub-band noise."""
+
+from __future__ import annotations
+
+import time
+from typing import Iterator
+
+import numpy as np
+import pytest
+import viser
+
+from console.arm_view import DeadBand, DeltaArmView, PlanarArmView, make_arm_view
+from console.model import model_for
+from console.skin import TubeSkin, bspline_weights
+from console.tube import TubeTopology
+from core.robots import load
+
+SOFT = load("soft-arm")
+EXT = load("extensible")
+KMAX = 16.7  # 1/m, the soft arm's kappa_max
+
+
+@pytest.fixture
+def server() -> Iterator[viser.ViserServer]:
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def skinned(handle, vertices, weights, bind, poses: np.ndarray):
+    """What the browser draws: three.js v' = sum_i w_i B_i B_i,bind^-1 v, with the bone
+    poses the handle last sent (each vertex has at most four weights: all viser sends)."""
+    assert np.count_nonzero(weights, axis=1).max() <= 4
+    sent = np.array([np.concatenate([b.wxyz, b.position]) for b in handle.bones])
+    np.testing.assert_allclose(sent[:, 4:], poses[:, :3, 3], atol=2.0**-16)
+    return TubeSkin.deform(vertices, weights, bind, poses)
+
+
+def test_bspline_weights_are_a_partition_of_unity_and_reproduce_linear_functions() -> None:
+    u = np.linspace(0.0, 6.0, 101)
+    idx, w = bspline_weights(u, 7)
+    np.testing.assert_allclose(w.sum(1), 1.0, atol=1e-12)
+    knot = idx - 1  # bone b sits on knot b - 1
+    np.testing.assert_allclose((w * knot).sum(1), u, atol=1e-12)
+    assert idx.min() == 0 and idx.max() == 8
+    with pytest.raises(ValueError):
+        bspline_weights([7.5], 7)
+
+
+@pytest.mark.parametrize("kappa", [np.full(6, KMAX), np.full(6, -KMAX),
+                                   np.array([KMAX, KMAX, KMAX, -KMAX, -KMAX, -KMAX]),
+                                   np.array([KMAX, -KMAX, KMAX, -KMAX, KMAX, -KMAX])])
+def test_soft_arm_skinned_body_matches_the_vertex_mesh_at_full_bend(server, kappa) -> None:
+    view = make_arm_view(server.scene, model_for(SOFT))
+    assert isinstance(view, PlanarArmView) and view.method == "skinned"
+    assert view.update(kappa)
+    want = view.geometry(kappa)["body"].astype(float)
+    got = skinned(view.body, *view.skin.bind(view.body_topology, [0], view.radius),
+                  view.skin.bind_poses(), view.skin.bone_poses(view.frames(kappa)))
+    err = np.linalg.norm(got - want, axis=1)
+    same_sign = np.all(kappa == kappa[0])
+    # Constant curvature: only the blend's ~1 % ring shrink remains; where the curvature
+    # flips sign the C2 skin rounds the corner by at most a tenth of the radius.
+    assert err.max() < (0.3e-3 if same_sign else 0.1 * view.radius), err.max()
+    # The tip ring (where the gripper attaches) stays put.
+    tip = want[: view.body_topology.n_rings * view.sides][-view.sides:].mean(0)
+    got_tip = got[: view.body_topology.n_rings * view.sides][-view.sides:].mean(0)
+    assert np.linalg.norm(got_tip - tip) < 0.1e-3
+    # Rings, gripper and palm: poses of the same geometry as the vertex method's.
+    ends = view.frames(kappa)[view.samples_per_segment::view.samples_per_segment]
+    np.testing.assert_allclose(view.rings.batched_positions, ends[:, :3, 3], atol=1e-6)
+    np.testing.assert_allclose(view.palm.position, view.geometry(kappa)["palm"], atol=1e-9)
+    g = view.geometry(kappa)["gripper"].astype(float)[: 2 * view.sides]
+    far = g[view.sides:].mean(0)
+    local_far = np.array([0.0, 0.0, SOFT.gripper.length])
+    rot = ends[-1, :3, :3]
+    np.testing.assert_allclose(view.gripper.position + rot @ local_far, far, atol=1e-6)
+
+
+@pytest.mark.parametrize("q", [
+    np.array([[0.03 * np.pi / 2, 0.0, 0.36], [0.0, -0.03 * np.pi / 2, 0.36]]),  # 90 deg each
+    np.array([[0.0, 0.03 * np.pi / 2, 0.0], [0.03 * np.pi / 2, 0.0, 0.0]]),  # retracted
+    np.array([[-0.03 * np.pi / 2, 0.0, 0.2], [0.03 * np.pi / 2, 0.0, 0.05]]),  # S-bend
+])
+def test_extensible_arm_skinned_backbone_and_racks_match_the_vertex_mesh(server, q) -> None:
+    view = make_arm_view(server.scene, model_for(EXT))
+    assert isinstance(view, DeltaArmView)
+    assert np.allclose(np.linalg.norm(q[:, :2], axis=1) / EXT.d, np.pi / 2)  # full bend
+    view.update(q)
+    g = view.geometry(q)
+    frames = view.frames(q)
+    n, s = EXT.n_segments, view.samples_per_segment
+    got = skinned(view.backbone,
+                  *view.skin.bind_segments(view.backbone_topology, n, view.backbone_radius),
+                  view.skin.bone_poses_segments(frames, n))
+    assert np.linalg.norm(got - g["backbone"], axis=1).max() < 0.3e-3
+    bind = view.skin.bind_each(view.rack_topology, view.rack_radius)
+    for j, handle in enumerate(view.racks):
+        got = skinned(handle, *bind, view.rack_bone_poses(frames, j))
+        assert np.linalg.norm(got - g["racks"][j], axis=1).max() < 0.3e-3
+    np.testing.assert_allclose(view.tip.position, g["tip_position"], atol=1e-9)
+    assert len(view.platforms.batched_positions) == n + 1
+
+
+def count_scene_messages(server: viser.ViserServer) -> list[object]:
+    """Every scene message the server queues from now on (wraps viser's one queue entry)."""
+    sent: list[object] = []
+    api = server.scene
+    original = api._queue_scene_message
+
+    def record(message):  # type: ignore[no-untyped-def]
+        sent.append(message)
+        return original(message)
+
+    api._queue_scene_message = record  # type: ignore[method-assign]
+    return sent
+
+
+@pytest.mark.parametrize("robot, method", [(SOFT, "skinned"), (EXT, "skinned"),
+                                           (SOFT, "vertices"), (EXT, "vertices")])
+def test_noise_below_the_dead_band_sends_nothing_and_a_move_above_it_sends(
+        server, robot, method) -> None:
+    model = model_for(robot)
+    band = DeadBand(2e-4, np.deg2rad(0.1), settle_s=0.0)  # a band alone, no averaging
+    view = make_arm_view(server.scene, model, method=method, dead_band=band)
+    q = np.asarray(model.zero(), dtype=float) + 0.5 * (
+        np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0]) if robot is SOFT
+        else np.array([[0.01, 0.0, 0.1], [0.0, 0.01, 0.05]]))
+    assert view.update(q)
+    sent = count_scene_messages(server)
+    rng = np.random.default_rng(1)
+    # Noise whose largest effect on any drawn frame stays inside the band.
+    scale = 1e-3 if robot is SOFT else 2e-6  # 1/m of curvature, m of rack length
+    for _ in range(50):
+        noisy = q + scale * rng.uniform(-1, 1, np.shape(q))
+        assert not band.moved(view.frames(q), view.frames(noisy))
+        assert view.update(noisy) is False
+    assert sent == []
+    bigger = q + (0.2 if robot is SOFT else 2e-4)  # moves the tip by millimetres
+    assert band.moved(view.frames(q), view.frames(bigger))
+    assert view.update(bigger) is True
+    assert len(sent) > 0
+
+
+def test_averaged_dead_band_holds_a_noisy_still_arm_and_follows_a_move(server, monkeypatch,
+                                                                      ) -> None:
+    """Noise that crosses the band frame by frame (the soft arm's mocap in the simulator:
+    ~0.8 mm and ~1.7 deg at the tip) averages out; a clean move is drawn frame by frame; a
+    state held back is drawn exactly when the display goes idle."""
+    import console.arm_view as arm_view
+
+    clock = [100.0]
+    monkeypatch.setattr(arm_view.time, "monotonic", lambda: clock[0])
+    model = model_for(SOFT)
+    view = make_arm_view(server.scene, model)
+    band = view.dead_band
+    assert band == DeadBand(5e-4, np.deg2rad(0.5), 2.0)
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    clock[0] += 5.0
+    assert view.update(q)
+    rng = np.random.default_rng(2)
+    sigma = np.array([0.035, 0.11, 0.19, 0.25, 0.31, 0.35])  # 1/m, measured on the sim, armed
+    frames, sent_before = [], view.frames_sent
+    for _ in range(200):  # 10 s at 20 frames/s
+        clock[0] += 0.05
+        noisy = q + sigma * rng.standard_normal(6)
+        frames.append(view.frames(noisy))
+        view.update(noisy)
+    # The noise alone crosses the band in most frames ...
+    crossing = np.mean([band.moved(view.frames(q), f) for f in frames])
+    assert crossing > 0.8
+    # ... but fewer than 2 frames a second are sent instead of 20.
+    assert view.frames_sent - sent_before < 20
+    # A clean move at ~14 mm/s of the tip after a pause: every frame is drawn.
+    clock[0] += 5.0
+    start = view.frames_sent
+    for k in range(1, 21):
+        clock[0] += 0.05
+        view.update(q + 0.01 * k)
+    assert view.frames_sent - start >= 19
+    # A tiny last step is held back, then drawn exactly when the display goes idle.
+    clock[0] += 0.05
+    last = q + 0.01 * 20 + 1e-3
+    assert view.update(last) is False
+    assert view.flush() is True
+    assert view.flush() is False
+    np.testing.assert_allclose(view.palm.position, view.geometry(last)["palm"], atol=1e-9)
+
+
+def test_dead_band_measures_translation_and_rotation() -> None:
+    band = DeadBand(2e-4, np.deg2rad(0.1))
+    a = np.tile(np.eye(4), (3, 1, 1))
+    b = a.copy()
+    b[1, 0, 3] = 1.9e-4
+    assert not band.moved(a, b)
+    b[1, 0, 3] = 2.1e-4
+    assert band.moved(a, b)
+    for angle, expected in ((np.deg2rad(0.09), False), (np.deg2rad(0.11), True)):
+        c = a.copy()
+        c[2, :2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+        assert band.moved(a, c) is expected
+
+
+def test_unknown_method_is_refused(server) -> None:
+    with pytest.raises(ValueError, match="method"):
+        make_arm_view(server.scene, model_for(SOFT), method="pixels")  # type: ignore[arg-type]
+
+
+def test_console_renders_the_skinned_arm_by_moving_the_same_bones(server) -> None:
+    from console.app import ConsoleApp
+
+    app = ConsoleApp(EXT, server)
+    view = app.view
+    assert isinstance(view, DeltaArmView) and view.method == "skinned"
+    handles = (view.backbone, *view.racks, view.platforms, view.tip)
+    vertices = view.backbone.vertices.copy()  # the bind pose, sent once
+    with app:
+        q = np.array([[0.02, 0.0, 0.15], [0.0, 0.0, 0.1]])
+        state = app.store.request(q, "test")
+        deadline = time.monotonic() + 3.0
+        while app.last_drawn_seq != state.seq:
+            assert time.monotonic() < deadline, "not drawn"
+            time.sleep(0.01)
+    assert (view.backbone, *view.racks, view.platforms, view.tip) == handles
+    np.testing.assert_array_equal(view.backbone.vertices, vertices)
+    poses = view.skin.bone_poses_segments(view.frames(q), EXT.n_segments)
+    got = np.array([b.position for b in view.backbone.bones])
+    np.testing.assert_allclose(got, poses[:, :3, 3], atol=2.0**-16)
+    np.testing.assert_allclose(view.tip.position, view.geometry(q)["tip_position"], atol=1e-9)
+
+
+def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_idle(
+        server) -> None:
+    from console.app import ConsoleApp
+    from console.panels.readout import READOUT_HZ, ReadoutPanel
+
+    app = ConsoleApp(SOFT, server)
+    readout = app.panel(ReadoutPanel)
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    first = app.store.request(q, "test")
+    app.render(first)
+    shown = readout.html.content
+    assert app.view.frames_sent >= 2 and shown
+    # Sub-band noise: nothing drawn, the readout stays as it was.
+    for k in range(5):
+        app.render(app.store.report(q + 1e-4 * (k + 1), "mocap"))
+    assert readout.html.content == shown
+    # Two moves within 1 / READOUT_HZ: the second is held back ...
+    time.sleep(1.1 / READOUT_HZ)
+    moved = app.store.report(q + 0.5, "mocap")
+    app.render(moved)
+    after_first_move = readout.html.content
+    assert after_first_move != shown
+    last = app.store.report(q + 1.0, "mocap")
+    app.render(last)
+    assert readout.html.content == after_first_move
+    # ... and shown once the display goes idle.
+    app._idle()
+    assert f"#{last.seq}" in readout.source.content
+    assert readout.html.content == readout._render(last)
+
+
+def test_plot_columns_are_thinned_to_float32_keeping_the_newest_sample() -> None:
+    from console.panels.plot_data import thin
+
+    t = np.arange(1000) * 0.01
+    y = np.sin(t)
+    tt, yy = thin((t, y), 100)
+    assert len(tt) <= 100 and tt.dtype == np.float32 and yy.dtype == np.float32
+    assert tt[-1] == np.float32(t[-1]) and np.all(np.diff(tt) > 0)
+    np.testing.assert_allclose(yy, np.sin(tt.astype(float)), atol=1e-5)  # samples, not means
+    short = thin((t[:50], y[:50]), 100)
+    np.testing.assert_array_equal(short[0], t[:50].astype(np.float32))
+    with pytest.raises(ValueError):
+        thin((t, y[:-1]))
