@@ -28,8 +28,6 @@ from __future__ import annotations
 import concurrent.futures as cf
 import dataclasses
 import gc
-import multiprocessing
-import queue
 import threading
 from typing import Any, Literal
 
@@ -40,7 +38,8 @@ from hw_bridge.commands import (BRIDGE_COMMANDS, SCENE_COMMANDS, Arm, Connect, D
                                StartGrasp, StopArm)
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
-from hw_bridge.loop_process import LoopProcess, ProcessBridgeControls
+from hw_bridge.loop_process import (LoopProcess, ProcessBridgeControls, reply_when_done,
+                                    serve_commands)
 from hw_bridge.soft_arm_worlds import HardwareWorld, SimWorld
 
 
@@ -183,29 +182,19 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     if helper_priority:
         promote_threads(helper_priority)
     try:
-        parent = multiprocessing.parent_process()
-        while True:
-            try:
-                msg = commands.get(timeout=1.0)
-            except queue.Empty:
-                if parent is not None and not parent.is_alive():
-                    break  # the console went away: stop the arm's loop too
-                continue
-            if msg is None:
-                break
-            cid, cmd = msg
+        def handle(cid: int, cmd: Any) -> None:
             if isinstance(cmd, scene_first):
                 try:
                     world.place_object(cmd.x, cmd.y, cmd.r)
                 except (RuntimeError, OSError, ValueError) as exc:
                     replies.put(("reply", cid, str(exc)))
-                    continue
+                    return
                 if isinstance(cmd, PlaceObject):
                     replies.put(("reply", cid, None))
-                    continue
-            fut = runner.submit(lambda s, t, cmd=cmd: apply(s, t, cmd))
-            fut.add_done_callback(lambda f, cid=cid: replies.put(
-                ("reply", cid, None if f.exception() is None else str(f.exception()))))
+                    return
+            reply_when_done(replies, cid, runner.submit(lambda s, t: apply(s, t, cmd)))
+
+        serve_commands(commands, handle)  # until None or the console went away
     finally:
         stop.set()
         runner.stop()
