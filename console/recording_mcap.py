@@ -18,9 +18,9 @@ from typing import Any, Callable
 import numpy as np
 
 from console.model import ArmModel
-from console.recording import MAX_DECOMPRESSED, Event, Recording, _describe
+from console.recording import MAX_DECOMPRESSED, Event, ReadBudget, Recording, _describe
 from core.labdata.channels import ArmGeometry, record_from_message
-from core.labdata.mcap_file import McapLog, iter_messages, read_header
+from core.labdata.mcap_file import McapLog, iter_messages, read_header, stored_size
 
 SUFFIX = ".mcap"
 
@@ -48,12 +48,18 @@ def write_queue(path: Path, q: queue.Queue[dict[str, Any] | None], header: dict[
         log.close()
 
 
-def load_mcap(path: Path, model: ArmModel) -> Recording:
+def load_mcap(path: Path, model: ArmModel, budget: ReadBudget | None = None) -> Recording:
     """Read a console MCAP recording for ``model``'s robot (see :func:`load_recording`).
 
+    Within ``budget``: the file's summary (its chunk index and statistics) is checked before any
+    message is decompressed (uncompressed bytes, message count); a file without a summary (a
+    recording cut short) is counted message by message as it is read.
+
     Raises:
-        ValueError: not a console recording, another robot's, or unreadable; says which.
+        ValueError: not a console recording, another robot's, unreadable or past the budget;
+            says which.
     """
+    budget = budget or ReadBudget()
     if path.stat().st_size > MAX_DECOMPRESSED:
         raise ValueError(f"{path.name}: larger than {MAX_DECOMPRESSED >> 20} MB")
     arm = ArmGeometry(model.robot)
@@ -77,7 +83,18 @@ def load_mcap(path: Path, model: ArmModel) -> Recording:
                                  f"'{model.robot.name}'")
             start = int(header.get("start_ns", "0"))
             f.seek(0)
-            for m in iter_messages(f):
+            size = stored_size(f)  # (uncompressed bytes, messages), None without a summary
+            if size is not None and size[0] > budget.max_bytes:
+                raise ValueError(f"{path.name}: larger than {budget.max_bytes >> 20} MB "
+                                 "uncompressed (the replay limit)")
+            if size is not None and size[1] > budget.max_records:
+                raise ValueError(f"{path.name}: more than {budget.max_records:,} records (the "
+                                 "replay limit)")
+            f.seek(0)
+            for n, m in enumerate(iter_messages(f), 1):
+                if n > budget.max_records:
+                    raise ValueError(f"{path.name}: more than {budget.max_records:,} records "
+                                     "(the replay limit)")
                 rec = record_from_message(m.topic, m.message)
                 if rec is None:
                     continue

@@ -297,3 +297,25 @@ def test_well_known_messages_build_as_the_foxglove_sdk_types(tmp_path) -> None:
             assert len(typed.encode()) > 0
             seen.add(schema.name)
     assert seen == {"foxglove.SceneUpdate", "foxglove.PoseInFrame", "foxglove.Log"}
+
+
+def test_an_mcap_past_the_replay_budget_is_refused_before_its_messages_are_read(tmp_path) -> None:
+    """The summary's uncompressed size and message count (read by the independent ``mcap``
+    reader here) decide before any message is decompressed; a file within the budget loads."""
+    from mcap.reader import make_reader
+
+    from console.recording import ReadBudget
+    from console.recording_mcap import load_mcap
+
+    path, _, _ = record_session(tmp_path)
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    count = summary.statistics.message_count
+    raw = sum(ci.uncompressed_size for ci in summary.chunk_indexes)
+    model = model_for(SOFT)
+    assert len(load_mcap(path, model, ReadBudget(max_bytes=raw, max_records=count)).times) == 5
+    with pytest.raises(ValueError, match=f"more than {count - 1:,} records"):
+        load_mcap(path, model, ReadBudget(max_records=count - 1))
+    with pytest.raises(ValueError, match="uncompressed"):
+        load_mcap(path, model, ReadBudget(max_bytes=raw - 1))

@@ -136,6 +136,17 @@ def read_header(f: BinaryIO) -> dict[str, str]:
     raise ValueError("not a console recording (no softarm.recording metadata)")
 
 
+def stored_size(f: BinaryIO) -> tuple[int, int] | None:
+    """(uncompressed bytes of all chunks, message count) from the file's summary, read without
+    decompressing a message; None when the file has no summary (a recording cut short)."""
+    summary = make_reader(f).get_summary()
+    if summary is None:
+        return None
+    total = sum(int(ci.uncompressed_size) for ci in summary.chunk_indexes)
+    count = int(summary.statistics.message_count) if summary.statistics is not None else 0
+    return total, count
+
+
 def iter_messages(f: BinaryIO, topics: list[str] | None = None) -> Iterator[LabMessage]:
     """Decoded JSON messages in log-time order (ValueError for a non-JSON channel)."""
     reader = make_reader(f)
