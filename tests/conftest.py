@@ -118,6 +118,18 @@ def console_server() -> Iterator[Callable[..., str]]:
             proc.wait(timeout=5)
 
 
+@pytest.fixture
+def server() -> Iterator[object]:
+    """A viser server on a free 127.0.0.1 port, stopped after the test."""
+    import viser
+
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
 @pytest.fixture(scope="session")
 def serve_module() -> object:
     """``serve.py`` imported as a module (it is a script at the repository root)."""

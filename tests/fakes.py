@@ -6,14 +6,42 @@ from typing import Any
 
 
 class FakeClient:
-    """What operator_only, app.refuse and app.notify_all use of a viser ClientHandle."""
+    """What operator_only, app.refuse and app.notify_all use of a viser ClientHandle.
+
+    ``notes`` holds (title, body) of every notification, ``colors`` their colours.
+    """
 
     def __init__(self, cid: int) -> None:
         self.client_id = cid
         self.notes: list[tuple[str, str]] = []
+        self.colors: list[str | None] = []
 
-    def add_notification(self, title: str, body: str, **_: object) -> None:
+    def add_notification(self, title: str, body: str, **kw: object) -> None:
         self.notes.append((title, body))
+        self.colors.append(kw.get("color"))  # type: ignore[arg-type]
+
+
+class ScopedClient(FakeClient):
+    """A ClientHandle stand-in whose widgets and nodes live in the server's own scope (for the
+    per-browser replay), recording the files sent to it."""
+
+    def __init__(self, server: Any, cid: int = 99) -> None:
+        super().__init__(cid)
+        self.gui, self.scene, self.atomic = server.gui, server.scene, server.atomic
+        self.downloads: list[tuple[str, bytes]] = []
+
+    def send_file_download(self, name: str, content: bytes) -> None:
+        self.downloads.append((name, content))
+
+
+class FakeClock:
+    """A clock the test moves by hand (``clock.t += dt``); call it for the time."""
+
+    def __init__(self, t: float = 100.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
 
 
 def console_app(robot: Any, server: Any, *, soft_control: Any = None,

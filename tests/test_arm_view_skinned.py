@@ -4,7 +4,6 @@ vertex geometry at full bend (both arms), and the dead band sends nothing for su
 from __future__ import annotations
 
 import time
-from typing import Iterator
 
 import numpy as np
 import pytest
@@ -13,21 +12,12 @@ import viser
 from console.arm_view import DeadBand, DeltaArmView, PlanarArmView, make_arm_view
 from console.model import model_for
 from console.skin import TubeSkin, bspline_weights
-from console.tube import TubeTopology
 from core.robots import load
 
 SOFT = load("soft-arm")
 EXT = load("extensible")
 KMAX = 16.7  # 1/m, the soft arm's kappa_max
 
-
-@pytest.fixture
-def server() -> Iterator[viser.ViserServer]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def skinned(handle, vertices, weights, bind, poses: np.ndarray):

@@ -20,7 +20,7 @@ from viser import _messages
 from console.client_guard import GuardLimits
 from console.panels.control import ControlPanel
 from console.panels.session import SessionPanel
-from tests.fakes import FakeClient
+from fakes import FakeClient
 from tests.ws_client import RawClient, wait_for
 
 PACE = 1.0 / 80  # below the guard's 100 messages/s per client: every message is judged

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import re
 import time
-from typing import Iterator
 
 import numpy as np
 import pytest
-import viser
 
 from console.app import ConsoleApp
 from console.arm_view import DeltaArmView, PlanarArmView, make_arm_view
@@ -24,14 +22,6 @@ from core.robots import load
 SOFT = load("soft-arm")
 EXT = load("extensible")
 
-
-@pytest.fixture
-def server() -> Iterator[viser.ViserServer]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def wait_until(predicate, timeout: float = 3.0) -> None:

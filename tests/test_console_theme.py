@@ -4,11 +4,9 @@ uses exactly its colours and label."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pytest
-import viser
 
 from console.app import ConsoleApp
 from console.theme import THEME_FILE, load_theme
@@ -21,14 +19,6 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-
-@pytest.fixture
-def server() -> Iterator[viser.ViserServer]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def test_the_theme_is_the_static_file():

@@ -21,7 +21,7 @@ from core.control.trials import TrialResult
 from core.robots import load
 from hw_bridge.interface import LinkHealth
 from hw_bridge.loop import LoopSnapshot, LoopStats
-from fakes import console_app
+from fakes import FakeClient, console_app
 
 SOFT = load("soft-arm")
 
@@ -93,15 +93,6 @@ class FakeControl:
         self.closed = True
 
 
-class FakeClient:
-    def __init__(self, cid):
-        self.client_id = cid
-        self.notes = []
-
-    def add_notification(self, title, body, **kw):
-        self.notes.append((title, body, kw.get("color")))
-
-
 def fake_view(device="mock", fault=None, link_state="inactive", armed=False, stale_s=0.0,
               kappa_meas=(0.5, -1.25, 2.0, 0.0, 3.333, -16.7), phase="idle", link=True):
     n = len(kappa_meas)
@@ -160,7 +151,7 @@ def test_panel_shows_link_and_kappa_and_tells_every_browser_of_a_fault_once(fake
     assert "unconfigured" in panel.link_md.content
     for c in clients.values():
         assert len(c.notes) == 1
-        title, body, color = c.notes[0]
+        (title, body), color = c.notes[0], c.colors[0]
         assert title == "Hardware fault" and fault in body and "re-arm" in body and color == "red"
 
     ctl.view = fake_view()  # cleared (the operator re-armed) ...

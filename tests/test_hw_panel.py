@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 import pytest
@@ -139,14 +139,6 @@ def user(handle: Any, client: FakeClient, value: Any = None) -> None:
     for cb in list(handle._impl.update_cb):
         cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))  # type: ignore[arg-type]
 
-
-@pytest.fixture
-def server() -> Iterator[viser.ViserServer]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def make_panel(server: viser.ViserServer, controls: Any, kind: str | None = "emulator",

@@ -4,7 +4,6 @@ the share tunnel staying off even for a client that asks for it on the wire."""
 from __future__ import annotations
 
 import time
-from typing import Iterator
 
 import numpy as np
 import pytest
@@ -15,26 +14,11 @@ from console.app import ConsoleApp
 from console.panels.base import Panel, operator_only
 from console.panels.jog import JogPanel
 from core.robots import load
-from fakes import FakeClient
+from fakes import FakeClient, FakeClock
 
 SOFT = load("soft-arm")
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
-@pytest.fixture
-def server() -> Iterator[viser.ViserServer]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def test_only_the_right_token_gives_control_and_refusals_name_the_holder() -> None:

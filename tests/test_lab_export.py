@@ -7,7 +7,7 @@ from __future__ import annotations
 import base64
 import re
 import time
-from typing import Any, Iterator
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -24,14 +24,6 @@ from core.robots import load
 
 SOFT = load("soft-arm")
 
-
-@pytest.fixture
-def server() -> Iterator[viser.ViserServer]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield srv
-    finally:
-        srv.stop()
 
 
 def decode_embedded(html: str) -> tuple[dict[str, Any], list[bytes]]:

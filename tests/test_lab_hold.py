@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from fakes import FakeClock
 from console.hold_to_run import HoldToRun
 from console.model import model_for
 from console.state import StateStore
@@ -21,13 +22,6 @@ EXT = load("extensible")
 CAP = 0.25
 
 
-class FakeClock:
-    def __init__(self) -> None:
-        self.t = 10.0
-
-    def __call__(self) -> float:
-        return self.t
-
 
 def planar_points(q: np.ndarray) -> np.ndarray:
     """Segment ends and the gripper's far end (x, y), from the planar FK."""
@@ -38,7 +32,7 @@ def planar_points(q: np.ndarray) -> np.ndarray:
 
 
 def make(robot, allowed=lambda cid: True, heard=None):
-    clock = FakeClock()
+    clock = FakeClock(10.0)
     store = StateStore(model_for(robot))
     hold = HoldToRun(store, allowed=allowed, heard=heard, clock=clock, rate_hz=50.0)
     return store, hold, clock

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Iterator
 
 import numpy as np
 import pytest
 import viser
 
+from fakes import ScopedClient
 from console.app import ConsoleApp
 from console.recording import Recorder
 from console.replay import ReplaySession
@@ -20,21 +21,6 @@ from core.robots import load
 
 SOFT = load("soft-arm")
 
-
-class FakeClient:
-    """A ClientHandle stand-in whose widgets and nodes live in the server's own scope."""
-
-    def __init__(self, server: viser.ViserServer) -> None:
-        self.client_id = 99
-        self.gui, self.scene, self.atomic = server.gui, server.scene, server.atomic
-        self.notes: list[tuple[str, str]] = []
-        self.downloads: list[tuple[str, int]] = []
-
-    def add_notification(self, title: str, body: str, **_: Any) -> None:
-        self.notes.append((title, body))
-
-    def send_file_download(self, name: str, content: bytes) -> None:
-        self.downloads.append((name, len(content)))
 
 
 @pytest.fixture
@@ -67,7 +53,7 @@ def tip_of(session: ReplaySession) -> np.ndarray:
 @pytest.mark.parametrize("name", ["../../../etc/passwd", "/etc/passwd",
                                   "../exports/x.jsonl.gz", "missing.jsonl.gz"])
 def test_loading_refuses_names_outside_or_missing(app, name: str) -> None:
-    client = FakeClient(app.server)
+    client = ScopedClient(app.server)
     session = ReplaySession(app, client, order=50.0)  # type: ignore[arg-type]
     assert not session.load(name)
     assert session.rec is None and session.ghost is None
@@ -76,7 +62,7 @@ def test_loading_refuses_names_outside_or_missing(app, name: str) -> None:
 
 def test_seek_play_and_export_a_recording(app) -> None:
     name, qs = record(app)
-    client = FakeClient(app.server)
+    client = ScopedClient(app.server)
     session = ReplaySession(app, client, order=50.0)  # type: ignore[arg-type]
     assert name in session.files.options
     command = app.store.command
@@ -98,4 +84,5 @@ def test_seek_play_and_export_a_recording(app) -> None:
     session.export()
     exports = list(app.data.folder("exports").glob("*.html"))
     assert len(exports) == 1 and exports[0].name.startswith("replay-")
-    assert client.downloads == [(exports[0].name, exports[0].stat().st_size)]
+    assert [(name, len(content)) for name, content in client.downloads] == [
+        (exports[0].name, exports[0].stat().st_size)]

@@ -241,7 +241,8 @@ def test_control_panel_shows_a_dead_control_process_and_tells_every_browser_once
     from console.panels.control import ControlPanel
     from core.robots import load
     from fakes import console_app
-    from test_control_console import FakeClient, FakeControl, fake_view
+    from fakes import FakeClient
+    from test_control_console import FakeControl, fake_view
 
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     ctl = FakeControl()
@@ -264,7 +265,8 @@ def test_control_panel_shows_a_dead_control_process_and_tells_every_browser_once
                                                  "process was killed (SIGKILL)")
         assert panel.arm_btn.disabled and panel.execute_btn.disabled
         for c in clients.values():
-            assert [(t, col) for t, _, col in c.notes] == [("Control process died", "red")]
+            assert [(t, col) for (t, _), col in zip(c.notes, c.colors)] == [
+                ("Control process died", "red")]
     finally:
         panel.close()
         srv.stop()

@@ -11,15 +11,9 @@ from __future__ import annotations
 
 import math
 import re
-import socket
-import subprocess
-import sys
-import textwrap
 import time
-import urllib.error
-import urllib.request
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 import pytest

@@ -17,7 +17,7 @@ from console.plan_view import (TableObject, circle_segments, ghost_segments, obj
                                scene_to_json)
 from core.kinematics import planar as pk
 from core.planning.grasp import plan_grasp
-from core.planning.reachability import PLANNABLE, ReachMap, from_json, reachability_map, to_json
+from core.planning.reachability import PLANNABLE, from_json, reachability_map, to_json
 from core.robots import load
 from fakes import FakeClient
 

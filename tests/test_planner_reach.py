@@ -7,7 +7,6 @@ backbone sampling. Objects of the paper's sizes (2-5 cm diameter), arm straight 
 start).
 """
 
-import math
 
 import numpy as np
 import pytest

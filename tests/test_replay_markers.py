@@ -8,12 +8,13 @@ from __future__ import annotations
 import re
 import time
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Iterator
 
 import numpy as np
 import pytest
 import viser
 
+from fakes import ScopedClient
 from console.app import ConsoleApp
 from console.recording import Recorder
 from console.replay import ReplaySession
@@ -22,21 +23,6 @@ from test_lab_export import decode_embedded
 
 SOFT = load("soft-arm")
 
-
-class FakeClient:
-    """A ClientHandle stand-in whose widgets and nodes live in the server's own scope."""
-
-    def __init__(self, server: viser.ViserServer) -> None:
-        self.client_id = 99
-        self.gui, self.scene, self.atomic = server.gui, server.scene, server.atomic
-        self.notes: list[tuple[str, str]] = []
-        self.downloads: list[tuple[str, bytes]] = []
-
-    def add_notification(self, title: str, body: str, **_: Any) -> None:
-        self.notes.append((title, body))
-
-    def send_file_download(self, name: str, content: bytes) -> None:
-        self.downloads.append((name, content))
 
 
 @pytest.fixture
@@ -69,7 +55,7 @@ def record(app: ConsoleApp) -> tuple[str, list[np.ndarray]]:
 
 def test_markers_jump_and_show_the_recorded_configuration(app) -> None:
     name, qs = record(app)
-    client = FakeClient(app.server)
+    client = ScopedClient(app.server)
     session = ReplaySession(app, client, order=50.0)  # type: ignore[arg-type]
     assert session.prev_btn.disabled and session.next_btn.disabled
     assert session.load(name)
