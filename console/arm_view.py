@@ -213,6 +213,8 @@ class ArmView(ABC):
         self._mean_at = 0.0
         self._steadiness = Steadiness()
         self._held: Array | None = None  # the newest configuration not sent
+        self._last_q: Array | None = None  # the configuration of the previous update
+        self._sent_q: Array | None = None  # the configuration last drawn
 
     @abstractmethod
     def geometry(self, q: Array) -> Geometry:
@@ -240,7 +242,15 @@ class ArmView(ABC):
         steady = self._steadiness.update(frames, dt)
         self._mean = band.average(self._mean, frames, dt, steady)
         self._mean_at = now
+        settled = self._last_q is not None and np.array_equal(q, self._last_q)
+        self._last_q = q
         if self._sent is not None and not band.moved(self._sent, self._mean):
+            if settled and not np.array_equal(q, self._sent_q):
+                # The arm stopped exactly here (a source that keeps reporting the same state
+                # never lets the display go idle): draw where it ended, once.
+                self._mean = frames.copy()
+                self._draw(q, frames, frames)
+                return True
             self._held = q
             return False
         self._draw(q, frames, self._mean)
@@ -260,6 +270,7 @@ class ArmView(ABC):
     def _draw(self, q: Array, frames: Array, reference: Array) -> None:
         self._send(q, frames)
         self._sent = reference.copy()
+        self._sent_q = q.copy()
         self._held = None
         self.frames_sent += 1
 

@@ -135,6 +135,27 @@ def test_noise_below_the_dead_band_sends_nothing_and_a_move_above_it_sends(
     assert len(sent) > 0
 
 
+@pytest.mark.parametrize("robot, method", [(SOFT, "skinned"), (EXT, "skinned"),
+                                           (SOFT, "vertices"), (EXT, "vertices")])
+def test_an_arm_that_stops_inside_the_band_is_drawn_where_it_stopped(server, robot,
+                                                                     method) -> None:
+    """A source that keeps reporting the same state never lets the display go idle: the last
+    small step (inside the band) is drawn once the state repeats, and only once."""
+    model = model_for(robot)
+    view = make_arm_view(server.scene, model, method=method,
+                         dead_band=DeadBand(5e-4, np.deg2rad(0.5), settle_s=0.0))
+    q = np.asarray(model.zero(), dtype=float) + (0.5 if robot is SOFT else 0.01)
+    assert view.update(q)
+    step = q + (2e-3 if robot is SOFT else 5e-6)  # far less than the band moves the tip
+    assert not view.dead_band.moved(view.frames(q), view.frames(step))
+    assert view.update(step) is False  # a small step on the way: held back
+    assert view.update(step) is True  # the same state again: it stopped there, draw it
+    sent = count_scene_messages(server)
+    for _ in range(5):
+        assert view.update(step) is False  # already drawn: nothing more
+    assert sent == []
+
+
 def test_averaged_dead_band_holds_a_noisy_still_arm_and_follows_a_move(server, monkeypatch,
                                                                       ) -> None:
     """Noise that crosses the band frame by frame (the soft arm's mocap in the simulator:
