@@ -209,6 +209,12 @@ class DeltaModel(ArmModel):
         clamped = min(max(value, max(lo, blo)), min(hi, bhi))
         out[seg, axis] = clamped
         if abs(clamped - value) <= 1e-9:
+            if axis < 2 and min(bhi - clamped, clamped - blo) < coord.step:
+                # At the end of the slider's range (a browser clamps a typed number there): say
+                # that the bending limit is what stops it.
+                return out, (f"{coord.label} at {clamped * 1e3:+.0f} mm: segment {seg + 1} at "
+                             f"its bending limit θ = {math.degrees(self.robot.theta_max):.0f}° "
+                             f"(|(Δx, Δy)| ≤ {self.bend_max * 1e3:.0f} mm)")
             return out, (notes[0] if notes else None)
         if (bhi <= hi) if value > clamped else (blo >= lo):  # the bending limit binds
             return out, (f"{coord.label} clamped to {clamped * 1e3:+.0f} mm: segment {seg + 1} "

@@ -45,7 +45,11 @@ def slider(page, label: str):
 
 
 def type_value(page, label: str, value: float) -> None:
-    slider(page, label)[1].fill(f"{value:g}")
+    """Type a value and leave the field, as a person does: the browser clamps an out-of-range
+    number to the slider's range on blur (the server refuses the raw one, console.client_guard)."""
+    box = slider(page, label)[1]
+    box.fill(f"{value:g}")
+    box.press("Tab")
 
 
 def read(page, testid: str) -> float:
@@ -157,16 +161,21 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
     assert canvas_png(page) != before, "3D view did not change after jogging"
     page.screenshot(path=str(artifacts_dir / "browser_extensible_jogged.png"))
 
-    # Ask for more bending than allowed: the console applies the largest feasible dx, here at
-    # the bending limit (theta_max; the racks would allow 210 mm).
-    q[0, 0] = _boundary(robot, q, (0, 0), 0.04, 0.24)
-    assert q[0, 0] < 0.05
+    # Ask for more bending than allowed: the field stops at the largest feasible dx, here at the
+    # bending limit (theta_max; the racks would allow 210 mm). The browser clamps the typed
+    # number to the slider's range (to its 1 mm step) on blur; the server refuses the raw one.
+    boundary = _boundary(robot, q, (0, 0), 0.04, 0.24)
+    assert boundary < 0.05
     type_value(page, "Δx₁", 0.24)
+    deadline = time.monotonic() + 5.0
+    while float(slider(page, "Δx₁")[1].input_value()) == 0.04 and time.monotonic() < deadline:
+        time.sleep(0.1)  # the field clamped on blur
+    q[0, 0] = float(slider(page, "Δx₁")[1].input_value())
+    assert q[0, 0] == pytest.approx(boundary, abs=1e-3) and _feasible(robot, q)
     tip = dk.tip_position(robot, q)
     racks = _racks(robot, q)
     wait_for_readout(page, {"tip-0": tip[0] * 1e3, "tip-2": tip[2] * 1e3,
                             "rack-1-1": racks[0, 0] * 1e3})
-    assert float(slider(page, "Δx₁")[1].input_value()) == pytest.approx(q[0, 0], abs=1e-3)
     assert page.get_by_text("bending limit").count() >= 1
     # Retract segment 1 below what that bend needs: the racks stop it, flagged at their limit.
     q[0, 2] = _boundary(robot, q, (0, 2), 0.15, 0.0)  # smallest feasible dL at that bend
