@@ -32,8 +32,8 @@ from hw_bridge.config import BridgeConfig
 from hw_bridge.interface import ReturnType, SerialHardware
 from hw_bridge.mock import MockHardware
 
-ROOT = Path(__file__).resolve().parent.parent
-DATA = Path(__file__).resolve().parent / "data" / "robots"
+ROOT = Path(__file__).resolve().parents[2]
+DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
 SOFT = {"soft-4x80mm": (4, 0.08), "soft-8x50mm": (8, 0.05)}
 EXT = {"extensible-1seg": 1, "extensible-3seg": 3, "extensible-4seg": 4}
 

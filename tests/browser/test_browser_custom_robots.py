@@ -22,7 +22,7 @@ from core.robots import load
 
 pytestmark = pytest.mark.browser
 
-DATA = Path(__file__).resolve().parent.parent / "data" / "robots"
+DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
 
 
 def test_four_segment_soft_arm_grasps_and_places_from_the_browser(

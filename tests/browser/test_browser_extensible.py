@@ -32,7 +32,7 @@ from core.planning.paths import build_path
 from core.robots import load
 
 pytestmark = pytest.mark.browser
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 ROBOT = load("extensible")
 READOUT_MM = 0.051  # the readout shows 0.1 mm
 @pytest.fixture
@@ -151,7 +151,7 @@ def test_path_preview_and_execute_on_mock_hardware(
 def emulator_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[str]:
     """``serve.py --robot <extensible>`` with its default hardware (no ``--hardware``): the
     device emulator on a pty. The robot file is the shipped one with 0.5 s link timeout and
-    watchdog (like tests/test_extensible_runner.py): the loop shares its process with the GUI
+    watchdog (like tests/hw_bridge/test_extensible_runner.py): the loop shares its process with the GUI
     and this 2-core box with other jobs, so the shipped 40 / 50 ms would turn a CPU stall into
     a (correct) link-loss stop; this test is about motion, not timing."""
     text = (REPO / "data" / "robots" / "extensible.toml").read_text()

@@ -26,7 +26,7 @@ from core.labdata.channels import CHANNELS
 from core.robots import load
 
 SOFT = load("soft-arm")
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 SUBPROTOCOL = "foxglove.websocket.v1"
 
 

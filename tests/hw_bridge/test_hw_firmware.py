@@ -17,7 +17,7 @@ import pytest
 
 from hw_bridge import protocol as p
 
-FW = Path(__file__).resolve().parent.parent / "firmware" / "arduino_due"
+FW = Path(__file__).resolve().parents[2] / "firmware" / "arduino_due"
 VECTORS = json.loads((FW / "test" / "vectors.json").read_text())
 
 

@@ -29,7 +29,7 @@ from hw_bridge.interface import SerialHardware
 from hw_bridge.mock import MockHardware
 from hw_bridge.transport import SerialTransport
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 ROBOT = load("extensible")
 N = ROBOT.n_segments
 Q0 = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.03]])  # a little extended: short approach

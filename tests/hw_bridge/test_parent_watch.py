@@ -16,7 +16,7 @@ import pytest
 
 from hw_bridge.parent_watch import exit_reason
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux prctl/proc")
 
 HOST = textwrap.dedent("""

@@ -21,7 +21,7 @@ L = ARM.lengths
 G = ARM.gripper
 KMAX = ARM.kappa_max
 TOL = ARM.constraint_tolerance          # 2e-3, the paper's
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 STRAIGHT = np.zeros(6)
 
 # Left-quadrant objects of the paper's sizes (2-5 cm diameter), arm straight.

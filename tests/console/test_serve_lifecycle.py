@@ -15,7 +15,7 @@ from pathlib import Path
 from console.serve_lifecycle import port_in_use
 from test_no_orphans import descendants, free_port, start_console, survivors
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_port_in_use_names_the_port():

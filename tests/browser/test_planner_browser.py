@@ -22,7 +22,7 @@ from core.planning.grasp import plan_grasp
 from core.robots import load
 
 pytestmark = pytest.mark.browser
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 ROBOT = load("soft-arm")
 @pytest.fixture
 def grasp_console(console_server: Callable[..., str]) -> Callable[[], str]:

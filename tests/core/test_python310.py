@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SOURCES = ["core", "console", "hw_bridge", "serve.py"]
 
 #: stdlib modules that do not exist on 3.10.

@@ -12,7 +12,7 @@ from console.app import ConsoleApp
 from console.theme import THEME_FILE, load_theme
 from core.robots import load
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 
 try:
     import tomllib

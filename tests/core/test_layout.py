@@ -18,7 +18,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("core", "console", "hw_bridge")
 
 # Never imported by anything under core/ (pure numpy/scipy: no GUI, no hardware, no I/O threads).
