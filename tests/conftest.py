@@ -85,7 +85,7 @@ def console_server() -> Iterator[Callable[..., str]]:
 
     def start(robot: str, *extra: str) -> str:
         port = _free_port()
-        log = REPO / "artifacts" / f"serve-{robot}-{port}.log"  # one per server: post-mortems
+        log = REPO / "artifacts" / f"serve-{Path(robot).stem}-{port}.log"  # one per server
         log.parent.mkdir(exist_ok=True)
         out = log.open("wb")
         proc = subprocess.Popen(
