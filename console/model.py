@@ -80,6 +80,11 @@ class ArmModel(ABC):
     def clamp(self, q: Array) -> tuple[Array, tuple[str, ...]]:
         """Nearest-in-spirit configuration within the limits, and a note per clamp."""
 
+    def limit_note(self, q: Array, coord: Coordinate) -> str | None:
+        """What stops ``coord`` at ``q`` when it sits within one slider step of a limit that its
+        slider's range ends at (a browser clamps a typed number to that range end), else None."""
+        return None
+
     @abstractmethod
     def set_coordinate(self, q: Array, coord: Coordinate, value: float) -> tuple[Array, str | None]:
         """``q`` with one coordinate set to ``value``, clamped so ``q`` stays within limits.
@@ -201,6 +206,18 @@ class DeltaModel(ArmModel):
         half = math.sqrt(max(self.bend_max ** 2 - other ** 2, 0.0)) * (1 - 1e-12)
         return -half, half
 
+    def limit_note(self, q: Array, coord: Coordinate) -> str | None:
+        seg, axis = coord.index
+        if axis == 2:
+            return None
+        blo, bhi = self.bend_interval(q, seg, axis)
+        value = float(q[seg, axis])
+        if min(bhi - value, value - blo) >= coord.step:
+            return None
+        return (f"{coord.label} at {value * 1e3:+.0f} mm: segment {seg + 1} at its bending limit "
+                f"θ = {math.degrees(self.robot.theta_max):.0f}° "
+                f"(|(Δx, Δy)| ≤ {self.bend_max * 1e3:.0f} mm)")
+
     def set_coordinate(self, q: Array, coord: Coordinate, value: float) -> tuple[Array, str | None]:
         seg, axis = coord.index
         out, notes = self.clamp(q)  # the rest of q must be feasible for the interval to exist
@@ -209,12 +226,6 @@ class DeltaModel(ArmModel):
         clamped = min(max(value, max(lo, blo)), min(hi, bhi))
         out[seg, axis] = clamped
         if abs(clamped - value) <= 1e-9:
-            if axis < 2 and min(bhi - clamped, clamped - blo) < coord.step:
-                # At the end of the slider's range (a browser clamps a typed number there): say
-                # that the bending limit is what stops it.
-                return out, (f"{coord.label} at {clamped * 1e3:+.0f} mm: segment {seg + 1} at "
-                             f"its bending limit θ = {math.degrees(self.robot.theta_max):.0f}° "
-                             f"(|(Δx, Δy)| ≤ {self.bend_max * 1e3:.0f} mm)")
             return out, (notes[0] if notes else None)
         if (bhi <= hi) if value > clamped else (blo >= lo):  # the bending limit binds
             return out, (f"{coord.label} clamped to {clamped * 1e3:+.0f} mm: segment {seg + 1} "

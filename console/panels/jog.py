@@ -104,6 +104,7 @@ class JogPanel(Panel):
         # newest slider value, whatever order the thread pool ran them in.
         with self._target_lock:
             target, note = model.set_coordinate(self._base(), coord, float(handle.value))
+            note = note or model.limit_note(target, coord)
             self.app.hold.move_to(event.client.client_id, target)
         applied = float(target[coord.index])
         if abs(applied - float(handle.value)) > 1e-9:
