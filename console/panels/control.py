@@ -218,6 +218,7 @@ class ControlPanel(Panel):
         self._plot_at = 0.0
         self._plotted: tuple[np.ndarray, np.ndarray] | None = None
         self._plotted_at = 0.0
+        self._table_at = 0.0
         self._loop_plot_at = 0.0
         self._counters_at = 0.0
         self._link_key: Any = None
@@ -468,20 +469,26 @@ class ControlPanel(Panel):
         ref = np.array([h[1] for h in hist])
         meas = np.array([h[2] for h in hist])
         now = time.monotonic()
+        if now - self._table_at >= 1.0 / KAPPA_PLOT_HZ:
+            # The κ table is a few hundred bytes: it follows the measurement at 2 Hz (only the
+            # plot waits for a move beyond the noise), so what it shows is never seconds old.
+            self._table_at = now
+            table = kappa_html(self.ctl.view) if self.ctl.view else ""
+            if table != self.kappa_md.content:
+                self.kappa_md.content = table
         if now - self._plotted_at >= 1.0 / KAPPA_PLOT_HZ and self._plot_moved(
                 ref[-1], meas[-1], now):
             cols: list[np.ndarray] = [t]
             for i in range(ref.shape[1]):
                 cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
             self.kappa_plot.data = thin(cols, KAPPA_PLOT_POINTS)
-            self.kappa_md.content = kappa_html(self.ctl.view) if self.ctl.view else ""
         if now - self._loop_plot_at >= 1.0 / LOOP_PLOT_HZ:
             self._loop_plot_at = now
             self.loop_plot.data = thin((t, np.array([h[3] for h in hist]),
                                         np.array([h[4] for h in hist])))
 
     def _plot_moved(self, ref: np.ndarray, meas: np.ndarray, now: float) -> bool:
-        """Whether the curvatures moved enough to redraw the plot and table: a target moved
+        """Whether the curvatures moved enough to redraw the plot: a target moved
         by PLOT_BAND, a measurement by MEAS_BAND (beyond mocap noise), or STILL_PLOT_S passed.
         A still arm's noise then costs a redraw every STILL_PLOT_S, not PLOT_HZ of them."""
         last = self._plotted
