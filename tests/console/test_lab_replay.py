@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pytest
 import viser
 
-from fakes import ScopedClient
+from fakes import ScopedClient, console_app
 from console.app import ConsoleApp
 from console.recording import Recorder
 from console.replay import ReplaySession
@@ -24,12 +23,8 @@ SOFT = load("soft-arm")
 
 
 @pytest.fixture
-def app(tmp_path: Path) -> Iterator[ConsoleApp]:
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield ConsoleApp(SOFT, srv, data_dir=tmp_path / "runs")
-    finally:
-        srv.stop()
+def app(server: viser.ViserServer, tmp_path: Path) -> ConsoleApp:
+    return console_app(SOFT, server, data_dir=tmp_path / "runs")  # (conftest's server)
 
 
 def record(app: ConsoleApp) -> tuple[str, list[np.ndarray]]:
