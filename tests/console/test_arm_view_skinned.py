@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 import viser
 
-from console.arm_view import DeadBand, DeltaArmView, PlanarArmView, make_arm_view
+from console.arm_view import DeltaArmView, PlanarArmView, make_arm_view
+from console.dead_band import DeadBand
 from console.model import model_for
 from console.skin import TubeSkin, bspline_weights
 from core.robots import load
