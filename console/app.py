@@ -54,6 +54,7 @@ from console.arm_view import ArmView, make_arm_view
 from console.client_guard import ClientGuard
 from console.client_guard import install as _install_client_guard
 from console.datadir import DataDir
+from console.header import ConsoleHeader
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
 from console.model import ArmModel, model_for
@@ -63,6 +64,7 @@ from console.panels.readout import ReadoutPanel
 from console.recording import Recorder
 from console.services import ConsoleServices
 from console.state import ArmState, StateStore
+from console.tabs import ConsoleTabs
 from console.theme import load_theme
 from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
@@ -149,6 +151,8 @@ class ConsoleApp:
         server.on_client_connect(self.access.grant_if_free)
 
         self._setup_theme(status)
+        self.header = ConsoleHeader(self)  # STOP, control, phase, link: above every tab
+        self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
         self._setup_table()
         self._setup_lights()
         self.view: ArmView = make_arm_view(server.scene, self.model)
@@ -364,7 +368,7 @@ class ConsoleApp:
         gui.configure_theme(show_share_button=False, show_logo=False,
                             brand_color=theme.brand_color, control_width=theme.control_width)
         gui.set_panel_label(theme.label_for(self.robot.name))
-        self.status = gui.add_markdown(f"<small>{status}</small>", order=0.0)
+        self.status = gui.add_markdown(f"<small>{status}</small>", order=0.3)
 
     def _span(self) -> float:
         """Largest distance of any arm point from the base (straight, fully extended)."""

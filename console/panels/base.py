@@ -1,7 +1,8 @@
 """The panel contract: one class per GUI panel, owning its handles, composed by ConsoleApp.
 
-A panel subclasses :class:`Panel`, sets ``title`` / ``order`` (smaller is higher in the control
-panel) and, if it only makes sense for one robot, ``kinds``; builds its widgets in
+A panel subclasses :class:`Panel`, sets ``title``, ``tab`` (its task's tab: ``Operate``,
+``Hardware``, ``Experiments`` or ``Session``, see ``console.tabs``), ``order`` (smaller is higher
+in its tab) and, if it only makes sense for one robot, ``kinds``; builds its widgets in
 :meth:`Panel.build` (called inside the panel's own folder, so ``self.gui.add_*`` lands there) and
 keeps the handles as attributes. Rules:
 
@@ -60,6 +61,7 @@ class Panel:
     """Base class of console panels (see the module docstring for the contract)."""
 
     title: ClassVar[str] = "Panel"
+    tab: ClassVar[str] = "Operate"  # one of console.tabs.TAB_ORDER
     order: ClassVar[float] = 100.0
     kinds: ClassVar[tuple[str, ...]] = ("planar", "delta")
     expand_by_default: ClassVar[bool] = True
@@ -67,8 +69,9 @@ class Panel:
     def __init__(self, app: ConsoleApp) -> None:
         self.app = app
         self.gui = app.server.gui
-        self.folder = self.gui.add_folder(self.title, order=self.order,
-                                          expand_by_default=self.expand_by_default)
+        with app.tabs.tab(self.tab):
+            self.folder = self.gui.add_folder(self.title, order=self.order,
+                                              expand_by_default=self.expand_by_default)
         with self.folder:
             self.build()
         self.after_build()

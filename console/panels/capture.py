@@ -44,6 +44,7 @@ class CapturePanel(Panel):
     """Capture-region characterisation with progress and the Fig. 6 drawing."""
 
     title = "Capture region"
+    tab = "Experiments"
     order = 55.0
     kinds = ("planar",)
     expand_by_default = False

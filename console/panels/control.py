@@ -32,6 +32,7 @@ import numpy as np
 import viser
 from viser import uplot
 
+from console.header import Tone
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
 from console.panels.plot_data import thin
@@ -98,6 +99,29 @@ def state_html(view: ControlView) -> str:
             f" · gripper {'closed' if c.gripper_closed else 'open'}{stale}{why}</div>")
 
 
+def header_phase(view: ControlView) -> tuple[str, Tone | None]:
+    """The header's phase field: the state machine's phase, waypoint and arming."""
+    c = view.snapshot.control
+    if c is None:
+        return "–", None
+    wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
+    tone: Tone = "busy" if c.phase not in IDLE_PHASES + ("settling",) else "ok"
+    return f"{c.phase}{wp} · {'ARMED' if c.armed else 'disarmed'}", tone
+
+
+def header_link(view: ControlView) -> tuple[str, Tone | None]:
+    """The header's link field: device and lifecycle state, or the fault in red."""
+    name = DEVICE_NAMES.get(view.device, view.device)
+    if view.fault:
+        return f"{name} · {view.fault}", "fault"
+    h = view.link
+    if view.device == "sim" and (h is None or h.port == "sim://"):
+        return f"{name} (no serial link)", "ok"
+    if h is None:
+        return f"{name} · starting…", "busy"
+    return f"{name} · {h.state}", "ok" if h.state == "active" else "warn"
+
+
 def fault_markdown(fault: str | None) -> str:
     """The hardware fault in bold, with what the operator must do (empty without one)."""
     if not fault:
@@ -160,7 +184,6 @@ class ControlPanel(Panel):
         self.link_md = gui.add_markdown("<small>link: –</small>")
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
-        self.stop_btn = gui.add_button("STOP arm", color="red", icon=viser.Icon.HAND_STOP)
         self.obj_x = gui.add_number("Object x (m)", -0.16, step=0.005)
         self.obj_y = gui.add_number("Object y (m)", 0.28, step=0.005)
         self.obj_r = gui.add_number("Object r (m)", r0, min=0.005, max=0.05, step=0.0005)
@@ -203,8 +226,6 @@ class ControlPanel(Panel):
                                             action="arm the arm"))
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
                                                action="disarm the arm"))
-        self.stop_btn.on_click(self._on_stop)  # STOP: any client
-        self.allow_viewers(self.stop_btn)
         self.place_btn.on_click(operator_only(lambda e: self._place(e), panel=self,
                                               action="place the object"))
         self.execute_btn.on_click(operator_only(lambda e: self._execute(e), panel=self,
@@ -289,10 +310,6 @@ class ControlPanel(Panel):
         self._stopped = False
         fut = self.ctl.execute(out.plan, out.obj.x, out.obj.y, out.obj.r)
         fut.add_done_callback(lambda f: self._report(event, f))
-
-    def _on_stop(self, event: Any) -> None:
-        client = getattr(event, "client", None)
-        self.app.stop_motion("STOP pressed in the Control panel", client)
 
     def _stop_hook(self, reason: str) -> None:
         self._stopped = True  # no forwarded jog may undo a STOP (race with the view)
@@ -416,6 +433,8 @@ class ControlPanel(Panel):
             return
         c = view.snapshot.control
         self.state_md.content = state_html(view)
+        self.app.header.show("phase", *header_phase(view))
+        self.app.header.show("link", *header_link(view))
         if c is not None:
             busy = c.phase not in IDLE_PHASES + ("settling",)
             self.execute_btn.disabled = self.plan_btn.disabled = busy

@@ -29,6 +29,7 @@ import numpy as np
 import viser
 from viser import uplot
 
+from console.header import Tone
 from console.lab_feed import LinkFeed
 from console.panels.base import Panel, operator_only
 from console.panels.plot_data import thin
@@ -66,6 +67,17 @@ def format_health(h: LinkHealth | None) -> str:
     if h.fault:
         lines.append(f"**Fault:** {h.fault}")
     return "  \n".join(lines)
+
+
+def header_link(kind: str | None, h: LinkHealth | None) -> tuple[str, Tone | None]:
+    """The header's link field for the extensible arm: device, state, arming, or the fault."""
+    name = kind or "no hardware"
+    if h is None:
+        return f"{name} · not connected", None
+    if h.fault:
+        return f"{name} · {h.fault}", "fault"
+    armed = "ARMED" if h.armed else "disarmed"
+    return f"{name} · {h.state} · {armed}", "ok" if h.state == "active" else "warn"
 
 
 def no_controls_text(kind: str | None, owner: str = "Control") -> str:
@@ -108,6 +120,7 @@ class HardwarePanel(Panel):
     """Port picker, baud, Connect/Disconnect, Arm/Disarm device, link readout, round-trip plot."""
 
     title = "Hardware"
+    tab = "Hardware"
     order = 50.0
 
     def build(self) -> None:
@@ -274,6 +287,8 @@ class HardwarePanel(Panel):
             for handle in self._inputs:
                 handle.disabled = ctl is None
             state = h.state if h is not None else "unconfigured"
+            if self.app.robot.kind == "delta":  # the soft arm's Control panel tells its link
+                self.app.header.show("link", *header_link(self.kind, h))
             self.connect_btn.disabled = ctl is None
             self.disconnect_btn.disabled = ctl is None or state == "unconfigured"
             self.arm_btn.disabled = ctl is None or state != "inactive"

@@ -45,7 +45,7 @@ class JogPanel(Panel):
     """Hold-to-run buttons, set-point sliders for every coordinate, straighten / retract."""
 
     title = "Jog"
-    order = 10.0
+    order = 20.0
 
     def build(self) -> None:
         model = self.app.model

@@ -30,7 +30,7 @@ class ObjectsPanel(Panel):
     """Table objects: click / type / drag, remove, save and load."""
 
     title = "Objects"
-    order = 30.0
+    order = 5.0
     kinds = ("planar",)
 
     def build(self) -> None:

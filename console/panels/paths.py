@@ -94,7 +94,7 @@ class PathsPanel(Panel):
     """Path choice, preview, execute / stop, progress and tip-error plot."""
 
     title = "Paths"
-    order = 30.0
+    order = 10.0
     kinds = ("delta",)
 
     def build(self) -> None:

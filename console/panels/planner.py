@@ -30,7 +30,7 @@ class PlannerPanel(Panel):
     """Plan the selected object's grasp; settings; the outcome in plain words."""
 
     title = "Grasp planner"
-    order = 31.0
+    order = 6.0
     kinds = ("planar",)
 
     def build(self) -> None:

@@ -115,7 +115,7 @@ class ReadoutPanel(Panel):
     """Tip pose and rack lengths of the displayed configuration."""
 
     title = "Readout"
-    order = 20.0
+    order = 25.0
 
     def build(self) -> None:
         self.html = self.gui.add_html(self._render(self.app.store.display))

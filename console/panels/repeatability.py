@@ -121,6 +121,7 @@ class RepeatabilityPanel(Panel):
     """Point, repetitions, run / stop, progress and the per-axis spread."""
 
     title = "Repeatability"
+    tab = "Experiments"
     order = 40.0
     kinds = ("delta",)
     expand_by_default = False

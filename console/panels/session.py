@@ -1,8 +1,8 @@
-"""Session panel: who holds control, take/release it, STOP for everyone, record, replay, export.
+"""Session panel: take/release control, record, replay, export (STOP is the header's).
 
-Shared widgets (every browser sees the same): STOP (always enabled, for viewers too, also the
-``Escape`` hotkey through viser's command palette), the control/connection status, recording
-start/stop (operator only) and "Export scene (HTML)" (anyone: a plan to hand to students).
+Shared widgets (every browser sees the same): who holds control (shown in the header,
+``console.header``), recording start/stop (operator only) and "Export scene (HTML)" (anyone: a
+plan to hand to students).
 
 Per-browser widgets (``client.gui``, added on connect inside this panel's folder, so what one
 browser types is never shown to another -- the operator token least of all): the user's role,
@@ -26,7 +26,6 @@ from console.panels.base import Panel, operator_only
 from console.replay import ReplayPlayer, ReplaySession
 
 log = logging.getLogger(__name__)
-STOP_HOTKEY = "escape"
 
 
 class _ClientWidgets:
@@ -40,6 +39,7 @@ class SessionPanel(Panel):
     """Control lock, STOP, recording, replay and export (see the module docstring)."""
 
     title = "Session"
+    tab = "Session"
     order = 1.0
 
     def build(self) -> None:
@@ -51,14 +51,6 @@ class SessionPanel(Panel):
         self._ready = threading.Event()  # set once build() has left the folder's `with` block
         self.clients: dict[int, _ClientWidgets] = {}
         self.player = ReplayPlayer()
-        self.stop_btn = gui.add_button("STOP", color="red", icon=viser.Icon.HAND_STOP,
-                                       hint="Stops the arm. Works for everyone (hotkey: Esc).",
-                                       order=0.0)
-        self.stop_btn.on_click(self._on_stop)
-        self.stop_cmd = gui.add_command("STOP the arm", description="Stops all motion",
-                                        hotkey=STOP_HOTKEY)
-        self.stop_cmd.on_trigger(self._on_stop)
-        self.status = gui.add_html("", order=1.0)
         self.demo_btn = None
         if self.app.services.demo is not None:
             self.demo_btn = gui.add_button("Run demo motion", order=20.0,
@@ -71,7 +63,7 @@ class SessionPanel(Panel):
         self.export_btn = gui.add_button("Export scene (HTML)", order=40.0,
                                          hint="The 3D scene as one file that opens offline.")
         self.export_btn.on_click(self._on_export_scene)
-        self.allow_viewers(self.stop_btn, self.stop_cmd, self.export_btn)  # the rest: operator
+        self.allow_viewers(self.export_btn)  # STOP is the header's; the rest: operator
         self.app.access.add_listener(self._on_control_change)
         self.app.server.on_client_connect(self._on_connect)
         self.app.server.on_client_disconnect(self._on_disconnect)
@@ -153,12 +145,6 @@ class SessionPanel(Panel):
 
     # -- shared actions ----------------------------------------------------------------------
 
-    def _on_stop(self, event: Any) -> None:
-        client = event.client
-        who = self.app.access.name_of(client)
-        self.app.stop_motion(f"STOP pressed by {who}", client)
-        self.app.notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)
-
     @operator_only(action="run the demo motion")
     def _on_demo(self, event: viser.GuiEvent) -> None:
         self.app.recorder.action("started the demo motion", event.client)
@@ -204,17 +190,17 @@ class SessionPanel(Panel):
         with self._lock:
             clients = dict(self.clients)
         if holder is None:
-            who = "nobody — take control below"
+            who = "nobody — take control in the Session tab"
         else:
             since = time.strftime("%H:%M:%S", time.localtime(holder.since))
             who = f"{html.escape(holder.name)} (since {since})"
         rec = self.app.recorder
         recording = (f' · <span data-testid="recording">● recording {rec.path.name}</span>'
                      if rec.recording and rec.path is not None else "")
-        self.status.content = (
-            f'<div data-testid="control-status"><b>Control:</b> '
-            f'<span data-testid="holder">{who}</span> · {len(clients)} browser'
-            f'{"s" if len(clients) != 1 else ""}{recording}</div>')
+        self.app.header.show(
+            "control", f'<span data-testid="control-status"><span data-testid="holder">{who}'
+            f'</span> · {len(clients)} browser{"s" if len(clients) != 1 else ""}{recording}'
+            "</span>", escape=False)
         connected = self.app.server.get_clients()
         for cid, w in clients.items():
             if cid not in connected:

@@ -96,7 +96,7 @@ class TargetPanel(Panel):
     """Gizmo and typed tip target, solved by the tip IK within the rack and bending limits."""
 
     title = "Tip target"
-    order = 12.0
+    order = 5.0
     kinds = ("delta",)
 
     def build(self) -> None:

@@ -43,6 +43,7 @@ class TrialsPanel(Panel):
     """Batch of headless grasp-and-place trials with a progress bar and a results table."""
 
     title = "Trials"
+    tab = "Experiments"
     order = 60.0
     kinds = ("planar",)
     expand_by_default = False

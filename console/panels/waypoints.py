@@ -52,7 +52,7 @@ class WaypointsPanel(Panel):
     """Inspect the plan's waypoints one by one."""
 
     title = "Waypoints"
-    order = 32.0
+    order = 7.0
     kinds = ("planar",)
 
     def build(self) -> None:

@@ -10,6 +10,7 @@ from typing import Any, Callable, Iterator
 import pytest
 
 from core.robots import load
+from browser_tabs import open_tab
 
 SOFT = load("soft-arm")
 
@@ -30,7 +31,7 @@ class Lab:
         page = context.new_page()
         n = len(self.server.get_clients())
         page.goto(self.url)
-        page.get_by_text("Session", exact=True).wait_for(timeout=20_000)
+        open_tab(page, "Session")  # the per-browser role line and Take control live there
         page.locator('[data-testid="role"]').wait_for(timeout=10_000)
         wait_for(lambda: len(self.server.get_clients()) > n)
         notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
@@ -66,8 +67,8 @@ def field(page: Any, label: str) -> Any:
 
 
 def stop_button(page: Any) -> Any:
-    """The Session panel's STOP (the first; the Control panel has one too)."""
-    return page.get_by_role("button", name="STOP", exact=True).first
+    """The header's STOP (above every tab)."""
+    return page.get_by_role("button", name="STOP (Esc)").first
 
 
 def notifications(page: Any) -> list[str]:

@@ -2,7 +2,7 @@
 
 Chromium places an object at one of the paper's spots (core.control.trials.paper_locations),
 presses *Execute grasp-and-place* and reads the state machine's phase from the Control panel
-until it shows "released". Then it starts the grasp again, presses *STOP arm* while the arm is
+until it shows "released". Then it starts the grasp again, presses *STOP* while the arm is
 on its way, and reads the panel: the phase must become "stopped" and the measured curvatures
 (the panel's numbers) and the tip readout must stop changing, while over the same time before
 STOP they changed (so the hold check can fail). A screenshot of the Control panel mid-run goes to
@@ -208,7 +208,7 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
     assert phase(page) in RUNNING, state_text(page)
     moved = np.linalg.norm(tip1 - tip0)
     assert moved > TIP_MOVING_MM, f"the tip barely moved before STOP ({moved:.1f} mm)"
-    page.get_by_role("button", name="STOP arm").click()
+    page.get_by_role("button", name="STOP (Esc)").click()
     wait_phase(page, ("stopped",), timeout=5.0)
     assert "STOP pressed in the Control panel" in state_text(page)
     time.sleep(0.5)  # the soft segments settle on their held cylinder volumes (tau 0.25 s)

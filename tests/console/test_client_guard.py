@@ -24,7 +24,7 @@ from fakes import FakeClient
 from tests.ws_client import RawClient, wait_for
 
 PACE = 1.0 / 80  # below the guard's 100 messages/s per client: every message is judged
-VIEWER_ALLOWED = {"STOP", "STOP arm", "Stop (hold)", "Save scene", "Export scene (HTML)"}
+VIEWER_ALLOWED = {"STOP  (Esc)", "Stop (hold)", "Save scene", "Export scene (HTML)"}
 
 
 @pytest.fixture(scope="module", params=["soft-arm", "extensible"])
@@ -221,7 +221,7 @@ def test_non_value_keys_and_bad_values_are_refused_for_every_widget(console: tup
     assert late.alive() and late.frames > 0
     late.close()
     # STOP still works, from the viewer.
-    stop = next(h for h in shared.values() if getattr(h._impl.props, "label", None) == "STOP")
+    stop = next(h for h in shared.values() if getattr(h._impl.props, "label", None) == "STOP  (Esc)")
     viewer.update(stop._impl.uuid, value=True)
     wait_for(lambda: app.stops == stops0 + 1, what="STOP ran")
 
@@ -236,7 +236,7 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
     shared = _inputs(server)
     allowed = {getattr(h._impl.props, "label", None) for h in shared.values()
                if app.guard.viewer_allowed(h)}
-    assert allowed <= VIEWER_ALLOWED and "STOP" in allowed
+    assert allowed <= VIEWER_ALLOWED and "STOP  (Esc)" in allowed
     targets = {u: h for u, h in shared.items()
                if not app.guard.viewer_allowed(h) and _other_valid(h) is not None
                and not getattr(h._impl.props, "disabled", False)}

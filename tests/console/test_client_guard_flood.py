@@ -65,7 +65,7 @@ def _close_code(client: RawClient) -> int | None:
 
 
 def _stop_uuid(app: ConsoleApp) -> str:
-    return app.panel(SessionPanel).stop_btn._impl.uuid
+    return app.header.stop_btn._impl.uuid
 
 
 @pytest.mark.parametrize("burst", ["10000 STOP clicks", "5000 camera messages"])
@@ -162,7 +162,7 @@ def test_unknown_ids_and_message_types_are_dropped(lab: tuple) -> None:
     server, app, token = lab
     watcher, viewer = RawClient(server), RawClient(server)
     _ready(app, watcher, viewer)
-    stop = app.panel(SessionPanel).stop_btn
+    stop = app.header.stop_btn
     bad = [
         _messages.GuiRemoveMessage(stop._impl.uuid),
         _messages.ShareUrlRequest(),
@@ -187,7 +187,7 @@ def test_unknown_ids_and_message_types_are_dropped(lab: tuple) -> None:
     viewer.update(stop._impl.uuid, value=True)
     wait_for(lambda: app.stops == 1, what="STOP")
     time.sleep(0.2)
-    viewer.send(_messages.CommandTriggerMessage(app.panel(SessionPanel).stop_cmd._impl.uuid))
+    viewer.send(_messages.CommandTriggerMessage(app.header.stop_cmd._impl.uuid))
     wait_for(lambda: app.stops == 2, what="STOP from the command palette (Esc)")
 
 

@@ -1,0 +1,93 @@
+"""The console's always-visible header: the one STOP, who holds control, the phase, the link.
+
+It sits above the tabs (``console.tabs``), so on a desktop, a tablet (820x1180) or a phone
+(390x844) STOP and the arm's phase are on screen without scrolling, whichever tab is open.
+STOP works for everyone (viewers too, also the ``Esc`` hotkey through viser's command palette).
+
+Panels own what the fields say and push it here with :meth:`ConsoleHeader.show`::
+
+    app.header.show("phase", "moving · waypoint 3/8", tone="busy")
+    app.header.show("link", "emulator · active · ARMED")
+
+Fields are shown in :data:`FIELDS` order; an empty text hides a field. ``tone`` colours the
+field's text (``ok``, ``busy``, ``warn``, ``fault`` or ``None`` for plain).
+"""
+
+from __future__ import annotations
+
+import html
+import threading
+from typing import TYPE_CHECKING, Any, Literal
+
+import viser
+
+if TYPE_CHECKING:
+    from console.app import ConsoleApp
+
+STOP_HOTKEY = "escape"
+FIELDS: tuple[str, ...] = ("control", "phase", "link")
+LABELS = {"control": "Control", "phase": "Phase", "link": "Link"}
+Tone = Literal["ok", "busy", "warn", "fault"]
+TONE_COLORS: dict[str, str] = {"ok": "#2b8a3e", "busy": "#1c7ed6", "warn": "#e67700",
+                               "fault": "#c92a2a"}
+
+
+class ConsoleHeader:
+    """STOP and the status fields above the tabs (see the module docstring).
+
+    Args:
+        app: The console; STOP calls ``app.stop_motion`` and tells every browser who pressed it.
+    """
+
+    def __init__(self, app: ConsoleApp) -> None:
+        self.app = app
+        gui = app.server.gui
+        self._lock = threading.Lock()
+        self._fields: dict[str, tuple[str, str | None]] = {}
+        self._shown = ""
+        self.stop_btn = gui.add_button("STOP  (Esc)", color="red", icon=viser.Icon.HAND_STOP,
+                                       hint="Stops the arm. Works for everyone (hotkey: Esc).",
+                                       order=0.1)
+        self.stop_btn.on_click(self._on_stop)
+        self.stop_cmd = gui.add_command("STOP the arm", description="Stops all motion",
+                                        hotkey=STOP_HOTKEY)
+        self.stop_cmd.on_trigger(self._on_stop)
+        self.status = gui.add_html(self._render(), order=0.2)
+        app.guard.allow_viewers(self.stop_btn, self.stop_cmd)
+
+    def show(self, field: str, text: str, tone: Tone | None = None, *,
+             escape: bool = True) -> None:
+        """Set one field's text (empty hides it); sends only when the header changes."""
+        if field not in FIELDS:
+            raise ValueError(f"unknown header field {field!r}; fields: {', '.join(FIELDS)}")
+        body = html.escape(text) if escape else text
+        with self._lock:
+            self._fields[field] = (body, tone)
+            page = self._render()
+            if page == self._shown or self.app.stopped:
+                return
+            self._shown = page
+        self.status.content = page
+
+    def text(self, field: str) -> str:
+        """The field's current text as HTML (empty when unset)."""
+        with self._lock:
+            return self._fields.get(field, ("", None))[0]
+
+    def _render(self) -> str:
+        parts = []
+        for field in FIELDS:
+            body, tone = self._fields.get(field, ("", None))
+            if not body:
+                continue
+            style = f' style="color:{TONE_COLORS[tone]}"' if tone in TONE_COLORS else ""
+            parts.append(f'<span data-testid="header-{field}"><b>{LABELS[field]}:</b> '
+                         f'<span{style}>{body}</span></span>')
+        return ('<div data-testid="console-header" style="font-size:0.85em;line-height:1.45;padding:0 0.75em">'
+                + "<br>".join(parts) + "</div>")
+
+    def _on_stop(self, event: Any) -> None:
+        client = getattr(event, "client", None)
+        who = self.app.access.name_of(client)
+        self.app.stop_motion(f"STOP pressed by {who}", client)
+        self.app.notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)

@@ -1,0 +1,18 @@
+"""Browser-test helper: the console's panels live in tabs (``console.tabs``); a widget is in
+the page only while its tab is open."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def open_tab(page: Any, name: str, timeout_ms: float = 20_000) -> None:
+    """Click the tab ``name`` (Operate, Hardware, Experiments, Session) and wait until it shows."""
+    tab = page.get_by_role("tab", name=name, exact=True)
+    tab.wait_for(timeout=timeout_ms)
+    if tab.get_attribute("aria-selected") != "true":
+        tab.click()
+    page.wait_for_function(
+        "n => [...document.querySelectorAll('[role=tab]')].some("
+        "t => t.textContent.trim() === n && t.getAttribute('aria-selected') === 'true')",
+        arg=name, timeout=timeout_ms)
