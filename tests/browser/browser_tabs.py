@@ -3,13 +3,20 @@ the page only while its tab is open."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
+ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
 
-def open_tab(page: Any, name: str, timeout_ms: float = 20_000) -> None:
+
+def open_tab(page: Any, name: str, timeout_ms: float = 60_000) -> None:
     """Click the tab ``name`` (Operate, Hardware, Experiments, Session) and wait until it shows."""
     tab = page.get_by_role("tab", name=name, exact=True)
-    tab.wait_for(timeout=timeout_ms)
+    try:
+        tab.wait_for(timeout=timeout_ms)
+    except Exception:
+        page.screenshot(path=str(ARTIFACTS / f"open_tab_{name.lower()}_failure.png"))
+        raise
     if tab.get_attribute("aria-selected") != "true":
         tab.click()
     page.wait_for_function(

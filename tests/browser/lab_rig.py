@@ -33,6 +33,7 @@ class Lab:
         page.goto(self.url)
         open_tab(page, "Session")  # the per-browser role line and Take control live there
         page.locator('[data-testid="role"]').wait_for(timeout=10_000)
+        open_tab(page, "Operate")
         wait_for(lambda: len(self.server.get_clients()) > n)
         notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
         if notice.count():
@@ -40,6 +41,8 @@ class Lab:
         return page
 
     def take_control(self, page: Any, name: str) -> None:
+        """Take control in the Session tab, then open the Operate tab again."""
+        open_tab(page, "Session")
         field(page, "Your name").fill(name)
         field(page, "Operator token").fill(self.token)
         page.get_by_role("button", name="Take control").click()
@@ -47,6 +50,7 @@ class Lab:
                  and self.app.access.holder.name == name)
         wait_for(lambda: page.locator('[data-testid="role"]').get_attribute("data-role")
                  == "operator")
+        open_tab(page, "Operate")
 
 
 def wait_for(predicate: Callable[[], Any], timeout: float = 5.0) -> Any:
@@ -76,8 +80,15 @@ def notifications(page: Any) -> list[str]:
     return page.locator(".mantine-Notification-root").all_inner_texts()
 
 
+def session_button(page: Any, name: str) -> Any:
+    """The Session tab's button labelled ``name`` (the tab is opened first)."""
+    open_tab(page, "Session")
+    return page.get_by_role("button", name=name)
+
+
 def press(page: Any, name: str) -> Any:
-    """Mouse down on the button labelled ``name``; returns the mouse to release."""
+    """Mouse down on the (Operate tab's) button labelled ``name``; returns the mouse to release."""
+    open_tab(page, "Operate")
     button = page.get_by_role("button", name=name, exact=True)
     button.scroll_into_view_if_needed()
     box = button.bounding_box()

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from browser_tabs import open_tab
 from core.control.trials import paper_locations
 
 pytestmark = pytest.mark.browser
@@ -103,12 +104,14 @@ def take_control(page: Any) -> None:
     holder = page.locator('[data-testid="holder"]')
     if "nobody" not in holder.inner_text():
         return
+    open_tab(page, "Session")
     page.get_by_role("button", name="Take control").click()
     deadline = time.monotonic() + 20.0
     while "nobody" in holder.inner_text():
         notes = page.locator(".mantine-Notification-root").all_inner_texts()
         assert time.monotonic() < deadline, f"could not take control: {notes}"
         time.sleep(0.05)
+    open_tab(page, "Operate")
 
 
 def close_notices(page: Any) -> None:
@@ -136,9 +139,12 @@ def open_console(page: Any, url: str) -> None:
     """
     page.goto(url)
     page.locator('[data-testid="holder"]').wait_for(timeout=60_000)
+    open_tab(page, "Session")
     if page.locator('[data-testid="role"]').count() == 0:
         page.reload()
+        open_tab(page, "Session")
     page.locator('[data-testid="role"]').wait_for(timeout=60_000)
+    open_tab(page, "Operate")
     page.locator('[data-testid="control-state"]').wait_for(timeout=30_000)
 
 

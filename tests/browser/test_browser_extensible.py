@@ -26,6 +26,7 @@ from typing import Callable, Iterator
 import numpy as np
 import pytest
 
+from browser_tabs import open_tab
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.planning.paths import build_path
@@ -196,9 +197,10 @@ def emulator_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[str]:
 
 
 def link_text(page) -> str:
-    """The Hardware panel's link line (the runner's ``bridge_controls.health()``), if shown."""
+    """The Hardware panel's link line (the runner's ``bridge_controls.health()``) while the
+    Hardware tab is open, else the header's (both from the same health)."""
     link = page.get_by_text("Link:")
-    return link.first.locator("xpath=..").inner_text() if link.count() else "no link line"
+    return link.last.locator("xpath=..").inner_text() if link.count() else "no link line"
 
 
 def emulator_log() -> str:
@@ -213,6 +215,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     # runner's bridge_controls). serve.py armed the link at start already, but on a loaded box
     # a CPU stall while it built the GUI can trip it before the page opens (nothing re-arms by
     # itself); connecting again makes the test about the motion, and about those controls.
+    open_tab(page, "Hardware")
     page.get_by_role("button", name="Connect", exact=True).click()
     wait_until("the link configured", lambda: "inactive" in link_text(page), timeout=20,
                show=lambda: link_text(page))
@@ -220,6 +223,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     page.get_by_role("button", name="Arm device", exact=True).click()
     wait_until("the link armed", lambda: "ARMED" in link_text(page), timeout=20,
                show=lambda: link_text(page))
+    open_tab(page, "Operate")
     start = np.array([0.0, 0.0, ROBOT.n_segments * ROBOT.L0 * 1e3])  # retracted, encoders at 0
     wait_until("the measured tip at the retracted pose",
                lambda: np.abs(readout_tip(page) - start).max() <= 0.5, timeout=20)

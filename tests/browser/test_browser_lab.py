@@ -21,8 +21,9 @@ import pytest
 from console.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
+from browser_tabs import open_tab  # noqa: E402
 from lab_rig import (Lab, field, lab, lab_app, notifications,  # noqa: E402,F401 (lab: fixture)
-                     press, stop_button, wait_for)
+                     press, session_button, stop_button, wait_for)
 
 pytestmark = pytest.mark.browser
 
@@ -31,10 +32,13 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
         lab, artifacts_dir: Path) -> None:
     app = lab.app
     alice, bob = lab.page(), lab.page()
+    open_tab(alice, "Session")
+    open_tab(bob, "Session")
     field(alice, "Operator token").fill("typed-by-alice")
     time.sleep(0.5)
     assert field(bob, "Operator token").input_value() == ""  # per-browser: never shown to Bob
     lab.take_control(alice, "Alice")
+    open_tab(alice, "Session")
     assert field(alice, "Operator token").input_value() == ""  # cleared once used
     assert bob.locator('[data-testid="role"]').get_attribute("data-role") == "viewer"
     wait_for(lambda: "Alice" in bob.locator('[data-testid="holder"]').inner_text())
@@ -43,23 +47,23 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     press(bob, "κ₁ +")
     time.sleep(0.5)
     bob.mouse.up()
-    bob.get_by_role("button", name="Run demo motion").click()
+    wait_for(lambda: any("Only the operator can jog — Alice holds control; ask them or take "
+                         "control with the token" in n for n in notifications(bob)))
+    session_button(bob, "Run demo motion").click()
     wait_for(lambda: any("Only the operator can run the demo motion" in n
                          for n in notifications(bob)))
+    open_tab(bob, "Operate")
     execute = bob.get_by_role("button", name="Execute grasp-and-place")  # the Control panel's
     execute.scroll_into_view_if_needed()
     execute.click()
     wait_for(lambda: any("Only the operator can run grasp-and-place — Alice holds control"
                          in n for n in notifications(bob)))
-    texts = notifications(bob)
-    assert any("Only the operator can jog — Alice holds control; ask them or take control "
-               "with the token" in n for n in texts), texts
     assert app.store.command is before and not app.services.demo.running
     view = app.services.soft_control.view  # the control process: never armed, no task started
     assert view is None or view.snapshot.control is None or (
         not view.snapshot.control.armed and view.snapshot.control.phase == "idle")
 
-    alice.get_by_role("button", name="Run demo motion").click()
+    session_button(alice, "Run demo motion").click()
     wait_for(lambda: app.services.demo.running and app.store.command.source == "demo")
     wait_for(lambda: app.store.command.seq > before.seq + 10)
     stop_button(bob).click()
@@ -76,7 +80,7 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
 
     # The hotkey: Esc in the viewer's page stops the motion too.
     n_stops = len(lab.stops)
-    alice.get_by_role("button", name="Run demo motion").click()
+    session_button(alice, "Run demo motion").click()
     wait_for(lambda: app.services.demo.running)
     bob.mouse.click(300, 700)  # focus the 3D view, not a text field
     bob.keyboard.press("Escape")
@@ -116,7 +120,7 @@ def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(l
     app = lab.app
     alice, bob = lab.page(), lab.page()
     lab.take_control(alice, "Alice")
-    alice.get_by_role("button", name="Run demo motion").click()
+    session_button(alice, "Run demo motion").click()
     wait_for(lambda: app.services.demo.running)
     closed = time.monotonic()
     alice.context.close()
@@ -196,11 +200,13 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
     assert box is not None
     bob.mouse.click(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.6)  # the table
     wait_for(lambda: refused("place or select an object"), timeout=15.0)
+    open_tab(bob, "Hardware")
     connect = bob.get_by_role("button", name="Connect", exact=True)
     connect.scroll_into_view_if_needed()
     connect.click()
     wait_for(lambda: refused("connect the hardware"), timeout=15.0)
     bob.screenshot(path=str(artifacts_dir / "browser_lab_viewer_refused.png"))
+    open_tab(bob, "Operate")
     time.sleep(0.3)
     assert session.view().objects == objects and session.view().outcome.seq == planned.seq
     assert app.services.bridge_controls.commands.empty()  # type: ignore[union-attr]

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 pytest.register_assert_rewrite("lab_rig")
-from lab_rig import SOFT, Lab, lab, stop_button, wait_for  # noqa: E402,F401 (lab: fixture)
+from browser_tabs import open_tab  # noqa: E402
+from lab_rig import (SOFT, Lab, lab, session_button, stop_button,  # noqa: E402,F401 (lab)
+                     wait_for)
 
 pytestmark = pytest.mark.browser
 
@@ -58,7 +60,7 @@ def test_exported_scene_opens_from_disk_and_shows_the_arm_and_the_plan(
     app.server.scene.add_icosphere("/plan/target", radius=0.03, color=(255, 0, 255),
                                    position=(0.25, 0.05, 0.03))
     viewer = lab.page()
-    viewer.get_by_role("button", name="Export scene (HTML)").click()
+    session_button(viewer, "Export scene (HTML)").click()
     files = wait_for(lambda: list(app.data.folder("exports").glob("scene-*.html")))
     page, requested = open_offline(lab.browser, files[0])
     try:
@@ -84,7 +86,7 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
     app = lab.app
     alice, bob = lab.page(), lab.page()  # Bob, a viewer, will replay and export
     lab.take_control(alice, "Alice")
-    alice.get_by_role("button", name="Start recording").click()
+    session_button(alice, "Start recording").click()
     wait_for(lambda: app.recorder.recording)
     alice.get_by_role("button", name="Run demo motion").click()
     wait_for(lambda: app.services.demo.running)
@@ -95,6 +97,7 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
     names = app.data.list("recordings", ".mcap")
     assert len(names) == 1
 
+    open_tab(bob, "Session")
     bob.get_by_text("Replay", exact=True).click()
     bob.get_by_role("button", name="Load recording").wait_for()
     bob.get_by_role("button", name="Load recording").click()

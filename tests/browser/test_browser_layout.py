@@ -1,0 +1,73 @@
+"""Issue #18: STOP and the arm's phase are on screen without scrolling at desktop, tablet and
+phone sizes, on every tab, for both default consoles; every tab is shot at desktop and tablet
+size (``artifacts/layout/``) for people to look at."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from browser_tabs import open_tab
+
+pytestmark = pytest.mark.browser
+
+SIZES = {"desktop": (1600, 1000), "tablet": (820, 1180), "phone": (390, 844)}
+TABS = {"soft-arm": ("Operate", "Hardware", "Experiments", "Session"),
+        "extensible-arm": ("Operate", "Hardware", "Experiments", "Session")}
+SHOT_SIZES = ("desktop", "tablet")
+
+# True when the element's centre is on screen and nothing else (a notification, the 3D
+# canvas) is drawn over it there: what a person can see and press without scrolling.
+_ON_SCREEN = """el => {
+    const r = el.getBoundingClientRect();
+    const x = r.left + r.width / 2, y = r.top + r.height / 2;
+    if (r.width <= 0 || r.height <= 0 || x < 0 || y < 0
+        || r.right > innerWidth || r.bottom > innerHeight) return false;
+    const top = document.elementFromPoint(x, y);
+    return top !== null && (el === top || el.contains(top));
+}"""
+
+
+def _on_screen(page: Any, locator: Any) -> bool:
+    return bool(locator.first.evaluate(_ON_SCREEN))
+
+
+def _close_notices(page: Any) -> None:
+    from playwright.sync_api import Error as PlaywrightError
+    for notice in page.locator(".mantine-Notification-root").all():
+        try:
+            notice.locator("button").first.click(timeout=1_000)
+        except PlaywrightError:  # closed on its own meanwhile
+            continue
+
+
+@pytest.mark.parametrize("robot", ["soft-arm", "extensible-arm"])
+def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
+        browser: Any, console_server: Any, artifacts_dir: Path, robot: str) -> None:
+    url = console_server(robot, "--no-token")
+    shots = artifacts_dir / "layout"
+    shots.mkdir(exist_ok=True)
+    for size, (width, height) in SIZES.items():
+        context = browser.new_context(viewport={"width": width, "height": height})
+        try:
+            page = context.new_page()
+            page.goto(url)
+            stop = page.get_by_role("button", name="STOP (Esc)")
+            stop.wait_for(timeout=60_000)
+            phase = page.locator('[data-testid="header-phase"]')
+            phase.wait_for(timeout=60_000)
+            page.locator('[data-testid="header-control"]').wait_for(timeout=30_000)
+            time.sleep(2.0)  # the software renderer draws the scene; notices arrive
+            _close_notices(page)
+            for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
+                open_tab(page, tab)
+                time.sleep(0.5)
+                assert _on_screen(page, stop), f"STOP is off screen or covered: {size}, {tab}"
+                assert _on_screen(page, phase), f"the phase is off screen: {size}, {tab}"
+                assert page.evaluate("() => scrollY") == 0
+                page.screenshot(path=str(shots / f"{robot}-{size}-{tab.lower()}.png"))
+        finally:
+            context.close()
