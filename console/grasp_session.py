@@ -26,7 +26,7 @@ import viser
 from console.lab_feed import feed_grasp
 from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableObject,
                                validate_object)
-from console.reach_job import (SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
+from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
 from core.planning.grasp import GraspPlanner, GraspRefused
 from core.planning.reachability import ReachMap
@@ -41,6 +41,7 @@ class GraspSession:
     """Shared grasp state of one console; see the module docstring for the threading rules."""
 
     compute_reach = True    # tests switch the (CPU-heavy) reachability map off
+    reach_step = REACH_STEP  # cell size of the map (tests use a coarse one)
 
     def __init__(self, app) -> None:
         self.app = app
@@ -209,7 +210,8 @@ class GraspSession:
     def _start_reach(self) -> None:
         """Ask for the map over the table (cache, else a child process with progress)."""
         x0, x1, y0, y1 = self.table_extent
-        request = ReachRequest(self.robot.source, self.default_radius, (x0, x1), (y0, y1))
+        request = ReachRequest(self.robot.source, self.default_radius, (x0, x1), (y0, y1),
+                               self.reach_step)
         data_root = getattr(self.app, "data_root", None)
         folders = ([Path(data_root) / "cache"] if data_root is not None else []) + [
             SHIPPED_CACHE]

@@ -66,7 +66,7 @@ def _clip(poly: list[Array], which: int, level: float) -> list[Array]:
     for k, cur in enumerate(poly):
         prev = poly[k - 1]
         a, b = prev[which] - level, cur[which] - level
-        if (a >= 0) != (b >= 0):
+        if (a > 0 > b) or (a < 0 < b):
             out.append(prev + (a / (a - b)) * (cur - prev))
         if b >= 0:
             out.append(cur)
@@ -110,6 +110,9 @@ def region_mesh(xs: Array, ys: Array, fields: list[Array], z: float) -> Mesh | N
         faces.append(np.array(extra_f))
     v2 = np.concatenate(verts)
     f = np.concatenate(faces).astype(np.uint32)
+    p, q, r = v2[f[:, 0]], v2[f[:, 1]], v2[f[:, 2]]
+    twice_area = (q - p)[:, 0] * (r - p)[:, 1] - (q - p)[:, 1] * (r - p)[:, 0]
+    f = f[np.abs(twice_area) > 1e-14]
     if len(f) == 0:
         return None
     return np.c_[v2, np.full(len(v2), z)], f

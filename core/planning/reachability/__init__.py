@@ -33,7 +33,7 @@ UNREACHABLE, PLANNABLE, FAILS = 0, 1, 2
 # Bump when a change to this module or to the planner can change a map: cached maps
 # (console.reach_cache) of another version are recomputed.
 ALGORITHM_VERSION = 2
-DEFAULT_LEVELS = 2
+DEFAULT_LEVELS = 2          # coarse-to-fine levels of the console's map (about half the plans)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,6 +71,24 @@ class ReachMap:
         return UNREACHABLE
 
 
+def map_planner(robot) -> GraspPlanner:
+    """The planner whose answers the map records, one cell at a time."""
+    # Coarser search than an operator's plan (fewer restarts and inserted waypoints): the map
+    # is a guide, the plan for a placed object is authoritative.
+    cfg = dataclasses.replace(PlannerConfig.from_robot(robot), max_restarts=2, max_insertions=1)
+    return GraspPlanner(robot, cfg)
+
+
+def cell_status(planner: GraspPlanner, kappa_meas: npt.ArrayLike, x: float, y: float,
+                radius: float) -> int:
+    """The planner's own answer for one cell: PLANNABLE, FAILS or UNREACHABLE (refused)."""
+    try:
+        plan = planner.plan(kappa_meas, (x, y), radius)
+    except GraspRefused:
+        return UNREACHABLE
+    return PLANNABLE if plan.success else FAILS
+
+
 def grid_axis(lo: float, hi: float, step: float) -> Array:
     """Cell centres from ``lo`` to ``hi`` inclusive, evenly spaced, at most ``step`` apart."""
     n = max(int(math.ceil((hi - lo) / step - 1e-9)), 1) + 1
@@ -86,7 +104,7 @@ def _lattice(n: int, stride: int) -> npt.NDArray[np.int64]:
 def reachability_map(robot, radius: float, x_range: tuple[float, float],
                      y_range: tuple[float, float], step: float,
                      kappa_meas: npt.ArrayLike | None = None, samples: int = 40000,
-                     near: float = 0.02, levels: int = DEFAULT_LEVELS,
+                     near: float = 0.02, levels: int = 0,
                      should_stop: Callable[[], bool] | None = None,
                      progress: Callable[[float], None] | None = None) -> ReachMap:
     """Plan an object of ``radius`` at every grid cell (see the module docstring).
@@ -101,31 +119,22 @@ def reachability_map(robot, radius: float, x_range: tuple[float, float],
         samples: Random configurations used to skip cells that are certainly far from reach.
         near: Cells farther than this from every sampled final object position are skipped.
         levels: Coarse to fine: the cells ``2**levels`` apart are planned first; a cell of the
-            next finer lattice is planned only where the 4 x 4 coarser cells around it differ,
-            otherwise it takes their common status (0 plans every cell).
+            next finer lattice is planned only where the (up to 2 x 2) coarser cells around it
+            differ, otherwise it takes their common status (0, the default, plans every
+            candidate cell; the console uses ``DEFAULT_LEVELS``).
         should_stop: Polled once per planned cell; when it returns True the map is returned
             as far as it got (the remaining cells stay UNREACHABLE).
         progress: Called with the fraction (0..1) of candidate cells decided so far.
     """
     if step <= 0 or radius <= 0 or levels < 0:
         raise ValueError("step and radius must be positive, levels not negative")
-    # Coarser search than an operator's plan (fewer restarts and inserted waypoints): the map
-    # is a guide, the plan for a placed object is authoritative.
-    cfg = dataclasses.replace(PlannerConfig.from_robot(robot), max_restarts=2, max_insertions=1)
-    planner = GraspPlanner(robot, cfg)
+    planner = map_planner(robot)
     km = np.zeros(planner.model.n) if kappa_meas is None else np.asarray(kappa_meas, float)
     xs, ys = grid_axis(*x_range, step), grid_axis(*y_range, step)
     candidate = _candidates(robot, planner.model, radius, xs, ys, samples, near)
     status = np.zeros(candidate.shape, np.int8)
     known = ~candidate
     total = max(int(candidate.sum()), 1)
-
-    def plan(i: int, j: int) -> None:
-        try:
-            result = planner.plan(km, (xs[j], ys[i]), radius)
-        except GraspRefused:
-            return
-        status[i, j] = PLANNABLE if result.success else FAILS
 
     stride = 2 ** levels
     prev: tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None
@@ -139,14 +148,14 @@ def reachability_map(robot, radius: float, x_range: tuple[float, float],
                     px, py = prev
                     a = int(np.searchsorted(px, j, "right")) - 1
                     b = int(np.searchsorted(py, i, "right")) - 1
-                    block = status[np.ix_(py[max(b - 1, 0):b + 3], px[max(a - 1, 0):a + 3])]
+                    block = status[np.ix_(py[b:b + 2], px[a:a + 2])]
                     if (block == block.flat[0]).all():
                         status[i, j] = block.flat[0]
                         known[i, j] = True
                         continue
                 if should_stop is not None and should_stop():
                     return ReachMap(xs, ys, status, float(radius))
-                plan(i, j)
+                status[i, j] = cell_status(planner, km, xs[j], ys[i], radius)
                 known[i, j] = True
                 if progress is not None:
                     progress(1.0 - float((~known).sum()) / total)
