@@ -7,7 +7,6 @@ import logging
 import shutil
 import socket
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
