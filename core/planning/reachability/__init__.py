@@ -3,12 +3,12 @@
 Every cell centre of a table grid is planned with :func:`core.planning.grasp.plan_grasp` from a
 given start (the paper's straight arm by default) for one object radius. To keep the map cheap,
 cells that no sampled final configuration comes near (the object centre a configuration holds at
-the final radius, arm body clear) are marked unreachable without planning, and the others are
-planned coarse to fine: every 4th cell first, then a finer cell only where the coarser cells
-around it disagree (elsewhere it takes their common status), so only the boundaries between
-outcomes are planned at full resolution. Pure and single-threaded;
-``python -m core.planning.reachability`` (:mod:`core.planning.reachability.__main__`) prints a map
-as JSON (the console runs that in a low-priority child process, once per robot file, and caches
+the final radius, arm body clear) are marked unreachable without planning; the others are
+planned, with ``levels`` (the console's ``DEFAULT_LEVELS`` = 2) coarse to fine: every 4th cell
+first, then a finer cell only where the coarser cells around it disagree (elsewhere it takes
+their common status), so mainly the boundaries between outcomes are planned at full
+resolution. Pure and single-threaded; ``python -m core.planning.reachability``
+(:mod:`core.planning.reachability.__main__`) prints a map as JSON (the console runs that in a low-priority child process, once per robot file, and caches
 it on disk: :mod:`console.reach_job`).
 """
 
