@@ -17,6 +17,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -24,7 +25,9 @@ import viser
 
 from console.lab_feed import feed_grasp
 from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableObject,
-                               start_reach_map, validate_object)
+                               validate_object)
+from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
+                               start_reach_map)
 from core.planning.grasp import GraspPlanner, GraspRefused
 from core.planning.reachability import ReachMap
 
@@ -38,6 +41,7 @@ class GraspSession:
     """Shared grasp state of one console; see the module docstring for the threading rules."""
 
     compute_reach = True    # tests switch the (CPU-heavy) reachability map off
+    reach_step = REACH_STEP  # cell size of the map (tests use a coarse one)
 
     def __init__(self, app) -> None:
         self.app = app
@@ -59,6 +63,8 @@ class GraspSession:
         self._index, self._playing, self._speed, self._trail = 0, False, 2.0, True
         self._dirty = {"objects", "reach"}
         self._reach: ReachMap | str | None = "computing"
+        self._reach_note = ""
+        self.table_extent = _table_extent(app)
         self._listeners: list[Callable[[SessionView], None]] = []
         self._stop = False
         self._next_tick = 0.0
@@ -68,13 +74,14 @@ class GraspSession:
         self._thread = threading.Thread(target=self._run, name="grasp-session", daemon=True)
         self._thread.start()
         if self.compute_reach:
-            start_reach_map(robot, self.default_radius, self._on_reach)
+            self._start_reach()
 
     # -- thread-safe requests (GUI callbacks) ------------------------------------------------
     def view(self) -> SessionView:
         with self._cond:
             return SessionView(tuple(self._objects), self._selected, self._outcome, self._index,
-                               self._playing, self._speed, self._trail, self._reach)
+                               self._playing, self._speed, self._trail, self._reach,
+                               self._reach_note)
 
     def add_listener(self, fn: Callable[[SessionView], None]) -> None:
         with self._cond:
@@ -200,9 +207,30 @@ class GraspSession:
         plan = self._outcome.plan if self._outcome else None
         return 0 if plan is None else plan.n
 
-    def _on_reach(self, result) -> None:
+    def _start_reach(self) -> None:
+        """Ask for the map over the table (cache, else a child process with progress)."""
+        x0, x1, y0, y1 = self.table_extent
+        request = ReachRequest(self.robot.source, self.default_radius, (x0, x1), (y0, y1),
+                               self.reach_step)
+        data_root = getattr(self.app, "data_root", None)
+        folders = ([Path(data_root) / "cache"] if data_root is not None else []) + [
+            SHIPPED_CACHE]
+        start_reach_map(request, ReachCache(*folders), self._on_reach, self._on_reach_progress)
+
+    def _on_reach_progress(self, fraction: float) -> None:
         with self._cond:
-            self._reach = result if isinstance(result, ReachMap) else f"failed: {result}"
+            if not isinstance(self._reach, ReachMap):
+                self._reach = f"{100 * fraction:.0f} %"
+                self._changed("reach")
+
+    def _on_reach(self, result: ReachOutcome) -> None:
+        if result.reach is not None:
+            log.info("reachability map %s", result.note())
+        else:
+            log.warning("reachability map %s", result.note())
+        with self._cond:
+            self._reach = result.reach if result.reach is not None else result.note()
+            self._reach_note = result.note()
             self._changed("reach")
 
     def on_gizmo(self, name: str, event: viser.TransformControlsEvent) -> None:
@@ -301,7 +329,7 @@ class GraspSession:
                     plan = view.outcome.plan if view.outcome else None
                     self.scene.draw_plan(plan, view.index, view.trail)
                 if "reach" in dirty and isinstance(view.reach, ReachMap):
-                    self.scene.draw_reach(view.reach, self.show_reach)
+                    self.scene.draw_reach(view.reach, self.show_reach, self.table_extent)
         except Exception:  # a drawing error must not kill the worker
             log.exception("grasp scene update failed")
         with self._cond:
@@ -313,6 +341,15 @@ class GraspSession:
                 log.exception("grasp panel refresh failed")
         # objects and plans into recordings and the live bridge
         feed_grasp(self.app.recorder, view, dirty)
+
+
+def _table_extent(app) -> tuple[float, float, float, float]:
+    """The table rectangle (x0, x1, y0, y1) the console draws (``ConsoleApp._table_extent``),
+    which the reachability map covers and its shading is clipped to."""
+    extent = getattr(app, "_table_extent", None)
+    if callable(extent):
+        return tuple(float(v) for v in extent())  # type: ignore[return-value]
+    return (-0.5, 0.5, -0.26, 0.5)
 
 
 def session_for(app: ConsoleApp) -> GraspSession:

@@ -5,9 +5,9 @@ approach circles (green; a failed radius red), ghost arms of the waypoints (the 
 highlighted, a trail of the ones passed), palm points, the gripper's capture region at the final
 waypoint and the reachability shading. Exactly one thread may draw into it: the grasp session's
 worker (``console.panels.planner.GraspSession``). The shading (where a grasp can be planned from
-the straight arm, :mod:`core.planning.reachability`) is computed once per robot file in a
-low-priority child process (:func:`start_reach_map`, cached), so it never holds the GUI's
-threads or the GIL.
+the straight arm, :mod:`core.planning.reachability`) comes from a disk cache or a low-priority
+child process (:func:`console.reach_job.start_reach_map`), so it never holds the GUI's threads
+or the GIL; it is drawn smooth and clipped to the table (:mod:`console.reach_shading`).
 
 Geometry comes from pure functions (``plan_geometry``, ``ghost_segments``, ``object_mesh``,
 ``reach_mesh``, ``ray_to_table``), tested without a server. Scene JSON is
@@ -21,11 +21,6 @@ import dataclasses
 import html
 import json
 import math
-import os
-import subprocess
-import sys
-import threading
-from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -33,8 +28,8 @@ import numpy.typing as npt
 
 from core.kinematics import planar as pk
 from core.planning.plan_types import GraspPlan
-from core.planning.reachability import FAILS, PLANNABLE, ReachMap, from_json
-from hw_bridge.parent_watch import death_signal_preexec
+from console.reach_shading import shading_meshes
+from core.planning.reachability import FAILS, PLANNABLE, ReachMap
 
 Array = npt.NDArray[np.float64]
 LIVE_HZ = 20.0
@@ -44,7 +39,6 @@ GHOST_COLOR, GHOST_SEL_COLOR = (120, 140, 170), (245, 120, 20)
 PALM_COLOR, CAPTURE_COLOR = (200, 40, 60), (70, 140, 235)
 OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
 REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
-REACH_STEP, REACH_X, REACH_Y = 0.02, (-0.5, 0.5), (-0.26, 0.5)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -180,44 +174,6 @@ def reach_mesh(reach: ReachMap, status: int, z: float = 0.0007) -> tuple[Array, 
     return v, f
 
 
-_REACH_CACHE: dict[tuple, ReachMap] = {}
-_REACH_LOCK = threading.Lock()
-
-
-def start_reach_map(robot, radius: float, done: Callable[[ReachMap | Exception], None]) -> None:
-    """Compute (once per robot file and radius, cached) the reachability map, then ``done``.
-
-    Runs ``python -m core.planning.reachability`` as a low-priority child process (no GIL or
-    GUI-thread contention); a small daemon thread waits for its JSON and calls ``done``.
-    """
-    key = (str(robot.source), float(radius), REACH_X, REACH_Y, REACH_STEP)
-    with _REACH_LOCK:
-        hit = _REACH_CACHE.get(key)
-    if hit is not None:
-        done(hit)
-        return
-
-    def wait() -> None:
-        cmd = [sys.executable, "-m", "core.planning.reachability", "--robot", str(robot.source),
-               "--radius", repr(float(radius)), "--x", *map(repr, REACH_X), "--y",
-               *map(repr, REACH_Y), "--step", repr(REACH_STEP), "--nice", "15",
-               "--parent", str(os.getpid())]
-        try:
-            # (killed with this thread's process: this thread waits for it, so it lives as
-            # long as the map is wanted - see hw_bridge.parent_watch)
-            out = subprocess.run(cmd, capture_output=True, text=True, timeout=600,
-                                 cwd=str(Path(__file__).resolve().parent.parent), check=True,
-                                 preexec_fn=death_signal_preexec())
-            result: ReachMap | Exception = from_json(out.stdout)
-            with _REACH_LOCK:
-                _REACH_CACHE[key] = result
-        except (subprocess.SubprocessError, OSError, ValueError, KeyError) as exc:
-            result = RuntimeError(f"reachability map failed: {exc}")
-        done(result)
-
-    threading.Thread(target=wait, name="reachability-wait", daemon=True).start()
-
-
 def _set_lines(handle, points: Array, colors) -> None:
     """Assign points with colours of the same length (viser keeps them as parallel arrays)."""
     colors = np.asarray(colors, np.uint8)
@@ -281,11 +237,14 @@ class PlanScene:
         for h in (self.circles, self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
             h.visible = True
 
-    def draw_reach(self, reach: ReachMap, visible: bool) -> None:
-        """Shade the table cells where a grasp can be planned (green) or fails (amber)."""
+    def draw_reach(self, reach: ReachMap, visible: bool,
+                   extent: tuple[float, float, float, float] | None = None) -> None:
+        """Shade where a grasp can be planned (green) or fails (amber), smooth and clipped to
+        the table rectangle ``extent`` (x0, x1, y0, y1)."""
         if not self.reach:
+            meshes = shading_meshes(reach, extent)
             for status, color in REACH_COLORS.items():
-                mesh = reach_mesh(reach, status)
+                mesh = meshes[status]
                 if mesh is not None:
                     self.reach.append(self.server.scene.add_mesh_simple(
                         f"/grasp/reach/{status}", mesh[0], mesh[1], color=color, opacity=0.28,
@@ -349,6 +308,7 @@ class SessionView:
     speed: float
     trail: bool
     reach: ReachMap | str | None
+    reach_note: str = ""
 
 
 def outcome_html(outcome: Outcome | None) -> str:

@@ -112,9 +112,15 @@ class PlannerPanel(Panel):
             note = ("<small>Shading: <span style='color:#2f9e44'>green</span> = a grasp can be "
                     "planned from the straight arm (object ⌀ "
                     f"{2 * view.reach.radius * 100:.1f} cm), <span style='color:#e8590c'>amber"
-                    "</span> = reachable, but the approach fails.</small>")
+                    "</span> = reachable, but the approach fails. <span data-testid='reach-"
+                    f"state' data-state='done'>Reachability map: "
+                    f"{html.escape(view.reach_note)}</span>.</small>")
         else:
-            note = f"<small>Reachability map: {html.escape(str(view.reach))}…</small>"
+            text = str(view.reach)
+            state = ("computing" if text == "computing" or text.endswith("%") else
+                     "failed" if text.startswith("failed") else "off")
+            note = (f"<small data-testid='reach-state' data-state='{state}'>Reachability map: "
+                    f"{html.escape(text)}{'…' if state == 'computing' else ''}</small>")
         if note != getattr(self, "_note", None):
             self._note = note
             self.reach_note.content = note
