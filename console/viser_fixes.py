@@ -1,4 +1,4 @@
-"""A fix for viser 1.1.1's message buffers, which can freeze a browser when updates come from threads.
+"""Fixes for viser 1.1.1's message path: a browser froze on updates from threads, and 50 viewers cost a core.
 
 ``viser.infra._async_message_buffer.AsyncMessageBuffer.push`` calls ``message_event.set()``
 (an ``asyncio.Event``) directly from whatever thread queued the message: in this console, the
@@ -13,6 +13,12 @@ to that browser for good (pages that never finished loading).
 ``set()`` from any other thread is handed to the event loop (``call_soon_threadsafe``); nothing
 in viser reads the event synchronously (it is only awaited and cleared by the buffer's window
 generator). Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
+
+:func:`install` also makes a message's wire form (``Message.as_serializable_dict``) computed once
+and shared by every viewer (:func:`share_wire_dicts`): viser serialises every message again for
+every connected client (a per-client producer walks each field in pure Python), so 50 viewers of
+the extensible arm (~115 pose messages per frame: viser's client takes skinned-mesh bone poses
+one message per bone and field, with no batched form) cost a whole core in that walk alone.
 
 What viser 1.1.1 does with what browsers *send* (it trusts them) is fixed in
 ``console.client_guard``, which ``ConsoleApp`` installs beside this module.
@@ -46,13 +52,55 @@ class LoopSafeEvent(asyncio.Event):
             pass
 
 
+_WIRE = "_viser_fixes_wire"  # where a message keeps its shared wire dict (in its __dict__)
+
+
+def share_wire_dicts() -> bool:
+    """Serialise each viser message once for all clients, not once per client.
+
+    Patches ``viser.infra.Message.as_serializable_dict``: the first call on a message stores the
+    dict it returns on the message, later calls (the other clients' producers) return that same
+    dict. Only messages without numpy arrays are shared: an array travels as a binary buffer
+    whose placeholder index depends on the client's window, so those are serialised as before.
+    Safe because viser builds a new message object for every update and never changes one after
+    queueing it (the owner stamp and the name are set before); readers only encode the dict.
+
+    Returns:
+        True if it patched now, False if it was already installed.
+    """
+    from viser.infra import _messages as infra_messages
+
+    cls: Any = infra_messages.Message
+    if getattr(cls, "_shared_wire_dicts", False):
+        return False
+    original = cls.as_serializable_dict
+
+    @functools.wraps(original)
+    def as_serializable_dict(self: Any, binary_buffers: Any = None) -> Any:
+        cached = self.__dict__.get(_WIRE)
+        if cached is not None:
+            return cached
+        before = None if binary_buffers is None else len(binary_buffers)
+        out = original(self, binary_buffers)
+        if binary_buffers is not None and len(binary_buffers) == before:
+            self.__dict__[_WIRE] = out
+        return out
+
+    cls.as_serializable_dict = as_serializable_dict
+    cls._shared_wire_dicts = True
+    return True
+
+
 def install() -> bool:
-    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`.
+    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`, and
+    share messages' wire dicts between clients (:func:`share_wire_dicts`).
 
     Returns:
         True if it patched now, False if it was already installed.
     """
     from viser.infra import _async_message_buffer as amb
+
+    share_wire_dicts()
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_loop_safe_event", False):

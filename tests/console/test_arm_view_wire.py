@@ -1,0 +1,125 @@
+"""What a viewer receives for one arm frame: the bone poses every websocket client decodes put the
+skinned centre line on the arm's forward kinematics, and the message work is shared by all
+clients (``console.viser_fixes.share_wire_dicts``), not repeated per client."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from viser import _messages
+from viser.infra import _messages as infra_messages
+
+from console.arm_view import make_arm_view
+from console.model import model_for
+from console.skin import bspline_weights
+from console.viser_fixes import install
+from core.kinematics import planar as pk
+from core.robots import load
+from tests.ws_client import RawClient
+
+SOFT = load("soft-arm")
+
+
+def test_a_message_is_serialised_once_for_every_client(monkeypatch) -> None:
+    install()
+    calls = [0]
+    original = infra_messages._prepare_for_serialization
+
+    def counting(*args, **kwargs):  # type: ignore[no-untyped-def]
+        calls[0] += 1
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(infra_messages, "_prepare_for_serialization", counting)
+    message = _messages.SetBonePositionMessage("/arm/body", 3, (0.1, 0.2, 0.3))
+    first = message.as_serializable_dict([])
+    once = calls[0]
+    assert once > 0
+    for _ in range(49):  # 49 more viewers' producers
+        assert message.as_serializable_dict([]) is first
+    assert calls[0] == once
+    assert first == {"name": "/arm/body", "bone_index": 3, "position": (0.1, 0.2, 0.3),
+                     "owner": message.owner, "type": "SetBonePositionMessage"}
+
+
+def test_a_message_with_arrays_is_serialised_per_window() -> None:
+    """An array travels as a binary buffer indexed within the client's own window."""
+    install()
+    poses = np.arange(12, dtype=np.float32).reshape(4, 3)
+    message = _messages.SceneNodeUpdateMessage("/arm/segment_rings", {"batched_positions": poses})
+    busy: list[memoryview] = [memoryview(b"x")]
+    a = message.as_serializable_dict(busy)
+    b = message.as_serializable_dict([])
+    assert a is not b
+    assert a["updates"]["batched_positions"]["__binary_index"] == 1
+    assert b["updates"]["batched_positions"]["__binary_index"] == 0
+
+
+def received_bones(client: RawClient, name: str, n: int) -> np.ndarray | None:
+    """(n, 7) newest [wxyz, xyz] of every bone of ``name`` the client decoded (None if any
+    is missing)."""
+    wxyz: dict[int, tuple] = {}
+    xyz: dict[int, tuple] = {}
+    with client._lock:
+        messages = list(client.messages)
+    for m in messages:
+        if m.get("name") != name:
+            continue
+        if m["type"] == "SetBoneOrientationMessage":
+            wxyz[m["bone_index"]] = m["wxyz"]
+        elif m["type"] == "SetBonePositionMessage":
+            xyz[m["bone_index"]] = m["position"]
+    if len(wxyz) < n or len(xyz) < n:
+        return None
+    return np.array([[*wxyz[i], *xyz[i]] for i in range(n)], dtype=float)
+
+
+def pose_matrices(rows: np.ndarray) -> np.ndarray:
+    import viser.transforms as vtf
+
+    out = np.tile(np.eye(4), (len(rows), 1, 1))
+    out[:, :3, :3] = vtf.SO3(rows[:, :4]).as_matrix()
+    out[:, :3, 3] = rows[:, 4:]
+    return out
+
+
+@pytest.mark.parametrize("kappa", [np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0]),
+                                   np.full(6, 16.7)])
+def test_every_viewer_decodes_bone_poses_that_put_the_tube_on_the_kinematics(server,
+                                                                              kappa) -> None:
+    install()
+    view = make_arm_view(server.scene, model_for(SOFT))
+    clients = [RawClient(server) for _ in range(3)]
+    try:
+        view.update(kappa)
+        n = view.skin.n_bones
+        deadline = time.monotonic() + 10.0
+        got: list[np.ndarray] = []
+        while time.monotonic() < deadline:
+            got = [received_bones(c, view.body.name, n) for c in clients]
+            if all(g is not None and np.allclose(g[:, 4:], view.skin.bone_poses(
+                    view.frames(kappa))[:, :3, 3], atol=2.0**-15) for g in got):
+                break
+            time.sleep(0.05)
+        else:
+            raise AssertionError("the viewers did not receive the frame's bone poses")
+        for g in got[1:]:
+            np.testing.assert_array_equal(g, got[0])  # every viewer got the same poses
+        poses = pose_matrices(got[0])
+    finally:
+        for c in clients:
+            c.close()
+    # Independent check: skin the bind-pose centre line at every segment end with the
+    # received poses (three.js's linear blend) and compare with forward kinematics.
+    skin = view.skin
+    per_segment = view.samples_per_segment // view.bone_stride  # knots per segment
+    u = np.arange(0, skin.n_knots, per_segment, dtype=float)  # knots on segment ends
+    idx, w = bspline_weights(u, skin.n_knots)
+    dense = np.zeros((len(u), skin.n_bones))
+    np.put_along_axis(dense, idx, w, axis=1)
+    centre = np.column_stack([np.zeros((len(u), 2)), u * skin.spacing])
+    drawn = skin.deform(centre, dense, skin.bind_poses(), poses)
+    ends = pk.forward_kinematics(kappa, SOFT.lengths, SOFT.base_pose)  # (N+1, 3)
+    want = np.column_stack([ends[:, :2], np.full(len(ends), SOFT.half_width)])
+    assert np.linalg.norm(drawn - want, axis=1).max() < 0.2e-3
