@@ -460,6 +460,8 @@ class ControlPanel(Panel):
             self.finger.visible = True
         else:
             self.finger.visible = False
+        # The 3D arm's pleated gripper curls while the loop commands it closed.
+        self.app.view.set_gripper_closed(c is not None and c.armed and c.gripper_closed)
 
     def _draw_plots(self) -> None:
         hist = list(self._hist)
