@@ -159,7 +159,8 @@ def child(a: argparse.Namespace) -> int:
             loop = None if view is None else {"p99_ms": view.stats.period_error_ms_p99,
                                               "max_ms": view.stats.period_error_ms_max}
             print(json.dumps({"frames_sent": app.view.frames_sent,
-                              "sent_at": list(app.view.sent_at), "now": time.monotonic(),
+                              "sent_at": list(getattr(app.view, "sent_at", ())),
+                              "now": time.monotonic(),
                               "frames_drawn": app.frames_drawn, "loop": loop,
                               "clients": len(server.get_clients())}), flush=True)
         elif cmd == "quit":
