@@ -42,6 +42,7 @@ from console.gripper_mesh import GripperShape, gripper_vertices, load_asset
 from console.model import ArmModel, DeltaModel, PlanarModel
 from console.skin import TubeSkin, planar_matrices
 from console.tube import TubeTopology, frames_from_matrices, planar_frames
+from console.viser_fixes import set_bone_poses
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 
@@ -103,11 +104,9 @@ def quantize(x: Array, step: float = 2.0**-16) -> Array:
 
 
 def pose_bones(handle: viser.MeshSkinnedHandle, poses: Array) -> None:
-    """Assign (B, 4, 4) bone poses (viser sends only the bones that changed)."""
-    for bone, wxyz, position in zip(handle.bones, quantize(wxyzs(poses)),
-                                    quantize(poses[:, :3, 3])):
-        bone.wxyz = wxyz
-        bone.position = position
+    """Assign (B, 4, 4) bone poses (viser sends only the bones that changed; one vectorised
+    comparison for all of them, ``viser_fixes.set_bone_poses``)."""
+    set_bone_poses(handle, quantize(wxyzs(poses)), quantize(poses[:, :3, 3]))
 
 
 class ArmView(ABC):

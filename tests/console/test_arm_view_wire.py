@@ -123,3 +123,62 @@ def test_every_viewer_decodes_bone_poses_that_put_the_tube_on_the_kinematics(ser
     ends = pk.forward_kinematics(kappa, SOFT.lengths, SOFT.base_pose)  # (N+1, 3)
     want = np.column_stack([ends[:, :2], np.full(len(ends), SOFT.half_width)])
     assert np.linalg.norm(drawn - want, axis=1).max() < 0.2e-3
+
+
+def test_set_bone_poses_queues_what_the_bone_setters_queue(server) -> None:
+    """The vectorised assignment sends the same messages as viser's per-bone setters, and
+    nothing for bones that did not move."""
+    from console.viser_fixes import set_bone_poses
+
+    view_a = make_arm_view(server.scene, model_for(SOFT), root="/a", dead_band=None)
+    view_b = make_arm_view(server.scene, model_for(SOFT), root="/b", dead_band=None)
+    rng = np.random.default_rng(3)
+    n = view_a.skin.n_bones
+    wxyz = rng.standard_normal((n, 4))
+    wxyz /= np.linalg.norm(wxyz, axis=1, keepdims=True)
+    xyz = rng.uniform(-0.3, 0.3, (n, 3))
+    xyz[::3] = [b.position for b in view_a.body.bones][::3]  # a third of the bones stay put
+    sent: list[object] = []
+    original = server.scene._queue_scene_message
+    server.scene._queue_scene_message = lambda m: (sent.append(m), original(m))[1]
+
+    def wire(messages: list[object]) -> list[tuple]:
+        return sorted((type(m).__name__, m.bone_index,
+                       tuple(getattr(m, "wxyz", ()) or m.position)) for m in messages)
+
+    for bone, q, p in zip(view_a.body.bones, wxyz, xyz):
+        bone.wxyz, bone.position = q, p
+    by_setters = wire(sent)
+    sent.clear()
+    assert set_bone_poses(view_b.body, wxyz, xyz) == len(by_setters)
+    assert wire(sent) == by_setters
+    assert {m.name for m in sent} == {"/b/body"}
+    assert sum(type(m).__name__ == "SetBonePositionMessage" for m in sent) == n - len(xyz[::3])
+    np.testing.assert_array_equal([b.position for b in view_b.body.bones], xyz)
+    sent.clear()
+    assert set_bone_poses(view_b.body, wxyz, xyz) == 0 and sent == []
+    with pytest.raises(ValueError):
+        set_bone_poses(view_b.body, wxyz[:-1], xyz)
+
+
+def test_loop_safe_event_schedules_one_set_for_a_burst_of_messages() -> None:
+    """A frame's ~100 pushes from the render thread wake the loop once, not once each."""
+    import asyncio
+
+    from console.viser_fixes import LoopSafeEvent
+
+    loop = asyncio.new_event_loop()
+    try:
+        event = LoopSafeEvent(loop)
+        for _ in range(100):
+            event.set()  # from this thread: the loop is not running here
+        assert len(loop._ready) == 1  # type: ignore[attr-defined]
+        assert not event.is_set()
+        loop.run_until_complete(asyncio.sleep(0))
+        assert event.is_set()
+        event.clear()
+        event.set()  # a later message schedules again
+        loop.run_until_complete(asyncio.sleep(0))
+        assert event.is_set()
+    finally:
+        loop.close()
