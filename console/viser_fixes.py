@@ -28,8 +28,10 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import time
 from typing import Any
 
+import msgspec
 import numpy as np
 import numpy.typing as npt
 
@@ -107,6 +109,81 @@ def share_wire_dicts() -> bool:
     return True
 
 
+_FRAMES = "_viser_fixes_frames"  # a buffer's recent encoded windows (on the buffer)
+_FRAMES_KEPT = 4
+
+
+def encode_window(buffer: Any, window: Any, zstd: Any) -> bytes:
+    """viser 1.1.1's websocket frame for a window of messages, encoded once per buffer.
+
+    The frame is exactly what ``viser.infra._infra._message_producer`` sends (zstd-compressed
+    msgpack of ``{"messages", "timestampSec", "binaryBufferLengths"}``, then the 8-byte aligned
+    binary buffers). Every client's producer reads the same broadcast buffer and, woken by the
+    same push, mostly takes the same window: the frame of a window made of the very same message
+    objects is reused from the buffer's last few instead of being encoded again per client. A
+    window holding a message meant to skip a client (``excluded_self_client``) is not shared.
+    """
+    from viser.infra import _infra
+
+    messages = tuple(window)
+    shareable = all(m.excluded_self_client is None for m in messages)
+    kept: list[tuple[tuple[Any, ...], bytes]] = buffer.__dict__.setdefault(_FRAMES, [])
+    if shareable:
+        for cached, frame in kept:
+            if len(cached) == len(messages) and all(a is b for a, b in zip(cached, messages)):
+                return frame
+    binary_buffers: list[memoryview] = []
+    serialized = tuple(m.as_serializable_dict(binary_buffers) for m in messages)
+    inner = msgspec.msgpack.encode({"messages": serialized, "timestampSec": time.perf_counter(),
+                                    "binaryBufferLengths": tuple(b.nbytes for b in binary_buffers)})
+    compressed = zstd.compress(inner)
+    parts: list[Any] = [len(inner).to_bytes(8, "little"), len(compressed).to_bytes(8, "little"),
+                        compressed]
+    _infra._append_aligned_buffers(parts, binary_buffers, 16 + len(compressed))
+    frame = b"".join(parts)
+    if shareable:  # holding the messages keeps their ids from being reused while cached
+        kept.append((messages, frame))
+        del kept[:-_FRAMES_KEPT]
+    return frame
+
+
+def share_frames() -> bool:
+    """Encode each window of messages once for all clients (:func:`encode_window`).
+
+    Replaces ``viser.infra._infra._message_producer`` (looked up when a client connects) with
+    the same loop, sending :func:`encode_window`'s frame: with 50 viewers the encoding and
+    compression of every frame, 50 times over, was most of the console's CPU. The producers
+    all run on the server's event loop, so the per-buffer cache needs no lock.
+
+    Returns:
+        True if it patched now, False if it was already installed.
+    """
+    from viser.infra import _infra
+
+    if getattr(_infra._message_producer, "_shared_frames", False):
+        return False
+    import zstandard
+
+    async def _message_producer(websocket: Any, buffer: Any, client_id: int,
+                                backlog_done_message: Any = None) -> None:
+        window_generator = buffer.window_generator(
+            client_id, backlog_done_message=backlog_done_message)
+        zstd = zstandard.ZstdCompressor(level=1)
+        try:
+            while not buffer.done:
+                try:
+                    outgoing = await window_generator.__anext__()
+                except StopAsyncIteration:
+                    break
+                await websocket.send(encode_window(buffer, outgoing, zstd))
+        finally:
+            await window_generator.aclose()  # as viser: its finallys run now, not at GC
+
+    _message_producer._shared_frames = True  # type: ignore[attr-defined]
+    _infra._message_producer = _message_producer
+    return True
+
+
 def install() -> bool:
     """Make every viser message buffer created from now on use :class:`LoopSafeEvent`, and
     share messages' wire dicts between clients (:func:`share_wire_dicts`).
@@ -117,6 +194,7 @@ def install() -> bool:
     from viser.infra import _async_message_buffer as amb
 
     share_wire_dicts()
+    share_frames()
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_loop_safe_event", False):

@@ -182,3 +182,32 @@ def test_loop_safe_event_schedules_one_set_for_a_burst_of_messages() -> None:
         assert event.is_set()
     finally:
         loop.close()
+
+
+def test_a_window_is_encoded_once_for_every_client() -> None:
+    """Producers taking the same window of the broadcast buffer send the same frame."""
+    import zstandard
+
+    from console.viser_fixes import encode_window
+    from tests.ws_client import decode_frame
+
+    class Buffer:  # what encode_window keeps its frames on
+        pass
+
+    buffer, zstd = Buffer(), zstandard.ZstdCompressor(level=1)
+    window = [_messages.SetBonePositionMessage("/arm/body", i, (0.0, 0.01 * i, 0.0))
+              for i in range(5)]
+    frame = encode_window(buffer, window, zstd)
+    assert encode_window(buffer, list(window), zstd) is frame  # the next client's producer
+    decoded = decode_frame(frame)
+    assert [m["bone_index"] for m in decoded] == list(range(5))
+    assert decoded[3]["position"] == [0.0, 0.03, 0.0]
+    # A different window (other message objects, equal content) is encoded afresh.
+    other = [_messages.SetBonePositionMessage("/arm/body", i, (0.0, 0.01 * i, 0.0))
+             for i in range(5)]
+    assert encode_window(buffer, other, zstd) is not frame
+    # A message that skips one client makes its window that client's own.
+    skip = _messages.SetBonePositionMessage("/arm/body", 9, (1.0, 0.0, 0.0))
+    skip.excluded_self_client = 7
+    first = encode_window(buffer, [skip], zstd)
+    assert encode_window(buffer, [skip], zstd) is not first
