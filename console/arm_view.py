@@ -5,8 +5,9 @@ only assigns to them, so no node is ever re-created while the arm moves. Two way
 
 * ``method="skinned"`` (default): every tube is a skinned mesh sent once (``console.skin``); a
   frame sends its bone poses (27 for the soft arm's body). Rigid parts (segment rings,
-  platforms) are batched meshes moved by one array of instance poses; the gripper and tip frame
-  are nodes moved by a pose. About 1-3 KB per frame instead of ~25-60 KB.
+  platforms) are batched meshes moved by one array of instance poses; the gripper (the paper's
+  pleated finger, ``console.gripper_mesh``: open and closed, sent once) and the tip frame are
+  nodes moved by a pose. About 1-3 KB per frame instead of ~25-60 KB.
 * ``method="vertices"``: the tubes' whole vertex arrays every frame (the original drawing, kept
   for the viewer benchmark and as the reference the skinned tubes are tested against).
 
@@ -17,7 +18,8 @@ display goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frame
 (vectorised numpy, no viser), which tests check against the kinematics without a server.
 
 * Soft planar arm: the backbone as a tube lying on the table (z = half-width), dark rings at the
-  segment boundaries, the straight gripper in a contrasting colour and the palm point w_t.
+  segment boundaries, the pleated gripper in a contrasting colour (a plain rod in the
+  ``"vertices"`` drawing) and the palm point w_t.
 * Extensible arm (base at the origin, local z = world z up): a thin backbone, the three racks of
   every segment as tubes on their constant-curvature offset arcs (one colour per rack, matching
   the readout), platform discs at the base and every segment end, and a tip frame.
@@ -25,6 +27,7 @@ display goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frame
 
 from __future__ import annotations
 
+import collections
 import time
 from abc import ABC, abstractmethod
 from typing import Any, Literal
@@ -35,9 +38,11 @@ import viser
 import viser.transforms as vtf
 
 from console.dead_band import DeadBand, Steadiness
+from console.gripper_mesh import GripperShape, gripper_vertices, load_asset
 from console.model import ArmModel, DeltaModel, PlanarModel
 from console.skin import TubeSkin, planar_matrices
 from console.tube import TubeTopology, frames_from_matrices, planar_frames
+from console.viser_fixes import set_bone_poses
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 
@@ -99,11 +104,9 @@ def quantize(x: Array, step: float = 2.0**-16) -> Array:
 
 
 def pose_bones(handle: viser.MeshSkinnedHandle, poses: Array) -> None:
-    """Assign (B, 4, 4) bone poses (viser sends only the bones that changed)."""
-    for bone, wxyz, position in zip(handle.bones, quantize(wxyzs(poses)),
-                                    quantize(poses[:, :3, 3])):
-        bone.wxyz = wxyz
-        bone.position = position
+    """Assign (B, 4, 4) bone poses (viser sends only the bones that changed; one vectorised
+    comparison for all of them, ``viser_fixes.set_bone_poses``)."""
+    set_bone_poses(handle, quantize(wxyzs(poses)), quantize(poses[:, :3, 3]))
 
 
 class ArmView(ABC):
@@ -127,6 +130,9 @@ class ArmView(ABC):
         self.method: Method = method
         self.dead_band = dead_band
         self.frames_sent = 0
+        # When the newest frames were sent (time.monotonic()): what a benchmark reads to tell
+        # the update rate while the arm moves from the pauses the dead band leaves unsent.
+        self.sent_at: collections.deque[float] = collections.deque(maxlen=2048)
         self._sent: Array | None = None  # the (averaged) frames when the last frame was sent
         self._mean: Array | None = None
         self._mean_at = 0.0
@@ -134,6 +140,9 @@ class ArmView(ABC):
         self._held: Array | None = None  # the newest configuration not sent
         self._last_q: Array | None = None  # the configuration of the previous update
         self._sent_q: Array | None = None  # the configuration last drawn
+
+    def set_gripper_closed(self, closed: bool) -> None:
+        """Show the gripper open or closed (arms without a gripper ignore it)."""
 
     @abstractmethod
     def geometry(self, q: Array) -> Geometry:
@@ -192,6 +201,7 @@ class ArmView(ABC):
         self._sent_q = q.copy()
         self._held = None
         self.frames_sent += 1
+        self.sent_at.append(time.monotonic())
 
 
 class PlanarArmView(ArmView):
@@ -212,6 +222,7 @@ class PlanarArmView(ArmView):
         self.body_topology = TubeTopology(n_rings, self.sides)
         self.ring_topology = TubeTopology(2, self.sides, n_tubes=r.n_segments)
         self.gripper_topology = TubeTopology(2, self.sides)
+        self.gripper_closed = False
         self.skin = TubeSkin(n_rings, self.bone_stride,
                              float(np.mean(r.lengths)) / self.samples_per_segment
                              * self.bone_stride)
@@ -237,12 +248,17 @@ class PlanarArmView(ArmView):
                               [[1, 0, 0]] * 2, [[0, 1, 0]] * 2, self.radius * 1.18),
                 band.faces, wxyzs(ends), ends[:, :3, 3],
                 batched_colors=batched_color(RING_COLOR), lod="off")
-            self.gripper = scene.add_mesh_simple(
-                f"{root}/gripper",
-                self.gripper_topology.vertices([[0, 0, 0], [0, 0, r.gripper.length]],
-                                               [[1, 0, 0]] * 2, [[0, 1, 0]] * 2,
-                                               r.gripper.half_width * 0.85),
-                self.gripper_topology.faces, color=GRIPPER_COLOR)
+            # The pleated gripper (static/gripper.stl fitted to the robot file), open and
+            # closed, under one node moved by the tip pose; closing only swaps visibility.
+            self.gripper = scene.add_frame(f"{root}/gripper", show_axes=False)
+            shape = GripperShape.of(r)
+            asset = load_asset()
+            self.gripper_shapes = {
+                closed: scene.add_mesh_simple(
+                    f"{root}/gripper/{'closed' if closed else 'open'}",
+                    *gripper_vertices(shape, closed, asset), color=GRIPPER_COLOR,
+                    flat_shading=True, visible=not closed)
+                for closed in (False, True)}
         self.palm = scene.add_icosphere(f"{root}/palm_point", radius=0.006, color=PALM_COLOR,
                                         position=g["palm"], cast_shadow=False)
         base = r.base_pose
@@ -252,6 +268,17 @@ class PlanarArmView(ArmView):
                       self.z + 0.003),
             wxyz=vtf.SO3.from_z_radians(base[2] - np.pi / 2).wxyz)
         self.update(q0)
+
+    def set_gripper_closed(self, closed: bool) -> None:
+        """Show the pleated gripper curled (closed) or straight (open): two visibility
+        messages on a change, nothing otherwise; any thread (``"vertices"`` draws a rod)."""
+        shapes = getattr(self, "gripper_shapes", None)
+        closed = bool(closed)
+        if shapes is None or closed == self.gripper_closed:
+            return
+        self.gripper_closed = closed
+        shapes[closed].visible = True
+        shapes[not closed].visible = False
 
     def _frames_at_ends(self, frames: Array) -> Array:
         return frames[self.samples_per_segment::self.samples_per_segment]

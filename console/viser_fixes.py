@@ -1,4 +1,4 @@
-"""A fix for viser 1.1.1's message buffers, which can freeze a browser when updates come from threads.
+"""Fixes for viser 1.1.1's message path: a browser froze on updates from threads, and 50 viewers cost a core.
 
 ``viser.infra._async_message_buffer.AsyncMessageBuffer.push`` calls ``message_event.set()``
 (an ``asyncio.Event``) directly from whatever thread queued the message: in this console, the
@@ -14,6 +14,12 @@ to that browser for good (pages that never finished loading).
 in viser reads the event synchronously (it is only awaited and cleared by the buffer's window
 generator). Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
 
+:func:`install` also makes a message's wire form (``Message.as_serializable_dict``) computed once
+and shared by every viewer (:func:`share_wire_dicts`): viser serialises every message again for
+every connected client (a per-client producer walks each field in pure Python), so 50 viewers of
+the extensible arm (~115 pose messages per frame: viser's client takes skinned-mesh bone poses
+one message per bone and field, with no batched form) cost a whole core in that walk alone.
+
 What viser 1.1.1 does with what browsers *send* (it trusts them) is fixed in
 ``console.client_guard``, which ``ConsoleApp`` installs beside this module.
 """
@@ -22,7 +28,12 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import time
 from typing import Any
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
 
 
 class LoopSafeEvent(asyncio.Event):
@@ -31,6 +42,7 @@ class LoopSafeEvent(asyncio.Event):
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         super().__init__()
         self._owner = loop
+        self._pending = False  # a set() is scheduled on the loop and has not run yet
 
     def set(self) -> None:
         try:
@@ -40,19 +52,149 @@ class LoopSafeEvent(asyncio.Event):
         if running is self._owner:
             super().set()
             return
+        # One scheduled set() serves every message pushed before it runs: scheduling writes
+        # to the loop's wake-up socket, and viser sets the event once per message (a frame of
+        # the extensible arm is ~115 messages; a system call each cost ~1/3 of the render
+        # thread's time on a busy machine). A set() seeing one pending is covered by it: its
+        # message was pushed before, and the callback clears the flag before setting.
+        if self._pending:
+            return
+        self._pending = True
         try:
-            self._owner.call_soon_threadsafe(super().set)
+            self._owner.call_soon_threadsafe(self._set_on_loop)
         except RuntimeError:  # loop closed (shutdown): nobody is waiting any more
-            pass
+            self._pending = False
+
+    def _set_on_loop(self) -> None:
+        self._pending = False
+        super().set()
+
+
+_WIRE = "_viser_fixes_wire"  # where a message keeps its shared wire dict (in its __dict__)
+
+
+def share_wire_dicts() -> bool:
+    """Serialise each viser message once for all clients, not once per client.
+
+    Patches ``viser.infra.Message.as_serializable_dict``: the first call on a message stores the
+    dict it returns on the message, later calls (the other clients' producers) return that same
+    dict. Only messages without numpy arrays are shared: an array travels as a binary buffer
+    whose placeholder index depends on the client's window, so those are serialised as before.
+    Safe because viser builds a new message object for every update and never changes one after
+    queueing it (the owner stamp and the name are set before); readers only encode the dict.
+
+    Returns:
+        True if it patched now, False if it was already installed.
+    """
+    from viser.infra import _messages as infra_messages
+
+    cls: Any = infra_messages.Message
+    if getattr(cls, "_shared_wire_dicts", False):
+        return False
+    original = cls.as_serializable_dict
+
+    @functools.wraps(original)
+    def as_serializable_dict(self: Any, binary_buffers: Any = None) -> Any:
+        cached = self.__dict__.get(_WIRE)
+        if cached is not None:
+            return cached
+        before = None if binary_buffers is None else len(binary_buffers)
+        out = original(self, binary_buffers)
+        if binary_buffers is not None and len(binary_buffers) == before:
+            self.__dict__[_WIRE] = out
+        return out
+
+    cls.as_serializable_dict = as_serializable_dict
+    cls._shared_wire_dicts = True
+    return True
+
+
+_FRAMES = "_viser_fixes_frames"  # a buffer's recent encoded windows (on the buffer)
+_FRAMES_KEPT = 4
+
+
+def encode_window(buffer: Any, window: Any, zstd: Any) -> bytes:
+    """viser 1.1.1's websocket frame for a window of messages, encoded once per buffer.
+
+    The frame is exactly what ``viser.infra._infra._message_producer`` sends (zstd-compressed
+    msgpack of ``{"messages", "timestampSec", "binaryBufferLengths"}``, then the 8-byte aligned
+    binary buffers). Every client's producer reads the same broadcast buffer and, woken by the
+    same push, mostly takes the same window: the frame of a window made of the very same message
+    objects is reused from the buffer's last few instead of being encoded again per client. A
+    window holding a message meant to skip a client (``excluded_self_client``) is not shared.
+    """
+    from viser.infra import _infra
+
+    messages = tuple(window)
+    shareable = all(m.excluded_self_client is None for m in messages)
+    kept: list[tuple[tuple[Any, ...], bytes]] = buffer.__dict__.setdefault(_FRAMES, [])
+    if shareable:
+        for cached, frame in kept:
+            if len(cached) == len(messages) and all(a is b for a, b in zip(cached, messages)):
+                return frame
+    binary_buffers: list[memoryview] = []
+    serialized = tuple(m.as_serializable_dict(binary_buffers) for m in messages)
+    inner = msgspec.msgpack.encode({"messages": serialized, "timestampSec": time.perf_counter(),
+                                    "binaryBufferLengths": tuple(b.nbytes for b in binary_buffers)})
+    compressed = zstd.compress(inner)
+    parts: list[Any] = [len(inner).to_bytes(8, "little"), len(compressed).to_bytes(8, "little"),
+                        compressed]
+    _infra._append_aligned_buffers(parts, binary_buffers, 16 + len(compressed))
+    frame = b"".join(parts)
+    if shareable:  # holding the messages keeps their ids from being reused while cached
+        kept.append((messages, frame))
+        del kept[:-_FRAMES_KEPT]
+    return frame
+
+
+def share_frames() -> bool:
+    """Encode each window of messages once for all clients (:func:`encode_window`).
+
+    Replaces ``viser.infra._infra._message_producer`` (looked up when a client connects) with
+    the same loop, sending :func:`encode_window`'s frame: with 50 viewers the encoding and
+    compression of every frame, 50 times over, was most of the console's CPU. The producers
+    all run on the server's event loop, so the per-buffer cache needs no lock.
+
+    Returns:
+        True if it patched now, False if it was already installed.
+    """
+    from viser.infra import _infra
+
+    if getattr(_infra._message_producer, "_shared_frames", False):
+        return False
+    import zstandard
+
+    async def _message_producer(websocket: Any, buffer: Any, client_id: int,
+                                backlog_done_message: Any = None) -> None:
+        window_generator = buffer.window_generator(
+            client_id, backlog_done_message=backlog_done_message)
+        zstd = zstandard.ZstdCompressor(level=1)
+        try:
+            while not buffer.done:
+                try:
+                    outgoing = await window_generator.__anext__()
+                except StopAsyncIteration:
+                    break
+                await websocket.send(encode_window(buffer, outgoing, zstd))
+        finally:
+            await window_generator.aclose()  # as viser: its finallys run now, not at GC
+
+    _message_producer._shared_frames = True  # type: ignore[attr-defined]
+    _infra._message_producer = _message_producer
+    return True
 
 
 def install() -> bool:
-    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`.
+    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`, and
+    share messages' wire dicts between clients (:func:`share_wire_dicts`).
 
     Returns:
         True if it patched now, False if it was already installed.
     """
     from viser.infra import _async_message_buffer as amb
+
+    share_wire_dicts()
+    share_frames()
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_loop_safe_event", False):
@@ -67,3 +209,42 @@ def install() -> bool:
     cls.__init__ = __init__
     cls._loop_safe_event = True
     return True
+
+
+def set_bone_poses(handle: Any, wxyzs: npt.ArrayLike, positions: npt.ArrayLike) -> int:
+    """Assign all bone poses of a ``MeshSkinnedHandle`` at once; returns the messages queued.
+
+    Queues exactly what assigning ``handle.bones[i].wxyz`` and ``.position`` one by one queues
+    (a ``SetBoneOrientationMessage`` / ``SetBonePositionMessage`` for each value that is not
+    ``np.allclose`` to the bone's current one, which is updated), but compares all bones in one
+    vectorised step instead of one ``np.allclose`` and one tuple cast per setter: those cost
+    about half of the render thread's time for the extensible arm's 56 bones. viser 1.1.1's
+    client has no message carrying several bones, so the message count stays the same.
+
+    Args:
+        handle: The skinned mesh (viser 1.1.1 ``MeshSkinnedHandle``).
+        wxyzs: (B, 4) unit quaternions.
+        positions: (B, 3) positions.
+    """
+    from viser import _messages
+
+    impl = handle._impl
+    if impl.removed:
+        raise RuntimeError("Cannot assign bone poses on a removed skinned mesh")
+    bones = handle.bones
+    queue = impl.api._queue_scene_message
+    sent = 0
+    for field, values, make in (
+            ("wxyz", wxyzs, _messages.SetBoneOrientationMessage),
+            ("position", positions, _messages.SetBonePositionMessage)):
+        new = np.asarray(values, dtype=float)
+        if new.shape != (len(bones), 4 if field == "wxyz" else 3):
+            raise ValueError(f"{field}: expected {len(bones)} rows, got shape {new.shape}")
+        current = [getattr(b._impl, field) for b in bones]
+        old = np.array(current)
+        same = np.all(np.abs(new - old) <= 1e-8 + 1e-5 * np.abs(old), axis=1)  # np.allclose
+        for i in np.flatnonzero(~same):
+            current[i][:] = new[i]
+            queue(make(impl.name, int(i), tuple(new[i].tolist())))
+            sent += 1
+    return sent

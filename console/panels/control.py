@@ -44,7 +44,7 @@ from console.state import ArmState
 SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")
 OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
-PUMP_HZ = 20.0
+PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can draw per second
 PLOT_HZ = 4.0
 # The curvature plot has 13 series, which viser sends as float64: 60 points, at most 2 Hz,
 # cost ~12 KB/s per viewer while the arm moves.
@@ -479,6 +479,8 @@ class ControlPanel(Panel):
             self.finger.visible = True
         else:
             self.finger.visible = False
+        # The 3D arm's pleated gripper curls while the loop commands it closed.
+        self.app.view.set_gripper_closed(c is not None and c.armed and c.gripper_closed)
 
     def _draw_plots(self) -> None:
         hist = list(self._hist)
