@@ -516,7 +516,7 @@ class PathsPanel(Panel):
         self.hardware.content = self._hardware_html()
         self.show_phase()
         if result.ok:
-            self._set_status(f"Done: final tip {(result.error or 0.0) * 1e3:.2f} mm from the "
+            self._set_status(f"Done: final tip {mm(result.error or 0.0, 2)} mm from the "
                              "path's end.", "done")
         elif snap.fault:
             self._set_status(f"⚠ Hardware fault: {snap.fault}. Commanding stopped.", "fault")

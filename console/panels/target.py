@@ -197,9 +197,13 @@ class TargetPanel(Panel):
         self._show()  # nothing else changes, so no frame would show it
 
     def _on_stop(self, reason: str) -> None:
-        """STOP / lost lease: drop pending solves (app.hold stops the motion itself)."""
+        """STOP / lost lease: drop pending solves (app.hold stops the motion itself), and say
+        so when that leaves a target unanswered or not reached."""
+        pending = self._latest[4] is not None or self._moving_to is not None
         self.worker.cancel()
         self._moving_to = None
+        if pending:
+            self.report_error(f"Not moved to the target: motion stopped ({reason}).")
 
     # -- worker ----------------------------------------------------------------------------
     def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
@@ -287,8 +291,9 @@ class TargetPanel(Panel):
             self._synced_seq = command.seq
             mine = command.source == "target" or (command.source == "jog"
                                                   and self._moving_to is not None)
-            if not mine and not self._dragging:
-                # Moved by jog / path / runner / STOP: the target rides on the tip.
+            if not mine and not self._dragging and self._latest[4] is None:
+                # Moved by jog / path / runner / STOP: the target rides on the tip (not while
+                # a typed target is being solved: its answer comes next).
                 self._target = self._tip(command.q)
                 self.gizmo.position = tuple(self._target)
                 self._publish(self._target, None, None)

@@ -86,6 +86,14 @@ def test_every_action_moves_or_says_why_from_the_start_pose(
                lambda: np.linalg.norm(readout_tip(page) - start) > 2.0, 5,
                show=lambda: f"{readout_tip(page)} {page.locator('body').inner_text()[-300:]}")
 
+    seen = [readout_tip(page)]
+
+    def still() -> bool:  # the jog ended (its release reached the console)
+        time.sleep(0.5)
+        seen.append(readout_tip(page))
+        return bool(np.abs(seen[-1] - seen[-2]).max() < 0.05)
+    wait_until("the jog to end", still, 10)
+
     # A typed target is answered within 1 s, then reached (it is reachable).
     target = np.array([0.0, 0.0, 250.0])
     assert solve_tip_ik(ROBOT, target / 1e3).reachable
