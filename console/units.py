@@ -8,7 +8,7 @@ as "-0": these helpers normalise it to "0" (or "+0" when a sign is asked for).
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 
 def _rounded(value: float, decimals: int) -> float:

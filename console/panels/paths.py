@@ -24,13 +24,11 @@ fault.
 from __future__ import annotations
 
 import concurrent.futures as cf
-from concurrent.futures.process import BrokenProcessPool
 import dataclasses
 import html
-import multiprocessing
-import os
 import threading
 import time
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -42,7 +40,7 @@ from console.arm_view import DeltaArmView
 from console.header import Tone
 from console.lab_feed import path_plan_record
 from console.panels.base import Panel
-from console.panels.hardware import header_link
+from console.panels.extensible_status import link_summary, runner_phase, worker_pool
 from console.panels.plot_data import thin
 from console.state import ArmState
 from console.units import mm
@@ -50,7 +48,6 @@ from core.kinematics import delta as dk
 from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
 from hw_bridge.extensible_jobs import JobResult
 from hw_bridge.extensible_process import ExtensibleProcess
-from hw_bridge.parent_watch import watch_parent
 
 Array = npt.NDArray[np.float64]
 N_GHOSTS = 5
@@ -83,33 +80,6 @@ def extensible_runner(app: Any) -> ExtensibleProcess:
         raise ValueError("the extensible arm's panels need its runner: build the console with "
                          "services=ConsoleServices(extensible_runner=...) (serve.py does)")
     return runner
-
-
-def worker_pool() -> cf.ProcessPoolExecutor:
-    """One ``spawn``-ed worker process for CPU-bound planning / IK, off the console's GIL.
-
-    It leaves when the console process is gone, even SIGKILLed (a spawned worker holds its own
-    queue's write end, so it would wait forever); its initializer lives in ``hw_bridge`` so the
-    worker does not import the console (viser) to start.
-    """
-    return cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=watch_parent, initargs=(os.getpid(),))
-
-
-def link_summary(app: Any) -> str:
-    """The extensible arm's link in words, from the link supervisor's health: the Hardware
-    panel's controls, or (in-process mock) the runner's own link once it runs."""
-    attachment = app.services.hardware
-    kind = None if attachment is None else attachment.kind
-    controls = app.services.bridge_controls
-    runner = app.services.extensible_runner
-    if controls is None and runner is not None and runner.started:
-        controls = runner.bridge_controls
-    health = None if controls is None else controls.health()
-    text = header_link(kind, health)[0]
-    if health is None and kind == "mock":
-        text += " (the in-process mock starts on the first Execute or Reconnect)"
-    return text
 
 
 @dataclasses.dataclass
@@ -439,22 +409,11 @@ class PathsPanel(Panel):
         """The header's Phase field for the extensible arm (what the runner is doing)."""
         runner = self.app.services.extensible_runner
         snap = runner.snapshot if runner is not None and runner.started else None
-        if snap is not None and snap.fault:
-            return f"fault: {snap.fault}", "fault"
-        if snap is not None and snap.busy:
-            self._stopped = False
-            if snap.job_id == self._job and snap.n_samples > 1:
-                total = (snap.n_samples - 1) * runner.period_s  # samples at the loop's rate
-                done = min(total, snap.sample * runner.period_s)
-                return f"running path {done:.1f}/{total:.1f} s", "busy"
-            return f"running {snap.label or 'a move'}", "busy"
-        if self.app.hold.target() is not None or (snap is not None
-                                                  and snap.state == "following"):
-            self._stopped = False
-            return "moving to target", "busy"
-        if self._stopped:
-            return "holding after STOP", "warn"
-        return "idle", "ok"
+        moving = self.app.hold.target() is not None
+        if moving or (snap is not None and (snap.busy or snap.state == "following")):
+            self._stopped = False  # a new motion: the STOP is over
+        period = runner.period_s if runner is not None else 0.01
+        return runner_phase(snap, period, self._job, moving, self._stopped)
 
     def show_phase(self) -> None:
         """Push :meth:`phase` to the header (it sends only changes)."""

@@ -33,7 +33,7 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel, operator_only
-from console.panels.paths import link_summary, worker_pool
+from console.panels.extensible_status import link_summary, worker_pool
 from console.state import ArmState
 from console.units import deg, mm, mm_value, mm_xyz
 from core.kinematics import delta as dk

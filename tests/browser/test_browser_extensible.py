@@ -44,7 +44,7 @@ def extensible_console(console_server: Callable[..., str]) -> Callable[[], str]:
 
 def open_console(page, url: str) -> None:
     page.goto(url)
-    page.get_by_text("Tip target", exact=True).wait_for(timeout=15_000)
+    page.get_by_text("Tip target", exact=True).wait_for(timeout=60_000)  # a loaded 2-core box
     page.locator('[data-testid="tip-readout"]').wait_for(timeout=10_000)
     notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
     if notice.count():

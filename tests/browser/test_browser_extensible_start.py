@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -115,7 +115,6 @@ def test_every_action_moves_or_says_why_from_the_start_pose(
     # Preview draws (the requested path at once) or says why within 5 s, and ends planned.
     path_status = page.locator('[data-testid="path-status"]')
     page.get_by_role("button", name="Preview").click()
-    t0 = time.monotonic()
     wait_until("a drawn preview or a reason", lambda: (
         path_status.get_attribute("data-drawn") == "requested"
         or path_status.get_attribute("data-state") in ("previewed", "infeasible", "error")), 5,

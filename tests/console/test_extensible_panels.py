@@ -83,8 +83,9 @@ def wait_for(fn, timeout: float = 10.0) -> bool:
 
 
 def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, monkeypatch):
-    from console.panels import paths
     from fakes import console_app
+
+    from console.panels import paths
 
     monkeypatch.setattr(paths, "PLAN_TIMEOUT_S", 1.0)
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
@@ -117,9 +118,11 @@ def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, m
 
 
 def test_hardware_line_is_the_link_supervisors_health_and_phase_follows_stop(server):
-    from console.panels.hardware import header_link
-    from console.panels.paths import PathsPanel, link_summary
     from fakes import console_app
+
+    from console.panels.extensible_status import link_summary
+    from console.panels.hardware import header_link
+    from console.panels.paths import PathsPanel
 
     controls = FakeControls(FakeHealth(fault="link lost: no valid STATE for 48 ms"))
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
@@ -147,8 +150,9 @@ def test_hardware_line_is_the_link_supervisors_health_and_phase_follows_stop(ser
 
 
 def test_unreachable_target_names_the_closest_reachable_tip_without_negative_zero(server):
-    from console.panels.target import TargetPanel
     from fakes import console_app
+
+    from console.panels.target import TargetPanel
 
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
                       hardware=FakeHardware("mock"))
