@@ -131,12 +131,16 @@ def test_every_action_moves_or_says_why_from_the_start_pose(
     retracted = np.array([0.0, 0.0, ROBOT.n_segments * ROBOT.L0 * 1e3])
     wait_until("the arm retracted", lambda: np.abs(readout_tip(page) - retracted).max() <= 0.5,
                20, show=lambda: str(readout_tip(page)))
-    hold(page, "Δx₁ −", 0.5)
-    note = page.get_by_text("extend δL₁ first")
-    wait_until("the clamp note", lambda: note.count() > 0, 5,
-               show=lambda: page.locator("body").inner_text()[-400:])
+    note = page.get_by_text("clamped to +0 mm")
+    for _ in range(3):  # a loaded box can lose the lease for a moment ("Not allowed"): again
+        hold(page, "Δx₁ −", 0.5)
+        try:
+            wait_until("the clamp note", lambda: note.count() > 0, 5)
+            break
+        except AssertionError:
+            continue
     text = page.locator("body").inner_text()
-    assert "clamped to +0 mm" in text
+    assert "clamped to +0 mm" in text and "extend δL₁ first" in text, text[-600:]
     assert not NEGATIVE_ZERO.findall(text), [ln for ln in text.splitlines()
                                              if NEGATIVE_ZERO.search(ln)]
     page.screenshot(path=str(artifacts_dir / "browser_extensible_clamp.png"))
