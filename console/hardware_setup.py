@@ -139,8 +139,11 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
         out.closers.append(emulator.stop)
         path = emulator.path
         out.port_path = path
-    runner = extensible_process.ExtensibleProcess(robot, store, "port", path, follow=False,
-                                                  cpus=part)
+    # The emulator's arm powers up retracted (every rack at rack_min: no room to bend); it moves
+    # to the console's start pose (console.model.DeltaModel.initial) on connect. A real
+    # controller is never moved by connecting: the console's command becomes where it is.
+    runner = extensible_process.ExtensibleProcess(robot, store, "port", path,
+                                                  follow=port_path is None, cpus=part)
     out.closers.insert(0, runner.close)
     runner.start()
     return ConsoleServices(hardware=out, extensible_runner=runner,

@@ -23,6 +23,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from console.units import deg, mm
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import ExtensibleArm, Robot, SoftArm
@@ -63,6 +64,11 @@ class ArmModel(ABC):
     def zero(self) -> Array:
         """The all-zero configuration (straight arm; retracted for the extensible arm)."""
         return np.zeros(self.shape)
+
+    def initial(self) -> Array:
+        """Where the console starts (the store's first command): the zero configuration unless
+        the robot needs room to move (see :meth:`DeltaModel.initial`)."""
+        return self.zero()
 
     def validate(self, q: npt.ArrayLike) -> Array:
         """A float copy of ``q``; raises ValueError naming the problem for bad input."""
@@ -170,6 +176,20 @@ class DeltaModel(ArmModel):
             ]
         self.coordinates = tuple(coords)
 
+    def initial(self) -> Array:
+        """Straight, every rack at the middle of [rack_min, rack_max] (whole millimetres).
+
+        Retracted (zero) every rack sits at rack_min, so no segment can bend: bending one way
+        shortens a rack. At mid-range each rack has (rack_max - rack_min) / 2 of travel both
+        ways, so every jog, target and path starts with room to move. A rule on the robot's
+        own limits (data/robots/*.toml), so every extensible robot file gets its own.
+        """
+        r = self.robot
+        mid = math.floor((0.5 * (r.rack_min + r.rack_max) - r.L0) * 1e3 + 1e-9) / 1e3
+        q = self.zero()
+        q[:, 2] = mid
+        return q
+
     def rack_lengths(self, q: Array) -> Array:
         """Rack lengths (n, 3) in metres."""
         return dk.robot_rack_lengths(self.robot, q)
@@ -214,9 +234,9 @@ class DeltaModel(ArmModel):
         value = float(q[seg, axis])
         if min(bhi - value, value - blo) >= coord.step:
             return None
-        return (f"{coord.label} at {value * 1e3:+.0f} mm: segment {seg + 1} at its bending limit "
-                f"θ = {math.degrees(self.robot.theta_max):.0f}° "
-                f"(|(Δx, Δy)| ≤ {self.bend_max * 1e3:.0f} mm)")
+        return (f"{coord.label} at {mm(value, 0, signed=True)} mm: segment {seg + 1} at its "
+                f"bending limit θ = {deg(self.robot.theta_max)}° "
+                f"(|(Δx, Δy)| ≤ {mm(self.bend_max, 0)} mm)")
 
     def set_coordinate(self, q: Array, coord: Coordinate, value: float) -> tuple[Array, str | None]:
         seg, axis = coord.index
@@ -228,16 +248,16 @@ class DeltaModel(ArmModel):
         if abs(clamped - value) <= 1e-9:
             return out, (notes[0] if notes else None)
         if (bhi <= hi) if value > clamped else (blo >= lo):  # the bending limit binds
-            return out, (f"{coord.label} clamped to {clamped * 1e3:+.0f} mm: segment {seg + 1} "
-                         f"at its bending limit θ = {math.degrees(self.robot.theta_max):.0f}° "
-                         f"(|(Δx, Δy)| ≤ {self.bend_max * 1e3:.0f} mm)")
+            return out, (f"{coord.label} clamped to {mm(clamped, 0, signed=True)} mm: segment "
+                         f"{seg + 1} at its bending limit θ = {deg(self.robot.theta_max)}° "
+                         f"(|(Δx, Δy)| ≤ {mm(self.bend_max, 0)} mm)")
         racks = self.rack_lengths(out[seg])
         limits = (self.robot.rack_min, self.robot.rack_max)
         which, j = np.unravel_index(np.argmin(np.abs(racks[None] - np.array(limits)[:, None])),
                                     (2, 3))
         limit = limits[which]
-        note = (f"{coord.label} clamped to {clamped * 1e3:+.0f} mm: rack {j + 1} of segment "
-                f"{seg + 1} at its {limit * 1e3:.0f} mm limit")
+        note = (f"{coord.label} clamped to {mm(clamped, 0, signed=True)} mm: rack {j + 1} of "
+                f"segment {seg + 1} at its {mm(limit, 0)} mm limit")
         if axis < 2 and hi - lo < 1e-9:
             note += f" (extend δL{subscript(seg + 1)} first to make room for bending)"
         return out, note
@@ -248,7 +268,7 @@ class DeltaModel(ArmModel):
         notes = []
         dl = np.clip(out[:, 2], r.rack_min - r.L0, r.rack_max - r.L0)
         for i in np.flatnonzero(dl != out[:, 2]):
-            notes.append(f"δL{subscript(i + 1)} clamped to {dl[i] * 1e3:.0f} mm (rack limits)")
+            notes.append(f"δL{subscript(i + 1)} clamped to {mm(dl[i], 0)} mm (rack limits)")
         out[:, 2] = dl
         length = r.L0 + dl  # (n,) rack length with no bending
         bend = out[:, :2] @ self.rack_gradient[:2]  # (n, 3) rack change due to bending
@@ -262,10 +282,10 @@ class DeltaModel(ArmModel):
         for i in np.flatnonzero(scale < 1.0 - 1e-12):
             if bend_room[i] < rack_scale[i]:
                 notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to stay within "
-                             f"its bending limit θ = {math.degrees(r.theta_max):.0f}°")
+                             f"its bending limit θ = {deg(r.theta_max)}°")
             else:
                 notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to keep racks "
-                             f"within [{r.rack_min * 1e3:.0f}, {r.rack_max * 1e3:.0f}] mm")
+                             f"within [{mm(r.rack_min, 0)}, {mm(r.rack_max, 0)}] mm")
         out[:, :2] *= scale[:, None]
         return out, tuple(notes)
 

@@ -63,7 +63,7 @@ class StateStore:
                  mirror_commands: bool = True) -> None:
         self.model = model
         self.mirror_commands = mirror_commands
-        q0 = model.zero() if initial is None else model.validate(initial)
+        q0 = model.initial() if initial is None else model.validate(initial)
         q0, notes = model.clamp(q0)
         self._cond = threading.Condition()
         self._seq = 0

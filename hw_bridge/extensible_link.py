@@ -140,6 +140,8 @@ class HardwareLink:
         pos = hw.positions()
         assert pos is not None
         stack.connected(pos, follow)
+        if not follow:  # the arm stays where it is: so does the console's command
+            stack.settle_link()
         self.publish()
         return None
 

@@ -288,6 +288,9 @@ class HardwarePanel(Panel):
                 handle.disabled = ctl is None
             state = h.state if h is not None else "unconfigured"
             if self.app.robot.kind == "delta":  # the soft arm's Control panel tells its link
+                runner = self.app.services.extensible_runner
+                if ctl is None and runner is not None and runner.started:  # in-process mock
+                    h = runner.bridge_controls.health()
                 self.app.header.show("link", *header_link(self.kind, h))
             self.connect_btn.disabled = ctl is None
             self.disconnect_btn.disabled = ctl is None or state == "unconfigured"

@@ -10,6 +10,15 @@ started on first use; it first joins the path from where the motors are). While 
 panel shows the progress, the measured tip trace and a plot of the commanded and the measured
 tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
 console-wide STOP (any client), whose hook makes the runner hold position, as does a lost lease.
+
+Preview answers at once: the requested tip path is drawn while the worker plans, the status
+counts the seconds, and a plan that has not come back within ``PLAN_TIMEOUT_S`` is reported as
+such (the worker is replaced); a failed plan or drawing says why. The worker processes (this
+planner and the tip target's IK) start when a browser opens, not on the first request. The
+"Hardware:" line and the tip target's warnings read the link supervisor's health (the same
+source as the Hardware panel and the header's Link field); this panel pushes the header's Phase
+field for the extensible arm: idle, moving to target, running path t/T s, holding after STOP,
+fault.
 """
 
 from __future__ import annotations
@@ -17,10 +26,9 @@ from __future__ import annotations
 import concurrent.futures as cf
 import dataclasses
 import html
-import multiprocessing
-import os
 import threading
 import time
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 import numpy as np
@@ -29,10 +37,13 @@ import viser
 import viser.uplot as uplot
 
 from console.arm_view import DeltaArmView
+from console.header import Tone
 from console.lab_feed import path_plan_record
-from console.panels.plot_data import thin
 from console.panels.base import Panel
+from console.panels.extensible_status import link_summary, runner_phase, worker_pool
+from console.panels.plot_data import thin
 from console.state import ArmState
+from console.units import mm
 from core.kinematics import delta as dk
 from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
 from hw_bridge.extensible_jobs import JobResult
@@ -46,6 +57,8 @@ TRACE_COLOR = (150, 60, 200)
 WAYPOINT_COLOR = (150, 60, 200)
 MEASURED_COLOR = (235, 130, 30)
 GHOST_COLOR = (90, 140, 220)
+PLAN_TIMEOUT_S = 30.0  # s: a Fig. 9 path plans in 2-5 s unloaded, 10-25 s on a busy 2-core box
+STATUS_HZ = 2.0  # planning seconds, Hardware line and the header's Phase field
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,11 +82,14 @@ def extensible_runner(app: Any) -> ExtensibleProcess:
     return runner
 
 
-def _exit_with_parent(parent: int) -> None:
-    """Planner worker initializer: leave when the console process is gone, even SIGKILLed
-    (a spawned worker holds its own queue's write end, so it would wait forever)."""
-    from hw_bridge.parent_watch import watch_parent
-    watch_parent(parent)
+@dataclasses.dataclass
+class _Planning:
+    """A plan in the worker: what was asked, since when (perf_counter s)."""
+
+    req: PathRequest
+    waypoints: Array
+    future: cf.Future
+    started: float
 
 
 def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:
@@ -117,7 +133,7 @@ class PathsPanel(Panel):
         self.reconnect_btn = gui.add_button(
             "Reconnect hardware", icon=viser.Icon.PLUG_CONNECTED,
             hint="Connect (after a fault: reconnect) and arm the motors; the arm holds still.")
-        self.hardware = gui.add_html(self._hardware_html(None))
+        self.hardware = gui.add_html(self._hardware_html())
         self.progress = gui.add_progress_bar(0.0, color="blue")
         self.status = gui.add_html(self._status("Preview a path, then Execute.", "idle"))
         self.plot = gui.add_uplot(
@@ -141,10 +157,12 @@ class PathsPanel(Panel):
         self._lock = threading.Lock()
         self._pool: cf.ProcessPoolExecutor | None = None
         self._planned: tuple[PathRequest, MotionPath] | None = None
-        self._planning: PathRequest | None = None
+        self._planning: _Planning | None = None
         self._execute_after_plan = False
         self._job = 0
         self._plot_at = 0.0
+        self._stopped = False  # STOP held the arm; cleared by the next motion
+        self._quit = threading.Event()
         self.preview_btn.on_click(self.operator_only(
             lambda _: self._request_plan(execute=False), "preview a path"))
         self.execute_btn.on_click(self.operator_only(self._on_execute, "execute a path"))
@@ -154,6 +172,16 @@ class PathsPanel(Panel):
         self.reconnect_btn.on_click(self.operator_only(lambda _: self._reconnect(),
                                                        "connect the hardware"))
         self.app.add_stop_hook(self._on_stop)
+        self.app.server.on_client_connect(lambda _: self._warm_up())
+        threading.Thread(target=self._status_loop, daemon=True, name="paths-status").start()
+
+    def _warm_up(self) -> None:
+        """Start the planner worker when a browser opens (importing the planner takes seconds
+        on a busy machine; the first Preview should not wait for it)."""
+        try:
+            self._plan_pool().submit(build_path, "linear", np.zeros(3), 0.01, "xy")
+        except RuntimeError:  # shut down (console closing)
+            pass
 
     @property
     def runner(self) -> ExtensibleProcess:
@@ -180,13 +208,23 @@ class PathsPanel(Panel):
             return
         with self._lock:
             self._execute_after_plan = execute
-            if self._planning == req:
-                return
-            self._planning = req
-        self._set_status("Planning…", "planning")
-        future = self._plan_pool().submit(plan_path, self.app.robot, waypoints, speed=req.speed,
-                                          start_delta=q)
-        future.add_done_callback(lambda f: self._on_planned(req, waypoints, f))
+            if self._planning is not None and self._planning.req == req:
+                return  # already planning this one (its status counts the seconds)
+        self._draw_requested(waypoints)
+        pool = self._plan_pool()
+        try:
+            future = pool.submit(plan_path, self.app.robot, waypoints, speed=req.speed,
+                                 start_delta=q)
+        except (RuntimeError, BrokenProcessPool) as exc:
+            self._drop_pool(pool)
+            self._set_status(f"⚠ Planning failed: the planner worker is gone ({exc}); "
+                             "Preview again.", "error")
+            return
+        planning = _Planning(req, waypoints, future, time.perf_counter())
+        with self._lock:
+            self._planning = planning
+        self._show_planning(planning)
+        future.add_done_callback(lambda f: self._on_planned(planning))
 
     def _on_execute(self, event: viser.GuiEvent) -> None:
         req = self._current_request()
@@ -202,6 +240,10 @@ class PathsPanel(Panel):
         """Stop hook (STOP, a lost lease, shutdown): no pending execute, motors hold."""
         with self._lock:
             self._execute_after_plan = False
+        # STOP itself (the header's, a panel's Stop); a lost lease or a change of control
+        # also stops motion, but an arm that was idle then is still just idle.
+        self._stopped = self._stopped or "stop" in reason.lower()
+        self.show_phase()
         runner = self.app.services.extensible_runner
         if runner is not None and runner.started:
             runner.stop()
@@ -209,42 +251,61 @@ class PathsPanel(Panel):
     def _reconnect(self) -> None:
         runner = self.runner
         future = runner.connect() if runner.started else runner.start().connecting
-        self.hardware.content = self._hardware_html(None, "connecting…")
+        self.hardware.content = self._hardware_html("connecting…")
 
         def show() -> None:
             try:
                 future.result(timeout=10.0)  # type: ignore[union-attr]
                 time.sleep(3 * runner.period_s)  # the snapshot trails by a tick
             finally:
-                self.hardware.content = self._hardware_html(runner)
+                self.hardware.content = self._hardware_html()
         threading.Thread(target=show, daemon=True, name="hw-connect").start()
 
     # -- workers ---------------------------------------------------------------------------
     def _plan_pool(self) -> cf.ProcessPoolExecutor:
         with self._lock:
             if self._pool is None:
-                self._pool = cf.ProcessPoolExecutor(
-                    1, mp_context=multiprocessing.get_context("spawn"),
-                    initializer=_exit_with_parent, initargs=(os.getpid(),))
+                self._pool = worker_pool()
             return self._pool
 
-    def _on_planned(self, req: PathRequest, waypoints: Array, future: cf.Future) -> None:
+    def _drop_pool(self, pool: cf.ProcessPoolExecutor) -> None:
+        """A broken or stuck worker: a new one on the next request."""
         with self._lock:
-            if self._planning == req:
-                self._planning = None
+            if self._pool is pool:
+                self._pool = None
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            proc.terminate()  # stuck in a plan: shutdown alone would leave it computing
+
+    def _on_planned(self, planning: _Planning) -> None:
+        """Worker callback: draw the plan and say what it is, or why there is none."""
+        with self._lock:
+            if self._planning is not planning:
+                return  # timed out (already reported) or replaced
+            self._planning = None
             execute, self._execute_after_plan = self._execute_after_plan, False
         try:
-            path: MotionPath = future.result()
+            self._show_plan(planning, execute)
+        except Exception as exc:  # noqa: BLE001 - a done-callback's exception would be lost
+            self._set_status(f"⚠ Planning failed: {type(exc).__name__}: {exc}", "error")
+
+    def _show_plan(self, planning: _Planning, execute: bool) -> None:
+        req, waypoints = planning.req, planning.waypoints
+        try:
+            path: MotionPath = planning.future.result()
         except Exception as exc:  # noqa: BLE001 - bad input or a broken worker: say so
-            self._set_status(f"⚠ Planning failed: {exc}", "error")
+            pool = self._pool
+            if isinstance(exc, BrokenProcessPool) and pool is not None:
+                self._drop_pool(pool)
+            self._set_status(f"⚠ Planning failed: {exc or type(exc).__name__}", "error")
             return
         self._planned = (req, path)
         self.app.recorder.log("plan", path_plan_record(req, waypoints, path))  # lab data
         self._draw_preview(path, waypoints)
         ok = path.max_error <= MAX_EXECUTE_ERROR
-        summary = (f"{req.kind} {req.size * 1e3:.0f} mm in {req.plane} at "
-                   f"{req.speed * 1e3:.0f} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
-                   f"max planned tip error {path.max_error * 1e3:.2f} mm, {path.jumps} jumps")
+        summary = (f"{req.kind} {mm(req.size, 0)} mm in {req.plane} at "
+                   f"{mm(req.speed, 0)} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
+                   f"max planned tip error {mm(path.max_error, 2)} mm, {path.jumps} jumps")
         if not ok:
             self._set_status(f"⚠ {summary}. The path leaves the reachable workspace: shrink it "
                              "or move the arm.", "infeasible")
@@ -262,13 +323,45 @@ class PathsPanel(Panel):
             self._set_status("⚠ A job is running: stop it first.", "error")
             return
         self._job = job = runner.execute(path, "path")
-        self.hardware.content = self._hardware_html(runner)
+        self._stopped = False
+        self.hardware.content = self._hardware_html()
         self._set_status(f"Executing ({path.duration:.1f} s)…", "running")
         # Frames come while the arm moves; this shows the end even if nothing is redrawn then.
         threading.Thread(target=self._watch, args=(runner, job), daemon=True,
                          name="path-watch").start()
 
     # -- display ---------------------------------------------------------------------------
+    def _draw_requested(self, waypoints: Array) -> None:
+        """At once on Preview: the requested tip path (the plan replaces it), no ghost arms."""
+        w = np.asarray(waypoints, dtype=float)
+        self.waypoints.points = w.astype(np.float32)
+        self.waypoints.visible = True
+        self.trace.points = np.stack([w[:-1], w[1:]], axis=1) if len(w) > 1 \
+            else np.stack([w, w], axis=1)
+        self.trace.visible = True
+        self.measured.visible = False
+        for ghost in self.ghosts:
+            ghost.visible = False
+
+    def _show_planning(self, planning: _Planning) -> None:
+        """Planning status with its seconds; past ``PLAN_TIMEOUT_S`` say so and give up."""
+        waited = time.perf_counter() - planning.started
+        if waited >= PLAN_TIMEOUT_S:
+            with self._lock:
+                if self._planning is not planning:
+                    return
+                self._planning = None
+                self._execute_after_plan = False
+                pool = self._pool
+            if pool is not None:
+                self._drop_pool(pool)
+            self._set_status(f"⚠ Planning gave no answer within {PLAN_TIMEOUT_S:.0f} s (the "
+                             "planner worker is busy or stuck; it was restarted). The drawn "
+                             "line is only the requested path: Preview again.", "error")
+            return
+        self._set_status(f"Planning… {waited:.0f} s (the requested tip path is drawn; the "
+                         "arm's motion follows when planned)", "planning", drawn="requested")
+
     def _draw_preview(self, path: MotionPath, waypoints: Array) -> None:
         self.waypoints.points = np.asarray(waypoints, dtype=np.float32)
         self.waypoints.visible = True
@@ -291,26 +384,68 @@ class PathsPanel(Panel):
                     f"/path/ghost_{i}", verts, faces, color=GHOST_COLOR, opacity=0.22,
                     cast_shadow=False, receive_shadow=False))
 
-    @staticmethod
-    def _hardware_html(runner: ExtensibleProcess | None, text: str | None = None) -> str:
-        if text is None and runner is None:
-            text = "not connected (connects on the first Execute)"
-        elif text is None:
-            snap = runner.snapshot  # type: ignore[union-attr]
-            port = runner.port  # type: ignore[union-attr]
-            text = f"{snap.state} · {port}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
+    def _hardware_html(self, text: str | None = None) -> str:
+        """The link as the Hardware panel and the header's Link field show it (the link
+        supervisor's health), and the runner's state once it runs."""
+        if text is None:
+            text = link_summary(self.app)
+            runner = self.app.services.extensible_runner
+            if runner is not None and runner.started:
+                snap = runner.snapshot
+                text += f" · runner {snap.state}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
         return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
                 f"Hardware: {html.escape(text)}</div>")
 
-    def _set_status(self, text: str, state: str) -> None:
-        self.status.content = self._status(text, state)
+    def _set_status(self, text: str, state: str, drawn: str = "") -> None:
+        self.status.content = self._status(text, state, drawn)
 
     @staticmethod
-    def _status(text: str, state: str) -> str:
-        return (f'<div data-testid="path-status" data-state="{state}" style="font-size:0.85em">'
-                f"{html.escape(text)}</div>")
+    def _status(text: str, state: str, drawn: str = "") -> str:
+        mark = f' data-drawn="{drawn}"' if drawn else ""
+        return (f'<div data-testid="path-status" data-state="{state}"{mark} '
+                f'style="font-size:0.85em">{html.escape(text)}</div>')
+
+    def phase(self) -> tuple[str, Tone]:
+        """The header's Phase field for the extensible arm (what the runner is doing)."""
+        runner = self.app.services.extensible_runner
+        snap = runner.snapshot if runner is not None and runner.started else None
+        moving = self.app.hold.target() is not None
+        if moving or (snap is not None and (snap.busy or snap.state == "following")):
+            self._stopped = False  # a new motion: the STOP is over
+        period = runner.period_s if runner is not None else 0.01
+        return runner_phase(snap, period, self._job, moving, self._stopped)
+
+    def show_phase(self) -> None:
+        """Push :meth:`phase` to the header (it sends only changes)."""
+        if not self.app.stopped:
+            self.app.header.show("phase", *self.phase())
+
+    def _status_loop(self) -> None:
+        """Worker: planning seconds (and timeout), the Hardware line and the Phase field,
+        also while no frame is drawn (an idle arm draws none)."""
+        shown = ""
+        while not self._quit.wait(1.0 / STATUS_HZ) and not self.app.stopped:
+            try:
+                planning = self._planning
+                if planning is not None:
+                    self._show_planning(planning)
+                self.show_phase()
+                page = self._hardware_html()
+                if page != shown:
+                    shown = self.hardware.content = page
+            except Exception:  # noqa: BLE001 - a display hiccup must not end the thread
+                time.sleep(1.0)
+
+    def close(self) -> None:
+        self._quit.set()
+        with self._lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+        super().close()
 
     def on_state(self, state: ArmState) -> None:
+        self.show_phase()
         runner = self.app.services.extensible_runner
         if runner is not None and runner.started:  # (the mock's connects on the first Execute)
             self._show_job(runner)
@@ -337,9 +472,10 @@ class PathsPanel(Panel):
         if result is None:
             return
         self._job = 0
-        self.hardware.content = self._hardware_html(runner)
+        self.hardware.content = self._hardware_html()
+        self.show_phase()
         if result.ok:
-            self._set_status(f"Done: final tip {(result.error or 0.0) * 1e3:.2f} mm from the "
+            self._set_status(f"Done: final tip {mm(result.error or 0.0, 2)} mm from the "
                              "path's end.", "done")
         elif snap.fault:
             self._set_status(f"⚠ Hardware fault: {snap.fault}. Commanding stopped.", "fault")

@@ -24,6 +24,7 @@ import viser
 from console.panels.base import Panel
 from console.panels.paths import extensible_runner
 from console.state import ArmState
+from console.units import mm, mm_value
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import ExtensibleArm
@@ -78,7 +79,7 @@ def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt
     ik = solve_tip_ik(robot, p)
     if not ik.reachable:
         raise ValueError(f"point is unreachable: the closest feasible tip is "
-                         f"{ik.error * 1e3:.1f} mm away")
+                         f"{mm(ik.error, 1)} mm away")
     home = dk.robot_rack_lengths(robot, np.zeros((robot.n_segments, 3)))
     runner.start()
     tips: list[Array] = []
@@ -105,13 +106,13 @@ def result_html(r: RepeatabilityResult) -> str:
     head = "".join(f'<th style="{cell}">{a} (mm)</th>' for a in _AXES)
     body = "".join(
         f'<tr><td style="{cell};text-align:left">{label}</td>'
-        + "".join(f'<td style="{cell}" data-testid="rep-{key}-{a}">{v * 1e3:.2f}</td>'
+        + "".join(f'<td style="{cell}" data-testid="rep-{key}-{a}">{mm(v, 2)}</td>'
                   for a, v in zip(_AXES, values)) + "</tr>"
         for key, label, values in rows)
     note = f" · {html.escape(r.message)}" if r.message else ""
     return (f'<div data-testid="rep-result" style="font-size:0.85em">'
             f"<b>{len(r.tips)}/{r.requested} runs</b> to "
-            f"({', '.join(f'{v * 1e3:.1f}' for v in r.point)}) mm{note}"
+            f"({', '.join(mm(v, 1) for v in r.point)}) mm{note}"
             f"<table style='border-collapse:collapse'><tr><th></th>{head}</tr>{body}"
             "</table><span style='opacity:.6'>tip from the encoders; spread = ±(max − min)/2 "
             "as in Table I</span></div>")
@@ -128,7 +129,7 @@ class RepeatabilityPanel(Panel):
 
     def build(self) -> None:
         tip = self._tip()
-        self.inputs = [self.gui.add_number(f"Point {a} (mm)", round(float(v) * 1e3, 1), step=0.1)
+        self.inputs = [self.gui.add_number(f"Point {a} (mm)", mm_value(v), step=0.1)
                        for a, v in zip(_AXES, tip)]
         self.use_tip = self.gui.add_button("Point ← current tip")
         self.count = self.gui.add_number("Repetitions", 5, min=1, max=50, step=1,
@@ -149,7 +150,7 @@ class RepeatabilityPanel(Panel):
 
     def _use_tip(self) -> None:
         for h, v in zip(self.inputs, self._tip()):
-            h.value = round(float(v) * 1e3, 1)
+            h.value = mm_value(v)
 
     def _tip(self) -> Array:
         robot: Any = self.app.robot

@@ -10,18 +10,20 @@ process: there a CPU-bound solve holds the GIL the extensible runner's 100 Hz lo
 seconds). The solution
 is a set-point for ``app.hold`` (``console.hold_to_run``: speed-capped, stops on STOP or a lost
 lease), like the jog sliders; on arrival the panel re-commands it as ``"target"`` so the Δ jog
-sliders show it. With the hardware runner started, the motors follow the command. An
-unreachable target leaves the arm at the closest feasible configuration; the panel says how far
-the tip is from the target and a red line in the view joins them. Only the operator may move
-the target (``operator_only``).
+sliders show it. With the hardware runner started, the motors follow the command; when the
+link is not armed (its health, as the Hardware panel shows it) the status says the motors will
+not follow. An unreachable target moves the arm to the closest feasible configuration; the
+panel names that tip, how far it is from the target, and a red line in the view joins them.
+A typed or released target is answered at once ("Solving the IK for (x, y, z) mm…"), then by
+the result or by why nothing moves (IK error, no answer within ``IK_TIMEOUT_S``, a running
+path, control lost, motors not armed): never silence. Only the operator may move the target
+(``operator_only``).
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
 import html
-import multiprocessing
-import os
 import threading
 import time
 from typing import Any
@@ -31,8 +33,9 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel, operator_only
-from console.panels.paths import _exit_with_parent
+from console.panels.extensible_status import link_summary, worker_pool
 from console.state import ArmState
+from console.units import deg, mm, mm_value, mm_xyz
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
 from core.robot_sections import IKSettings
@@ -42,6 +45,7 @@ LIVE_HZ = 30.0
 TARGET_COLOR = (235, 130, 30)
 MISS_COLOR = (210, 40, 40)
 ARRIVAL_POLL_S = 0.05
+IK_TIMEOUT_S = 20.0  # s: a solve takes < 1 s unloaded; past this the worker is restarted
 _AXES = ("x", "y", "z")
 
 
@@ -114,17 +118,19 @@ class TargetPanel(Panel):
         self.follow = self.gui.add_checkbox(
             "Follow while dragging", True,
             hint="Solve the IK live while the gizmo moves (else only on release).")
-        self.inputs = [self.gui.add_number(f"Target {a} (mm)", round(float(v) * 1e3, 1), step=0.1,
+        self.inputs = [self.gui.add_number(f"Target {a} (mm)", mm_value(v), step=0.1,
                                            hint=f"Tip target {a} in mm; the arm moves on change.")
                        for a, v in zip(_AXES, tip)]
         self.to_tip = self.gui.add_button("Target ← current tip",
                                           hint="Put the target back on the arm's tip.")
         self.status = self.gui.add_html(self._status_html(None, None))
+        self._hardware_note = ""  # why the motors will not follow, from the link's health
         self._target = tip.copy()
         self._dragging = False
         self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
-        # (n, target, result, message): replaced whole by the worker, shown by on_state.
-        self._latest: tuple[int, Array, TipIKResult | None, str | None] = (0, tip, None, None)
+        # (n, target, result, error, info): replaced whole by the worker, shown by on_state.
+        self._latest: tuple[int, Array, TipIKResult | None, str | None, str | None] = (
+            0, tip, None, None, None)
         self._shown = 0
         self._synced_seq = self.app.store.command.seq
         self._pool: cf.ProcessPoolExecutor | None = None
@@ -135,6 +141,17 @@ class TargetPanel(Panel):
             handle.on_update(self._on_typed)
         self.to_tip.on_click(lambda _: self._reset_to_tip())
         self.app.add_stop_hook(self._on_stop)
+        self.app.server.on_client_connect(lambda _: self._warm_up())
+
+    def _warm_up(self) -> None:
+        """Start the IK worker process when a browser opens (not on the first target: a
+        spawned Python with numpy takes seconds to start on a loaded machine)."""
+        q = np.asarray(self.app.store.command.q, dtype=float)
+        try:  # a solve where the tip already is: cheap, and imports all a solve needs
+            self._ik_pool().submit(solve_tip_ik, self.app.robot, self._tip(q), q,
+                                   restarts=False, settings=self.settings)
+        except RuntimeError:  # shut down (console closing)
+            pass
 
     # -- callbacks (thin) ------------------------------------------------------------------
     @operator_only(action="move the tip target")
@@ -144,6 +161,8 @@ class TargetPanel(Panel):
         target = np.asarray(event.target.position, dtype=float)
         self._target = target
         self._dragging = event.phase != "end"
+        if event.phase == "end":
+            self._say_solving(target)
         if event.phase == "end" or self.follow.value:
             self.worker.submit(target, event.phase == "end", event.client.client_id)
 
@@ -157,7 +176,13 @@ class TargetPanel(Panel):
             return
         self._target = target
         self.gizmo.position = tuple(target)
+        self._say_solving(target)
         self.worker.submit(target, True, event.client.client_id)
+
+    def _say_solving(self, target: Array) -> None:
+        """Answer a typed / released target at once: the solve may take a moment."""
+        self._publish(target, None, None, f"Solving the IK for {mm_xyz(target)} mm…")
+        self._show()
 
     def on_refused(self, event: Any) -> None:
         """A viewer moved the gizmo or an input: put them back where the target is."""
@@ -172,9 +197,13 @@ class TargetPanel(Panel):
         self._show()  # nothing else changes, so no frame would show it
 
     def _on_stop(self, reason: str) -> None:
-        """STOP / lost lease: drop pending solves (app.hold stops the motion itself)."""
+        """STOP / lost lease: drop pending solves (app.hold stops the motion itself), and say
+        so when that leaves a target unanswered or not reached."""
+        pending = self._latest[4] is not None or self._moving_to is not None
         self.worker.cancel()
         self._moving_to = None
+        if pending:
+            self.report_error(f"Not moved to the target: motion stopped ({reason}).")
 
     # -- worker ----------------------------------------------------------------------------
     def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
@@ -189,17 +218,19 @@ class TargetPanel(Panel):
         if generation != self.worker.generation:
             return
         self._publish(target, result, None)
-        if self.app.hold.move_to(client_id, result.delta):
-            self._moving_to = result.delta
-        else:
+        # Set before the move starts: a frame of the move ("jog") must not read as someone
+        # else's command, which would put the target back on the tip and clear this status.
+        self._moving_to = result.delta
+        if not self.app.hold.move_to(client_id, result.delta):
+            self._moving_to = None
             self.report_error("Not moved: you no longer hold control.")
+        else:
+            self._show()
 
     def _ik_pool(self) -> cf.ProcessPoolExecutor:
         with self._pool_lock:
             if self._pool is None:
-                self._pool = cf.ProcessPoolExecutor(
-                    1, mp_context=multiprocessing.get_context("spawn"),
-                    initializer=_exit_with_parent, initargs=(os.getpid(),))
+                self._pool = worker_pool()
             return self._pool
 
     def _solve(self, target: Array, q0: Array, final: bool) -> TipIKResult:
@@ -207,12 +238,21 @@ class TargetPanel(Panel):
         pool = self._ik_pool()
         try:
             return pool.submit(solve_tip_ik, self.app.robot, target, q0, restarts=final,
-                               settings=self.settings).result(timeout=60.0)
+                               settings=self.settings).result(timeout=IK_TIMEOUT_S)
         except cf.process.BrokenProcessPool:
-            with self._pool_lock:  # a new worker next time
-                if self._pool is pool:
-                    self._pool = None
+            self._drop_pool(pool)
             raise RuntimeError("the IK worker process stopped; try again") from None
+        except cf.TimeoutError:
+            self._drop_pool(pool)
+            raise RuntimeError(f"the IK gave no answer within {IK_TIMEOUT_S:.0f} s (machine "
+                               "busy?); not moved; try again") from None
+
+    def _drop_pool(self, pool: cf.ProcessPoolExecutor) -> None:
+        """A broken or stuck worker: a new one next time (the old one is told to stop)."""
+        with self._pool_lock:
+            if self._pool is pool:
+                self._pool = None
+        pool.shutdown(wait=False, cancel_futures=True)
 
     def close(self) -> None:
         with self._pool_lock:
@@ -237,8 +277,12 @@ class TargetPanel(Panel):
         self._publish(self._target, None, message)
         self._show()
 
-    def _publish(self, target: Array, result: TipIKResult | None, message: str | None) -> None:
-        self._latest = (self._latest[0] + 1, np.asarray(target, dtype=float), result, message)
+    def _publish(self, target: Array, result: TipIKResult | None, message: str | None,
+                 info: str | None = None) -> None:
+        """Replace what the panel shows: an error ``message``, or ``info`` (a step under way),
+        or the IK ``result`` (None: idle)."""
+        self._latest = (self._latest[0] + 1, np.asarray(target, dtype=float), result,
+                        message, info)
 
     # -- display (render thread) -----------------------------------------------------------
     def on_state(self, state: ArmState) -> None:
@@ -247,20 +291,22 @@ class TargetPanel(Panel):
             self._synced_seq = command.seq
             mine = command.source == "target" or (command.source == "jog"
                                                   and self._moving_to is not None)
-            if not mine and not self._dragging:
-                # Moved by jog / path / runner / STOP: the target rides on the tip.
+            if not mine and not self._dragging and self._latest[4] is None:
+                # Moved by jog / path / runner / STOP: the target rides on the tip (not while
+                # a typed target is being solved: its answer comes next).
                 self._target = self._tip(command.q)
                 self.gizmo.position = tuple(self._target)
                 self._publish(self._target, None, None)
         self._show()
 
     def _show(self) -> None:
-        n, target, result, error = self._latest
-        if n == self._shown:
+        n, target, result, error, info = self._latest
+        note = self._motors_note()
+        if n == self._shown and note == self._hardware_note:
             return
-        self._shown = n
+        self._shown, self._hardware_note = n, note
         self._set_inputs(target)
-        self.status.content = self._status_html(result, error)
+        self.status.content = self._status_html(result, error, info, target, note)
         if result is not None and not result.reachable:
             self.miss.points = np.stack([result.tip, target])[None]
             self.miss.visible = True
@@ -269,24 +315,49 @@ class TargetPanel(Panel):
 
     def _set_inputs(self, target: Array) -> None:
         for handle, value in zip(self.inputs, target):
-            mm = round(float(value) * 1e3, 1)
-            if abs(float(handle.value) - mm) > 0.05:
-                handle.value = mm
+            shown = mm_value(value)
+            if abs(float(handle.value) - shown) > 0.05:
+                handle.value = shown
 
-    def _status_html(self, result: TipIKResult | None, error: str | None) -> str:
+    def _motors_note(self) -> str:
+        """Why the motors will not follow the command, from the link supervisor's health (what
+        the Hardware panel shows); "" when they follow or there is no link to manage."""
+        if self.app.store.mirror_commands:  # the view shows the command (mock: no serial link)
+            return ""
+        controls = self.app.services.bridge_controls
+        health = None if controls is None else controls.health()
+        if health is not None and health.armed and not health.fault:
+            return ""
+        return (f"The motors do not follow ({link_summary(self.app)}): connect and arm them "
+                "in the Hardware tab.")
+
+    def _status_html(self, result: TipIKResult | None, error: str | None,
+                     info: str | None = None, target: Array | None = None,
+                     note: str = "") -> str:
         if error is not None:
             body, state = f"⚠ {html.escape(error)}", "error"
+        elif info is not None:
+            body, state = html.escape(info), "solving"
         elif result is None:
-            body, state = "Drag the gizmo (orange ball) or type x, y, z.", "idle"
+            body, state = "Drag the gizmo (orange ball) or type x, y, z (mm).", "idle"
         elif result.reachable:
-            body, state = f"Tip on target (IK error {result.error * 1e3:.2f} mm).", "reachable"
+            body = (f"Target {mm_xyz(result.tip)} mm reachable (IK error "
+                    f"{mm(result.error, 2)} mm): the tip goes there.")
+            state = "reachable"
         else:
-            body = (f"<b style='color:#c92a2a'>⚠ Unreachable:</b> the closest feasible tip is "
-                    f"<b>{result.error * 1e3:.1f} mm</b> from the target (arm shown there; "
-                    "red line to the target).")
+            r: Any = self.app.robot
+            aim = "the target" if target is None else f"{mm_xyz(target)} mm"
+            body = (f"<b style='color:#c92a2a'>⚠ Unreachable:</b> {html.escape(aim)} is beyond "
+                    f"the arm's reach (racks {mm(r.rack_min, 0)}–{mm(r.rack_max, 0)} mm, "
+                    f"bend ≤ {deg(r.theta_max)}° per segment). Moved to the closest reachable "
+                    f"tip, {mm_xyz(result.tip)} mm, <b>{mm(result.error, 1)} mm</b> from the "
+                    "target (red line to the target).")
             state = "unreachable"
-        distance = "" if result is None else f"{result.error * 1e3:.3f}"
+        if note:
+            body += f"<br><b style='color:#e67700'>⚠ {html.escape(note)}</b>"
+        distance = "" if result is None else f"{mm(result.error, 3)}"
         return (f'<div data-testid="target-status" data-state="{state}" '
+                f'data-motors="{"still" if note else "follow"}" '
                 f'data-error-mm="{distance}" style="font-size:0.85em">{body}</div>')
 
     def _tip(self, q: npt.ArrayLike) -> Array:

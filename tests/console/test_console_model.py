@@ -8,6 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from console.model import DeltaModel, PlanarModel, model_for
+from console.state import StateStore
 from core.kinematics import delta as dk
 from core.robots import load
 
@@ -104,6 +105,27 @@ def test_bending_a_retracted_segment_says_to_extend_first():
     out, note = model.set_coordinate(model.zero(), model.coordinates[0], 0.05)
     np.testing.assert_array_equal(out, model.zero())
     assert note is not None and "extend δL₁ first" in note
+    assert "-0" not in note  # the clamp to 0 mm reads "+0 mm", never "-0 mm"
+    out, note = model.set_coordinate(model.zero(), model.coordinates[0], -0.05)
+    assert note is not None and "clamped to +0 mm" in note and "-0" not in note
+
+
+def test_the_extensible_arm_starts_straight_at_mid_range_with_room_to_bend_both_ways():
+    """Issue #19.5: retracted, every rack sits at rack_min and every bend is refused. The
+    console's first command is the straight arm with every rack at mid-range (the store's
+    default), so every bending coordinate can move both ways by a full slider step."""
+    model = DeltaModel(EXT)
+    q0 = StateStore(model).command.q
+    np.testing.assert_array_equal(q0, model.initial())
+    mid = (EXT.rack_min + EXT.rack_max) / 2
+    np.testing.assert_allclose(racks(np.asarray(q0)), mid, atol=1e-3)  # whole millimetres
+    assert feasible(np.asarray(q0)) and not np.any(q0[:, :2])
+    for coord in model.coordinates:
+        for step in (-coord.step, coord.step):
+            out, note = model.set_coordinate(np.asarray(q0), coord, q0[coord.index] + step)
+            assert note is None and out[coord.index] == pytest.approx(q0[coord.index] + step)
+    # The soft arm still starts straight.
+    np.testing.assert_array_equal(StateStore(model_for(SOFT)).command.q, np.zeros(6))
 
 
 def test_planar_curvature_is_clipped_to_kappa_max_with_a_note():

@@ -1,0 +1,169 @@
+"""The extensible arm's Tip target and Paths panels answer every action (issue #19.5): a plan
+that never comes back is reported after a timeout (the requested path drawn meanwhile), the
+"Hardware:" line is the link supervisor's health (as the Hardware panel and the header show
+it), the header's Phase says what the runner does, and an unreachable target names the
+closest reachable tip; no "-0" anywhere."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import re
+import time
+
+import numpy as np
+
+from core.kinematics import delta as dk
+from core.kinematics.delta_ik import solve_tip_ik
+from core.robots import load
+from hw_bridge.extensible_jobs import RunnerSnapshot
+
+EXT = load("extensible")
+
+
+@dataclasses.dataclass
+class FakeHealth:
+    """The LinkHealth fields the texts read."""
+
+    state: str = "active"
+    port: str = "/dev/pts/9"
+    fault: str | None = None
+    armed: bool = True
+
+
+class FakeControls:
+    def __init__(self, health: FakeHealth | None) -> None:
+        self.h = health
+
+    def health(self) -> FakeHealth | None:
+        return self.h
+
+
+class FakeRunner:
+    """Not started (the in-process mock before the first Execute): what the panels read."""
+
+    started = False
+    period_s = 0.01
+    snapshot = RunnerSnapshot("disconnected")
+
+    def stop(self) -> None:
+        pass
+
+
+@dataclasses.dataclass
+class FakeHardware:
+    kind: str
+
+
+class NeverAnswers:
+    """A planner pool whose plans never come back (a stuck worker)."""
+
+    def __init__(self) -> None:
+        self.futures: list[cf.Future] = []
+
+    def submit(self, *args, **kwargs) -> cf.Future:
+        self.futures.append(cf.Future())
+        return self.futures[-1]
+
+    def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
+        pass
+
+
+def status_of(html: str) -> str:
+    return re.search(r'data-state="(\w+)"', html).group(1)
+
+
+def wait_for(fn, timeout: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while not fn():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, monkeypatch):
+    from fakes import console_app
+
+    from console.panels import paths
+
+    monkeypatch.setattr(paths, "PLAN_TIMEOUT_S", 1.0)
+    app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
+                      hardware=FakeHardware("mock"))
+    panel = app.add_panel(paths.PathsPanel)
+    stuck = NeverAnswers()
+    monkeypatch.setattr(panel, "_plan_pool", lambda: stuck)
+    t0 = time.monotonic()
+    panel._request_plan(execute=False)
+    # At once: the requested tip path (centred on the tip, build_path) is drawn and said so.
+    assert status_of(panel.status.content) == "planning"
+    assert 'data-drawn="requested"' in panel.status.content
+    tip = dk.tip_position(EXT, np.asarray(app.store.command.q))
+    want = paths.build_path("linear", tip, 0.08, "xy")
+    np.testing.assert_allclose(panel.waypoints.points, want, atol=1e-6)
+    assert panel.trace.visible
+    # The worker never answers: after the timeout the panel says so (the 2 Hz status loop).
+    assert wait_for(lambda: status_of(panel.status.content) == "error")
+    assert time.monotonic() - t0 < 1.0 + 2.0
+    assert "no answer within 1 s" in panel.status.content
+    # A late answer of the abandoned plan changes nothing.
+    stuck.futures[0].set_exception(RuntimeError("late"))
+    assert "no answer within 1 s" in panel.status.content
+    # A failing plan says why at once.
+    panel._request_plan(execute=False)
+    stuck.futures[-1].set_exception(ValueError("speed 9 m/s exceeds the tip speed limit"))
+    assert status_of(panel.status.content) == "error"
+    assert "exceeds the tip speed limit" in panel.status.content
+    app.stop()
+
+
+def test_hardware_line_is_the_link_supervisors_health_and_phase_follows_stop(server):
+    from fakes import console_app
+
+    from console.panels.extensible_status import link_summary
+    from console.panels.hardware import header_link
+    from console.panels.paths import PathsPanel
+
+    controls = FakeControls(FakeHealth(fault="link lost: no valid STATE for 48 ms"))
+    app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
+                      bridge_controls=controls, hardware=FakeHardware("emulator"),
+                      mirror_commands=False)
+    panel = app.add_panel(PathsPanel)
+    said = header_link("emulator", controls.h)[0]  # the header's Link field
+    assert link_summary(app) == said == "emulator · link lost: no valid STATE for 48 ms"
+    assert wait_for(lambda: said in panel.hardware.content)
+    assert "connects on the first Execute" not in panel.hardware.content
+    controls.h = FakeHealth()
+    assert wait_for(lambda: "emulator · active · ARMED" in panel.hardware.content)
+    assert wait_for(lambda: ">idle<" in app.header.status.content.replace("</span>", "<"))
+    app.stop_motion("client 0's tab went silent for 2 s")  # stops motion; was idle: still idle
+    assert ">idle<" in app.header.status.content.replace("</span>", "<")
+    app.stop_motion("STOP pressed by client 0")
+    assert "holding after STOP" in app.header.status.content
+    app.stop()
+
+    mock = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
+                       hardware=FakeHardware("mock"))
+    assert link_summary(mock).startswith("mock · not connected")
+    assert "first Execute" in link_summary(mock)
+    mock.stop()
+
+
+def test_unreachable_target_names_the_closest_reachable_tip_without_negative_zero(server):
+    from fakes import console_app
+
+    from console.panels.target import TargetPanel
+
+    app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
+                      hardware=FakeHardware("mock"))
+    panel = app.add_panel(TargetPanel)
+    far = np.array([-1e-7, 0.0, 0.9])  # beyond the 820 mm arm, x a hair below 0
+    result = solve_tip_ik(EXT, far)
+    assert not result.reachable
+    text = panel._status_html(result, None, None, far)
+    assert 'data-state="unreachable"' in text and "-0" not in text.replace("−", "")
+    assert "(0.0, 0.0, 900.0) mm is beyond the arm's reach" in text
+    tip = ", ".join(f"{v * 1e3:.1f}".replace("-0.0", "0.0") for v in result.tip)
+    assert f"closest reachable tip, ({tip}) mm" in text
+    assert f"{result.error * 1e3:.1f} mm</b> from the target" in text
+    app.stop()
