@@ -46,6 +46,7 @@ TRACE_COLOR = (150, 60, 200)
 WAYPOINT_COLOR = (150, 60, 200)
 MEASURED_COLOR = (235, 130, 30)
 GHOST_COLOR = (90, 140, 220)
+TRAIL_S = 30.0  # the measured tip trace shows at most the run's last this many seconds
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,6 +75,13 @@ def _exit_with_parent(parent: int) -> None:
     (a spawned worker holds its own queue's write end, so it would wait forever)."""
     from hw_bridge.parent_watch import watch_parent
     watch_parent(parent)
+
+
+def trail_tail(times: Array, points: Array, seconds: float) -> Array:
+    """The points of a trace sampled no more than ``seconds`` before its newest sample."""
+    if len(times) == 0:
+        return points[:0]
+    return points[np.asarray(times) >= times[-1] - seconds]
 
 
 def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:
@@ -291,6 +299,10 @@ class PathsPanel(Panel):
                     f"/path/ghost_{i}", verts, faces, color=GHOST_COLOR, opacity=0.22,
                     cast_shadow=False, receive_shadow=False))
 
+    def clear_trails(self) -> None:
+        """Hide the measured tip trace of the last run (the View panel's "Clear trails")."""
+        self.measured.visible = False
+
     @staticmethod
     def _hardware_html(runner: ExtensibleProcess | None, text: str | None = None) -> str:
         if text is None and runner is None:
@@ -331,9 +343,10 @@ class PathsPanel(Panel):
                 self.plot.data = thin((trace.times[:n],
                                        np.linalg.norm(trace.commanded[:n] - target, axis=1) * 1e3,
                                        np.linalg.norm(trace.measured[:n] - target, axis=1) * 1e3))
-                m = trace.measured[:n]
-                self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
-                self.measured.visible = True
+                m = trail_tail(trace.times[:n], trace.measured[:n], TRAIL_S)
+                if len(m) >= 2:
+                    self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
+                    self.measured.visible = True
         if result is None:
             return
         self._job = 0
