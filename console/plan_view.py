@@ -47,9 +47,9 @@ OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
 REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
 REACH_STEP, REACH_X, REACH_Y = 0.02, (-0.5, 0.5), (-0.26, 0.5)
 TRAIL_WAYPOINTS = 4                 # the trail shows at most this many passed waypoints
-TRAIL_FADE = 0.6                    # the oldest of them is this far faded towards the table
+TRAIL_FADE = 0.45                   # the oldest of them is this far faded towards the table
 TABLE_TINT = np.array([226, 222, 214], float)  # what a faded trail fades into
-LABEL_GAP = 0.014                   # m between a waypoint's dot and its number
+LABEL_GAP = 0.022                   # m between a waypoint's dot and its number
 
 
 @dataclasses.dataclass(frozen=True)
@@ -342,7 +342,7 @@ class PlanScene:
                 if i == len(pool):
                     pool.append(scene.add_label(
                         f"/grasp/plan/labels/{kind}_{i}", text, position=pos,
-                        font_screen_scale=0.8 if kind == "circles" else 0.9,
+                        font_screen_scale=0.85 if kind == "circles" else 1.0,
                         anchor="center-center"))
                     continue
                 h = pool[i]

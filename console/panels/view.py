@@ -93,7 +93,7 @@ def _swatch(color: Rgb, shape: str) -> str:
     rgb = f"rgb{tuple(int(c) for c in color)}"
     base = "display:inline-block;vertical-align:middle;margin-right:2px;"
     if shape == "line":
-        return f'<span style="{base}width:16px;height:4px;border-radius:2px;background:{rgb}"></span>'
+        return f'<span style="{base}width:12px;height:4px;border-radius:2px;background:{rgb}"></span>'
     if shape == "dot":
         return f'<span style="{base}width:9px;height:9px;border-radius:50%;background:{rgb}"></span>'
     if shape == "ring":
@@ -108,11 +108,12 @@ def _swatch(color: Rgb, shape: str) -> str:
 def legend_html(kind: str) -> str:
     """The legend for a robot kind (``data-testid="view-legend"``, one ``li`` per entry)."""
     rows = "".join(
-        f'<li style="margin:1px 0;list-style:none">'
-        f'<span style="display:inline-block;width:52px">'
-        f'{"".join(_swatch(c, e.shape) for c in e.colors)}</span>{html.escape(e.text)}</li>'
+        f'<li style="margin:2px 0;list-style:none;display:flex;align-items:flex-start">'
+        f'<span style="flex:0 0 46px;padding-top:1px">'
+        f'{"".join(_swatch(c, e.shape) for c in e.colors)}</span>'
+        f'<span>{html.escape(e.text)}</span></li>'
         for e in _legend(kind))
-    return (f'<div data-testid="view-legend" style="font-size:0.8em;line-height:1.35">'
+    return (f'<div data-testid="view-legend" style="font-size:0.8em;line-height:1.3">'
             f'<b>Legend</b><ul style="padding:0;margin:2px 0 0 0">{rows}</ul></div>')
 
 
@@ -129,8 +130,11 @@ class ViewPanel(Panel):
         self.span = app._span()
         self.table = app._table_extent()
         names = [p.name for p in camera.presets(self.kind, self.span, self.table)]
-        self.cameras = gui.add_button_group("Camera", names, hint=(
-            "Move your own camera (only yours) to a preset view."))
+        # One button per preset (a button group's value is refused by console.client_values,
+        # which takes every button-like widget for a plain button).
+        self.cameras = {name: gui.add_button(name, icon=viser.Icon.CAMERA,
+                                             hint=f"Your camera (only yours) to the {name} view.")
+                        for name in names}
         self.reset = gui.add_button(RESET, icon=viser.Icon.HOME,
                                     hint="Your camera back to how the console opened.")
         self.measure = gui.add_button(
@@ -157,13 +161,14 @@ class ViewPanel(Panel):
                                      font_screen_scale=1.3, anchor="bottom-center",
                                      visible=False)
         self.claims = ClickClaims(app.server, self._on_measure_click)
-        self.cameras.on_click(self._on_camera)
+        for name, button in self.cameras.items():
+            button.on_click(lambda e, name=name: self._on_camera(e, name))
         self.reset.on_click(self._on_reset)
         self.measure.on_click(self._on_measure)
         self.clear_measure.on_click(self._on_clear_measure)
         self.clear_trails.on_click(self._on_clear_trails)
         # Cameras and measurements move nothing: viewers may use them too.
-        self.allow_viewers(self.cameras, self.reset, self.measure, self.clear_measure)
+        self.allow_viewers(*self.cameras.values(), self.reset, self.measure, self.clear_measure)
 
     # -- camera ------------------------------------------------------------------------------
     def pose_for(self, client: Any, name: str) -> camera.CameraPose:
@@ -185,9 +190,9 @@ class ViewPanel(Panel):
             camera.apply(client.camera, pose)
         return pose
 
-    def _on_camera(self, event: viser.GuiEvent) -> None:
+    def _on_camera(self, event: viser.GuiEvent, name: str) -> None:
         if event.client is not None:
-            self.move_camera(event.client, str(event.target.value))
+            self.move_camera(event.client, name)
 
     def _on_reset(self, event: viser.GuiEvent) -> None:
         if event.client is not None:

@@ -284,14 +284,15 @@ def test_view_panel_for_the_extensible_arm_has_its_presets_and_legend(server):
 
     app = console_app(EXT, server, panels=(ViewPanel,))
     view = app.panel(ViewPanel)
-    assert set(view.cameras.options) == {"Perspective", "Front", "Side", "Top-down"}
+    assert set(view.cameras) == {"Perspective", "Front", "Side", "Top-down"}
     ext, soft = legend_html("delta"), legend_html("planar")
     assert "Racks" in ext and "Approach circles" not in ext
     assert "Approach circles" in soft and "Racks" not in soft
     for words in ("Ghost arm", "Trail", "Waypoints", "Capture region", "Object",
                   "grasp can be planned", "planning fails", "Measurement"):
         assert words in soft, words
-    assert app.guard.viewer_allowed(view.cameras) and app.guard.viewer_allowed(view.measure)
+    assert all(app.guard.viewer_allowed(b) for b in view.cameras.values())
+    assert app.guard.viewer_allowed(view.reset) and app.guard.viewer_allowed(view.measure)
     assert not app.guard.viewer_allowed(view.clear_trails)
 
 
