@@ -166,22 +166,23 @@ def trail_colors(shown: Array, index: int) -> Array:
     return np.round(c).astype(np.uint8)
 
 
-def plan_labels(robot, plan: GraspPlan) -> dict[str, list[tuple[str, tuple[float, ...]]]]:
-    """Texts and positions of the labels: each approach circle's radius, on the side away
-    from the arm's base (where no arm is drawn), and each waypoint's number just outside its
-    palm dot (away from the object)."""
+def plan_labels(robot, plan: GraspPlan) -> dict[str, list[tuple[str, tuple[float, ...], str]]]:
+    """Text, position and anchor of each label: every approach circle's radius just outside
+    the circle on the side away from the arm's base (where no arm is drawn; the text runs
+    outwards, off the circles), and every waypoint's number just outside its palm dot."""
     c = np.asarray(plan.center[:2], float)
     base = np.asarray(robot.base_pose[:2], float)
     away = c - base
     away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-9 else np.array([0.0, 1.0])
-    circles = [(f"r{k + 1} {r * 100:.1f} cm", (*(c + r * away), Z_PLAN))
+    side = "center-right" if away[0] < 0 else "center-left"     # text extends away, not inwards
+    circles = [(f"r{k + 1} {r * 100:.1f} cm", (*(c + (r + LABEL_GAP / 3) * away), Z_PLAN), side)
                for k, r in enumerate(np.asarray(plan.radii, float))]
     points = []
     for k, p in enumerate(np.asarray(plan.palm_poses)[:, :2]):
         out = p - c
         n = np.linalg.norm(out)
         out = out / n if n > 1e-9 else -away
-        points.append((f"{k + 1}", (*(p + LABEL_GAP * out), Z_PLAN)))
+        points.append((f"{k + 1}", (*(p + LABEL_GAP * out), Z_PLAN), "center-center"))
     return {"circles": circles, "waypoints": points}
 
 
@@ -332,22 +333,23 @@ class PlanScene:
             h.visible = True
         self._draw_labels(g["labels"])
 
-    def _draw_labels(self, labels: dict[str, list[tuple[str, tuple[float, ...]]]]) -> None:
+    def _draw_labels(self, labels: dict[str, list[tuple[str, tuple[float, ...], str]]]) -> None:
         """Reuse, add or hide label nodes so each text sits at its position (screen-sized
         text, so it stays readable at any zoom; drawn over the scene)."""
         scene = self.server.scene
         for kind, wanted in labels.items():
             pool = self.labels[kind]
-            for i, (text, pos) in enumerate(wanted):
+            for i, (text, pos, anchor) in enumerate(wanted):
                 if i == len(pool):
                     pool.append(scene.add_label(
                         f"/grasp/plan/labels/{kind}_{i}", text, position=pos,
-                        font_screen_scale=0.85 if kind == "circles" else 1.0,
-                        anchor="center-center"))
+                        font_screen_scale=0.85 if kind == "circles" else 1.0, anchor=anchor))
                     continue
                 h = pool[i]
                 if h.text != text:
                     h.text = text
+                if h.anchor != anchor:
+                    h.anchor = anchor
                 if np.any(np.abs(np.subtract(h.position, pos)) > 1e-6):
                     h.position = pos
                 h.visible = True

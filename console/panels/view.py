@@ -73,7 +73,7 @@ def _legend(kind: str) -> tuple[LegendEntry, ...]:
             LegendEntry((MEASURE_COLOR,), "line", "Measurement (View → Measure distance)"),
         )
     from console.panels.paths import GHOST_COLOR as PATH_GHOST_COLOR
-    from console.panels.paths import MEASURED_COLOR, TRACE_COLOR, WAYPOINT_COLOR
+    from console.panels.paths import MEASURED_COLOR, TRACE_COLOR
     from console.panels.target import MISS_COLOR, TARGET_COLOR
     return (
         LegendEntry((BACKBONE_COLOR, PLATFORM_COLOR), "fill", "Backbone and platforms"),
@@ -93,9 +93,11 @@ def _swatch(color: Rgb, shape: str) -> str:
     rgb = f"rgb{tuple(int(c) for c in color)}"
     base = "display:inline-block;vertical-align:middle;margin-right:2px;"
     if shape == "line":
-        return f'<span style="{base}width:12px;height:4px;border-radius:2px;background:{rgb}"></span>'
+        return f'<span style="{base}width:12px;height:4px;border-radius:2px;background:{rgb}">' \
+               "</span>"
     if shape == "dot":
-        return f'<span style="{base}width:9px;height:9px;border-radius:50%;background:{rgb}"></span>'
+        return f'<span style="{base}width:9px;height:9px;border-radius:50%;background:{rgb}">' \
+               "</span>"
     if shape == "ring":
         return (f'<span style="{base}width:10px;height:10px;border-radius:50%;'
                 f'border:2px solid {rgb}"></span>')

@@ -165,13 +165,15 @@ def test_the_measured_path_trace_keeps_its_last_seconds():
 def test_labels_name_each_circle_and_waypoint_away_from_the_arm():
     plan = plan_grasp(SOFT, np.zeros(6), (-0.2, 0.2), 0.0165)
     labels = plan_labels(SOFT, plan)
-    assert [t for t, _ in labels["waypoints"]] == [str(k + 1) for k in range(plan.n)]
-    for (text, pos), r in zip(labels["circles"], plan.radii):
+    assert [t for t, _, _ in labels["waypoints"]] == [str(k + 1) for k in range(plan.n)]
+    for (text, pos, anchor), r in zip(labels["circles"], plan.radii):
         assert text.endswith(f"{r * 100:.1f} cm")
-        # on the circle, on the far side from the base (further from it than the centre)
-        assert math.hypot(pos[0] - plan.center[0], pos[1] - plan.center[1]) == pytest.approx(r)
+        # just outside the circle, on the far side from the base (further from it than the
+        # centre), the text running outwards (the object is left of the base: to the left)
+        assert r < math.hypot(pos[0] - plan.center[0], pos[1] - plan.center[1]) < r + 0.01
         assert math.hypot(*pos[:2]) > math.hypot(*plan.center[:2])
-    for (_, pos), palm in zip(labels["waypoints"], plan.palm_poses):
+        assert anchor == "center-right"
+    for (_, pos, _), palm in zip(labels["waypoints"], plan.palm_poses):
         assert 0.005 < math.hypot(pos[0] - palm[0], pos[1] - palm[1]) < 0.03
 
 
