@@ -79,6 +79,56 @@ def frame_sphere(name: str, centre: npt.ArrayLike, radius: float, direction: npt
     return CameraPose(name, _vec(look + back * dist), _vec(look), fov=fov)
 
 
+def frame_points(name: str, points: npt.ArrayLike, direction: npt.ArrayLike,
+                 aspect: float = DEFAULT_ASPECT, fov: float = FOV,
+                 table: tuple[float, float, float, float] | None = None) -> CameraPose:
+    """The nearest pose looking along ``-direction`` that shows every point of ``points`` in
+    the canvas left of the control panel (a bisection on the distance). With ``table``, the
+    look-at point (the orbit centre) is kept on the table, the view moved along with it."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    c = (pts.min(0) + pts.max(0)) / 2
+    back = np.asarray(direction, dtype=float)
+    back = back / np.linalg.norm(back)
+    forward = -back
+    right = np.cross(forward, (0.0, 0.0, 1.0))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    free = free_fraction(aspect)
+    tan_v = math.tan(fov / 2)
+    x_max = 1.0 - 2.0 * (1.0 - free)
+
+    def pose_at(dist: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        look = c + right * (1.0 - free) * dist * tan_v * aspect
+        return look + back * dist, look
+
+    def fits(dist: float) -> bool:
+        eye, _ = pose_at(dist)
+        d = pts - eye
+        depth = d @ forward
+        if np.any(depth <= 1e-6):
+            return False
+        x = (d @ right) / (depth * tan_v * aspect)
+        y = (d @ up) / (depth * tan_v)
+        return bool(np.all(np.abs(y) <= 1 / MARGIN) and np.all(x >= -1 / MARGIN)
+                    and np.all(x <= x_max - (1 - 1 / MARGIN)))
+
+    size = float(np.linalg.norm(pts.max(0) - pts.min(0))) or 1.0
+    lo, hi = 0.0, size
+    while not fits(hi):
+        hi *= 2
+        if hi > 1e3 * size:
+            break
+    for _ in range(40):
+        mid = (lo + hi) / 2
+        lo, hi = (lo, mid) if fits(mid) else (mid, hi)
+    eye, look = pose_at(hi)
+    if table is not None:
+        x0, x1, y0, y1 = table
+        moved = np.array([min(max(look[0], x0), x1), min(max(look[1], y0), y1), look[2]])
+        eye, look = eye + (moved - look), moved
+    return CameraPose(name, _vec(eye), _vec(look), fov=fov)
+
+
 def frame_top_down(name: str, x: tuple[float, float], y: tuple[float, float],
                    aspect: float = DEFAULT_ASPECT, fov: float = FOV) -> CameraPose:
     """Straight down on the table rectangle ``x`` by ``y`` (+y up on screen), fitted into the
@@ -113,6 +163,12 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
         # with it): the reachable half-disc from the front right, look-at right of its centre.
         perspective = CameraPose("Perspective", (0.55 * span, -1.25 * span, 1.75 * span),
                                  (0.3 * span, 0.32 * span, 0.0))
+        if abs(aspect - DEFAULT_ASPECT) > 0.05:
+            # Another window shape: the same direction, fitted to the reach (the initial
+            # camera cannot know the window; "Reset view" still goes back to it).
+            reach = [(sx * span, sy * span, 0.0) for sx in (-1, 1) for sy in (-0.25, 1)]
+            perspective = frame_points("Perspective", reach, np.subtract(
+                perspective.position, perspective.look_at), aspect, table=table)
         # Top-down: the arm's reach, x in [-span, span], y from just behind the base to span.
         top = frame_top_down("Top-down", (-span, span), (-0.25 * span, span), aspect)
         return (perspective, top)

@@ -102,16 +102,16 @@ def _swatch(color: Rgb, shape: str) -> str:
         return (f'<span style="{base}width:10px;height:10px;border-radius:50%;'
                 f'border:2px solid {rgb}"></span>')
     if shape == "area":
-        return (f'<span style="{base}width:14px;height:10px;border-radius:2px;background:{rgb};'
+        return (f'<span style="{base}width:12px;height:10px;border-radius:2px;background:{rgb};'
                 f'opacity:.55;outline:1px solid {rgb}"></span>')
-    return f'<span style="{base}width:14px;height:10px;border-radius:2px;background:{rgb}"></span>'
+    return f'<span style="{base}width:12px;height:10px;border-radius:2px;background:{rgb}"></span>'
 
 
 def legend_html(kind: str) -> str:
     """The legend for a robot kind (``data-testid="view-legend"``, one ``li`` per entry)."""
     rows = "".join(
         f'<li style="margin:2px 0;list-style:none;display:flex;align-items:flex-start">'
-        f'<span style="flex:0 0 46px;padding-top:1px">'
+        f'<span style="flex:0 0 50px;padding-top:1px">'
         f'{"".join(_swatch(c, e.shape) for c in e.colors)}</span>'
         f'<span>{html.escape(e.text)}</span></li>'
         for e in _legend(kind))

@@ -99,7 +99,8 @@ def test_presets_look_at_the_table_and_keep_the_arm_left_of_the_panel(robot, asp
     # The base and the arm's reach in the free part of the canvas (left of the panel).
     if robot.kind == "planar":
         corners = [(sx * span, sy * span, 0.0) for sx in (-1, 1) for sy in (-0.25, 1)]
-        for pose in (top,) + ((poses[0],) if aspect == 1.6 else ()):
+        # (a tall window's Perspective keeps its orbit centre on the table, so may be cut off)
+        for pose in (top,) + ((poses[0],) if aspect >= 1 else ()):
             for c in corners + [(0.0, 0.0, 0.0)]:
                 x, y = ndc(pose, c, aspect)
                 assert -1 <= x <= 1 - 2 * (1 - free) + 1e-9 and -1 <= y <= 1, (pose.name, c)
