@@ -152,6 +152,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     from console.panels.planner import grasp_panels
     from console.panels.session import SessionPanel
     from console.panels.trials import TrialsPanel
+    from console.panels.view import ViewPanel
 
     token = None if args.no_token else secrets.token_urlsafe(9)
     desk = is_loopback(args.host) and not args.lab
@@ -174,7 +175,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
         app.status.content += ("<br><small><b>Device log:</b> " + html.escape(device_log[-1])
                                + "</small>")
     for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
-                      *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel):
+                      *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel, ViewPanel):
         app.add_panel(panel_cls)
     return server, app, token
 

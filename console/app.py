@@ -51,6 +51,8 @@ import viser
 
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
+from console.camera import apply as apply_camera
+from console.camera import presets as camera_presets
 from console.client_guard import ClientGuard
 from console.client_guard import install as _install_client_guard
 from console.datadir import DataDir
@@ -415,15 +417,7 @@ class ConsoleApp:
                                    ground_color=self.theme.ground_color, intensity=1.3)
 
     def _setup_camera(self) -> None:
-        # Framed so the table and every reachable arm shape are in view with the control panel
-        # docked on the right (the look-at point sits right of the workspace centre).
-        cam = self.server.initial_camera
-        span = self._span()
-        if self.model.kind == "planar":
-            cam.look_at = (0.3 * span, 0.32 * span, 0.0)
-            cam.position = (0.55 * span, -1.25 * span, 1.75 * span)
-        else:
-            cam.look_at = (0.15 * span, 0.0, 0.3 * span)
-            cam.position = (1.45 * span, -1.75 * span, 1.25 * span)
-        cam.fov = float(np.deg2rad(50.0))
-        cam.up = (0.0, 0.0, 1.0)
+        # The first of the robot's camera presets (console.camera, also the View panel's
+        # "Reset view"): framed for a wide window with the control panel docked on the right.
+        self.camera_presets = camera_presets(self.model.kind, self._span(), self._table_extent())
+        apply_camera(self.server.initial_camera, self.camera_presets[0])

@@ -61,6 +61,7 @@ class GraspSession:
         self._request: bool | None = False      # pending plan: True = live, False = final
         self._outcome: Outcome | None = None
         self._index, self._playing, self._speed, self._trail = 0, False, 2.0, True
+        self._trail_from = 0    # "Clear trails": no trail before this waypoint (until re-planned)
         self._dirty = {"objects", "reach"}
         self._reach: ReachMap | str | None = "computing"
         self._reach_note = ""
@@ -81,7 +82,7 @@ class GraspSession:
         with self._cond:
             return SessionView(tuple(self._objects), self._selected, self._outcome, self._index,
                                self._playing, self._speed, self._trail, self._reach,
-                               self._reach_note)
+                               self._reach_note, self._trail_from)
 
     def add_listener(self, fn: Callable[[SessionView], None]) -> None:
         with self._cond:
@@ -168,6 +169,7 @@ class GraspSession:
             n = self._n()
             i = self._index + step if index is None else int(index)
             self._index = min(max(i, 0), max(n - 1, 0))
+            self._trail_from = min(self._trail_from, self._index)
             self._playing = False
             self._changed("inspect")
 
@@ -176,7 +178,7 @@ class GraspSession:
             if speed is not None:
                 self._speed = float(min(max(speed, 0.1), 50.0))
             if playing and self._index >= self._n() - 1:
-                self._index = 0
+                self._index = self._trail_from = 0
             self._playing = bool(playing) and self._n() > 1
             self._next_tick = time.perf_counter() + 1.0 / self._speed
             self._changed("inspect")
@@ -184,6 +186,12 @@ class GraspSession:
     def set_trail(self, trail: bool) -> None:
         with self._cond:
             self._trail = bool(trail)
+            self._changed("inspect")
+
+    def clear_trail(self) -> None:
+        """Hide the trail of the waypoints passed so far (it grows again from here)."""
+        with self._cond:
+            self._trail_from = self._index
             self._changed("inspect")
 
     def inspected_kappa(self) -> np.ndarray | None:
@@ -297,6 +305,7 @@ class GraspSession:
                     self._outcome = outcome
                     n = self._n()
                     self._index = min(self._index, max(n - 1, 0)) if request else 0
+                    self._trail_from = min(self._trail_from, self._index)
                     if not request:
                         self._playing = False
                 dirty.add("plan")
@@ -327,7 +336,7 @@ class GraspSession:
                     self.scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
                 if dirty & {"plan", "inspect"}:
                     plan = view.outcome.plan if view.outcome else None
-                    self.scene.draw_plan(plan, view.index, view.trail)
+                    self.scene.draw_plan(plan, view.index, view.trail, view.trail_from)
                 if "reach" in dirty and isinstance(view.reach, ReachMap):
                     self.scene.draw_reach(view.reach, self.show_reach, self.table_extent)
         except Exception:  # a drawing error must not kill the worker

@@ -1,8 +1,9 @@
 """The grasp layer of the 3D view, and the pure pieces behind it, for the grasp panels.
 
 :class:`PlanScene` owns the scene nodes of grasp planning: table objects with their drag gizmos,
-approach circles (green; a failed radius red), ghost arms of the waypoints (the inspected one
-highlighted, a trail of the ones passed), palm points, the gripper's capture region at the final
+approach circles (green; a failed radius red; labelled with their radii), ghost arms of the
+waypoints (the inspected one highlighted, a fading trail of the last few passed), numbered palm
+points, the gripper's capture region at the final
 waypoint and the reachability shading. Exactly one thread may draw into it: the grasp session's
 worker (``console.panels.planner.GraspSession``). The shading (where a grasp can be planned from
 the straight arm, :mod:`core.planning.reachability`) comes from a disk cache or a low-priority
@@ -39,6 +40,10 @@ GHOST_COLOR, GHOST_SEL_COLOR = (120, 140, 170), (245, 120, 20)
 PALM_COLOR, CAPTURE_COLOR = (200, 40, 60), (70, 140, 235)
 OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
 REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
+TRAIL_WAYPOINTS = 4                 # the trail shows at most this many passed waypoints
+TRAIL_FADE = 0.45                   # the oldest of them is this far faded towards the table
+TABLE_TINT = np.array([226, 222, 214], float)  # what a faded trail fades into
+LABEL_GAP = 0.022                   # m between a waypoint's dot and its number
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,25 +142,68 @@ def ghost_segments(robot, kappas: Array, z: float, per_segment: int = 8) -> Arra
     return np.stack([pts[:, :-1], pts[:, 1:]], 2)
 
 
-def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool) -> dict[str, Any]:
+def trail_mask(n: int, index: int, trail: bool, trail_from: int = 0) -> Array:
+    """Which waypoints' ghost arms the trail shows: at most :data:`TRAIL_WAYPOINTS` of those
+    passed before ``index``, none before ``trail_from`` ("Clear trails"), none if ``trail``
+    is off."""
+    i = np.arange(n)
+    if not trail:
+        return np.zeros(n, bool)
+    return (i < index) & (i >= max(trail_from, index - TRAIL_WAYPOINTS))
+
+
+def trail_colors(shown: Array, index: int) -> Array:
+    """One colour per shown ghost arm: the newest in :data:`GHOST_COLOR`, older ones faded."""
+    age = index - np.nonzero(shown)[0]                                  # 1 = the last passed
+    fade = TRAIL_FADE * (age - 1) / max(TRAIL_WAYPOINTS - 1, 1)
+    c = (1 - fade[:, None]) * np.array(GHOST_COLOR, float) + fade[:, None] * TABLE_TINT
+    return np.round(c).astype(np.uint8)
+
+
+def plan_labels(robot, plan: GraspPlan) -> dict[str, list[tuple[str, tuple[float, ...], str]]]:
+    """Text, position and anchor of each label: every approach circle's radius just outside
+    the circle on the side away from the arm's base (where no arm is drawn; the text runs
+    outwards, off the circles), and every waypoint's number just outside its palm dot."""
+    c = np.asarray(plan.center[:2], float)
+    base = np.asarray(robot.base_pose[:2], float)
+    away = c - base
+    away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-9 else np.array([0.0, 1.0])
+    side = "center-right" if away[0] < 0 else "center-left"     # text extends away, not inwards
+    circles = [(f"r{k + 1} {r * 100:.1f} cm", (*(c + (r + LABEL_GAP / 3) * away), Z_PLAN), side)
+               for k, r in enumerate(np.asarray(plan.radii, float))]
+    points = []
+    for k, p in enumerate(np.asarray(plan.palm_poses)[:, :2]):
+        out = p - c
+        n = np.linalg.norm(out)
+        out = out / n if n > 1e-9 else -away
+        points.append((f"{k + 1}", (*(p + LABEL_GAP * out), Z_PLAN), "center-center"))
+    return {"circles": circles, "waypoints": points}
+
+
+def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool,
+                  trail_from: int = 0) -> dict[str, Any]:
     """Everything the plan layer draws for ``plan`` with waypoint ``index`` (0-based) inspected."""
     ok = np.array([s == "ok" for s in plan.status])
     circles = circle_segments(plan.center, plan.radii, Z_PLAN - 0.002)
     per = len(circles) // max(plan.n, 1)
     circle_colors = np.repeat(np.where(ok[:, None], [CIRCLE_COLOR], [FAIL_COLOR]), per, 0)
     ghosts = ghost_segments(robot, plan.kappas, Z_PLAN)
-    shown = np.arange(plan.n) < index if trail else np.zeros(plan.n, bool)
+    shown = trail_mask(plan.n, index, trail, trail_from)
     palm = np.c_[plan.palm_poses[:, :2], np.full(plan.n, Z_PLAN)]
     final = plan.palm_poses[-1]
     left = np.array([-math.sin(final[2]), math.cos(final[2])])
     aim = final[:2] + left * (robot.gripper.g_off + robot.capture.nominal_object_radius)
+    ghost_colors = np.repeat(trail_colors(shown, index), ghosts.shape[1], 0)
     return {
         "circles": circles, "circle_colors": np.repeat(circle_colors[:, None], 2, 1),
         "circle_sel": circle_segments(plan.center, plan.radii[index:index + 1], Z_PLAN - 0.001),
-        "ghosts": ghosts[shown].reshape(-1, 2, 3), "ghost_sel": ghosts[index],
+        "ghosts": ghosts[shown].reshape(-1, 2, 3),
+        "ghost_colors": np.repeat(ghost_colors[:, None], 2, 1),
+        "ghost_sel": ghosts[index],
         "palms": palm, "palm_sel": palm[index],
         "capture": disk_mesh(aim, robot.capture.diameter / 2, 0.0012),
         "capture_visible": bool(ok.all()) and index == plan.n - 1,
+        "labels": plan_labels(robot, plan),
     }
 
 
@@ -210,23 +258,26 @@ class PlanScene:
         self.capture = scene.add_mesh_simple("/grasp/plan/capture", v, f, color=CAPTURE_COLOR,
                                              opacity=0.35, visible=False, cast_shadow=False,
                                              receive_shadow=False, side="double")
+        self.labels: dict[str, list[Any]] = {"circles": [], "waypoints": []}
         self.reach: list = []
         self.objects: dict[str, tuple[Any, Any, float]] = {}   # name -> (gizmo, body, radius)
         self._made = 0
 
-    def draw_plan(self, plan: GraspPlan | None, index: int, trail: bool) -> None:
-        """Show ``plan`` (None hides the plan layer)."""
+    def draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
+                  trail_from: int = 0) -> None:
+        """Show ``plan`` (None hides the plan layer); the trail starts at ``trail_from``."""
         handles = (self.circles, self.circle_sel, self.ghosts, self.ghost_sel, self.palms,
                    self.palm_sel, self.capture)
         if plan is None or plan.n == 0:
             for h in handles:
                 h.visible = False
+            self._draw_labels({"circles": [], "waypoints": []})
             return
-        g = plan_geometry(self.robot, plan, index, trail)
+        g = plan_geometry(self.robot, plan, index, trail, trail_from)
         _set_lines(self.circles, g["circles"], g["circle_colors"])
         _set_lines(self.circle_sel, g["circle_sel"], CIRCLE_SEL_COLOR)
         if len(g["ghosts"]):
-            _set_lines(self.ghosts, g["ghosts"], GHOST_COLOR)
+            _set_lines(self.ghosts, g["ghosts"], g["ghost_colors"])
         self.ghosts.visible = len(g["ghosts"]) > 0
         _set_lines(self.ghost_sel, g["ghost_sel"], GHOST_SEL_COLOR)
         self.palms.points = g["palms"]
@@ -236,6 +287,30 @@ class PlanScene:
         self.capture.visible = g["capture_visible"]
         for h in (self.circles, self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
             h.visible = True
+        self._draw_labels(g["labels"])
+
+    def _draw_labels(self, labels: dict[str, list[tuple[str, tuple[float, ...], str]]]) -> None:
+        """Reuse, add or hide label nodes so each text sits at its position (screen-sized
+        text, so it stays readable at any zoom; drawn over the scene)."""
+        scene = self.server.scene
+        for kind, wanted in labels.items():
+            pool = self.labels[kind]
+            for i, (text, pos, anchor) in enumerate(wanted):
+                if i == len(pool):
+                    pool.append(scene.add_label(
+                        f"/grasp/plan/labels/{kind}_{i}", text, position=pos,
+                        font_screen_scale=0.85 if kind == "circles" else 1.0, anchor=anchor))
+                    continue
+                h = pool[i]
+                if h.text != text:
+                    h.text = text
+                if h.anchor != anchor:
+                    h.anchor = anchor
+                if np.any(np.abs(np.subtract(h.position, pos)) > 1e-6):
+                    h.position = pos
+                h.visible = True
+            for h in pool[len(wanted):]:
+                h.visible = False
 
     def draw_reach(self, reach: ReachMap, visible: bool,
                    extent: tuple[float, float, float, float] | None = None) -> None:
@@ -309,6 +384,7 @@ class SessionView:
     trail: bool
     reach: ReachMap | str | None
     reach_note: str = ""
+    trail_from: int = 0     # the trail shows no waypoint before this one ("Clear trails")
 
 
 def outcome_html(outcome: Outcome | None) -> str:

@@ -59,6 +59,7 @@ MEASURED_COLOR = (235, 130, 30)
 GHOST_COLOR = (90, 140, 220)
 PLAN_TIMEOUT_S = 30.0  # s: a Fig. 9 path plans in 2-5 s unloaded, 10-25 s on a busy 2-core box
 STATUS_HZ = 2.0  # planning seconds, Hardware line and the header's Phase field
+TRAIL_S = 30.0  # the measured tip trace shows at most the run's last this many seconds
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,6 +91,13 @@ class _Planning:
     waypoints: Array
     future: cf.Future
     started: float
+
+
+def trail_tail(times: Array, points: Array, seconds: float) -> Array:
+    """The points of a trace sampled no more than ``seconds`` before its newest sample."""
+    if len(times) == 0:
+        return points[:0]
+    return points[np.asarray(times) >= times[-1] - seconds]
 
 
 def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:
@@ -384,6 +392,10 @@ class PathsPanel(Panel):
                     f"/path/ghost_{i}", verts, faces, color=GHOST_COLOR, opacity=0.22,
                     cast_shadow=False, receive_shadow=False))
 
+    def clear_trails(self) -> None:
+        """Hide the measured tip trace of the last run (the View panel's "Clear trails")."""
+        self.measured.visible = False
+
     def _hardware_html(self, text: str | None = None) -> str:
         """The link as the Hardware panel and the header's Link field show it (the link
         supervisor's health), and the runner's state once it runs."""
@@ -466,9 +478,10 @@ class PathsPanel(Panel):
                 self.plot.data = thin((trace.times[:n],
                                        np.linalg.norm(trace.commanded[:n] - target, axis=1) * 1e3,
                                        np.linalg.norm(trace.measured[:n] - target, axis=1) * 1e3))
-                m = trace.measured[:n]
-                self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
-                self.measured.visible = True
+                m = trail_tail(trace.times[:n], trace.measured[:n], TRAIL_S)
+                if len(m) >= 2:
+                    self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
+                    self.measured.visible = True
         if result is None:
             return
         self._job = 0
