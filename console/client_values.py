@@ -98,7 +98,7 @@ def validate_value(handle: Any, value: Any, limits: GuardLimits) -> Any:
     current = impl.value
     if kind == "GuiUploadButtonHandle":  # files come as FileTransfer messages, never as a value
         raise Refused("an upload button takes files, not values")
-    if impl.is_button:
+    if impl.is_button and kind != "GuiButtonGroupHandle":  # a group sends the option's name
         if value is not True:
             raise Refused("a button sends true")
         return True

@@ -389,6 +389,11 @@ def test_validate_value_by_widget_kind() -> None:
                 validate_value(rgb, bad, lim)
         dd = g.add_dropdown("d", ("a", "b"))
         assert validate_value(dd, "b", lim) == "b"
+        group = g.add_button_group("views", ("Top", "Side"))  # sends the pressed option's name
+        assert validate_value(group, "Side", lim) == "Side"
+        for bad in (True, "Front", 1):
+            with pytest.raises(Refused):
+                validate_value(group, bad, lim)
         with pytest.raises(Refused):
             validate_value(dd, "c", lim)
         box = g.add_checkbox("b", False)
