@@ -60,7 +60,7 @@ class SilenceWarning:
                 self._handle = client.add_notification(
                     "Your browser is slow to answer", status.sentence(), color="yellow",
                     loading=True, with_close_button=False, auto_close_seconds=None)
-            except Exception:  # a client that just left
+            except Exception:  # noqa: BLE001 - a client that just left
                 log.debug("lease warning to client %s failed", client.client_id)
                 return
             self._client_id = client.client_id
@@ -78,7 +78,7 @@ class SilenceWarning:
             handle.loading = False
             handle.with_close_button = True
             handle.auto_close_seconds = self.CLOSE_AFTER_S
-        except Exception:
+        except Exception:  # noqa: BLE001 - a client that just left
             log.debug("lease warning update failed")
         self._client_id, self._worst = None, 0.0
 
@@ -87,7 +87,7 @@ class SilenceWarning:
         self._client_id, self._worst = None, 0.0
         try:
             handle.remove()
-        except Exception:
+        except Exception:  # noqa: BLE001 - a client that just left
             log.debug("lease warning removal failed")
 
 
@@ -99,10 +99,12 @@ class LeaseMonitor:
     answer, and from ``warn_s`` of silence on shows the operator a :class:`SilenceWarning`
     (an unanswered probe is re-sent at that moment; answers come in order, so nothing is
     lost); the answers are also the heartbeats that keep a set-point jog moving (it holds when
-    the last one is over 300 ms old, see ``console.hold_to_run``), hence the 0.1 s default; a closed tab is also caught at once by ``server.on_client_disconnect``. On a desk
-    console (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-
-    rendered page busy for seconds -- is probed too and gets control back when it answers (the
-    arm stopped when the lease lapsed and stays stopped).
+    the last one is over 300 ms old, see ``console.hold_to_run``), hence the 0.1 s default; a
+    closed tab is also caught at once by ``server.on_client_disconnect``. On a desk console
+    (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-rendered
+    page busy for seconds -- is probed too and gets control back when it answers (the arm
+    stopped when the lease lapsed and stays stopped); so is, in any mode, a tab whose lease
+    lapsed before it ever answered (a page still loading).
     """
 
     def __init__(self, server: viser.ViserServer, access: AccessControl,
@@ -175,8 +177,8 @@ class LeaseMonitor:
         self.warning.update(client, self.access.status())  # heard: clears the warning
 
     def _probe_lapsed(self) -> None:
-        """Desk mode: a tab whose lease lapsed while it was busy gets control back when it
-        answers a probe again (see :meth:`AccessControl.regrant`)."""
+        """A tab whose lease lapsed while it was busy (desk mode) or still loading (any mode)
+        gets control back when it answers a probe (see :meth:`AccessControl.lapsed`)."""
         cid = self.access.lapsed
         client = None if cid is None else self.server.get_clients().get(cid)
         if client is None:

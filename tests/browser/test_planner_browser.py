@@ -74,7 +74,7 @@ def close_notifications(page) -> None:
         try:
             notices.first.locator("button").first.click(timeout=5_000)
             notices.first.wait_for(state="detached", timeout=5_000)
-        except Exception:  # noqa: BLE001 - closed by itself meanwhile, or detaching slowly
+        except Exception:  # noqa: BLE001, S110 - closed by itself meanwhile, or slow to detach
             pass
     assert notices.count() == 0, [n.inner_text() for n in notices.all()]
 

@@ -7,11 +7,11 @@ from __future__ import annotations
 from typing import Any
 
 import pytest
+from fakes import FakeClock, console_app
 
 from console.access import FIRST_ANSWER_S, LEASE_S, WARN_S, AccessControl
 from console.lease import LeaseMonitor
 from core.robots import load
-from fakes import FakeClock, console_app
 
 
 class FakeHandle:
@@ -185,7 +185,7 @@ def test_a_lab_tab_that_went_silent_after_answering_must_take_control_again() ->
     monitor.step()
     tab.freeze(None)
     settle(monitor, clock, 3.5)
-    assert access.holder is None and access.lapsed is None
+    assert access.holder is None and access.lapsed is None and "silent for 3 s" in stops[-1]
     tab.freeze(0)
     settle(monitor, clock, 1.0)
     assert access.holder is None  # lab mode: a lost lease is retaken on purpose
