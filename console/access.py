@@ -10,8 +10,13 @@ The lock is a lease. ``console.lease.LeaseMonitor`` (the viser side) keeps it al
 round trip to the operator's tab every ``probe_period`` s (a localStorage read: the browser's
 JavaScript must answer, so a frozen or throttled tab fails it as well as a closed one or a
 dropped network) and revokes it when the tab disconnects or has not answered for
-``lease_s`` s. Every change of holder is reported to the listeners (the app stops the arm when
-an operator goes away, see ``ConsoleApp.stop_motion``).
+``lease_s`` s; from ``warn_s`` s of silence the operator sees a warning (:meth:`status`). Every
+change of holder is reported to the listeners (the app stops the arm when an operator goes
+away, see ``ConsoleApp.stop_motion``).
+
+The limits come from measurements of headless Chromium with software rendering
+(``benchmarks/lease_gaps.py``, see :data:`LEASE_S`): the gaps between a tab's answers and the
+time from connect to its first answer, loaded and unloaded, desktop and throttled tablet.
 """
 
 from __future__ import annotations
@@ -29,6 +34,27 @@ log = logging.getLogger(__name__)
 NAME_MAX = 32
 _NAME_OK = re.compile(r"[^\w .@'()-]+", re.UNICODE)
 
+# The lease's limits, from benchmarks/lease_gaps.py (headless Chromium 1280x800 or a tablet:
+# 820x1180 touch viewport with 4x CPU throttling; software rendering; the console streaming a
+# moving arm; probe every 0.1 s; 2 cores already shared with other work; s):
+#
+#                                  gaps between answers (n)          connect -> first answer
+#                                  p50   p99   p99.9  max            max of 2-3 fresh tabs
+#   desktop                        0.34  0.97  1.05   1.06  (80)     1.96
+#   desktop, 2 busy loops          0.30  1.07  3.16   3.40  (106)    2.78
+#   tablet                         1.40  3.20  3.20   3.20  (22)     9.67
+#   tablet, 2 busy loops           0.67  1.51  1.60   1.61  (39)     8.66
+#
+# The old limits lapsed on these browsers: a 2 s lease against gaps of 3.4 s, a 10 s grace
+# against first answers of 9.7 s (the tablet of issue #19). LEASE_S is the worst gap x 2
+# (3.4 s -> 7 s); FIRST_ANSWER_S the slowest first answer x 2 (9.7 s -> 20 s); WARN_S, half
+# the lease, is past every gap measured, so a warning means something unusual. What does not
+# wait for the lease: a held jog or set-point move holds 300 ms after the last answer
+# (console.hold_to_run), a closed tab is revoked at once, STOP works from every browser.
+LEASE_S = 7.0
+WARN_S = 3.5
+FIRST_ANSWER_S = 20.0
+
 
 class NotOperator(PermissionError):
     """An action that needs control was attempted without it; ``reason`` says why, for users."""
@@ -45,6 +71,37 @@ class Operator:
     client_id: int
     name: str
     since: float
+
+
+@dataclasses.dataclass(frozen=True)
+class LeaseStatus:
+    """The operator's lease at one instant (see :meth:`AccessControl.status`).
+
+    Attributes:
+        holder: Who holds control (None: nobody, and the rest means nothing).
+        silent_for: Seconds since their tab last answered (or took control).
+        limit: Silence after which control is revoked (``lease_s``, or ``first_answer_s``
+            while the tab has not answered yet).
+        warn_after: Silence after which the operator is warned.
+        answered: Whether their tab has answered at all (False: the page is still loading).
+    """
+
+    holder: Operator | None
+    silent_for: float
+    limit: float
+    warn_after: float
+    answered: bool
+
+    @property
+    def warning(self) -> bool:
+        """Whether the operator should be warned now: a tab that answered before and has been
+        silent for ``warn_after`` s (a page still loading is in its grace, not warned)."""
+        return self.holder is not None and self.answered and self.silent_for >= self.warn_after
+
+    def sentence(self) -> str:
+        """What the operator reads: how long their browser has been silent, when the arm stops."""
+        return (f"Your browser has been silent for {self.silent_for:.1f} s; the arm stops at "
+                f"{self.limit:g} s. Close other busy tabs or programs.")
 
 
 # listener(new holder, previous holder, reason: a sentence naming who did what)
@@ -72,9 +129,12 @@ class AccessControl:
     Args:
         token: Secret a client must present to take control; None needs none (closed lab).
         lease_s: A holder silent for longer than this loses control (see ``console.lease.LeaseMonitor``).
+        warn_s: From this much silence on the operator is warned (:meth:`status`); None:
+            :data:`WARN_S`, or half of ``lease_s`` if that is smaller.
         first_answer_s: ... except before their tab has answered at all: a page still loading
-            (a software-rendered browser was measured taking over 2 s to build the console)
-            gets this long for its first answer, then ``lease_s`` applies.
+            gets this long for its first answer, then ``lease_s`` applies. A tab that runs out
+            of it loses control (the arm stops), but that does not count as a lost lease: it
+            gets control back when it answers (:attr:`lapsed`), in desk and lab mode alike.
         first_client_takes_control: Desk mode: a client that connects while nobody holds
             control gets it without a token (only for a console bound to the loopback address).
         max_failures: Wrong tokens accepted per ``failure_window`` s from one client before
@@ -86,8 +146,8 @@ class AccessControl:
         clock: Monotonic time source (tests pass a fake one).
     """
 
-    def __init__(self, token: str | None = None, *, lease_s: float = 2.0,
-                 first_answer_s: float = 10.0,
+    def __init__(self, token: str | None = None, *, lease_s: float = LEASE_S,
+                 warn_s: float | None = None, first_answer_s: float = FIRST_ANSWER_S,
                  first_client_takes_control: bool = False, max_failures: int = 5,
                  failure_window: float = 10.0, address_failures: int = 20,
                  clock: Callable[[], float] = time.monotonic) -> None:
@@ -97,8 +157,13 @@ class AccessControl:
             raise ValueError(f"lease_s must be > 0, got {lease_s}")
         if first_answer_s < lease_s:
             raise ValueError(f"first_answer_s must be >= lease_s, got {first_answer_s}")
+        if warn_s is None:
+            warn_s = min(WARN_S, lease_s / 2)
+        if not 0 < warn_s < lease_s:
+            raise ValueError(f"warn_s must be in (0, lease_s={lease_s:g}), got {warn_s}")
         self.token = token
         self.lease_s = lease_s
+        self.warn_s = warn_s
         self.first_answer_s = first_answer_s
         self.first_client_takes_control = first_client_takes_control
         self.max_failures = max_failures
@@ -109,7 +174,8 @@ class AccessControl:
         self._holder: Operator | None = None
         self._last_seen = 0.0
         self._answered = False  # has the holder's tab answered a probe yet?
-        self._lapsed: int | None = None  # desk mode: whose lease lapsed by silence
+        self._lapsed: int | None = None  # whose lease lapsed by silence (see lapsed)
+        self._lapsed_loading = False  # ... before their tab ever answered
         self._names: dict[int, str] = {}
         self._failures: dict[object, list[float]] = {}  # per client id and per ("addr", host)
         self._listeners: list[Listener] = []
@@ -238,6 +304,7 @@ class AccessControl:
             self._last_seen = now
             self._answered = False
             self._lapsed = None
+            self._lapsed_loading = False
             new = self._holder
         reason = (f"{new.name} took control" if previous is None
                   else f"{new.name} took control from {previous.name}")
@@ -254,6 +321,7 @@ class AccessControl:
             self._last_seen = self._clock()
             self._answered = False
             self._lapsed = None
+            self._lapsed_loading = False
             new = self._holder
         self._notify(new, None, f"{new.name} took control (first browser on a desk console)")
         return new
@@ -319,29 +387,44 @@ class AccessControl:
         with self._lock:
             return 0.0 if self._holder is None else self._clock() - self._last_seen
 
+    def status(self) -> LeaseStatus:
+        """The lease now: holder, silence, limit, whether to warn (one consistent snapshot)."""
+        with self._lock:
+            return LeaseStatus(self._holder, self.silent_for(), self.lease_limit(), self.warn_s,
+                               self._answered)
+
     def expire_if_silent(self) -> Operator | None:
-        """Revoke the lease if the holder has been silent for ``lease_s``; returns who lost it."""
+        """Revoke the lease if the holder has been silent for ``lease_s`` (``first_answer_s``
+        before their first answer); returns who lost it."""
         with self._lock:
             holder = self._holder
             limit = self.lease_limit()
             if holder is None or self._clock() - self._last_seen < limit:
                 return None
-            what = "went silent for" if self._answered else "did not answer within"
             self._lapsed = holder.client_id
-        return self.revoke(f"{holder.name}'s tab {what} {limit:g} s", holder.client_id)
+            self._lapsed_loading = not self._answered
+            if self._answered:
+                reason = f"{holder.name}'s tab went silent for {limit:g} s"
+            else:
+                reason = (f"{holder.name}'s tab did not answer within {limit:g} s (still "
+                          "loading?); it gets control back when it answers")
+        return self.revoke(reason, holder.client_id)
 
     @property
     def lapsed(self) -> int | None:
-        """Desk mode: the client whose lease lapsed by silence (not by release or close) and
-        that may get control back once its tab answers again; None otherwise."""
+        """The client whose lease lapsed by silence (not by release or close) and that gets
+        control back once its tab answers again: in desk mode always, in lab mode only a tab
+        that never answered (a page still loading has not lost anything); None otherwise."""
         with self._lock:
-            if not self.first_client_takes_control or self._holder is not None:
+            if self._holder is not None:
+                return None
+            if not (self.first_client_takes_control or self._lapsed_loading):
                 return None
             return self._lapsed
 
     def regrant(self, client: Any) -> Operator | None:
-        """Desk mode: give control back to the :attr:`lapsed` client whose tab answered again
-        (the arm stopped when the lease lapsed; getting control back moves nothing)."""
+        """Give control back to the :attr:`lapsed` client whose tab answered (the arm stopped
+        when the lease lapsed; getting control back moves nothing)."""
         cid = client_id_of(client)
         with self._lock:
             if cid is None or cid != self.lapsed:
@@ -350,6 +433,7 @@ class AccessControl:
             self._last_seen = self._clock()
             self._answered = True
             self._lapsed = None
+            self._lapsed_loading = False
             new = self._holder
         self._notify(new, None, f"{new.name} has control again (their tab answers again)")
         return new

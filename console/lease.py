@@ -6,11 +6,89 @@ server and its clients, while the lock itself stays testable without a browser.
 
 from __future__ import annotations
 
+import logging
 import threading
+from typing import Any
 
 import viser
 
-from console.access import AccessControl
+from console.access import AccessControl, LeaseStatus
+
+log = logging.getLogger(__name__)
+
+
+class SilenceWarning:
+    """The operator's own notice that their browser is slow to answer, before the lease lapses.
+
+    :meth:`update` with each :class:`LeaseStatus` shows it on the holder's tab once their
+    silence passes ``warn_after`` ("Your browser has been silent for 1.5 s; the arm stops at
+    3 s"); when the tab is heard again it says for how long it was silent and closes itself a
+    few seconds later; when control goes (the lease lapsed, released, taken) it is removed (the
+    app's "Control released" notice says the rest). A silent tab may only draw the notice once
+    it catches up, so the after-the-fact sentence is the one most operators read.
+    """
+
+    CLOSE_AFTER_S = 6.0
+
+    def __init__(self) -> None:
+        self.shown = 0  # warnings shown so far (for tests and logs)
+        self._client_id: int | None = None
+        self._handle: Any = None
+        self._worst = 0.0
+        self._limit = 0.0
+
+    @property
+    def active(self) -> bool:
+        """Whether a warning is showing now (not yet cleared)."""
+        return self._handle is not None
+
+    def update(self, client: Any, status: LeaseStatus) -> None:
+        """Show, refresh or clear the warning for ``client`` (the holder's handle, or None)."""
+        holder = status.holder
+        same = (holder is not None and client is not None
+                and client.client_id == holder.client_id == self._client_id)
+        if self._handle is not None and not same:
+            self._remove()
+        if client is None or not status.warning:
+            if self._handle is not None:
+                self._heard()
+            return
+        self._worst = max(self._worst, status.silent_for)
+        self._limit = status.limit
+        if self._handle is None:
+            try:
+                self._handle = client.add_notification(
+                    "Your browser is slow to answer", status.sentence(), color="yellow",
+                    loading=True, with_close_button=False, auto_close_seconds=None)
+            except Exception:  # noqa: BLE001 - a client that just left
+                log.debug("lease warning to client %s failed", client.client_id)
+                return
+            self._client_id = client.client_id
+            self.shown += 1
+            log.info("operator's tab silent for %.1f s (lease %.1f s)", status.silent_for,
+                     status.limit)
+
+    def _heard(self) -> None:
+        """The tab answered: say for how long it was silent, then close by itself."""
+        handle, self._handle = self._handle, None
+        try:
+            handle.title = "Your browser answers again"
+            handle.body = (f"It was silent for {self._worst:.1f} s; the arm stops at "
+                           f"{self._limit:g} s. Close other busy tabs or programs.")
+            handle.loading = False
+            handle.with_close_button = True
+            handle.auto_close_seconds = self.CLOSE_AFTER_S
+        except Exception:  # noqa: BLE001 - a client that just left
+            log.debug("lease warning update failed")
+        self._client_id, self._worst = None, 0.0
+
+    def _remove(self) -> None:
+        handle, self._handle = self._handle, None
+        self._client_id, self._worst = None, 0.0
+        try:
+            handle.remove()
+        except Exception:  # noqa: BLE001 - a client that just left
+            log.debug("lease warning removal failed")
 
 
 class LeaseMonitor:
@@ -18,11 +96,15 @@ class LeaseMonitor:
 
     A thread probes the holder's tab every ``probe_period`` s with a localStorage read (a
     JavaScript round trip) bounded so that the lease expires at most ``lease_s`` after the last
-    answer; the answers are also the heartbeats that keep a set-point jog moving (it holds when
-    the last one is over 300 ms old, see ``console.hold_to_run``), hence the 0.1 s default; a closed tab is also caught at once by ``server.on_client_disconnect``. On a desk
-    console (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-
-    rendered page busy for seconds -- is probed too and gets control back when it answers (the
-    arm stopped when the lease lapsed and stays stopped).
+    answer, and from ``warn_s`` of silence on shows the operator a :class:`SilenceWarning`
+    (an unanswered probe is re-sent at that moment; answers come in order, so nothing is
+    lost); the answers are also the heartbeats that keep a set-point jog moving (it holds when
+    the last one is over 300 ms old, see ``console.hold_to_run``), hence the 0.1 s default; a
+    closed tab is also caught at once by ``server.on_client_disconnect``. On a desk console
+    (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-rendered
+    page busy for seconds -- is probed too and gets control back when it answers (the arm
+    stopped when the lease lapsed and stays stopped); so is, in any mode, a tab whose lease
+    lapsed before it ever answered (a page still loading).
     """
 
     def __init__(self, server: viser.ViserServer, access: AccessControl,
@@ -31,6 +113,7 @@ class LeaseMonitor:
         self.access = access
         self.probe_period = probe_period
         self.probes = 0
+        self.warning = SilenceWarning()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         server.on_client_disconnect(self._on_disconnect)
@@ -56,34 +139,46 @@ class LeaseMonitor:
 
     def _run(self) -> None:
         while not self._stop.wait(self.probe_period):
-            holder = self.access.holder
-            if holder is None:
-                self._probe_lapsed()
-                continue
-            client = self.server.get_clients().get(holder.client_id)
-            if client is None:
-                self.access.revoke(f"{holder.name}'s tab is gone", holder.client_id)
-                continue
-            budget = self.access.lease_limit() - self.access.silent_for()
-            if budget <= 0:
-                self.access.expire_if_silent()
-                continue
-            try:
-                client.local_storage.get_item("console-lease", timeout=budget)
-            except TimeoutError:
-                self.access.expire_if_silent()
-                continue
-            except RuntimeError as exc:
-                if "Failed to read localStorage" not in str(exc):  # that one is an answer
-                    self.access.revoke(f"{holder.name}'s tab closed or lost its connection",
-                                       holder.client_id)
-                    continue
-            self.probes += 1
-            self.access.heartbeat(holder.client_id)
+            self.step()
+
+    def step(self) -> None:
+        """One probe of the holder's tab (or of a lapsed tab that may get control back)."""
+        status = self.access.status()
+        holder = status.holder
+        client = None if holder is None else self.server.get_clients().get(holder.client_id)
+        self.warning.update(client, status)
+        if holder is None:
+            self._probe_lapsed()
+            return
+        if client is None:
+            self.access.revoke(f"{holder.name}'s tab is gone", holder.client_id)
+            return
+        budget = status.limit - status.silent_for
+        if budget <= 0:
+            self.access.expire_if_silent()
+            self.warning.update(client, self.access.status())
+            return
+        if status.answered and status.silent_for < status.warn_after:
+            budget = min(budget, status.warn_after - status.silent_for)  # then warn, go on
+        try:
+            client.local_storage.get_item("console-lease", timeout=budget)
+        except TimeoutError:
+            self.access.expire_if_silent()
+            self.warning.update(client, self.access.status())
+            return
+        except RuntimeError as exc:
+            if "Failed to read localStorage" not in str(exc):  # that one is an answer
+                self.access.revoke(f"{holder.name}'s tab closed or lost its connection",
+                                   holder.client_id)
+                return
+        self.probes += 1
+        self.warning.update(client, self.access.status())  # how long it was silent
+        self.access.heartbeat(holder.client_id)
+        self.warning.update(client, self.access.status())  # heard: clears the warning
 
     def _probe_lapsed(self) -> None:
-        """Desk mode: a tab whose lease lapsed while it was busy gets control back when it
-        answers a probe again (see :meth:`AccessControl.regrant`)."""
+        """A tab whose lease lapsed while it was busy (desk mode) or still loading (any mode)
+        gets control back when it answers a probe (see :meth:`AccessControl.lapsed`)."""
         cid = self.access.lapsed
         client = None if cid is None else self.server.get_clients().get(cid)
         if client is None:

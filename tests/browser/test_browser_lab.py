@@ -5,7 +5,7 @@ Checked: a viewer's jog, "Run demo motion" and the Control panel's "Execute gras
 refused with the reason shown to them and move nothing; STOP from the viewer (button and Esc
 hotkey) stops the operator's (demo) motion through the stop hooks; a held jog stops within
 300 ms of letting go and a STOP latches it; closing (or freezing) the operator's tab stops the
-arm and releases the lock within 2 s. Recording and export: test_browser_lab_export.py; the rig:
+arm and releases the lock (closing: within 2 s; freezing: within the lease). Recording and export: test_browser_lab_export.py; the rig:
 lab_rig.py.
 """
 
@@ -135,10 +135,12 @@ def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(l
     assert app.access.holder is not None and app.lease.probes > 0
     n_stops = len(lab.stops)
     frozen = time.monotonic()
-    carol.evaluate("() => { const end = Date.now() + 3500; while (Date.now() < end) {} }")
+    lease_s = app.access.lease_s  # 7 s (console.access.LEASE_S: measured browsers x 2)
+    carol.evaluate("s => { const end = Date.now() + s * 1000; while (Date.now() < end) {} }",
+                   lease_s + 1.5)
     wait_for(lambda: len(lab.stops) > n_stops, timeout=2.0)
-    # 2 s of silence, plus the probe's 0.1 s polling and thread scheduling on a busy machine
-    assert "silent" in lab.stops[-1][1] and lab.stops[-1][0] - frozen <= 2.0 + 0.6
+    # lease_s of silence, plus the probe's 0.1 s polling and thread scheduling on a busy machine
+    assert "silent" in lab.stops[-1][1] and lab.stops[-1][0] - frozen <= lease_s + 0.6
     assert app.access.holder is None
 
 
@@ -213,7 +215,7 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
     assert alice.get_by_label("x (m)", exact=True).input_value() == shown
     assert not any("Only the operator" in n for n in notifications(alice))
 
-    if app.access.holder is None:  # a loaded machine can starve a tab past its 2 s lease
+    if app.access.holder is None:  # a loaded machine can starve a tab past its lease
         grasp_lab.take_control(alice, "Alice")
     alice.get_by_role("button", name="Add object").click()  # the operator may
     wait_for(lambda: len(session.view().objects) == len(objects) + 1, timeout=15.0)

@@ -7,6 +7,7 @@ to a file without a reader, or a reader that skips a check, fails here.
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 import time
@@ -37,7 +38,7 @@ def leaves(t: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def edited(name: str, section: str, key: str, value: Any = None, *, delete: bool = False):
-    table = tomllib.loads((robots.ROBOTS_DIR / f"{name}.toml").read_text())
+    table = copy.deepcopy(SHIPPED[name])  # the file as read, fresh for each edit
     node = table
     for part in filter(None, section.split(".")):
         node = node[part]
@@ -54,6 +55,28 @@ def parse(table: dict[str, Any], name: str):
 
 def field(section: str, key: str) -> str:
     return f"{section}.{key}" if section else key
+
+
+def refusal(case: str, table: dict[str, Any], name: str, pattern: str) -> str | None:
+    """None if parsing ``table`` raises RobotFileError whose message matches ``pattern``
+    (``re.search``, as ``pytest.raises(match=)``); else what went wrong, naming ``case``.
+
+    The generated cases (every section and key of both files, ~800) run as loops in a few
+    tests rather than one pytest item each (which cost pytest's per-item overhead 800 times);
+    every failing case is named in the assertion message.
+    """
+    try:
+        parse(table, name)
+    except RobotFileError as err:
+        msg = str(err)
+        if not re.search(pattern, msg):
+            return f"{case}: message {msg!r} does not match {pattern!r}"
+        if "Traceback" in msg:
+            return f"{case}: a traceback in the message {msg!r}"
+        return None
+    except Exception as err:  # noqa: BLE001 - any other exception is a failure of this case
+        return f"{case}: {type(err).__name__}: {err}"
+    return f"{case}: accepted (no RobotFileError)"
 
 
 CASES = [(n, s, k) for n in SHIPPED for s, k in leaves(SHIPPED[n])]
@@ -89,16 +112,19 @@ def test_shipped_files_round_trip_into_the_typed_sections(name):
             assert got == value and type(got) in (type(value), float), dotted
 
 
-@pytest.mark.parametrize("name,section", SECTIONS)
-def test_unknown_key_refused_in_every_section_with_the_known_ones(name, section):
-    known = sorted(SHIPPED[name] if not section else _node(SHIPPED[name], section))
-    with pytest.raises(RobotFileError) as err:
-        parse(edited(name, section, "wieghts", 1.0), name)
-    msg = str(err.value)
-    where = f"[{section}]" if section else "top level"
-    assert msg.startswith(f"{name}.toml: {where}: unknown key 'wieghts'; known keys: "), msg
-    listed = msg.split("known keys: ")[1].split(", ")
-    assert set(known) <= set(listed), (known, listed)
+def test_unknown_key_refused_in_every_section_with_the_known_ones():
+    assert len(SECTIONS) > 20
+    for name, section in SECTIONS:
+        case = f"{name} [{section}]"
+        known = sorted(SHIPPED[name] if not section else _node(SHIPPED[name], section))
+        with pytest.raises(RobotFileError) as err:
+            parse(edited(name, section, "wieghts", 1.0), name)
+        msg = str(err.value)
+        where = f"[{section}]" if section else "top level"
+        assert msg.startswith(f"{name}.toml: {where}: unknown key 'wieghts'; known keys: "), \
+            (case, msg)
+        listed = msg.split("known keys: ")[1].split(", ")
+        assert set(known) <= set(listed), (case, known, listed)
 
 
 def _node(t: dict[str, Any], section: str) -> dict[str, Any]:
@@ -107,43 +133,66 @@ def _node(t: dict[str, Any], section: str) -> dict[str, Any]:
     return t
 
 
-@pytest.mark.parametrize("name,section,key", CASES)
-def test_missing_key_either_defaults_or_names_file_section_and_key(name, section, key):
+@pytest.mark.parametrize("name", SHIPPED)
+def test_missing_key_either_defaults_or_names_file_section_and_key(name):
     optional = {"planner.weights", "planner.clearance_margin", "planner.base_keepout",
                 "planner.max_restarts", "planner.max_insertions", "planner.line_samples",
                 "planner.seed_table", "bridge.velocities", "trajectory.synchronization",
                 "motors.mapping"} | {field(s, k) for s, k in leaves(SHIPPED["extensible"])
                                      if s in ("ik", "paths")}
-    table = edited(name, section, key, delete=True)
-    if field(section, key) in optional:
-        parse(table, name)
-        return
-    with pytest.raises(RobotFileError, match=rf"^{name}\.toml: .*"
-                       rf"{'kind' if key == 'kind' else field(section, key)}"):
-        parse(table, name)
+    failures = []
+    cases = [c for c in CASES if c[0] == name]
+    assert len(cases) > 20
+    for _, section, key in cases:
+        case = f"{name}: without {field(section, key)}"
+        table = edited(name, section, key, delete=True)
+        if field(section, key) in optional:
+            try:
+                parse(table, name)
+            except Exception as err:  # noqa: BLE001 - an optional key must default
+                failures.append(f"{case}: {type(err).__name__}: {err}")
+            continue
+        failures.append(refusal(case, table, name, rf"^{name}\.toml: .*"
+                                rf"{'kind' if key == 'kind' else field(section, key)}"))
+    failures = [f for f in failures if f]
+    assert not failures, "\n".join(failures)
 
 
-@pytest.mark.parametrize("name,section,key", [c for c in CASES if c[2] != "name"])
-def test_wrong_type_names_file_section_and_key(name, section, key):
-    for bad in (["x"], {"x": 1} if key not in STRINGS else 3, True if key != "velocities" and
-                key != "pass_over" else 1):
-        with pytest.raises(RobotFileError,
-                           match=rf"^{name}\.toml: {field(section, key)}\b") as err:
-            parse(edited(name, section, key, bad), name)
-        assert "Traceback" not in str(err.value)
+@pytest.mark.parametrize("name", SHIPPED)
+def test_wrong_type_names_file_section_and_key(name):
+    failures = []
+    cases = [c for c in CASES if c[0] == name and c[2] != "name"]
+    assert len(cases) > 20
+    for _, section, key in cases:
+        for bad in (["x"], {"x": 1} if key not in STRINGS else 3, True if key != "velocities"
+                    and key != "pass_over" else 1):
+            failures.append(refusal(f"{name}: {field(section, key)} = {bad!r}",
+                                    edited(name, section, key, bad), name,
+                                    rf"^{name}\.toml: {field(section, key)}\b"))
+    failures = [f for f in failures if f]
+    assert not failures, "\n".join(failures)
 
 
-@pytest.mark.parametrize("name,section,key", [c for c in CASES if c[2] not in STRINGS
-                                              and c[2] not in ("velocities", "pass_over")])
+@pytest.mark.parametrize("name", SHIPPED)
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -1e300, 1e300])
-def test_non_finite_and_absurd_numbers_are_refused(name, section, key, bad):
-    value = _node(SHIPPED[name], section)[key] if section else SHIPPED[name][key]
-    if isinstance(value, list) and key != "pose":
-        bad = [bad] * len(value)
-    elif key == "pose":
-        bad = [0.0, bad, 0.0]
-    with pytest.raises(RobotFileError, match=rf"^{name}\.toml: {field(section, key)}"):
-        parse(edited(name, section, key, bad), name)
+def test_non_finite_and_absurd_numbers_are_refused(name, bad):
+    failures = []
+    cases = [c for c in CASES if c[0] == name and c[2] not in STRINGS
+             and c[2] not in ("velocities", "pass_over")]
+    assert len(cases) > 20
+    for _, section, key in cases:
+        value = _node(SHIPPED[name], section)[key] if section else SHIPPED[name][key]
+        if isinstance(value, list) and key != "pose":
+            given: Any = [bad] * len(value)
+        elif key == "pose":
+            given = [0.0, bad, 0.0]
+        else:
+            given = bad
+        failures.append(refusal(f"{name}: {field(section, key)} = {given!r}",
+                                edited(name, section, key, given), name,
+                                rf"^{name}\.toml: {field(section, key)}"))
+    failures = [f for f in failures if f]
+    assert not failures, "\n".join(failures)
 
 
 @pytest.mark.parametrize("name,limit", [("soft-arm", 15), ("extensible", 4)])
