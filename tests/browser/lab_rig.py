@@ -76,9 +76,22 @@ def notifications(page: Any) -> list[str]:
     return page.locator(".mantine-Notification-root").all_inner_texts()
 
 
-def press(page: Any, name: str) -> Any:
-    """Mouse down on the button labelled ``name``; returns the mouse to release."""
-    button = page.get_by_role("button", name=name, exact=True)
+def jog_button(page: Any, label: str, sign: str) -> Any:
+    """The hold-to-jog button ``sign`` ("−" or "+") beside the Jog slider labelled ``label``."""
+    uid = page.locator("label", has_text=label).first.get_attribute("for")
+    assert uid, f"no slider labelled {label!r}"
+    # The slider's box, then the two button boxes after it in the same row of the folder.
+    row = page.locator(f'xpath=//*[@id="{uid}"]/ancestor::div[following-sibling::div[1]/button][1]')
+    button = row.locator("xpath=following-sibling::div[position() <= 2]/button").filter(
+        has_text=sign)
+    assert button.count() == 1, f"no {sign!r} beside {label!r}"
+    return button
+
+
+def press(page: Any, name: str | Any) -> Any:
+    """Mouse down on the button labelled ``name`` (or the locator ``name``); returns the mouse
+    to release."""
+    button = page.get_by_role("button", name=name, exact=True) if isinstance(name, str) else name
     button.scroll_into_view_if_needed()
     box = button.bounding_box()
     assert box is not None

@@ -21,8 +21,8 @@ import pytest
 from console.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
-from lab_rig import (Lab, field, lab, lab_app, notifications,  # noqa: E402,F401 (lab: fixture)
-                     press, stop_button, wait_for)
+from lab_rig import (Lab, field, jog_button, lab, lab_app,  # noqa: E402,F401 (lab: fixture)
+                     notifications, press, stop_button, wait_for)
 
 pytestmark = pytest.mark.browser
 
@@ -40,7 +40,7 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     wait_for(lambda: "Alice" in bob.locator('[data-testid="holder"]').inner_text())
 
     before = app.store.command
-    press(bob, "κ₁ +")
+    press(bob, jog_button(bob, "κ₁", "+"))
     time.sleep(0.5)
     bob.mouse.up()
     bob.get_by_role("button", name="Run demo motion").click()
@@ -88,7 +88,7 @@ def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> Non
     app = lab.app
     alice, bob = lab.page(), lab.page()
     lab.take_control(alice, "Alice")
-    mouse = press(alice, "κ₂ +")
+    mouse = press(alice, jog_button(alice, "κ₂", "+"))
     wait_for(lambda: app.store.command.source == HOLD_SOURCE, timeout=3.0)
     time.sleep(0.8)
     mouse.up()
@@ -102,7 +102,7 @@ def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> Non
     time.sleep(0.3)
     assert app.store.command.seq == last.seq
 
-    mouse = press(alice, "κ₂ +")
+    mouse = press(alice, jog_button(alice, "κ₂", "+"))
     wait_for(lambda: app.store.command.seq > last.seq + 3, timeout=3.0)
     stop_button(bob).click()
     wait_for(lambda: app.store.command.source == "stop", timeout=3.0)
