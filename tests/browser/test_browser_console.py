@@ -90,6 +90,7 @@ def test_soft_arm_jog_moves_tip_as_forward_kinematics(
     # Click 3/4 along the κ₂ track (a mouse jog), then type -8 into κ₄'s number box.
     # (Not arrow keys: viser 1.1.1 also orbits the camera on arrow keys over a slider.)
     thumb, _, track = slider(page, "κ₂")
+    track.scroll_into_view_if_needed()  # the Jog panel sits below others in the Operate tab
     box = track.bounding_box()
     assert box is not None
     page.mouse.click(box["x"] + 0.75 * box["width"], box["y"] + box["height"] / 2)
