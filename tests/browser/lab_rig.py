@@ -77,7 +77,9 @@ def notifications(page: Any) -> list[str]:
 
 
 def jog_button(page: Any, label: str, sign: str) -> Any:
-    """The hold-to-jog button ``sign`` ("−" or "+") beside the Jog slider labelled ``label``."""
+    """The hold-to-jog button ``sign`` ("−" or "+") beside the Jog slider labelled ``label``
+    (opens the Operate tab, where the Jog panel is)."""
+    open_tab(page, "Operate")
     uid = page.locator("label", has_text=label).first.get_attribute("for")
     assert uid, f"no slider labelled {label!r}"
     # The slider's box, then the two button boxes after it in the same row of the folder.
