@@ -19,6 +19,7 @@ import viser
 from console.panels.base import Panel, operator_only
 from core.control.capture import CaptureMap, characterise
 from core.robots import load
+from core.units import MM_PER_M, fmt_mm
 from hw_bridge.parent_watch import pool_initializer
 
 CHUNKS = 8
@@ -40,6 +41,16 @@ def merge(parts: list[CaptureMap]) -> CaptureMap:
                       first.gripper_closed)
 
 
+def summary_markdown(m: CaptureMap) -> str:
+    """The map's result in words, lengths in mm (the map's grid is whole millimetres)."""
+    cx, cy = m.centroid()
+    return (f"{m.successes} captures of an r = {fmt_mm(m.radius)} mm object on a "
+            f"{fmt_mm(m.spacing, 0)} mm grid · equivalent diameter "
+            f"**{fmt_mm(m.equivalent_diameter(), 0)} mm** (paper: about half a gripper length, "
+            f"{fmt_mm(m.model.diameter, 0)} mm) · centroid ({fmt_mm(cx, 0)}, {fmt_mm(cy, 0)}) mm "
+            f"in the gripper frame · agreement with the model {m.model_agreement():.0%}")
+
+
 class CapturePanel(Panel):
     """Capture-region characterisation with progress and the Fig. 6 drawing."""
 
@@ -52,9 +63,10 @@ class CapturePanel(Panel):
     def build(self) -> None:
         gui = self.gui
         robot = self.app.robot
-        self.radius = gui.add_number("Object r (m)", robot.capture.nominal_object_radius,
-                                     min=0.005, max=robot.gripper.max_object_radius, step=0.0005)
-        self.spacing = gui.add_number("Grid (m)", 0.005, min=0.002, max=0.02, step=0.001)
+        self.radius = gui.add_number(
+            "Object r (mm)", round(robot.capture.nominal_object_radius * MM_PER_M, 3), min=5.0,
+            max=round(robot.gripper.max_object_radius * MM_PER_M, 3), step=0.5)
+        self.spacing = gui.add_number("Grid (mm)", 5.0, min=2.0, max=20.0, step=1.0)
         self.repeats = gui.add_slider("Repeats (±1 mm)", min=1, max=5, step=1, initial_value=1)
         self.run_btn = gui.add_button("Characterise", icon=viser.Icon.PLAYER_PLAY)
         self.save_btn = gui.add_button("Save map (JSON)", icon=viser.Icon.DEVICE_FLOPPY,
@@ -75,7 +87,8 @@ class CapturePanel(Panel):
         self.run_btn.disabled = True
         self.progress.value, self.progress.visible = 0.0, True
         self._thread = threading.Thread(target=self._run, name="capture-map", daemon=True,
-                                        args=(float(self.radius.value), float(self.spacing.value),
+                                        args=(float(self.radius.value) / MM_PER_M,
+                                              float(self.spacing.value) / MM_PER_M,
                                               int(self.repeats.value)))
         self._thread.start()
 
@@ -95,12 +108,7 @@ class CapturePanel(Panel):
                     self.progress.value = 100.0 * k / len(futs)
             self.map = merge(parts)
             m = self.map
-            cx, cy = m.centroid()
-            self.summary.content = (
-                f"{m.successes} captures on a {m.spacing * 1000:.0f} mm grid · equivalent diameter "
-                f"**{m.equivalent_diameter() * 100:.1f} cm** (paper: about half a gripper length, "
-                f"{m.model.diameter * 100:.1f} cm) · centroid ({cx * 100:.1f}, {cy * 100:.1f}) cm in "
-                f"the gripper frame · agreement with the model {m.model_agreement():.0%}")
+            self.summary.content = summary_markdown(m)
             self.drawing.content = m.to_svg(scale=2500.0)
             self.save_btn.disabled = False
         except Exception as exc:  # report, never kill the console

@@ -22,21 +22,11 @@ from console.arm_view import RACK_COLORS
 from console.model import DeltaModel, PlanarModel
 from console.panels.base import Panel
 from console.state import ArmState
+from core.units import fmt_deg, fmt_mm
 
 NEAR_LIMIT = 0.005  # m
 READOUT_HZ = 10.0
 _CELL = "padding:1px 6px;text-align:right;white-space:nowrap"
-
-
-def _signed(value: float) -> str:
-    """``+12.3`` with one decimal and never ``-0.0``."""
-    return f"{round(value, 1) + 0.0:+.1f}"
-
-
-def _wrap_deg(theta: float) -> float:
-    """Angle in degrees wrapped to (-180, 180]."""
-    deg = math.degrees(theta) % 360.0
-    return deg - 360.0 if deg > 180.0 else deg
 
 
 def _pose_table(rows: list[tuple[str, str, list[str | None]]], columns: list[str]) -> str:
@@ -56,9 +46,10 @@ def planar_readout_html(model: PlanarModel, q: np.ndarray) -> str:
     tip = model.poses(q)[-1]
     palm = model.palm_point(tip)
     rows = [
-        ("tip", "Arm tip", [_signed(tip[0] * 1e3), _signed(tip[1] * 1e3),
-                            _signed(_wrap_deg(tip[2]))]),
-        ("palm", "Palm w<sub>t</sub>", [_signed(palm[0] * 1e3), _signed(palm[1] * 1e3), None]),
+        ("tip", "Arm tip", [fmt_mm(tip[0], sign=True), fmt_mm(tip[1], sign=True),
+                            fmt_deg(tip[2], sign=True, wrap=True)]),
+        ("palm", "Palm w<sub>t</sub>", [fmt_mm(palm[0], sign=True), fmt_mm(palm[1], sign=True),
+                                        None]),
     ]
     return ('<div data-testid="tip-readout" style="font-size:0.85em;line-height:1.5">'
             + _pose_table(rows, ["x (mm)", "y (mm)", "θ (°)"])
@@ -74,7 +65,7 @@ def _rack_cell(cell_id: str, length: float, lo: float, hi: float,
     rgb = f"rgb{color}"
     return (
         f'<td style="{_CELL}" data-testid="{cell_id}" data-near-limit="{str(near).lower()}">'
-        f'<span style="{text_style}">{length * 1e3:.1f}{flag}</span>'
+        f'<span style="{text_style}">{fmt_mm(length)}{flag}</span>'
         f'<div style="height:4px;background:#e9ecef;border-radius:2px;margin-top:1px">'
         f'<div style="height:4px;width:{frac * 100:.1f}%;background:{rgb};border-radius:2px">'
         "</div></div></td>")
@@ -85,7 +76,7 @@ def delta_readout_html(model: DeltaModel, q: np.ndarray) -> str:
     r = model.robot
     tip = model.frames(q)[-1]
     p = tip[:3, 3]
-    tilt = math.degrees(math.acos(min(max(float(tip[2, 2]), -1.0), 1.0)))
+    tilt = math.acos(min(max(float(tip[2, 2]), -1.0), 1.0))
     racks = model.rack_lengths(q)
     head = "".join(
         f'<th style="{_CELL}"><span style="color:rgb{RACK_COLORS[j]}">■</span> rack {j + 1}</th>'
@@ -100,13 +91,13 @@ def delta_readout_html(model: DeltaModel, q: np.ndarray) -> str:
     return (
         '<div style="font-size:0.85em;line-height:1.6">'
         '<div data-testid="tip-readout">'
-        + _pose_table([("tip", "Tip", [_signed(p[0] * 1e3), _signed(p[1] * 1e3),
-                                        _signed(p[2] * 1e3), f"{tilt:.1f}"])],
+        + _pose_table([("tip", "Tip", [fmt_mm(p[0], sign=True), fmt_mm(p[1], sign=True),
+                                        fmt_mm(p[2], sign=True), fmt_deg(tilt)])],
                       ["x (mm)", "y (mm)", "z (mm)", "tilt (°)"])
         + "<span style='opacity:.6'>tilt = tip axis from vertical</span></div>"
         '<div data-testid="rack-readout" style="margin-top:6px">'
-        f"<b>Rack lengths</b> (mm) <span style='opacity:.6'>limits {r.rack_min * 1e3:.0f}–"
-        f"{r.rack_max * 1e3:.0f}; ⚠ within {NEAR_LIMIT * 1e3:.0f} mm</span>"
+        f"<b>Rack lengths</b> (mm) <span style='opacity:.6'>limits {fmt_mm(r.rack_min, 0)}–"
+        f"{fmt_mm(r.rack_max, 0)} mm; ⚠ within {fmt_mm(NEAR_LIMIT, 0)} mm</span>"
         f'<table style="border-collapse:collapse;margin-top:2px"><tr><th></th>{head}</tr>'
         f"{rows}</table></div></div>")
 

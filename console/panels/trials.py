@@ -18,6 +18,7 @@ import viser
 
 from console.panels.base import Panel, operator_only
 from core.control.trials import TrialResult, paper_locations, run_trials
+from core.units import MM_PER_M
 from hw_bridge.parent_watch import pool_initializer
 
 SPOTS = ("A-E (paper)", "custom")
@@ -27,7 +28,8 @@ def results_markdown(results: list[TrialResult], loop: dict | None = None) -> st
     """Markdown table of trial results."""
     if not results:
         return "<small>no results yet</small>"
-    rows = ["| # | spot | ok | approach s | return s | failure |", "|---|---|---|---|---|---|"]
+    rows = ["| # | spot | ok | approach (s) | return (s) | failure |",
+            "|---|---|---|---|---|---|"]
     for i, r in enumerate(results, 1):
         rows.append(f"| {i} | {r.label} | {'✓' if r.success else '✗'} | {r.approach_s:.1f} | "
                     f"{r.return_s:.1f} | {r.failure or ''} |")
@@ -52,9 +54,10 @@ class TrialsPanel(Panel):
         gui = self.gui
         r0 = self.app.robot.capture.nominal_object_radius
         self.spots = gui.add_dropdown("Spots", SPOTS, initial_value=SPOTS[0])
-        self.x = gui.add_number("Custom x (m)", -0.16, step=0.005)
-        self.y = gui.add_number("Custom y (m)", 0.28, step=0.005)
-        self.r = gui.add_number("Object r (m)", r0, min=0.005, max=0.05, step=0.0005)
+        self.x = gui.add_number("Custom x (mm)", -160.0, step=5.0)
+        self.y = gui.add_number("Custom y (mm)", 280.0, step=5.0)
+        self.r = gui.add_number("Object r (mm)", round(r0 * MM_PER_M, 3), min=5.0, max=50.0,
+                                step=0.5)
         self.repeats = gui.add_slider("Repeats", min=1, max=10, step=1, initial_value=5)
         self.seed = gui.add_number("Seed", 0, step=1)
         self.run_btn = gui.add_button("Run trials", icon=viser.Icon.PLAYER_PLAY)
@@ -66,10 +69,11 @@ class TrialsPanel(Panel):
         self.results: list[TrialResult] = []
 
     def objects(self) -> list[tuple[str, tuple[float, float, float]]]:
-        r = float(self.r.value)
+        """The batch's objects (label, (x, y, r)) in metres; the fields are in mm."""
+        r = float(self.r.value) / MM_PER_M
         if self.spots.value == SPOTS[0]:
             return [(k, (x, y, r)) for k, (x, y) in paper_locations().items()]
-        return [("custom", (float(self.x.value), float(self.y.value), r))]
+        return [("custom", (float(self.x.value) / MM_PER_M, float(self.y.value) / MM_PER_M, r))]
 
     def _start(self) -> None:
         if self._thread is not None and self._thread.is_alive():

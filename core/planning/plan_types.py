@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.robot_schema import Section
+from core.units import fmt_deg, fmt_mm
 
 Array = npt.NDArray[np.float64]
 
@@ -200,21 +201,24 @@ class GraspPlan:
 
 
 def format_plan(plan: GraspPlan) -> str:
-    """Human-readable table of a plan's waypoints."""
+    """Human-readable table of a plan's waypoints: lengths in mm, angles in degrees, the unit
+    in every header (``to_dict`` / ``--json`` stay SI)."""
     cx, cy = plan.center
-    lines = [f"Object at ({cx:.3f}, {cy:.3f}) m, r = {plan.radius * 100:.1f} cm: {plan.summary()}",
-             f"d1 = {plan.d1:.4f} m, d2 = {plan.d2:.4f} m, numMoves = {plan.num_moves}, "
-             f"delta_d = {plan.delta_d:.3f} m",
-             f"{'#':>2} {'r_a[m]':>7} {'phi[deg]':>8}  {'kappa [1/m]':^41}  {'palm x':>7} "
-             f"{'palm y':>7} {'th[deg]':>7} {'clr[mm]':>7} {'path[mm]':>8} {'it':>3}  status"]
+    lines = [f"Object at ({fmt_mm(cx)}, {fmt_mm(cy)}) mm, r = {fmt_mm(plan.radius)} mm: "
+             f"{plan.summary()}",
+             f"d1 = {fmt_mm(plan.d1)} mm, d2 = {fmt_mm(plan.d2)} mm, numMoves = {plan.num_moves}, "
+             f"delta_d = {fmt_mm(plan.delta_d)} mm",
+             f"{'#':>2} {'r_a (mm)':>8} {'phi (deg)':>9}  {'kappa (1/m)':^41}  {'palm x (mm)':>11} "
+             f"{'palm y (mm)':>11} {'th (deg)':>8} {'clr (mm)':>8} {'path (mm)':>9} {'it':>3}  "
+             "status"]
     for k in range(plan.n):
-        kap = " ".join(f"{v:6.2f}" for v in plan.kappas[k])
+        kap = " ".join(f"{v + 0.0:6.2f}" for v in np.round(plan.kappas[k], 2))
         px, py, pt = plan.palm_poses[k]
         tag = "+" if plan.inserted[k] else " "
         lines.append(
-            f"{k + 1:>2}{tag}{plan.radii[k]:7.4f} {math.degrees(plan.phis[k]):8.1f}  {kap}  "
-            f"{px:7.4f} {py:7.4f} {math.degrees(pt):7.1f} {plan.clearance[k] * 1e3:7.1f} "
-            f"{plan.path_clearance[k] * 1e3:8.1f} {plan.iterations[k]:3d}  {plan.status[k]}")
+            f"{k + 1:>2}{tag}{fmt_mm(plan.radii[k]):>8} {fmt_deg(plan.phis[k]):>9}  {kap}  "
+            f"{fmt_mm(px):>11} {fmt_mm(py):>11} {fmt_deg(pt):>8} {fmt_mm(plan.clearance[k]):>8} "
+            f"{fmt_mm(plan.path_clearance[k]):>9} {plan.iterations[k]:3d}  {plan.status[k]}")
     if plan.inserted.any():
         lines.append("+ inserted between Algorithm 1's radii to keep the swept path clear")
     return "\n".join(lines)

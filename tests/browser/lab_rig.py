@@ -86,10 +86,26 @@ def session_button(page: Any, name: str) -> Any:
     return page.get_by_role("button", name=name)
 
 
-def press(page: Any, name: str) -> Any:
-    """Mouse down on the (Operate tab's) button labelled ``name``; returns the mouse to release."""
+def jog_button(page: Any, label: str, sign: str) -> Any:
+    """The hold-to-jog button ``sign`` ("−" or "+") beside the Jog slider labelled ``label``
+    (opens the Operate tab, where the Jog panel is)."""
     open_tab(page, "Operate")
-    button = page.get_by_role("button", name=name, exact=True)
+    uid = page.locator("label", has_text=label).first.get_attribute("for")
+    assert uid, f"no slider labelled {label!r}"
+    # The slider's box, then the two button boxes after it in the same row of the folder.
+    row = page.locator(f'xpath=//*[@id="{uid}"]/ancestor::div[following-sibling::div[1]/button][1]')
+    button = row.locator("xpath=following-sibling::div[position() <= 2]/button").filter(
+        has_text=sign)
+    assert button.count() == 1, f"no {sign!r} beside {label!r}"
+    return button
+
+
+def press(page: Any, name: str | Any) -> Any:
+    """Mouse down on the button labelled ``name`` (or the locator ``name``); returns the mouse
+    to release."""
+    if isinstance(name, str):
+        open_tab(page, "Operate")
+    button = page.get_by_role("button", name=name, exact=True) if isinstance(name, str) else name
     button.scroll_into_view_if_needed()
     box = button.bounding_box()
     assert box is not None

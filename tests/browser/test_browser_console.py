@@ -90,6 +90,7 @@ def test_soft_arm_jog_moves_tip_as_forward_kinematics(
     # Click 3/4 along the κ₂ track (a mouse jog), then type -8 into κ₄'s number box.
     # (Not arrow keys: viser 1.1.1 also orbits the camera on arrow keys over a slider.)
     thumb, _, track = slider(page, "κ₂")
+    track.scroll_into_view_if_needed()  # the Jog panel sits below others in the Operate tab
     box = track.bounding_box()
     assert box is not None
     page.mouse.click(box["x"] + 0.75 * box["width"], box["y"] + box["height"] / 2)
@@ -149,7 +150,7 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
 
     q = np.array([[0.04, 0.0, 0.15], [0.0, -0.04, 0.10]])
     for label, value in (("δL₁", 0.15), ("Δx₁", 0.04), ("δL₂", 0.10), ("Δy₂", -0.04)):
-        type_value(page, label, value)
+        type_value(page, label, value * 1e3)  # the Δ sliders are in mm
     assert _feasible(robot, q)
     tip = dk.tip_position(robot, q)
     racks = _racks(robot, q)
@@ -163,14 +164,14 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
 
     # Ask for more bending than allowed: the field stops at the largest feasible dx, here at the
     # bending limit (theta_max; the racks would allow 210 mm). The browser clamps the typed
-    # number to the slider's range (to its 1 mm step) on blur; the server refuses the raw one.
+    # number to the slider's range (to its 0.1 mm step) on blur; the server refuses the raw one.
     boundary = _boundary(robot, q, (0, 0), 0.04, 0.24)
     assert boundary < 0.05
-    type_value(page, "Δx₁", 0.24)
+    type_value(page, "Δx₁", 240.0)
     deadline = time.monotonic() + 5.0
-    while float(slider(page, "Δx₁")[1].input_value()) == 0.04 and time.monotonic() < deadline:
+    while float(slider(page, "Δx₁")[1].input_value()) == 40.0 and time.monotonic() < deadline:
         time.sleep(0.1)  # the field clamped on blur
-    q[0, 0] = float(slider(page, "Δx₁")[1].input_value())
+    q[0, 0] = float(slider(page, "Δx₁")[1].input_value()) / 1e3
     assert q[0, 0] == pytest.approx(boundary, abs=1e-3) and _feasible(robot, q)
     tip = dk.tip_position(robot, q)
     racks = _racks(robot, q)
@@ -179,7 +180,7 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
     assert page.get_by_text("bending limit").count() >= 1
     # Retract segment 1 below what that bend needs: the racks stop it, flagged at their limit.
     q[0, 2] = _boundary(robot, q, (0, 2), 0.15, 0.0)  # smallest feasible dL at that bend
-    type_value(page, "δL₁", 0.0)
+    type_value(page, "δL₁", 0.0)  # mm
     tip = dk.tip_position(robot, q)
     racks = _racks(robot, q)
     wait_for_readout(page, {"tip-0": tip[0] * 1e3, "tip-2": tip[2] * 1e3,

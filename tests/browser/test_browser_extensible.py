@@ -81,14 +81,14 @@ def wait_until(what: str, fn: Callable[[], bool], timeout: float = 10.0,
 
 
 def jog_posture(page) -> np.ndarray:
-    """The Δ jog sliders' values (m) as (n, 3), full precision (the boxes show 3 decimals)."""
-    labels = [f"{c}{s} (m)" for s in "₁₂" for c in ("Δx", "Δy", "δL")]
+    """The Δ jog sliders' values (m; the sliders show mm) as (n, 3), full precision."""
+    labels = [f"{c}{s} (mm)" for s in "₁₂" for c in ("Δx", "Δy", "δL")]
     values = []
     for label in labels:
         uid = page.locator("label", has_text=label).first.get_attribute("for")
         thumb = page.locator(f'[id="{uid}"]').get_by_role("slider")
         values.append(float(thumb.get_attribute("aria-valuenow")))
-    return np.array(values).reshape(ROBOT.n_segments, 3)
+    return np.array(values).reshape(ROBOT.n_segments, 3) / 1e3
 
 
 def test_typed_target_moves_the_tip_and_the_jog_sliders(
@@ -102,7 +102,7 @@ def test_typed_target_moves_the_tip_and_the_jog_sliders(
                lambda: np.abs(readout_tip(page) - target).max() <= 1.0)
     status = page.locator('[data-testid="target-status"]')
     wait_until("the reachable status", lambda: status.get_attribute("data-state") == "reachable")
-    # The jog sliders mirror the posture the IK chose (the panel rounds them to 1e-6 m).
+    # The jog sliders mirror the posture the IK chose (the panel rounds them to 1e-6 mm).
     wait_until("the jog sliders in sync", lambda: np.linalg.norm(
         dk.tip_position(ROBOT, jog_posture(page)) * 1e3 - target) <= 1.0)
     time.sleep(0.3)

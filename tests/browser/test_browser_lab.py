@@ -22,8 +22,8 @@ from console.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
 from browser_tabs import open_tab  # noqa: E402
-from lab_rig import (Lab, field, lab, lab_app, notifications,  # noqa: E402,F401 (lab: fixture)
-                     press, session_button, stop_button, wait_for)
+from lab_rig import (Lab, field, jog_button, lab, lab_app,  # noqa: E402,F401 (lab: fixture)
+                     notifications, press, session_button, stop_button, wait_for)
 
 pytestmark = pytest.mark.browser
 
@@ -44,7 +44,7 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     wait_for(lambda: "Alice" in bob.locator('[data-testid="holder"]').inner_text())
 
     before = app.store.command
-    press(bob, "κ₁ +")
+    press(bob, jog_button(bob, "κ₁", "+"))
     time.sleep(0.5)
     bob.mouse.up()
     wait_for(lambda: any("Only the operator can jog — Alice holds control; ask them or take "
@@ -92,7 +92,7 @@ def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> Non
     app = lab.app
     alice, bob = lab.page(), lab.page()
     lab.take_control(alice, "Alice")
-    mouse = press(alice, "κ₂ +")
+    mouse = press(alice, jog_button(alice, "κ₂", "+"))
     wait_for(lambda: app.store.command.source == HOLD_SOURCE, timeout=3.0)
     time.sleep(0.8)
     mouse.up()
@@ -106,7 +106,7 @@ def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> Non
     time.sleep(0.3)
     assert app.store.command.seq == last.seq
 
-    mouse = press(alice, "κ₂ +")
+    mouse = press(alice, jog_button(alice, "κ₂", "+"))
     wait_for(lambda: app.store.command.seq > last.seq + 3, timeout=3.0)
     stop_button(bob).click()
     wait_for(lambda: app.store.command.source == "stop", timeout=3.0)

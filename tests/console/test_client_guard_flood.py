@@ -21,6 +21,7 @@ from viser import _messages
 from console.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
 from console.client_guard import GuardLimits
+from console.panels.jog import JogPanel
 from console.panels.session import SessionPanel
 from core.robots import load
 from tests.ws_client import CAMERA, RawClient, wait_for
@@ -233,8 +234,7 @@ def test_a_viewers_jog_is_refused_in_the_panels_own_words(lab: tuple) -> None:
     op = _operator(server, app, token)
     viewer = RawClient(server)
     _ready(app, viewer)
-    plus = next(h for h in server.gui._gui_input_handle_from_uuid.values()
-                if getattr(h._impl.props, "label", "") == "κ₁ +")
+    plus = app.panel(JogPanel).jog_buttons[("kappa1", 1)]  # the "+" beside κ₁'s slider
     before = app.store.command
     for _ in range(5):
         viewer.send(_messages.GuiButtonHoldMessage(plus._impl.uuid, 20.0))

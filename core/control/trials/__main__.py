@@ -25,6 +25,7 @@ from core.control.params import SimParams
 from core.control.planner_spec import DEFAULT_PLANNER
 from core.control.trials import TrialResult, paper_locations, run_trials, summary
 from core.robots import SoftArm, load
+from core.units import fmt_mm
 
 
 def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
@@ -47,14 +48,18 @@ def parse_overrides(items: Sequence[str]) -> dict[str, Any]:
 
 
 def format_table(results: Sequence[TrialResult]) -> str:
-    """Fixed-width results table (one row per trial, then per-spot success counts)."""
-    lines = [f"{'#':>3} {'spot':<4} {'x':>7} {'y':>7} {'r':>6} {'ok':<3} {'approach_s':>10} "
-             f"{'return_s':>8} {'replans':>7} {'stalls':>6}  failure"]
+    """Fixed-width results table (one row per trial, then per-spot success counts).
+
+    Lengths in mm and times in s, the unit in each column's header (``--json`` and ``--csv``
+    stay SI).
+    """
+    lines = [f"{'#':>3} {'spot':<4} {'x (mm)':>7} {'y (mm)':>7} {'r (mm)':>6} {'ok':<3} "
+             f"{'approach (s)':>12} {'return (s)':>10} {'replans':>7} {'stalls':>6}  failure"]
     for i, r in enumerate(results, 1):
         x, y, rad = r.object
-        lines.append(f"{i:>3} {r.label:<4} {x:>7.3f} {y:>7.3f} {rad:>6.4f} "
-                     f"{'yes' if r.success else 'NO':<3} {r.approach_s:>10.1f} {r.return_s:>8.1f} "
-                     f"{r.replans:>7d} {r.stalls:>6d}  {r.failure or ''}")
+        lines.append(f"{i:>3} {r.label:<4} {fmt_mm(x):>7} {fmt_mm(y):>7} {fmt_mm(rad):>6} "
+                     f"{'yes' if r.success else 'NO':<3} {r.approach_s:>12.1f} "
+                     f"{r.return_s:>10.1f} {r.replans:>7d} {r.stalls:>6d}  {r.failure or ''}")
     by: dict[str, list[bool]] = {}
     for r in results:
         by.setdefault(r.label, []).append(r.success)
