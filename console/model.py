@@ -23,7 +23,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from console.units import deg, mm
+from core.units import fmt_deg, fmt_mm
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import ExtensibleArm, Robot, SoftArm
@@ -234,9 +234,9 @@ class DeltaModel(ArmModel):
         value = float(q[seg, axis])
         if min(bhi - value, value - blo) >= coord.step:
             return None
-        return (f"{coord.label} at {mm(value, 0, signed=True)} mm: segment {seg + 1} at its "
-                f"bending limit θ = {deg(self.robot.theta_max)}° "
-                f"(|(Δx, Δy)| ≤ {mm(self.bend_max, 0)} mm)")
+        return (f"{coord.label} at {fmt_mm(value, 0, sign=True)} mm: segment {seg + 1} at its "
+                f"bending limit θ = {fmt_deg(self.robot.theta_max, 0)}° "
+                f"(|(Δx, Δy)| ≤ {fmt_mm(self.bend_max, 0)} mm)")
 
     def set_coordinate(self, q: Array, coord: Coordinate, value: float) -> tuple[Array, str | None]:
         seg, axis = coord.index
@@ -248,16 +248,16 @@ class DeltaModel(ArmModel):
         if abs(clamped - value) <= 1e-9:
             return out, (notes[0] if notes else None)
         if (bhi <= hi) if value > clamped else (blo >= lo):  # the bending limit binds
-            return out, (f"{coord.label} clamped to {mm(clamped, 0, signed=True)} mm: segment "
-                         f"{seg + 1} at its bending limit θ = {deg(self.robot.theta_max)}° "
-                         f"(|(Δx, Δy)| ≤ {mm(self.bend_max, 0)} mm)")
+            return out, (f"{coord.label} clamped to {fmt_mm(clamped, 0, sign=True)} mm: segment "
+                         f"{seg + 1} at its bending limit θ = {fmt_deg(self.robot.theta_max, 0)}° "
+                         f"(|(Δx, Δy)| ≤ {fmt_mm(self.bend_max, 0)} mm)")
         racks = self.rack_lengths(out[seg])
         limits = (self.robot.rack_min, self.robot.rack_max)
         which, j = np.unravel_index(np.argmin(np.abs(racks[None] - np.array(limits)[:, None])),
                                     (2, 3))
         limit = limits[which]
-        note = (f"{coord.label} clamped to {mm(clamped, 0, signed=True)} mm: rack {j + 1} of "
-                f"segment {seg + 1} at its {mm(limit, 0)} mm limit")
+        note = (f"{coord.label} clamped to {fmt_mm(clamped, 0, sign=True)} mm: rack {j + 1} of "
+                f"segment {seg + 1} at its {fmt_mm(limit, 0)} mm limit")
         if axis < 2 and hi - lo < 1e-9:
             note += f" (extend δL{subscript(seg + 1)} first to make room for bending)"
         return out, note
@@ -268,7 +268,7 @@ class DeltaModel(ArmModel):
         notes = []
         dl = np.clip(out[:, 2], r.rack_min - r.L0, r.rack_max - r.L0)
         for i in np.flatnonzero(dl != out[:, 2]):
-            notes.append(f"δL{subscript(i + 1)} clamped to {mm(dl[i], 0)} mm (rack limits)")
+            notes.append(f"δL{subscript(i + 1)} clamped to {fmt_mm(dl[i], 0)} mm (rack limits)")
         out[:, 2] = dl
         length = r.L0 + dl  # (n,) rack length with no bending
         bend = out[:, :2] @ self.rack_gradient[:2]  # (n, 3) rack change due to bending
@@ -282,10 +282,10 @@ class DeltaModel(ArmModel):
         for i in np.flatnonzero(scale < 1.0 - 1e-12):
             if bend_room[i] < rack_scale[i]:
                 notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to stay within "
-                             f"its bending limit θ = {deg(r.theta_max)}°")
+                             f"its bending limit θ = {fmt_deg(r.theta_max, 0)}°")
             else:
                 notes.append(f"segment {i + 1} bending scaled to {scale[i]:.0%} to keep racks "
-                             f"within [{mm(r.rack_min, 0)}, {mm(r.rack_max, 0)}] mm")
+                             f"within [{fmt_mm(r.rack_min, 0)}, {fmt_mm(r.rack_max, 0)}] mm")
         out[:, :2] *= scale[:, None]
         return out, tuple(notes)
 

@@ -8,6 +8,7 @@ decimals and never ``-0.0``: the unit belongs in the label or column header ("x 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 MM_PER_M = 1000.0
 
@@ -57,3 +58,14 @@ def fmt_deg(theta_rad: float, decimals: int = 1, *, sign: bool = False,
     if wrap and text.lstrip("+") == _fixed(-180.0, decimals, False):
         return _fixed(180.0, decimals, sign)  # -179.99 rounds to -180: show the (-180, 180] end
     return text
+
+
+def mm_value(x_m: float, decimals: int = 1) -> float:
+    """A length given in metres as a millimetre number for a GUI input, rounded, never -0.0."""
+    v = round(float(x_m) * MM_PER_M, decimals)
+    return 0.0 if v == 0 else v  # -0.0 == 0: normalised to +0.0
+
+
+def mm_xyz(point_m: Iterable[float], decimals: int = 1) -> str:
+    """A point given in metres as ``"(x, y, z)"`` in millimetres, without the unit."""
+    return "(" + ", ".join(fmt_mm(float(v), decimals) for v in point_m) + ")"

@@ -43,7 +43,7 @@ from console.panels.base import Panel
 from console.panels.extensible_status import link_summary, runner_phase, worker_pool
 from console.panels.plot_data import thin
 from console.state import ArmState
-from console.units import mm
+from core.units import fmt_mm
 from core.kinematics import delta as dk
 from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
 from hw_bridge.extensible_jobs import JobResult
@@ -311,9 +311,9 @@ class PathsPanel(Panel):
         self.app.recorder.log("plan", path_plan_record(req, waypoints, path))  # lab data
         self._draw_preview(path, waypoints)
         ok = path.max_error <= MAX_EXECUTE_ERROR
-        summary = (f"{req.kind} {mm(req.size, 0)} mm in {req.plane} at "
-                   f"{mm(req.speed, 0)} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
-                   f"max planned tip error {mm(path.max_error, 2)} mm, {path.jumps} jumps")
+        summary = (f"{req.kind} {fmt_mm(req.size, 0)} mm in {req.plane} at "
+                   f"{fmt_mm(req.speed, 0)} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
+                   f"max planned tip error {fmt_mm(path.max_error, 2)} mm, {path.jumps} jumps")
         if not ok:
             self._set_status(f"⚠ {summary}. The path leaves the reachable workspace: shrink it "
                              "or move the arm.", "infeasible")
@@ -488,7 +488,7 @@ class PathsPanel(Panel):
         self.hardware.content = self._hardware_html()
         self.show_phase()
         if result.ok:
-            self._set_status(f"Done: final tip {mm(result.error or 0.0, 2)} mm from the "
+            self._set_status(f"Done: final tip {fmt_mm(result.error or 0.0, 2)} mm from the "
                              "path's end.", "done")
         elif snap.fault:
             self._set_status(f"⚠ Hardware fault: {snap.fault}. Commanding stopped.", "fault")

@@ -24,7 +24,7 @@ import viser
 from console.panels.base import Panel
 from console.panels.paths import extensible_runner
 from console.state import ArmState
-from console.units import mm, mm_value
+from core.units import fmt_mm, mm_value
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import ExtensibleArm
@@ -79,7 +79,7 @@ def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt
     ik = solve_tip_ik(robot, p)
     if not ik.reachable:
         raise ValueError(f"point is unreachable: the closest feasible tip is "
-                         f"{mm(ik.error, 1)} mm away")
+                         f"{fmt_mm(ik.error, 1)} mm away")
     home = dk.robot_rack_lengths(robot, np.zeros((robot.n_segments, 3)))
     runner.start()
     tips: list[Array] = []
@@ -106,13 +106,13 @@ def result_html(r: RepeatabilityResult) -> str:
     head = "".join(f'<th style="{cell}">{a} (mm)</th>' for a in _AXES)
     body = "".join(
         f'<tr><td style="{cell};text-align:left">{label}</td>'
-        + "".join(f'<td style="{cell}" data-testid="rep-{key}-{a}">{mm(v, 2)}</td>'
+        + "".join(f'<td style="{cell}" data-testid="rep-{key}-{a}">{fmt_mm(v, 2)}</td>'
                   for a, v in zip(_AXES, values)) + "</tr>"
         for key, label, values in rows)
     note = f" · {html.escape(r.message)}" if r.message else ""
     return (f'<div data-testid="rep-result" style="font-size:0.85em">'
             f"<b>{len(r.tips)}/{r.requested} runs</b> to "
-            f"({', '.join(mm(v, 1) for v in r.point)}) mm{note}"
+            f"({', '.join(fmt_mm(v, 1) for v in r.point)}) mm{note}"
             f"<table style='border-collapse:collapse'><tr><th></th>{head}</tr>{body}"
             "</table><span style='opacity:.6'>tip from the encoders; spread = ±(max − min)/2 "
             "as in Table I</span></div>")

@@ -35,7 +35,7 @@ import viser
 from console.panels.base import Panel, operator_only
 from console.panels.extensible_status import link_summary, worker_pool
 from console.state import ArmState
-from console.units import deg, mm, mm_value, mm_xyz
+from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
 from core.robot_sections import IKSettings
@@ -342,20 +342,20 @@ class TargetPanel(Panel):
             body, state = "Drag the gizmo (orange ball) or type x, y, z (mm).", "idle"
         elif result.reachable:
             body = (f"Target {mm_xyz(result.tip)} mm reachable (IK error "
-                    f"{mm(result.error, 2)} mm): the tip goes there.")
+                    f"{fmt_mm(result.error, 2)} mm): the tip goes there.")
             state = "reachable"
         else:
             r: Any = self.app.robot
             aim = "the target" if target is None else f"{mm_xyz(target)} mm"
             body = (f"<b style='color:#c92a2a'>⚠ Unreachable:</b> {html.escape(aim)} is beyond "
-                    f"the arm's reach (racks {mm(r.rack_min, 0)}–{mm(r.rack_max, 0)} mm, "
-                    f"bend ≤ {deg(r.theta_max)}° per segment). Moved to the closest reachable "
-                    f"tip, {mm_xyz(result.tip)} mm, <b>{mm(result.error, 1)} mm</b> from the "
+                    f"the arm's reach (racks {fmt_mm(r.rack_min, 0)}–{fmt_mm(r.rack_max, 0)} mm, "
+                    f"bend ≤ {fmt_deg(r.theta_max, 0)}° per segment). Moved to the closest reachable "
+                    f"tip, {mm_xyz(result.tip)} mm, <b>{fmt_mm(result.error, 1)} mm</b> from the "
                     "target (red line to the target).")
             state = "unreachable"
         if note:
             body += f"<br><b style='color:#e67700'>⚠ {html.escape(note)}</b>"
-        distance = "" if result is None else f"{mm(result.error, 3)}"
+        distance = "" if result is None else f"{fmt_mm(result.error, 3)}"
         return (f'<div data-testid="target-status" data-state="{state}" '
                 f'data-motors="{"still" if note else "follow"}" '
                 f'data-error-mm="{distance}" style="font-size:0.85em">{body}</div>')

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from core.units import fmt_deg, fmt_mm, wrap_deg
+from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz, wrap_deg
 
 
 def test_metres_read_as_millimetres_with_fixed_decimals() -> None:
@@ -50,3 +50,26 @@ def test_bad_decimals_and_non_finite_values() -> None:
         fmt_mm(0.1, -1)
     assert fmt_mm(math.nan) == "nan"
     assert fmt_mm(math.inf, sign=True) == "+inf"
+
+
+@pytest.mark.parametrize("value, decimals, sign, text", [
+    (-0.0004, 0, False, "0"),     # rounds to IEEE -0.0
+    (-0.0004, 0, True, "+0"),
+    (-0.0, 1, False, "0.0"),
+    (-0.00004, 1, True, "+0.0"),
+    (-0.0006, 0, True, "-1"),     # a real negative keeps its sign
+    (0.1234, 1, False, "123.4"),
+    (0.25, 0, True, "+250"),
+])
+def test_clamp_notes_never_print_negative_zero(value: float, decimals: int, sign: bool,
+                                               text: str) -> None:
+    assert fmt_mm(value, decimals, sign=sign) == text
+
+
+def test_points_and_gui_numbers_in_millimetres() -> None:
+    assert fmt_deg(math.pi / 2, 0) == "90"
+    assert fmt_deg(-1e-6, 1) == "0.0"
+    assert mm_xyz((-0.00001, 0.0, 0.46)) == "(0.0, 0.0, 460.0)"
+    v = mm_value(-0.00001)
+    assert v == 0.0 and math.copysign(1.0, v) == 1.0 and str(v) == "0.0"
+    assert mm_value(0.01236) == 12.4
