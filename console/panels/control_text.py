@@ -6,6 +6,7 @@ Pure functions (no widgets, no threads), so they are tested without a console.
 
 from __future__ import annotations
 
+import dataclasses
 import html
 from typing import Any
 
@@ -31,29 +32,84 @@ def table_point(origin: Any, direction: Any) -> tuple[float, float] | None:
     return None if s <= 0 else (float(o[0] + s * d[0]), float(o[1] + s * d[1]))
 
 
-def state_html(view: ControlView) -> str:
-    """The state machine's state (``data-phase`` for tests), reason and flags."""
+@dataclasses.dataclass(frozen=True)
+class ExecuteTarget:
+    """What Execute acts on: the Objects panel's selected object (metres) and, when the Grasp
+    planner has a successful plan for exactly that object, that plan (else the controller
+    plans the approach itself)."""
+
+    name: str
+    x: float
+    y: float
+    r: float
+    plan: Any = None  # core.planning.grasp.GraspPlan
+
+    def describe(self) -> str:
+        """For the operator: which object, where, and whose plan."""
+        where = f"{self.name} at ({self.x * 1e3:.0f}, {self.y * 1e3:.0f}) mm, r {self.r * 1e3:.1f} mm"
+        if self.plan is not None:
+            return f"{where}, with the Grasp planner's {self.plan.n}-waypoint plan"
+        return f"{where} (no Grasp planner plan for it: the controller plans the approach)"
+
+
+def execute_target(session_view: Any) -> ExecuteTarget:
+    """The target of Execute from the grasp session's view (``console.plan_view.SessionView``);
+    ValueError (the operator's message) without a selected object."""
+    obj = next((o for o in session_view.objects if o.name == session_view.selected), None)
+    if obj is None:
+        raise ValueError("No object selected: place or select one in the Objects panel first.")
+    out = session_view.outcome
+    plan = None
+    if (out is not None and out.obj == obj and out.plan is not None and out.plan.success
+            and out.plan.n > 0):
+        plan = out.plan
+    return ExecuteTarget(obj.name, obj.x, obj.y, obj.r, plan)
+
+
+def waypoint_text(c: Any, planner_plan: bool = False) -> str:
+    """Where the task is in its plan, counted as the Grasp planner and the Waypoints panel count
+    (" · approach waypoint 3 of 8 (Grasp planner's plan)"); empty without a plan."""
+    if not c.n_waypoints:
+        return ""
+    whose = (f"controller's re-plan {c.replans}" if c.replans
+             else "Grasp planner's plan" if planner_plan else "controller's plan")
+    if c.phase == "approach":
+        return f" · approach waypoint {c.waypoint + 1} of {c.n_waypoints} ({whose})"
+    return f" · plan of {c.n_waypoints} waypoints ({whose})"
+
+
+def state_html(view: ControlView, target: ExecuteTarget | None = None) -> str:
+    """The state machine's state (``data-phase``, ``data-waypoint``, ``data-waypoints`` and
+    ``data-object`` for tests), the object it acts on, reason and flags."""
     c = view.snapshot.control
     if c is None:
         return '<div data-testid="control-state" data-phase=""><b>State:</b> –</div>'
-    wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
+    wp = waypoint_text(c, target is not None and target.plan is not None)
     stale = (f" · <b>telemetry stale</b> (last at t = {c.t:.2f} s: the device is not read)"
              if view.snapshot.t - c.t > STALE_S else "")
     why = f"<br><b>Reason:</b> {html.escape(c.reason)}" if c.reason else ""
-    return (f'<div data-testid="control-state" data-phase="{c.phase}"><b>State:</b> '
-            f'<span data-testid="control-phase">{c.phase}</span>{wp} · re-plans {c.replans} · '
+    name = "" if target is None else html.escape(target.name, quote=True)
+    obj = "" if target is None else f"<br><b>Object:</b> {html.escape(target.describe())}"
+    return (f'<div data-testid="control-state" data-phase="{c.phase}" '
+            f'data-waypoint="{c.waypoint + 1 if c.n_waypoints else ""}" '
+            f'data-waypoints="{c.n_waypoints or ""}" data-object="{name}"><b>State:</b> '
+            f'<span data-testid="control-phase">{c.phase}</span>{wp} · '
             f"{'ARMED' if c.armed else 'disarmed'} · tracking {'ok' if c.tracking_ok else 'LOST'}"
-            f" · gripper {'closed' if c.gripper_closed else 'open'}{stale}{why}</div>")
+            f" · gripper {'closed' if c.gripper_closed else 'open'}{stale}{obj}{why}</div>")
 
 
-def header_phase(view: ControlView) -> tuple[str, Tone | None]:
+def header_phase(view: ControlView, target: ExecuteTarget | None = None
+                 ) -> tuple[str, Tone | None]:
     """The header's phase field: the state machine's phase, waypoint and arming."""
     c = view.snapshot.control
     if c is None:
         return "–", None
-    wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
+    wp = ""
+    if c.n_waypoints and c.phase == "approach":
+        wp = f" · waypoint {c.waypoint + 1} of {c.n_waypoints}"
+    what = f" · {target.name}" if target is not None and c.phase not in IDLE_PHASES else ""
     tone: Tone = "busy" if c.phase not in IDLE_PHASES + ("settling",) else "ok"
-    return f"{c.phase}{wp} · {'ARMED' if c.armed else 'disarmed'}", tone
+    return f"{c.phase}{what}{wp} · {'ARMED' if c.armed else 'disarmed'}", tone
 
 
 def header_link(view: ControlView) -> tuple[str, Tone | None]:
