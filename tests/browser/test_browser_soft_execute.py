@@ -60,18 +60,26 @@ def open_operate(page: Any, url: str) -> None:
     start lost it), and open the Operate tab once the Control panel shows the loop."""
     page.set_viewport_size({"width": 1024, "height": 900})
     page.goto(url)
-    holder = page.locator('[data-testid="holder"]')  # (in the header)
-    holder.wait_for(timeout=90_000)
+    page.locator('[data-testid="holder"]').wait_for(timeout=90_000)  # (in the header)
     time.sleep(1.0)  # the per-browser greeting arrives
-    close_notices(page)  # (a notification can cover the tabs)
-    if "nobody" in holder.inner_text():
-        open_tab(page, "Session", timeout_ms=60_000)
-        page.get_by_role("button", name="Take control").click()
-        wait_until("take control", lambda: "nobody" not in holder.inner_text(), 20.0, page)
-        close_notices(page)
+    hold_control(page)
     open_tab(page, "Operate")
     page.locator('[data-testid="control-link"]').wait_for(timeout=60_000)
     page.locator('[data-testid="plan-summary"][data-state="ok"]').wait_for(timeout=60_000)
+
+
+def hold_control(page: Any) -> None:
+    """Hold control: desk mode gives it to the first tab, but a loaded machine's software
+    renderer can stall the tab past its 2 s lease (control released): take it back then."""
+    holder = page.locator('[data-testid="holder"]')
+    close_notices(page)  # (a notification can cover the tabs)
+    if "nobody" not in holder.inner_text():
+        return
+    open_tab(page, "Session", timeout_ms=60_000)
+    page.get_by_role("button", name="Take control").click()
+    wait_until("take control", lambda: "nobody" not in holder.inner_text(), 20.0, page)
+    close_notices(page)
+    open_tab(page, "Operate")
 
 
 def failure_shot(page: Any, path: Path) -> None:
@@ -96,6 +104,7 @@ def click_table(page: Any, xy: tuple[float, float], count: int) -> None:
     assert box is not None
     info = page.locator('[data-testid="objects-info"]')
     for attempt in range(3):
+        hold_control(page)
         page.mouse.click(*project((*xy, 0.0), box["width"], box["height"]))
         try:
             page.wait_for_function(
@@ -112,6 +121,40 @@ def palm_mm(page: Any) -> tuple[float, float]:
                  for i in range(2))  # type: ignore[return-value]
 
 
+def run_to_grasp(page: Any, n: int) -> set[str] | None:
+    """Arm, Execute, and follow the run to the grasp, checking the object and the waypoint
+    count on the way; the approach waypoints seen, or None if a lost lease stopped it."""
+    summary = page.locator('[data-testid="plan-summary"]')
+    hold_control(page)
+    if "ARMED" not in state(page).inner_text():
+        page.get_by_role("button", name="Arm", exact=True).click()
+        wait_until("armed", lambda: "ARMED" in state(page).inner_text(), 20.0, page)
+    close_notices(page)
+    page.get_by_role("button", name="Execute grasp-and-place").click()
+    wait_until("told which object", lambda: any("Object 2" in t for t in notes(page)), 10.0,
+               page)
+    lost = lambda: "went silent" in state(page).inner_text()  # noqa: E731 - a stalled tab
+    wait_until("running", lambda: state(page).get_attribute("data-phase") in RUNNING or lost(),
+               20.0, page)
+    if lost():
+        return None
+    counted: set[str] = set()
+    while (ph := state(page).get_attribute("data-phase")) not in ("grasp", "move_to_bin"):
+        text = state(page).inner_text()
+        if ph == "stopped" and "went silent" in text:
+            return None
+        assert ph in RUNNING, text
+        assert state(page).get_attribute("data-object") == "Object 2" and "Object 2" in text
+        if ph == "approach":
+            assert state(page).get_attribute("data-waypoints") == str(n), text
+            assert f" of {n} (Grasp planner's plan)" in text, text
+            counted.add(state(page).get_attribute("data-waypoint") or "")
+        assert page.locator('[data-testid="waypoint-info"]').get_attribute(
+            "data-count") == str(n) and summary.get_attribute("data-waypoints") == str(n)
+        time.sleep(0.1)
+    return counted
+
+
 def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     """Issues 19.1 and 19.4."""
@@ -126,6 +169,7 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         wait_until("Object 2 selected",
                    lambda: info.get_attribute("data-selected") == "Object 2", 10.0, page)
         summary = page.locator('[data-testid="plan-summary"]')
+        hold_control(page)
         page.get_by_role("button", name="Plan grasp").click()
         planned = page.locator('[data-testid="plan-summary"][data-state="ok"]')
         wait_until("planned", lambda: planned.count() == 1, 20.0, page)
@@ -137,27 +181,11 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         wait_until("Execute's target", lambda: "Object 2" in target.inner_text(), 10.0, page)
         assert f"{n}-waypoint plan" in target.inner_text()
 
-        page.get_by_role("button", name="Arm", exact=True).click()
-        wait_until("armed", lambda: "ARMED" in state(page).inner_text(), 20.0, page)
-        close_notices(page)
-        page.get_by_role("button", name="Execute grasp-and-place").click()
-        wait_until("told which object",
-                   lambda: any("Object 2" in t for t in notes(page)), 10.0, page)
-        wait_until("running", lambda: state(page).get_attribute("data-phase") in RUNNING,
-                   20.0, page)
-        assert state(page).get_attribute("data-object") == "Object 2"
-        assert "Object 2" in state(page).inner_text()
-        counted = set()
-        while (ph := state(page).get_attribute("data-phase")) not in ("grasp", "move_to_bin"):
-            assert ph in RUNNING, state(page).inner_text()
-            if ph == "approach":
-                text = state(page).inner_text()
-                assert state(page).get_attribute("data-waypoints") == str(n), text
-                assert f" of {n} (Grasp planner's plan)" in text, text
-                counted.add(state(page).get_attribute("data-waypoint"))
-            assert page.locator('[data-testid="waypoint-info"]').get_attribute(
-                "data-count") == str(n) and summary.get_attribute("data-waypoints") == str(n)
-            time.sleep(0.1)
+        for attempt in range(3):  # only a lost lease (a stalled tab) may start it again
+            counted = run_to_grasp(page, n)
+            if counted is not None:
+                break
+            assert attempt < 2, f"lost control three times: {state(page).inner_text()}"
         assert counted, "never saw the approach"
         palm = palm_mm(page)
         page.screenshot(path=str(artifacts_dir / "browser_soft_execute_object2.png"))
@@ -197,6 +225,7 @@ def test_clean_start_shows_no_fault_and_execute_does_not_arm(
         page.screenshot(path=str(artifacts_dir / "browser_soft_clean_start.png"))
         # Execute while disarmed: refused with what to do, and nothing arms.
         assert "disarmed" in state(page).inner_text()
+        hold_control(page)
         page.get_by_role("button", name="Execute grasp-and-place").click()
         wait_until("told to arm first",
                    lambda: any("Arm first" in t for t in notes(page)), 10.0, page)
