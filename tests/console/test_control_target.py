@@ -10,7 +10,12 @@ import numpy as np
 import pytest
 
 from console.panels.control_plots import MIN_ERROR_RANGE, error_range, tracking_error
-from console.panels.control_text import execute_target, header_phase, state_html, waypoint_text
+from console.panels.control_text import (
+    execute_target,
+    header_phase,
+    state_html,
+    waypoint_text,
+)
 from console.plan_view import Outcome, SessionView, TableObject
 from core.planning.grasp import plan_grasp
 from core.robots import load
