@@ -130,7 +130,7 @@ def palm_mm(page: Any) -> tuple[float, float]:
                  for i in range(2))  # type: ignore[return-value]
 
 
-def run_to_grasp(page: Any, n: int) -> set[str] | None:
+def run_to_grasp(page: Any, n: int, palms: list) -> set[str] | None:
     """Arm, Execute, and follow the run to the grasp, checking the object and the waypoint
     count on the way; the approach waypoints seen, or None if a lost lease stopped it."""
     summary = page.locator('[data-testid="plan-summary"]')
@@ -160,7 +160,8 @@ def run_to_grasp(page: Any, n: int) -> set[str] | None:
             counted.add(text.split(" of ")[0].rsplit(" ", 1)[-1])
         assert page.locator('[data-testid="waypoint-info"]').get_attribute(
             "data-count") == str(n) and summary.get_attribute("data-waypoints") == str(n)
-        time.sleep(0.1)
+        palms.append(palm_mm(page))
+        time.sleep(0.05)
     return counted
 
 
@@ -191,15 +192,16 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         assert f"{n}-waypoint plan" in target.inner_text()
 
         for attempt in range(3):  # only a lost lease (a stalled tab) may start it again
-            counted = run_to_grasp(page, n)
+            palms: list = []
+            counted = run_to_grasp(page, n, palms)
             if counted is not None:
                 break
             assert attempt < 2, f"lost control three times: {state(page).inner_text()}"
         assert counted, "never saw the approach"
         # The gripper closes on Object 2: the palm (readout, mm; it follows the measured arm at
-        # the render rate) comes to it, not to the old Control panel object 114 mm away.
-        palms = []
-        end = time.monotonic() + 8.0
+        # the render rate) comes to it during the run, not to the old Control panel object
+        # 114 mm away.
+        end = time.monotonic() + 3.0
         while time.monotonic() < end and state(page).get_attribute("data-phase") in (
                 "grasp", "move_to_bin"):
             palms.append(palm_mm(page))
