@@ -61,7 +61,7 @@ def validate_object(obj: TableObject, robot) -> TableObject:
     if not all(math.isfinite(v) for v in (obj.x, obj.y, obj.r)):
         raise ValueError("object position and radius must be finite numbers")
     if not 0.002 <= obj.r <= 0.2:
-        raise ValueError(f"object radius must be between 2 mm and 20 cm, got {obj.r * 1e3:.1f} mm")
+        raise ValueError(f"object radius must be between 2 and 200 mm, got {obj.r * 1e3:.1f} mm")
     if max(abs(obj.x), abs(obj.y)) > 2.0:
         raise ValueError("object must lie on the table (within 2 m of the base)")
     return obj
@@ -402,7 +402,7 @@ def outcome_html(outcome: Outcome | None) -> str:
         else:
             f = plan.failures[0]
             body = (f"<b style='color:#c92a2a'>Failed</b> at approach circle {f.index} "
-                    f"(r_a = {f.radius * 100:.1f} cm, {f.reason.replace('_', ' ')}): "
+                    f"(r_a = {f.radius * 1e3:.0f} mm, {f.reason.replace('_', ' ')}): "
                     f"{html.escape(f.detail)}. {plan.n} waypoints, {plan.total_ms:.1f} ms.")
             state = "failed"
     return (f'<div data-testid="plan-summary" data-state="{state}" data-waypoints="{n}" '

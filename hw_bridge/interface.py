@@ -3,7 +3,8 @@
 States: ``UNCONFIGURED`` -> :meth:`configure` (port open, HELLO, CONFIG, telemetry) ->
 ``INACTIVE`` -> :meth:`activate` (ARM, demands streaming) -> ``ACTIVE``; :meth:`deactivate`
 and :meth:`cleanup` go back. :meth:`read` / :meth:`write` return :class:`ReturnType`. Any
-failure (no valid STATE for ``link_timeout``, transport error, device reports watchdog/e-stop
+failure (no valid STATE for ``link_timeout`` while active, for ``hello_timeout`` while inactive:
+:meth:`SerialHardware.state_timeout_s`; transport error; device reports watchdog/e-stop
 while active) calls :meth:`on_error`: best-effort DISARM, port closed, state ``UNCONFIGURED``,
 ``fault`` set. Nothing re-arms automatically: the operator must configure (reconnect) and
 activate (arm) again. configure/activate block for up to a few hundred ms; they are operator
@@ -273,7 +274,7 @@ class SerialHardware(HardwareInterface):
                 return self.on_error(f"link lost: {item}")
         last = self.link.last_state_time
         age = self._clock() - last if last is not None else float("inf")
-        if age > self.config.link_timeout_s:
+        if age > self.state_timeout_s():
             return self.on_error(f"link lost: no valid STATE for {age * 1000:.0f} ms")
         st = self.link.last_state
         if self.state is LifecycleState.ACTIVE and st is not None:
@@ -284,6 +285,20 @@ class SerialHardware(HardwareInterface):
             if not st.status & p.Status.ARMED:
                 return self.on_error("device disarmed itself")
         return ReturnType.OK
+
+    def state_timeout_s(self) -> float:
+        """How long :meth:`read` waits for a STATE before it calls the link lost.
+
+        While ACTIVE the host commands the arm: ``link_timeout_s`` (40 ms), so it stops within
+        the device's watchdog. While INACTIVE nothing is commanded, so a late STATE is only late
+        telemetry: the patience :meth:`configure` gives the first STATE (``hello_timeout_s``,
+        500 ms). At start-up the loop's first reads come while the console, the planner and the
+        emulator are still starting on 2 CPUs (a receive thread or the device can be late by
+        tens of ms), which with 40 ms showed "link lost" before anyone had armed.
+        """
+        if self.state is LifecycleState.ACTIVE:
+            return self.config.link_timeout_s
+        return max(self.config.link_timeout_s, self.config.hello_timeout_s)
 
     def write(self, counts: npt.ArrayLike) -> ReturnType:
         """Send one DEMAND (all motors, int32 counts); refused unless ACTIVE."""

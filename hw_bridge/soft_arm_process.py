@@ -43,6 +43,9 @@ from hw_bridge.loop_process import (LoopProcess, ProcessBridgeControls, reply_wh
 from hw_bridge.soft_arm_worlds import HardwareWorld, SimWorld
 
 
+ARM_FIRST = "Arm first (press Arm): Execute does not arm the arm"
+
+
 @dataclasses.dataclass(frozen=True)
 class ControlView:
     """What the console draws: loop snapshot, stats and the simulated scene.
@@ -132,9 +135,9 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         elif isinstance(cmd, PlaceObject):
             place(cmd.x, cmd.y, cmd.r)
         elif isinstance(cmd, (GraspAt, ExecutePlan)):
+            if not s.armed:  # arming is the operator's own, visible act: never implied here
+                raise RuntimeError(ARM_FIRST)
             place(cmd.x, cmd.y, cmd.r)
-            if not s.armed:
-                link(s, Arm())
             if isinstance(cmd, GraspAt):
                 s.start(t)
             else:
@@ -224,7 +227,8 @@ class ControlProcess(LoopProcess):
             default) the loop and its emulator on the highest CPU, the planner on the others;
             None: anywhere.
 
-    With hardware, Arm (and grasp_at/execute while disarmed) configures and activates the
+    Only Arm arms: grasp_at / execute while disarmed are refused with :data:`ARM_FIRST`
+    (issue 19.3: Execute used to arm silently). With hardware, Arm configures and activates the
     link in the loop thread; a link fault stops commanding and shows in ``view.fault``, and
     nothing re-arms until the operator arms again. :meth:`disconnect_link` /
     :meth:`connect_link` close and re-open the link (a new SerialHardware on the given port,

@@ -6,14 +6,19 @@ in a child process (the console's own threads would delay a loop thread here); `
 starts it and hands it over as ``app.services.soft_control``. The panel only sends commands
 (applied by the loop at its next tick) and reads the newest published view, never locks.
 
-Widgets: Arm / Disarm, object x, y, r and *Place object*, *Execute* (the full grasp-and-place
-for the placed object: settle, plan in the planner process, approach, grasp, carry, release),
-*Click to grasp* (one click on the table places the object there and runs it all), STOP (any
-client, also the Session panel's hotkey: it runs ``app.stop_motion``, whose hook freezes the
-arm), the state machine's state and reason, a hardware fault in bold (every browser is told
-once; nothing re-arms until the operator does), one line of link health (device, lifecycle
-state, armed, round trip p99, lost demands), measured vs target kappa per segment in numbers,
-and live uPlots of kappa target vs measured and of the loop's period and tick time. While armed
+Widgets: Arm / Disarm, what Execute acts on, *Execute grasp-and-place*, *Click to grasp*, the
+state machine's state and reason, a hardware fault in bold (every browser is told once; nothing
+re-arms until the operator does), one line of link health (device, lifecycle state, armed, round
+trip p99, lost demands), measured vs target kappa per segment in numbers, and the live plots of
+:mod:`console.panels.control_plots` (tracking error per segment, loop timing). STOP is the
+header's (any client; it runs ``app.stop_motion``, whose hook freezes the arm).
+
+One object model (issue 19.1 / 18): the objects are the Objects panel's (the grasp session's).
+Execute acts on its selected object, with the Grasp planner's plan for exactly that object when
+there is one (else the controller plans the approach), and says which; the state line names it
+and counts waypoints as the planner does. *Click to grasp* places (or selects) an object in the
+Objects panel where the click ray meets the table and executes it. Only Arm arms (issue 19.3):
+Execute or a click while disarmed is refused with "Arm first (press Arm)". While armed
 the 3D view shows the measured arm; jog commands from other panels are forwarded as moves when
 no task runs. The render thread only runs on new arm states (none while disarmed), so the pump
 refreshes the text itself when ``on_state`` has been quiet.
@@ -21,48 +26,44 @@ refreshes the text itself when ``on_state`` has been quiet.
 
 from __future__ import annotations
 
-import collections
 import html
-import math
 import threading
 import time
 from typing import Any
 
 import numpy as np
 import viser
-from viser import uplot
 
-from console.header import Tone
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
-from console.panels.plot_data import thin
-from console.plan_view import TableObject, validate_object
+from console.panels.control_plots import ControlPlots
+from console.panels.control_text import (IDLE_PHASES, ExecuteTarget, execute_target,
+                                         fault_markdown, header_link, header_phase, kappa_html,
+                                         link_line, state_html, table_point)
+from console.plan_view import validate_object
 from hw_bridge.link_supervisor import DISCONNECTED
-from hw_bridge.soft_arm_process import ControlProcess, ControlView
+from hw_bridge.soft_arm_process import ARM_FIRST, ControlProcess, ControlView
 from console.state import ArmState
 
-SEGMENT_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599")
 OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can draw per second
 PLOT_HZ = 4.0
-# The curvature plot has 13 series, which viser sends as float64: 60 points, at most 2 Hz,
-# cost ~12 KB/s per viewer while the arm moves.
-KAPPA_PLOT_POINTS = 60
-KAPPA_PLOT_HZ = 2.0
-PLOT_BAND = 0.05  # 1/m: the curvature plot is redrawn when a target moved more than this,
-MEAS_BAND = 1.0  # 1/m: ... a measured curvature more than this (the sim's noise: <= 0.35 rms),
-STILL_PLOT_S = 10.0  # s: ... or this long after the last redraw
+TABLE_HZ = 2.0  # the kappa table follows the measurement at this rate
 COUNTERS_HZ = 1.0  # link and loop lines (their counters change on every refresh)
-LOOP_PLOT_HZ = 0.2  # loop timing is noise on a still arm too: every 5 s is enough
 HISTORY_S = 10.0
 STATS_TICKS = 1000
-IDLE_PHASES = ("idle", "released", "stopped")
 FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
-STALE_S = 0.2  # telemetry older than this (loop time) was not refreshed by a device read
-DEVICE_NAMES = {"sim": "simulated arm", "mock": "mock device", "emulator": "device emulator",
-                "port": "controller"}
-_CELL = "padding:0 2px;text-align:right;font-variant-numeric:tabular-nums"
+
+
+__all__ = ["ControlPanel", "control_for", "fault_markdown", "header_link", "header_phase",
+           "kappa_html", "link_line", "state_html", "table_point"]
+
+
+def target_object(target: ExecuteTarget) -> Any:
+    """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
+    from console.plan_view import TableObject
+    return TableObject(target.name, target.x, target.y, target.r)
 
 
 def control_for(app: Any) -> ControlProcess:
@@ -73,99 +74,6 @@ def control_for(app: Any) -> ControlProcess:
                          "console with services=ConsoleServices(soft_control=ControlProcess(...))"
                          " (serve.py does)")
     return ctl
-
-
-def table_point(origin: Any, direction: Any) -> tuple[float, float] | None:
-    """Where a click ray meets the table plane z = 0 (None if it does not)."""
-    o, d = np.asarray(origin, float), np.asarray(direction, float)
-    if abs(d[2]) < 1e-9:
-        return None
-    s = -o[2] / d[2]
-    return None if s <= 0 else (float(o[0] + s * d[0]), float(o[1] + s * d[1]))
-
-
-def state_html(view: ControlView) -> str:
-    """The state machine's state (``data-phase`` for tests), reason and flags."""
-    c = view.snapshot.control
-    if c is None:
-        return '<div data-testid="control-state" data-phase=""><b>State:</b> –</div>'
-    wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
-    stale = (f" · <b>telemetry stale</b> (last at t = {c.t:.2f} s: the device is not read)"
-             if view.snapshot.t - c.t > STALE_S else "")
-    why = f"<br><b>Reason:</b> {html.escape(c.reason)}" if c.reason else ""
-    return (f'<div data-testid="control-state" data-phase="{c.phase}"><b>State:</b> '
-            f'<span data-testid="control-phase">{c.phase}</span>{wp} · re-plans {c.replans} · '
-            f"{'ARMED' if c.armed else 'disarmed'} · tracking {'ok' if c.tracking_ok else 'LOST'}"
-            f" · gripper {'closed' if c.gripper_closed else 'open'}{stale}{why}</div>")
-
-
-def header_phase(view: ControlView) -> tuple[str, Tone | None]:
-    """The header's phase field: the state machine's phase, waypoint and arming."""
-    c = view.snapshot.control
-    if c is None:
-        return "–", None
-    wp = f" · waypoint {c.waypoint + 1}/{c.n_waypoints}" if c.n_waypoints else ""
-    tone: Tone = "busy" if c.phase not in IDLE_PHASES + ("settling",) else "ok"
-    return f"{c.phase}{wp} · {'ARMED' if c.armed else 'disarmed'}", tone
-
-
-def header_link(view: ControlView) -> tuple[str, Tone | None]:
-    """The header's link field: device and lifecycle state, or the fault in red."""
-    name = DEVICE_NAMES.get(view.device, view.device)
-    if view.fault:
-        return f"{name} · {view.fault}", "fault"
-    h = view.link
-    if view.device == "sim" and (h is None or h.port == "sim://"):
-        return f"{name} (no serial link)", "ok"
-    if h is None:
-        return f"{name} · starting…", "busy"
-    return f"{name} · {h.state}", "ok" if h.state == "active" else "warn"
-
-
-def fault_markdown(fault: str | None) -> str:
-    """The hardware fault in bold, with what the operator must do (empty without one)."""
-    if not fault:
-        return ""
-    if fault == DISCONNECTED:
-        return ("**Disconnected** by the operator: the arm is not commanded. "
-                "Connect (Hardware panel), then Arm.")
-    return (f"**Fault: {fault}**  \nThe arm is not commanded and nothing re-arms by itself: "
-            "the operator must press **Arm** again (it reconnects the link first).")
-
-
-def link_line(view: ControlView) -> str:
-    """One line of link health: device, lifecycle state, armed, round trip p99, lost."""
-    name = DEVICE_NAMES.get(view.device, view.device)
-    h = view.link
-    if view.device == "sim" and (h is None or h.port == "sim://"):
-        return f"<small>link: {name} in the loop process (no serial link)</small>"
-    if h is None:
-        return f"<small>link: {name} · starting…</small>"
-    where = f" {h.port}" if view.device == "port" else ""
-    rtt = "–" if h.rtt_ms_p99 is None else f"{h.rtt_ms_p99:.2f} ms"
-    return (f'<small data-testid="control-link">link: {name}{where} · {h.state} · '
-            f"{'ARMED' if h.armed else 'disarmed'} · round trip p99 {rtt} · lost {h.lost}"
-            "</small>")
-
-
-def kappa_html(view: ControlView) -> str:
-    """Measured and target curvature per segment (1/m), two decimals; cells have test ids."""
-    c = view.snapshot.control
-    if c is None:
-        return ""
-    n = len(c.kappa_ref)
-    meas = c.kappa_meas if c.kappa_meas is not None else [None] * n
-
-    def row(label: str, key: str, values: Any) -> str:
-        cells = "".join(f'<td style="{_CELL}" data-testid="kappa-{key}-{i}">'
-                        f"{'–' if v is None else f'{v:+.2f}'}</td>" for i, v in enumerate(values))
-        return f'<tr><td style="{_CELL};text-align:left">{label}</td>{cells}</tr>'
-
-    head = "".join(f'<th style="{_CELL}">{i + 1}</th>' for i in range(n))
-    return (f'<div data-testid="control-kappa" style="font-size:0.72em">'
-            f'<table style="border-collapse:collapse;width:100%">'
-            f'<tr><th style="{_CELL};text-align:left">κ (1/m)</th>{head}</tr>'
-            f"{row('measured', 'meas', meas)}{row('target', 'ref', c.kappa_ref)}</table></div>")
 
 
 class ControlPanel(Panel):
@@ -184,37 +92,18 @@ class ControlPanel(Panel):
         self.link_md = gui.add_markdown("<small>link: –</small>")
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
-        self.obj_x = gui.add_number("Object x (m)", -0.16, step=0.005)
-        self.obj_y = gui.add_number("Object y (m)", 0.28, step=0.005)
-        self.obj_r = gui.add_number("Object r (m)", r0, min=0.005, max=0.05, step=0.0005)
-        self.place_btn = gui.add_button("Place object", icon=viser.Icon.CIRCLE_PLUS)
-        self.execute_btn = gui.add_button("Execute grasp-and-place", icon=viser.Icon.PLAYER_PLAY)
-        self.plan_btn = gui.add_button("Execute current plan", icon=viser.Icon.ROUTE,
-                                       hint="the Grasp planner panel's plan for its object")
+        self.target_md = gui.add_html(self._target_html())
+        self.execute_btn = gui.add_button(
+            "Execute grasp-and-place", icon=viser.Icon.PLAYER_PLAY,
+            hint="the Objects panel's selected object, with the Grasp planner's plan for it "
+                 "when there is one; arm first")
         self.click_mode = gui.add_checkbox("Click to grasp", False,
-                                           hint="one click on the table places the object there "
-                                                "and runs the whole grasp-and-place")
+                                           hint="one click on the table places (or selects) an "
+                                                "object there in the Objects panel and runs the "
+                                                "whole grasp-and-place; arm first")
         self.kappa_md = gui.add_markdown("")
         self.loop_md = gui.add_markdown("<small>loop: –</small>")
-        n = self.app.robot.n_segments
-        series = [uplot.Series(label="t (s)")]
-        for i in range(n):
-            c = SEGMENT_COLORS[i % len(SEGMENT_COLORS)]
-            series.append(uplot.Series(label=f"κ{i + 1} target", stroke=c, width=1, dash=(6, 4)))
-            series.append(uplot.Series(label=f"κ{i + 1} measured", stroke=c, width=2))
-        self.kappa_plot = gui.add_uplot(
-            data=tuple(np.zeros(2) for _ in range(1 + 2 * n)), series=tuple(series),
-            scales={"x": uplot.Scale(time=False)},
-            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="1/m")),
-            title="Curvature: target (dashed) vs measured", aspect=1.4)
-        self.loop_plot = gui.add_uplot(
-            data=(np.zeros(2), np.zeros(2), np.zeros(2)),
-            series=(uplot.Series(label="t (s)"),
-                    uplot.Series(label="period (ms)", stroke="#1c7ed6", width=2),
-                    uplot.Series(label="tick work (ms)", stroke="#e8590c", width=2)),
-            scales={"x": uplot.Scale(time=False)},
-            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="ms")),
-            title="Control loop (100 Hz)", aspect=2.0)
+        self.plots = ControlPlots(gui, self.app.robot.n_segments, int(HISTORY_S * PUMP_HZ))
         scene = self.app.server.scene
         self.obj_mesh = scene.add_cylinder("/control/object", radius=r0, height=0.03,
                                            color=OBJECT_COLOR, position=(0.0, 0.0, 0.015),
@@ -226,21 +115,16 @@ class ControlPanel(Panel):
                                             action="arm the arm"))
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
                                                action="disarm the arm"))
-        self.place_btn.on_click(operator_only(lambda e: self._place(e), panel=self,
-                                              action="place the object"))
         self.execute_btn.on_click(operator_only(lambda e: self._execute(e), panel=self,
                                                 action="run grasp-and-place"))
-        self.plan_btn.on_click(operator_only(lambda e: self._execute_plan(e), panel=self,
-                                             action="execute the plan"))
         scene.on_click()(self._on_scene_click)
         self.app.add_stop_hook(self._stop_hook)
+        self.target: ExecuteTarget | None = None  # what the last Execute acts on
+        if self.app.grasp_session is not None:
+            self.app.grasp_session.add_listener(lambda _view: self._show_target())
 
-        self._hist: collections.deque = collections.deque(maxlen=int(HISTORY_S * PUMP_HZ))
         self._plot_at = 0.0
-        self._plotted: tuple[np.ndarray, np.ndarray] | None = None
-        self._plotted_at = 0.0
         self._table_at = 0.0
-        self._loop_plot_at = 0.0
         self._counters_at = 0.0
         self._link_key: Any = None
         self._fwd_seq = self.app.store.command.seq
@@ -265,51 +149,68 @@ class ControlPanel(Panel):
         fut = self.ctl.disarm()
         fut.add_done_callback(lambda f: self._report(event, f))
 
-    def _object(self, event: Any, x: float, y: float) -> tuple[float, float, float] | None:
-        """(x, y, r) of the object to grasp, or None after telling the user why (nothing is
-        sent: a radius of 1e308 must not arm the arm)."""
-        r = float(self.obj_r.value)
-        lo, hi = float(self.obj_r.min or 0.0), float(self.obj_r.max or 0.2)
-        try:
-            if not all(math.isfinite(v) for v in (x, y, r)):
-                raise ValueError("object position and radius must be finite numbers")
-            if not lo <= r <= hi:
-                raise ValueError(f"object radius must be between {lo * 1e3:g} and {hi * 1e3:g} "
-                                 f"mm, got {r * 1e3:.4g} mm")
-            validate_object(TableObject("object", x, y, r), self.app.robot)
-        except ValueError as exc:
-            client = getattr(event, "client", None)
-            if client is not None:
-                client.add_notification("Refused", str(exc), color="red",
-                                        auto_close_seconds=8.0)
-            return None
-        return x, y, r
+    def _refuse(self, event: Any, title: str, message: str) -> None:
+        client = getattr(event, "client", None)
+        if client is not None:
+            client.add_notification(title, message, color="red", auto_close_seconds=8.0)
 
-    def _place(self, event: Any = None) -> None:
-        obj = self._object(event, float(self.obj_x.value), float(self.obj_y.value))
-        if obj is not None:
-            self.ctl.place_object(*obj)
+    def _disarmed(self) -> bool:
+        view = self.ctl.view
+        c = None if view is None else view.snapshot.control
+        return c is None or not c.armed
+
+    def _target_html(self) -> str:
+        """Which object Execute would act on now (the Objects panel's selection)."""
+        session = self.app.grasp_session
+        try:
+            if session is None:
+                raise ValueError("No Objects panel: no object to grasp.")
+            text = "Execute acts on " + html.escape(execute_target(session.view()).describe())
+        except ValueError as exc:
+            text = html.escape(str(exc))
+        return f'<small data-testid="control-target">{text}</small>'
+
+    def _show_target(self) -> None:
+        text = self._target_html()
+        if text != self.target_md.content:
+            self.target_md.content = text
+
+    def _target(self, event: Any) -> ExecuteTarget | None:
+        """The selected object (and its plan) Execute acts on, or None after telling the
+        operator why (nothing is sent: a radius of 1e308 must not reach the arm)."""
+        if self._disarmed():  # arming is the operator's own act (issue 19.3)
+            self._refuse(event, "Arm first", ARM_FIRST)
+            return None
+        session = self.app.grasp_session
+        try:
+            if session is None:
+                raise ValueError("No Objects panel: no object to grasp.")
+            target = execute_target(session.view())
+            validate_object(target_object(target), self.app.robot)
+        except ValueError as exc:
+            self._refuse(event, "Refused", str(exc))
+            return None
+        return target
+
+    def _run(self, event: Any, target: ExecuteTarget) -> None:
+        """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
+        self._stopped = False
+        self.target = target
+        if target.plan is not None:
+            fut = self.ctl.execute(target.plan, target.x, target.y, target.r)
+        else:
+            fut = self.ctl.grasp_at(target.x, target.y, target.r)
+        fut.add_done_callback(lambda f: self._report(event, f))
+        client = getattr(event, "client", None)
+        if client is not None:
+            client.add_notification("Grasp-and-place", target.describe(), color="blue",
+                                    auto_close_seconds=6.0)
+        self.app.recorder.action(f"execute grasp-and-place: {target.describe()}", None)
 
     def _execute(self, event: Any) -> None:
-        obj = self._object(event, float(self.obj_x.value), float(self.obj_y.value))
-        if obj is None:
-            return
-        self._stopped = False
-        fut = self.ctl.grasp_at(*obj)
-        fut.add_done_callback(lambda f: self._report(event, f))
-
-    def _execute_plan(self, event: Any) -> None:
-        from console.panels.planner import session_for
-        out = session_for(self.app).view().outcome
-        client = getattr(event, "client", None)
-        if out is None or out.plan is None or out.obj is None or len(out.plan.kappas) == 0:
-            if client is not None:
-                client.add_notification("No plan", "Plan a grasp in the Grasp planner panel first.",
-                                        color="orange", auto_close_seconds=6.0)
-            return
-        self._stopped = False
-        fut = self.ctl.execute(out.plan, out.obj.x, out.obj.y, out.obj.r)
-        fut.add_done_callback(lambda f: self._report(event, f))
+        target = self._target(event)
+        if target is not None:
+            self._run(event, target)
 
     def _stop_hook(self, reason: str) -> None:
         self._stopped = True  # no forwarded jog may undo a STOP (race with the view)
@@ -326,13 +227,21 @@ class ControlPanel(Panel):
         p = table_point(event.ray_origin, event.ray_direction)
         if p is None:
             return
-        obj = self._object(event, float(p[0]), float(p[1]))
-        if obj is None:
+        if self._disarmed():
+            self._refuse(event, "Arm first", ARM_FIRST)
             return
-        self.obj_x.value, self.obj_y.value = round(p[0], 4), round(p[1], 4)
-        self._stopped = False
-        fut = self.ctl.grasp_at(*obj)
-        fut.add_done_callback(lambda f: self._report(event, f))
+        session = self.app.grasp_session
+        if session is None:
+            self._refuse(event, "Refused", "No Objects panel: no object to grasp.")
+            return
+        try:  # the Objects panel's object there (selected), or a new one
+            session.place(p[0], p[1])
+        except ValueError as exc:
+            self._refuse(event, "Refused", str(exc))
+            return
+        target = self._target(event)
+        if target is not None:
+            self._run(event, target)
 
     @staticmethod
     def _report(event: Any, fut: Any) -> None:
@@ -377,7 +286,7 @@ class ControlPanel(Panel):
             return
         snap = view.snapshot
         meas = c.kappa_meas if c.kappa_meas is not None else np.full(len(c.kappa_ref), np.nan)
-        self._hist.append((c.t, c.kappa_ref.copy(), meas, snap.period_ms, snap.work_ms))
+        self.plots.append(c.t, c.kappa_ref, meas, c.phase, snap.period_ms, snap.work_ms)
         store = self.app.store
         if c.armed and c.kappa_meas is not None:
             cmd = store.command
@@ -423,7 +332,7 @@ class ControlPanel(Panel):
         if died:
             self.state_md.content = (f"**Control process died:** {died}. The arm is not "
                                      "commanded; restart the console.")
-            for btn in (self.arm_btn, self.disarm_btn, self.execute_btn, self.plan_btn):
+            for btn in (self.arm_btn, self.disarm_btn, self.execute_btn):
                 btn.disabled = True
             return
         if view is None:
@@ -432,12 +341,12 @@ class ControlPanel(Panel):
                                      else f"**Control process failed:** {failure}")
             return
         c = view.snapshot.control
-        self.state_md.content = state_html(view)
-        self.app.header.show("phase", *header_phase(view))
+        self.state_md.content = state_html(view, self.target)
+        self.app.header.show("phase", *header_phase(view, self.target))
         self.app.header.show("link", *header_link(view))
         if c is not None:
             busy = c.phase not in IDLE_PHASES + ("settling",)
-            self.execute_btn.disabled = self.plan_btn.disabled = busy
+            self.execute_btn.disabled = busy
             # Arm while armed would only restart the stack; after a fault it is the way back.
             self.arm_btn.disabled = c.armed and not view.fault
             self.disarm_btn.disabled = not c.armed
@@ -453,7 +362,7 @@ class ControlPanel(Panel):
         if counters or link_key != self._link_key:
             self._link_key = link_key
             self.link_md.content = link_line(view)
-        if len(self._hist) < 2:  # else the table is redrawn with the plot (_draw_plots)
+        if len(self.plots.hist) < 2:  # else the table is redrawn with the plot (_draw_plots)
             self.kappa_md.content = kappa_html(view)
         if counters:
             self._counters_at = now
@@ -483,43 +392,17 @@ class ControlPanel(Panel):
         self.app.view.set_gripper_closed(c is not None and c.armed and c.gripper_closed)
 
     def _draw_plots(self) -> None:
-        hist = list(self._hist)
-        if len(hist) < 2:
+        if len(self.plots.hist) < 2:
             return
-        t = np.array([h[0] for h in hist])
-        ref = np.array([h[1] for h in hist])
-        meas = np.array([h[2] for h in hist])
         now = time.monotonic()
-        if now - self._table_at >= 1.0 / KAPPA_PLOT_HZ:
+        if now - self._table_at >= 1.0 / TABLE_HZ:
             # The κ table is a few hundred bytes: it follows the measurement at 2 Hz (only the
             # plot waits for a move beyond the noise), so what it shows is never seconds old.
             self._table_at = now
             table = kappa_html(self.ctl.view) if self.ctl.view else ""
             if table != self.kappa_md.content:
                 self.kappa_md.content = table
-        if now - self._plotted_at >= 1.0 / KAPPA_PLOT_HZ and self._plot_moved(
-                ref[-1], meas[-1], now):
-            cols: list[np.ndarray] = [t]
-            for i in range(ref.shape[1]):
-                cols += [ref[:, i], np.where(np.isfinite(meas[:, i]), meas[:, i], math.nan)]
-            self.kappa_plot.data = thin(cols, KAPPA_PLOT_POINTS)
-        if now - self._loop_plot_at >= 1.0 / LOOP_PLOT_HZ:
-            self._loop_plot_at = now
-            self.loop_plot.data = thin((t, np.array([h[3] for h in hist]),
-                                        np.array([h[4] for h in hist])))
-
-    def _plot_moved(self, ref: np.ndarray, meas: np.ndarray, now: float) -> bool:
-        """Whether the curvatures moved enough to redraw the plot: a target moved
-        by PLOT_BAND, a measurement by MEAS_BAND (beyond mocap noise), or STILL_PLOT_S passed.
-        A still arm's noise then costs a redraw every STILL_PLOT_S, not PLOT_HZ of them."""
-        last = self._plotted
-        moved = (last is None or last[0].shape != ref.shape
-                 or now - self._plotted_at >= STILL_PLOT_S
-                 or not np.allclose(ref, last[0], rtol=0.0, atol=PLOT_BAND)
-                 or not np.allclose(meas, last[1], rtol=0.0, atol=MEAS_BAND, equal_nan=True))
-        if moved:
-            self._plotted, self._plotted_at = (ref.copy(), meas.copy()), now
-        return moved
+        self.plots.draw(now)
 
     def close(self) -> None:
         self._pump_stop.set()

@@ -3,7 +3,8 @@
 A click on the table (the click ray meets z = 0) selects the object under it or places a new
 one there; each object carries a transform gizmo in the 3D view to drag it in x and y (the
 planner re-plans live while it moves, see ``console.panels.planner``). The number boxes show and
-edit the selected object; "Add object" places one at the typed x, y, r. The scene is saved as a
+edit the selected object, in mm (SI inside: the session keeps metres); "Add object" places one
+at the typed x, y, r. The scene is saved as a
 JSON download and loaded from an uploaded file (``console.plan_view.scene_from_json``; a bad
 file is refused with its reason and changes nothing).
 
@@ -26,6 +27,11 @@ from console.panels.planner import SessionView, session_for
 from console.plan_view import ray_to_table, scene_from_json, scene_to_json
 
 
+def mm(metres: float) -> float:
+    """A length for a field people read: millimetres, to 0.1 mm."""
+    return round(float(metres) * 1e3, 1)
+
+
 class ObjectsPanel(Panel):
     """Table objects: click / type / drag, remove, save and load."""
 
@@ -43,10 +49,10 @@ class ObjectsPanel(Panel):
         self.selected = self.gui.add_dropdown(
             "Selected", [o.name for o in view.objects] or ["(none)"],
             initial_value=view.selected or "(none)")
-        self.x = self.gui.add_number("x (m)", round(first.x, 4) if first else -0.2, step=0.001)
-        self.y = self.gui.add_number("y (m)", round(first.y, 4) if first else 0.2, step=0.001)
-        self.r = self.gui.add_number("radius (m)", round(first.r, 4) if first else 0.0165,
-                                     min=0.002, max=0.2, step=0.0005)
+        self.x = self.gui.add_number("x (mm)", mm(first.x) if first else -200.0, step=1.0)
+        self.y = self.gui.add_number("y (mm)", mm(first.y) if first else 200.0, step=1.0)
+        self.r = self.gui.add_number("radius (mm)", mm(first.r) if first else 16.5,
+                                     min=2.0, max=200.0, step=0.5)
         self.add_button = self.gui.add_button("Add object", hint="New object at the typed x, y, r.")
         self.remove_button = self.gui.add_button("Remove object", color="red")
         self.save_button = self.gui.add_button("Save scene", hint="Download the objects as JSON.")
@@ -84,7 +90,7 @@ class ObjectsPanel(Panel):
     @operator_only(action="place or select an object")
     def _place_at(self, event, hit: tuple[float, float]) -> None:
         try:
-            self.session.place(*hit, r=float(self.r.value))
+            self.session.place(*hit, r=float(self.r.value) / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
 
@@ -117,19 +123,19 @@ class ObjectsPanel(Panel):
         if name is None:
             return
         try:
-            self.session.update(name, x=float(self.x.value), y=float(self.y.value),
-                                r=float(self.r.value))
+            self.session.update(name, x=float(self.x.value) / 1e3, y=float(self.y.value) / 1e3,
+                                r=float(self.r.value) / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
 
     @operator_only(action="add an object")
     def _on_add(self, event) -> None:
         view = self.session.view()
-        x, y = float(self.x.value), float(self.y.value)
+        x, y = float(self.x.value) / 1e3, float(self.y.value) / 1e3
         if any(((o.x - x) ** 2 + (o.y - y) ** 2) ** 0.5 <= o.r for o in view.objects):
             x += 0.06  # typed spot taken (it shows the selected object): place beside it
         try:
-            self.session.place(x, y, r=float(self.r.value))
+            self.session.place(x, y, r=float(self.r.value) / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
 
@@ -179,11 +185,17 @@ class ObjectsPanel(Panel):
             obj = next((o for o in view.objects if o.name == view.selected), None)
             if obj is not None:
                 for handle, value in ((self.x, obj.x), (self.y, obj.y), (self.r, obj.r)):
-                    if abs(float(handle.value) - value) > 5e-5:
-                        handle.value = round(value, 4)
+                    if abs(float(handle.value) - mm(value)) > 0.05:
+                        handle.value = mm(value)
         finally:
             self._mirror = False
         count = len(view.objects)
+        obj = next((o for o in view.objects if o.name == view.selected), None)
+        where = ("" if obj is None else
+                 f" at ({mm(obj.x):.0f}, {mm(obj.y):.0f}) mm, r {mm(obj.r):.1f} mm")
         text = (f"{count} object{'s' if count != 1 else ''} on the table"
-                + (f"; selected: <b>{html.escape(view.selected)}</b>" if view.selected else ""))
-        self.info.content = f'<small data-testid="objects-info">{text}</small>'
+                + (f"; selected: <b>{html.escape(view.selected)}</b>{where}" if view.selected
+                   else ""))
+        sel = html.escape(view.selected or "", quote=True)
+        self.info.content = (f'<small data-testid="objects-info" data-selected="{sel}">'
+                             f"{text}</small>")

@@ -2,8 +2,9 @@
 
 The panel works on the console's :class:`console.grasp_session.GraspSession` (shared with the
 Objects and Waypoints panels; ``GraspSession``, ``session_for`` and ``SessionView`` are
-re-exported here): "Plan grasp", delta_d and weight inputs, live re-plan and shading toggles,
-and the outcome ("5 waypoints, 1.3 ms", or why not).
+re-exported here): "Plan grasp", delta_d (mm; metres inside) and weight inputs, live re-plan
+and shading toggles, and the outcome ("5 waypoints, 1.3 ms", or why not). The panel shows the
+session's outcome from the start (a plan made before the panel existed is not hidden).
 
 Sharing: the plan and its settings are the same for every browser, so Plan grasp and every
 settings change is operator-only (a viewer's edit snaps back); so are the Objects and Waypoints
@@ -38,7 +39,8 @@ class PlannerPanel(Panel):
         s = self.session
         self.plan_button = self.gui.add_button(
             "Plan grasp", hint="Plan the approach to the selected object (Algorithm 1).")
-        self.delta_d = self.gui.add_number("Δd (m)", s.delta_d, min=0.005, max=0.3, step=0.005,
+        self.delta_d = self.gui.add_number("Δd (mm)", round(s.delta_d * 1e3, 1), min=5.0,
+                                           max=300.0, step=5.0,
                                            hint="Allowable incremental distance between "
                                                 "approach circles.")
         self.weights = self.gui.add_text("Weights R", ", ".join(f"{w:g}" for w in s.weights),
@@ -47,7 +49,7 @@ class PlannerPanel(Panel):
         self.reach = self.gui.add_checkbox("Reachability shading", s.show_reach,
                                            hint="Green: a grasp can be planned from the straight "
                                                 "arm; amber: reachable, approach fails.")
-        self.summary = self.gui.add_html(outcome_html(None))
+        self.summary = self.gui.add_html(outcome_html(s.view().outcome))
         self.reach_note = self.gui.add_html("<small>Reachability map: computing…</small>")
         self.plan_button.on_click(self.operator_only(lambda _: s.request_plan(), "plan a grasp"))
         self.delta_d.on_update(self._on_delta_d)
@@ -59,6 +61,7 @@ class PlannerPanel(Panel):
             "change the shading"))
         self._shown = None
         s.add_listener(self.refresh)
+        self.refresh(s.view())  # a plan finished before the listener was added is shown too
 
     def _notify(self, event, message: str) -> None:
         if event.client is not None:
@@ -69,11 +72,11 @@ class PlannerPanel(Panel):
         if event.client is None:
             return
         value = float(self.delta_d.value)
-        if not 0.0 < value <= 1.0:
-            self._notify(event, f"Δd must be a positive distance in metres, got {value:g}")
+        if not 0.0 < value <= 1000.0:
+            self._notify(event, f"Δd must be a positive distance up to 1000 mm, got {value:g} mm")
             self.on_refused(event)
             return
-        self.session.configure(delta_d=value)
+        self.session.configure(delta_d=value / 1e3)
 
     @operator_only(action="change the planner")
     def _on_weights(self, event) -> None:
@@ -94,7 +97,7 @@ class PlannerPanel(Panel):
         """Put a refused (or bad) edit back to the session's setting, for everyone."""
         s, target = self.session, getattr(event, "target", None)
         if target is self.delta_d:
-            self.delta_d.value = s.delta_d
+            self.delta_d.value = round(s.delta_d * 1e3, 1)
         elif target is self.weights:
             self.weights.value = ", ".join(f"{w:g}" for w in s.weights)
         elif target is self.live:
@@ -111,7 +114,7 @@ class PlannerPanel(Panel):
         if isinstance(view.reach, ReachMap):
             note = ("<small>Shading: <span style='color:#2f9e44'>green</span> = a grasp can be "
                     "planned from the straight arm (object ⌀ "
-                    f"{2 * view.reach.radius * 100:.1f} cm), <span style='color:#e8590c'>amber"
+                    f"{2 * view.reach.radius * 1e3:.0f} mm), <span style='color:#e8590c'>amber"
                     "</span> = reachable, but the approach fails. <span data-testid='reach-"
                     f"state' data-state='done'>Reachability map: "
                     f"{html.escape(view.reach_note)}</span>.</small>")

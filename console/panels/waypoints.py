@@ -3,7 +3,8 @@
 Previous / Next, a slider, play / pause with a speed, and a trail toggle (ghost arms of the
 waypoints already passed). The inspected waypoint is highlighted in the 3D view (orange ghost
 arm, bright circle, palm point, and the capture region at the final one) and listed here with
-its kappa, phi, r_a and clearances. "Move arm here" commands the waypoint's configuration.
+its kappa, phi, r_a and clearances (mm and degrees). "Move arm here" commands the waypoint's
+configuration. Shown from the start, so it and the Grasp planner tell the same plan.
 
 Everything here is operator-only, browsing included: the inspected waypoint, playback, speed
 and trail are drawn in the 3D view every browser shares, so a viewer stepping through the
@@ -31,10 +32,10 @@ def waypoint_html(view: SessionView) -> str:
     status = plan.status[k]
     colour = "#2b8a3e" if status == "ok" else "#c92a2a"
     rows = [
-        ("r_a", f"{plan.radii[k] * 100:.2f} cm"),
+        ("r_a", f"{plan.radii[k] * 1e3:.1f} mm"),
         ("φ", f"{math.degrees(plan.phis[k]):.1f}°"),
         ("κ (1/m)", kappa),
-        ("palm", f"({plan.palm_poses[k, 0] * 100:.1f}, {plan.palm_poses[k, 1] * 100:.1f}) cm, "
+        ("palm", f"({plan.palm_poses[k, 0] * 1e3:.1f}, {plan.palm_poses[k, 1] * 1e3:.1f}) mm, "
                  f"{math.degrees(plan.palm_poses[k, 2]):.1f}°"),
         ("clearance", f"{plan.clearance[k] * 1e3:.1f} mm (path ≥ "
                       f"{plan.path_clearance[k] * 1e3:.1f} mm)"),
@@ -83,6 +84,7 @@ class WaypointsPanel(Panel):
         self.move_button.on_click(self._on_move)
         self._shown: tuple | None = None
         s.add_listener(self.refresh)
+        self.refresh(s.view())
 
     @operator_only(action="step through the waypoints")
     def _on_slider(self, event) -> None:

@@ -124,10 +124,18 @@ def close_notices(page: Any) -> None:
 
 
 def execute_at(page: Any, x: float, y: float) -> None:
-    page.get_by_label("Object x (m)", exact=True).fill(f"{x:g}")
-    page.get_by_label("Object y (m)", exact=True).fill(f"{y:g}")
+    """Put the selected object (Objects panel, mm) at (x, y) m, arm if needed (Execute does not
+    arm: issue 19.3) and Execute it (issue 19.1: Execute acts on the selected object)."""
+    page.get_by_label("x (mm)", exact=True).fill(f"{x * 1e3:g}")
+    page.get_by_label("y (mm)", exact=True).fill(f"{y * 1e3:g}")
     page.keyboard.press("Tab")  # commit the number inputs
     take_control(page)
+    if "ARMED" not in state_text(page):
+        page.get_by_role("button", name="Arm", exact=True).click()
+        deadline = time.monotonic() + 20.0
+        while "ARMED" not in state_text(page):
+            assert time.monotonic() < deadline, f"not armed: {state_text(page)!r}"
+            time.sleep(0.05)
     page.get_by_role("button", name="Execute grasp-and-place").click()
 
 
@@ -179,8 +187,7 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
 
 def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
     open_console(page, url)
-    # The control process is up. (On a loaded machine the mock link may already have timed
-    # out: then the panel shows that fault, and Execute's Arm reconnects it.)
+    # The control process is up. (Arm reconnects a link that a fault closed.)
     link = page.locator('[data-testid="control-link"]')
     link.wait_for(timeout=60_000)
     assert "mock device" in link.inner_text() and "round trip p99" in link.inner_text()
@@ -243,6 +250,11 @@ def test_click_to_grasp_on_the_default_emulator_console(
         assert "emulator" in link.inner_text(), link.inner_text()
         close_notices(page)
         take_control(page)
+        page.get_by_role("button", name="Arm", exact=True).click()  # Execute does not arm
+        deadline = time.monotonic() + 20.0
+        while "ARMED" not in state_text(page):
+            assert time.monotonic() < deadline, f"not armed: {state_text(page)!r}"
+            time.sleep(0.05)
         page.get_by_label("Click to grasp", exact=True).check()
         x, y = paper_locations()[SPOT]
         box = page.locator("canvas").first.bounding_box()
@@ -255,9 +267,9 @@ def test_click_to_grasp_on_the_default_emulator_console(
             except AssertionError:
                 if attempt == 2:
                     raise
-        placed = (float(page.get_by_label("Object x (m)", exact=True).input_value()),
-                  float(page.get_by_label("Object y (m)", exact=True).input_value()))
-        assert np.hypot(placed[0] - x, placed[1] - y) < 0.01, placed
+        placed = (float(page.get_by_label("x (mm)", exact=True).input_value()) / 1e3,
+                  float(page.get_by_label("y (mm)", exact=True).input_value()) / 1e3)
+        assert np.hypot(placed[0] - x, placed[1] - y) < 0.01, placed  # the Objects panel's
         wait_phase(page, ("grasp", "move_to_bin"), timeout=40.0, avoid=("stopped", "idle"))
         page.mouse.move(5, 5)
         page.screenshot(path=str(artifacts_dir / "browser_click_to_grasp.png"))

@@ -184,7 +184,7 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
     grasp_lab.take_control(alice, "Alice")
     planned = wait_for(lambda: session.view().outcome, timeout=10.0)
     objects = session.view().objects
-    x_box = bob.get_by_label("x (m)", exact=True)
+    x_box = bob.get_by_label("x (mm)", exact=True)
     shown = x_box.input_value()
 
     def refused(action: str) -> bool:  # (who holds control is checked in other tests)
@@ -192,7 +192,7 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
 
     bob.get_by_role("button", name="Add object").click()
     wait_for(lambda: refused("add an object"), timeout=15.0)
-    x_box.fill("0.05")
+    x_box.fill("50")
     x_box.press("Enter")
     wait_for(lambda: refused("edit an object"), timeout=15.0)
     wait_for(lambda: x_box.input_value() == shown, timeout=15.0)  # snapped back for Bob
@@ -212,7 +212,7 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
     time.sleep(0.3)
     assert session.view().objects == objects and session.view().outcome.seq == planned.seq
     assert app.services.bridge_controls.commands.empty()  # type: ignore[union-attr]
-    assert alice.get_by_label("x (m)", exact=True).input_value() == shown
+    assert alice.get_by_label("x (mm)", exact=True).input_value() == shown
     assert not any("Only the operator" in n for n in notifications(alice))
 
     if app.access.holder is None:  # a loaded machine can starve a tab past its lease

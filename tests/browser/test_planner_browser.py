@@ -117,9 +117,10 @@ def test_click_to_place_plan_step_to_the_last_waypoint_and_refusal(
                 raise AssertionError(f"no object placed by the click; notifications: {notes}; "
                                      f"objects: {info.inner_text()!r}; this tab is {role}"
                                      ) from exc
-    x, y = float(number(page, "x (m)").input_value()), float(number(page, "y (m)").input_value())
+    x = float(number(page, "x (mm)").input_value()) / 1e3  # mm in the fields (issue 18)
+    y = float(number(page, "y (mm)").input_value()) / 1e3
     assert math.hypot(x - target[0], y - target[1]) < 0.01, (x, y)
-    radius = float(number(page, "radius (m)").input_value())
+    radius = float(number(page, "radius (mm)").input_value()) / 1e3
 
     page.get_by_role("button", name="Plan grasp").click()
     wait_state(page, ("ok",))
@@ -148,7 +149,7 @@ def test_click_to_place_plan_step_to_the_last_waypoint_and_refusal(
     page.screenshot(path=str(artifacts_dir / "grasp-waypoint.png"))
 
     # Typing a position out of reach re-plans the selected object and says why it cannot work.
-    for label, value in (("x (m)", "0.6"), ("y (m)", "0.6")):
+    for label, value in (("x (mm)", "600"), ("y (mm)", "600")):
         box = number(page, label)
         box.fill(value)
         box.press("Enter")

@@ -298,34 +298,46 @@ def test_a_viewer_cannot_tick_click_to_grasp(console: tuple, trio: tuple) -> Non
 
 
 def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) -> None:
-    """Issue 20.8: 'Object r' has bounds; 1e308 is refused by the guard (for the operator too)
-    and, should a bad radius get into the field some other way, by the panel before it sends."""
+    """Issue 20.8: the object's radius has bounds; 1e308 is refused by the guard (for the
+    operator too) and, should a bad radius get into the objects some other way, by the Control
+    panel before it sends. (Issue 18: the radius is the Objects panel's, in mm; the Control
+    panel has no object fields of its own.)"""
+    import dataclasses
+
+    from console.panels.objects import ObjectsPanel
+
     server, app, _ = console
     if app.robot.kind != "planar":
         pytest.skip("the Control panel is the soft arm's")
     op, viewer, watcher = trio
-    panel = app.panel(ControlPanel)
-    r0 = panel.obj_r.value
-    op.update(panel.obj_r._impl.uuid, value=1e308)
-    wait_for(lambda: op.received("GuiUpdateMessage", lambda m: m["uuid"] == panel.obj_r._impl.uuid))
-    assert panel.obj_r.value == r0
+    objects, panel, session = app.panel(ObjectsPanel), app.panel(ControlPanel), app.grasp_session
+    r0 = objects.r.value
+    op.update(objects.r._impl.uuid, value=1e308)
+    wait_for(lambda: op.received("GuiUpdateMessage",
+                                 lambda m: m["uuid"] == objects.r._impl.uuid))
+    assert objects.r.value == r0
     sent: list[tuple] = []
-    real = panel.ctl.grasp_at, panel.ctl.place_object
+    real = panel.ctl.grasp_at, panel.ctl.execute
     panel.ctl.grasp_at = lambda *a: sent.append(a)  # type: ignore[method-assign]
-    panel.ctl.place_object = lambda *a: sent.append(a)  # type: ignore[method-assign]
+    panel.ctl.execute = lambda *a: sent.append(a)  # type: ignore[method-assign]
+    panel._disarmed = lambda: False  # type: ignore[method-assign]  # as if armed
     client = FakeClient(op.client_id)
     event = type("E", (), {"client": client, "client_id": op.client_id})()
+    first = session.view().objects[0]
     try:
         for r in (1e308, math.nan, 0.5):
-            panel.obj_r.value = r
+            with session._cond:  # past the session's own checks, as a bug might
+                session._objects[0] = dataclasses.replace(first, r=r)
+                session._selected = first.name
             panel._execute(event)
-            panel._place(event)
         assert sent == []
-        assert len(client.notes) == 6 and all(t == "Refused" for t, _ in client.notes)
+        assert len(client.notes) == 3 and all(t == "Refused" for t, _ in client.notes)
         assert "radius" in client.notes[0][1] or "finite" in client.notes[0][1]
     finally:
-        panel.ctl.grasp_at, panel.ctl.place_object = real  # type: ignore[method-assign]
-        panel.obj_r.value = r0
+        panel.ctl.grasp_at, panel.ctl.execute = real  # type: ignore[method-assign]
+        del panel._disarmed
+        with session._cond:
+            session._objects[0] = first
 
 
 def test_uploads_and_gizmos_are_the_operators(console: tuple, trio: tuple) -> None:

@@ -55,6 +55,11 @@ def control(app):
 def test_arm_move_and_stop_hold_through_the_loop_process(app):
     panel = app.panel(ControlPanel)
     wait_for(lambda: control(app) is not None)
+    # Issue 19.3: Execute while disarmed is refused with what to do; it does not arm.
+    with pytest.raises(RuntimeError, match=r"Arm first \(press Arm\)"):
+        panel.ctl.grasp_at(-0.16, 0.28, 0.0165).result(10)
+    time.sleep(0.2)
+    assert not control(app).armed and control(app).phase == "idle"
     panel._arm()
     wait_for(lambda: control(app).armed and control(app).prepressurised)
     panel.ctl.goto(np.full(6, 6.0)).result(10)

@@ -33,8 +33,13 @@ def test_queued_commands_drive_the_lifecycle_only_on_the_control_thread() -> Non
     mocks: list[MockHardware] = []
 
     def open_hw(port: str, baud: int, old: Any) -> MockHardware:
-        mocks.append(MockHardware(ROBOT))
-        return mocks[-1]
+        # This test is about where the commands run, not link timing: a patient link (0.5 s
+        # for a STATE and for the device's watchdog), so a test thread descheduled under CPU
+        # load is not "link lost: no valid STATE for 92 ms" (issue 19.3).
+        hw = MockHardware(ROBOT)
+        hw.config = dataclasses.replace(hw.config, link_timeout_s=0.5, watchdog_s=0.5)
+        mocks.append(hw)
+        return hw
 
     link = LinkSupervisor(None, open_hw)
     strategy = RecordingStrategy()

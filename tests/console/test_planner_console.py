@@ -254,15 +254,15 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
 
     user(op.add_button, viewer)
     user(op.remove_button, viewer)
-    user(op.x, viewer, 0.05)
-    user(op.r, viewer, 0.03)
+    user(op.x, viewer, 50.0)  # mm (issue 18: units people read)
+    user(op.r, viewer, 30.0)
     user(op.selected, viewer, "Object 2")
     user(op.click_place, viewer, False)
     user(op.load_button, viewer, viser.UploadedFile("cup.json", scene))
     click_at(op, viewer, -0.1, 0.3)
     drag(s, "Object 1", viewer, 0.0, 0.35, phase="update")
     user(pp.plan_button, viewer)
-    user(pp.delta_d, viewer, 0.05)
+    user(pp.delta_d, viewer, 50.0)
     user(pp.weights, viewer, "1, 1, 1, 1, 1, 1")
     user(pp.live, viewer, False)
     user(pp.reach, viewer, False)
@@ -280,9 +280,9 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
     assert (s.delta_d, s.weights, s.live, s.show_reach) == settings
     assert app.store.command is command
     # What the viewer's browser showed everyone is put back.
-    assert (op.x.value, op.r.value) == (round(obj.x, 4), round(obj.r, 4))
+    assert (op.x.value, op.r.value) == (round(obj.x * 1e3, 1), round(obj.r * 1e3, 1))  # mm
     assert op.selected.value == "Object 1" and op.click_place.value is True
-    assert pp.delta_d.value == s.delta_d and pp.live.value and pp.reach.value
+    assert pp.delta_d.value == round(s.delta_d * 1e3, 1) and pp.live.value and pp.reach.value
     assert pp.weights.value == ", ".join(f"{w:g}" for w in s.weights)
     assert wp.slider.value == before.index + 1 and wp.speed.value == 2.0 and wp.trail.value
     gizmo = s.scene.objects["Object 1"][0]
@@ -316,14 +316,14 @@ def test_the_operator_changes_objects_plan_and_waypoints(gated):
     assert (placed.x, placed.y) == pytest.approx((-0.12, 0.28))
     drag(s, "Object 2", operator, -0.15, 0.25)
     wait_for(lambda: s.view().objects[1].x == pytest.approx(-0.15))
-    wait_for(lambda: (op.x.value, op.y.value) == (-0.15, 0.25))  # mirrored into the fields
-    user(op.r, operator, 0.02)
+    wait_for(lambda: (op.x.value, op.y.value) == (-150.0, 250.0))  # mirrored into the fields (mm)
+    user(op.r, operator, 20.0)
     wait_for(lambda: s.view().objects[1].r == pytest.approx(0.02))
     assert (s.view().objects[1].x, s.view().objects[1].y) == pytest.approx((-0.15, 0.25))
-    user(pp.delta_d, operator, 0.03)
+    user(pp.delta_d, operator, 30.0)  # mm
     assert s.delta_d == pytest.approx(0.03)
     user(pp.delta_d, operator, 0.0)  # bad input: a clear message, the setting stays
-    assert s.delta_d == pytest.approx(0.03) and pp.delta_d.value == pytest.approx(0.03)
+    assert s.delta_d == pytest.approx(0.03) and pp.delta_d.value == pytest.approx(30.0)
     assert any("Δd must be a positive distance" in body for _, body in operator.notes)
     seq = s.view().outcome.seq
     user(pp.plan_button, operator)

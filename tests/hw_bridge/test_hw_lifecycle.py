@@ -105,6 +105,30 @@ def test_link_cut_gives_error_within_timeout_and_no_automatic_rearm(hw: MockHard
     assert np.all(hw.device.motors.position > stopped)
 
 
+def test_a_late_state_on_a_disarmed_link_is_not_link_lost(hw: MockHardware) -> None:
+    """Issue 19.3: both arms showed "link lost: no valid STATE for 45 ms" at start, before
+    anyone armed. A disarmed (INACTIVE) link commands nothing, so it waits the configure
+    patience (hello_timeout, 500 ms) for a STATE, not the armed link's 40 ms; a cable cut
+    while disarmed is still found, after that patience."""
+    assert hw.configure() is ReturnType.OK and hw.state is LifecycleState.INACTIVE
+    assert hw.state_timeout_s() == hw.config.hello_timeout_s > 5 * hw.config.link_timeout_s
+    assert hw.transport is not None
+    hw.transport.connected = False  # no STATE arrives any more
+    t_cut = time.perf_counter()
+    late_ok = 0
+    while hw.read() is ReturnType.OK:
+        if time.perf_counter() - t_cut > 2 * hw.config.link_timeout_s:
+            late_ok += 1  # 80 ms without a STATE: not link lost while disarmed
+        time.sleep(0.01)
+        assert time.perf_counter() - t_cut < 3.0
+    detected = time.perf_counter() - t_cut
+    assert late_ok > 0 and detected >= hw.config.hello_timeout_s, detected
+    assert hw.state is LifecycleState.UNCONFIGURED and "no valid STATE" in (hw.fault or "")
+    hw.transport.connected = True
+    assert hw.configure() is ReturnType.OK and hw.activate() is ReturnType.OK
+    assert hw.state_timeout_s() == hw.config.link_timeout_s  # armed: the 40 ms rule
+
+
 def test_config_is_retried_until_acknowledged() -> None:
     cfg = BridgeConfig.from_robot(ROBOT)
     device = DeviceCore(MotorBank(6, SPEED), cfg.watchdog_s, cfg.period_s, now=time.perf_counter())
