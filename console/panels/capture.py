@@ -58,7 +58,6 @@ class CapturePanel(Panel):
     tab = "Experiments"
     order = 55.0
     kinds = ("planar",)
-    expand_by_default = False
 
     def build(self) -> None:
         gui = self.gui

@@ -125,7 +125,6 @@ class RepeatabilityPanel(Panel):
     tab = "Experiments"
     order = 40.0
     kinds = ("delta",)
-    expand_by_default = False
 
     def build(self) -> None:
         tip = self._tip()

@@ -48,7 +48,6 @@ class TrialsPanel(Panel):
     tab = "Experiments"
     order = 60.0
     kinds = ("planar",)
-    expand_by_default = False
 
     def build(self) -> None:
         gui = self.gui

@@ -1,5 +1,5 @@
-"""Browser-test helper: the console's panels live in tabs (``console.tabs``); a widget is in
-the page only while its tab is open."""
+"""Browser-test helpers: the console's panels live in tabs (``console.tabs``), and a widget is in
+the page only while its tab is open; notifications can cover widgets."""
 
 from __future__ import annotations
 
@@ -23,3 +23,13 @@ def open_tab(page: Any, name: str, timeout_ms: float = 60_000) -> None:
         "n => [...document.querySelectorAll('[role=tab]')].some("
         "t => t.textContent.trim() === n && t.getAttribute('aria-selected') === 'true')",
         arg=name, timeout=timeout_ms)
+
+
+def close_notices(page: Any) -> None:
+    """Close every notification shown (one that closes on its own meanwhile is skipped)."""
+    from playwright.sync_api import Error as PlaywrightError
+    for notice in page.locator(".mantine-Notification-root").all():
+        try:
+            notice.locator("button").first.click(timeout=1_000)
+        except PlaywrightError:
+            continue

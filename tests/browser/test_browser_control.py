@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from browser_tabs import open_tab
+from browser_tabs import close_notices, open_tab
 from core.control.trials import paper_locations
 
 pytestmark = pytest.mark.browser
@@ -112,15 +112,6 @@ def take_control(page: Any) -> None:
         assert time.monotonic() < deadline, f"could not take control: {notes}"
         time.sleep(0.05)
     open_tab(page, "Operate")
-
-
-def close_notices(page: Any) -> None:
-    from playwright.sync_api import Error as PlaywrightError
-    for notice in page.locator(".mantine-Notification-root").all():
-        try:
-            notice.locator("button").first.click(timeout=1_000)
-        except PlaywrightError:  # closed on its own meanwhile
-            continue
 
 
 def execute_at(page: Any, x: float, y: float) -> None:

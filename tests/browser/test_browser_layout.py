@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from browser_tabs import open_tab
+from browser_tabs import close_notices, open_tab
 
 pytestmark = pytest.mark.browser
 
@@ -35,15 +35,6 @@ def _on_screen(page: Any, locator: Any) -> bool:
     return bool(locator.first.evaluate(_ON_SCREEN))
 
 
-def _close_notices(page: Any) -> None:
-    from playwright.sync_api import Error as PlaywrightError
-    for notice in page.locator(".mantine-Notification-root").all():
-        try:
-            notice.locator("button").first.click(timeout=1_000)
-        except PlaywrightError:  # closed on its own meanwhile
-            continue
-
-
 @pytest.mark.parametrize("robot", ["soft-arm", "extensible-arm"])
 def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
         browser: Any, console_server: Any, artifacts_dir: Path, robot: str) -> None:
@@ -61,7 +52,7 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
             phase.wait_for(timeout=60_000)
             page.locator('[data-testid="header-control"]').wait_for(timeout=30_000)
             time.sleep(2.0)  # the software renderer draws the scene; notices arrive
-            _close_notices(page)
+            close_notices(page)
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
                 time.sleep(0.5)

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from browser_tabs import open_tab
+from browser_tabs import close_notices, open_tab
 
 pytestmark = pytest.mark.browser
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
@@ -32,15 +32,6 @@ RUNNING = ("settling", "planning", "approach", "grasp", "move_to_bin", "release"
 
 def notes(page: Any) -> list[str]:
     return page.locator(".mantine-Notification-root").all_inner_texts()
-
-
-def close_notices(page: Any) -> None:
-    from playwright.sync_api import Error as PlaywrightError
-    for notice in page.locator(".mantine-Notification-root").all():
-        try:
-            notice.locator("button").first.click(timeout=1_000)
-        except PlaywrightError:  # closed on its own meanwhile
-            continue
 
 
 def wait_until(what: str, fn: Callable[[], Any], timeout: float, page: Any) -> Any:
