@@ -31,6 +31,7 @@ from core.kinematics import planar as pk
 from core.planning.plan_types import GraspPlan
 from console.reach_shading import shading_meshes
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap
+from core.units import fmt_mm
 
 Array = npt.NDArray[np.float64]
 LIVE_HZ = 20.0
@@ -169,7 +170,7 @@ def plan_labels(robot, plan: GraspPlan) -> dict[str, list[tuple[str, tuple[float
     away = c - base
     away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-9 else np.array([0.0, 1.0])
     side = "center-right" if away[0] < 0 else "center-left"     # text extends away, not inwards
-    circles = [(f"r{k + 1} {r * 100:.1f} cm", (*(c + (r + LABEL_GAP / 3) * away), Z_PLAN), side)
+    circles = [(f"r{k + 1} {fmt_mm(r, 0)} mm", (*(c + (r + LABEL_GAP / 3) * away), Z_PLAN), side)
                for k, r in enumerate(np.asarray(plan.radii, float))]
     points = []
     for k, p in enumerate(np.asarray(plan.palm_poses)[:, :2]):

@@ -168,7 +168,7 @@ def test_labels_name_each_circle_and_waypoint_away_from_the_arm():
     labels = plan_labels(SOFT, plan)
     assert [t for t, _, _ in labels["waypoints"]] == [str(k + 1) for k in range(plan.n)]
     for (text, pos, anchor), r in zip(labels["circles"], plan.radii):
-        assert text.endswith(f"{r * 100:.1f} cm")
+        assert text.endswith(f" {round(r * 1e3):.0f} mm")  # mm, like every label (issue 18)
         # just outside the circle, on the far side from the base (further from it than the
         # centre), the text running outwards (the object is left of the base: to the left)
         assert r < math.hypot(pos[0] - plan.center[0], pos[1] - plan.center[1]) < r + 0.01
