@@ -122,7 +122,8 @@ def header_link(view: ControlView) -> tuple[str, Tone | None]:
         return f"{name} (no serial link)", "ok"
     if h is None:
         return f"{name} · starting…", "busy"
-    return f"{name} · {h.state}", "ok" if h.state == "active" else "warn"
+    ready = h.state in ("active", "inactive")  # inactive: configured, waiting for Arm
+    return f"{name} · {h.state}", "ok" if ready else "warn"
 
 
 def fault_markdown(fault: str | None) -> str:

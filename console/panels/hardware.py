@@ -77,7 +77,8 @@ def header_link(kind: str | None, h: LinkHealth | None) -> tuple[str, Tone | Non
     if h.fault:
         return f"{name} · {h.fault}", "fault"
     armed = "ARMED" if h.armed else "disarmed"
-    return f"{name} · {h.state} · {armed}", "ok" if h.state == "active" else "warn"
+    ready = h.state in ("active", "inactive")  # inactive: configured, waiting for Arm
+    return f"{name} · {h.state} · {armed}", "ok" if ready else "warn"
 
 
 def no_controls_text(kind: str | None, owner: str = "Control") -> str:
