@@ -16,6 +16,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
+from console.model import DeltaModel
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import load
@@ -141,10 +142,12 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     robot = load("extensible")
     open_console(page, console_server("extensible"))
+    # It starts straight with every rack at mid-range (issue 19.5: room to bend both ways).
+    start = DeltaModel(robot).initial()
+    assert np.all(start[:, :2] == 0.0)
     wait_for_readout(page, {"tip-0": 0.0, "tip-1": 0.0,
-                            "tip-2": robot.n_segments * robot.L0 * 1e3})
-    # Retracted: every rack sits at rack_min and is flagged.
-    assert page.locator('[data-near-limit="true"]').count() == 3 * robot.n_segments
+                            "tip-2": dk.tip_position(robot, start)[2] * 1e3})
+    assert page.locator('[data-near-limit="true"]').count() == 0
     page.screenshot(path=str(artifacts_dir / "browser_extensible_default.png"))
     before = canvas_png(page)
 

@@ -214,7 +214,7 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
     assert moved > TIP_MOVING_MM, f"the tip barely moved before STOP ({moved:.1f} mm)"
     page.get_by_role("button", name="STOP (Esc)").click()
     wait_phase(page, ("stopped",), timeout=5.0)
-    assert "STOP pressed in the Control panel" in state_text(page)
+    assert "STOP pressed by" in state_text(page)  # the header's STOP, naming who pressed it
     time.sleep(0.5)  # the soft segments settle on their held cylinder volumes (tau 0.25 s)
     k1, tip1, ref1 = window(page)
     k2, tip2, ref2 = window(page)

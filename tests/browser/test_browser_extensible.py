@@ -239,7 +239,12 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     wait_until("the measured tip held still", still, timeout=20)
     start = seen[-1]
     assert np.abs(start[:2]).max() <= 0.5 and retracted - 0.5 <= start[2] <= initial[2] + 0.5
-    target = np.array([80.0, 40.0, 300.0])  # mm
+    # Where Connect stopped the arm varies with the machine's load: aim far from it, so the
+    # readout has a long way to show the arm on (mm; each candidate is reachable).
+    candidates = [np.array(c) for c in ((80.0, 40.0, 300.0), (80.0, 40.0, 180.0),
+                                        (60.0, -40.0, 420.0))]
+    target = max(candidates, key=lambda c: float(np.linalg.norm(c - start)))
+    assert np.linalg.norm(target - start) > 100.0
     ik = solve_tip_ik(ROBOT, target / 1e3)
     assert ik.reachable
     t0 = time.monotonic()

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from browser_tabs import open_tab
+from lab_rig import jog_button
 
 from console.model import DeltaModel
 from core.kinematics import delta as dk
@@ -53,9 +54,9 @@ def readout_tip(page) -> np.ndarray:
                      for k in range(3)])
 
 
-def hold(page, name: str, seconds: float) -> None:
-    """Press and hold a hold-to-run button."""
-    button = page.get_by_role("button", name=name, exact=True)
+def hold(page, label: str, sign: str, seconds: float) -> None:
+    """Press and hold the hold-to-run button ``sign`` beside the Jog slider ``label``."""
+    button = jog_button(page, label, sign)
     button.scroll_into_view_if_needed()
     button.hover()
     page.mouse.down()
@@ -81,7 +82,7 @@ def test_every_action_moves_or_says_why_from_the_start_pose(
     page.screenshot(path=str(artifacts_dir / "browser_extensible_start.png"))
 
     # A bend jog moves at start (retracted, every rack at rack_min, it was refused).
-    hold(page, "Δx₁ +", 1.0)
+    hold(page, "Δx₁", "+", 1.0)
     wait_until("the tip moved by the bend jog",
                lambda: np.linalg.norm(readout_tip(page) - start) > 2.0, 5,
                show=lambda: f"{readout_tip(page)} {page.locator('body').inner_text()[-300:]}")
@@ -133,7 +134,7 @@ def test_every_action_moves_or_says_why_from_the_start_pose(
                20, show=lambda: str(readout_tip(page)))
     note = page.get_by_text("clamped to +0 mm")
     for _ in range(3):  # a loaded box can lose the lease for a moment ("Not allowed"): again
-        hold(page, "Δx₁ −", 0.5)
+        hold(page, "Δx₁", "−", 0.5)
         try:
             wait_until("the clamp note", lambda: note.count() > 0, 5)
             break

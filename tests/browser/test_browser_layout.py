@@ -16,7 +16,7 @@ pytestmark = pytest.mark.browser
 
 SIZES = {"desktop": (1600, 1000), "tablet": (820, 1180), "phone": (390, 844)}
 TABS = {"soft-arm": ("Operate", "Hardware", "Experiments", "Session"),
-        "extensible-arm": ("Operate", "Hardware", "Experiments", "Session")}
+        "extensible": ("Operate", "Hardware", "Experiments", "Session")}
 SHOT_SIZES = ("desktop", "tablet")
 
 # True when the element's centre is on screen and nothing else (a notification, the 3D
@@ -35,7 +35,7 @@ def _on_screen(page: Any, locator: Any) -> bool:
     return bool(locator.first.evaluate(_ON_SCREEN))
 
 
-@pytest.mark.parametrize("robot", ["soft-arm", "extensible-arm"])
+@pytest.mark.parametrize("robot", ["soft-arm", "extensible"])
 def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
         browser: Any, console_server: Any, artifacts_dir: Path, robot: str) -> None:
     url = console_server(robot, "--no-token")

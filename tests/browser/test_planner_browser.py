@@ -18,6 +18,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
+from browser_tabs import open_tab
 from core.planning.grasp import plan_grasp
 from core.robots import load
 
@@ -87,7 +88,9 @@ def open_console(page, url: str) -> None:
     page.goto(url)
     page.get_by_text("Grasp planner", exact=True).wait_for(timeout=60_000)
     wait_state(page, ("ok",), timeout=60)          # the demo object is planned at start
+    open_tab(page, "Session")  # the per-browser role line
     page.locator('[data-testid="role"][data-role="operator"]').wait_for(timeout=30_000)
+    open_tab(page, "Operate")
     close_notifications(page)
 
 

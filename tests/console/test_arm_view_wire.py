@@ -167,18 +167,26 @@ def test_loop_safe_event_schedules_one_set_for_a_burst_of_messages() -> None:
 
     from console.viser_fixes import LoopSafeEvent
 
+    import threading
+
     loop = asyncio.new_event_loop()
+
+    def run_once() -> None:  # in a thread of its own: this one may hold a running loop already
+        worker = threading.Thread(target=loop.run_until_complete, args=(asyncio.sleep(0),))
+        worker.start()
+        worker.join(5.0)
+
     try:
         event = LoopSafeEvent(loop)
         for _ in range(100):
             event.set()  # from this thread: the loop is not running here
         assert len(loop._ready) == 1  # type: ignore[attr-defined]
         assert not event.is_set()
-        loop.run_until_complete(asyncio.sleep(0))
+        run_once()
         assert event.is_set()
         event.clear()
         event.set()  # a later message schedules again
-        loop.run_until_complete(asyncio.sleep(0))
+        run_once()
         assert event.is_set()
     finally:
         loop.close()
