@@ -50,7 +50,6 @@ class _World:
 
     def check(self, obj):
         self.at_release.append((obj, self.sim.obj.xy.copy(), self.sim.captured))
-        return None
 
 
 def test_three_objects_are_released_at_the_bin_in_order(arm):
@@ -150,8 +149,6 @@ def test_bad_rows_are_refused_with_a_message(arm):
         RowObject(0.1, 0.2, 0.0)
     with pytest.raises(ValueError, match="finite"):
         RowObject(float("nan"), 0.2, 0.01)
-    sim = SoftArmSim(arm, seed=0)
     stack = ControlStack(arm, 0.01, immediate(lambda req: None))
     with pytest.raises(RuntimeError, match="not armed"):
         ObjectRow([B]).start(stack, 0.0)
-    del sim
