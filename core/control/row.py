@@ -13,7 +13,8 @@ row early; the objects not tried are recorded as skipped, with that reason.
 The row is pure bookkeeping, called from the loop thread (the only one that touches the stack):
 :meth:`ObjectRow.start` and :meth:`ObjectRow.after_tick` return the object whose turn begins, so
 the caller can put it into a simulated world (the simulator holds one object at a time);
-:func:`run_row` drives a :class:`core.control.sim_loop.SimLoop` that way.
+:func:`run_row` drives a :class:`core.control.sim_loop.SimLoop` that way. :func:`bin_at` turns a
+bin placed on the table (a point) into the configuration ``move_to_bin`` goes to.
 """
 
 from __future__ import annotations
@@ -23,8 +24,11 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
+import numpy as np
+
 from core.control.grasp_place import Phase
-from core.control.params import BinParams
+from core.control.params import BinParams, StateMachineParams
+from core.robots import SoftArm
 
 RowState = Literal["idle", "running", "done", "stopped"]
 Status = Literal["released", "failed", "skipped"]
@@ -194,3 +198,42 @@ def run_row(loop: Any, row: ObjectRow, place: Callable[[RowObject], None],
             return row
     row.stop(loop.stack, loop.t, f"row time limit {time_limit_s:g} s reached")
     return row
+
+
+def bin_drop_point(robot: SoftArm, kappa: Any, radius: float) -> np.ndarray:
+    """Where an object of ``radius`` held in the gripper sits with the arm at ``kappa`` (m)."""
+    from core.kinematics.planar import forward_kinematics, point_in_frame
+    tip = forward_kinematics(np.asarray(kappa, dtype=float), robot.lengths, robot.base_pose)[-1]
+    return np.asarray(point_in_frame(tip, (robot.gripper.w_off_along,
+                                           2 * robot.gripper.g_off + radius)), dtype=float)
+
+
+def bin_at(robot: SoftArm, x: float, y: float, radius: float | None = None) -> BinParams:
+    """The bin placed at ``(x, y)`` on the table, as the configuration ``move_to_bin`` goes to.
+
+    The configuration is the grasp planner's final pose for an object of ``radius`` (default
+    the robot's nominal object) lying at the bin: with the arm there, the held object is over
+    the bin point, so releasing it drops it there. Only the final pose is needed (the arm moves
+    to the bin directly, not along an approach), so a plan whose approach failed still gives a
+    bin when its final pose was solved. Raises ValueError with the reason when no pose puts the
+    gripper over the point (out of reach, on the base, on the straight arm).
+    """
+    from core.planning.grasp import GraspRefused, plan_grasp
+    r = robot.capture.nominal_object_radius if radius is None else float(radius)
+    where = f"({x * 1000:.0f}, {y * 1000:.0f}) mm"
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r) and r > 0):
+        raise ValueError(f"bin at {where}: need a finite point and an object radius > 0")
+    try:
+        plan = plan_grasp(robot, np.zeros(robot.n_segments), (x, y), r)
+    except GraspRefused as exc:
+        raise ValueError(f"the bin at {where} cannot be reached: {exc}") from None
+    if len(plan.status) == 0 or plan.status[-1] != "ok":
+        raise ValueError(f"the bin at {where} cannot be reached: no arm shape puts the gripper "
+                         "over it")
+    kappa = np.asarray(plan.kappas[-1], dtype=float)
+    miss = float(np.hypot(*(bin_drop_point(robot, kappa, r) - (x, y))))
+    tol = StateMachineParams.from_robot(robot).release_distance_m
+    if miss > tol:  # the solver's palm-point error is far below this
+        raise ValueError(f"the bin at {where} cannot be reached: the closest pose drops "
+                         f"{miss * 1000:.0f} mm away")
+    return BinParams(kappa, robot.bin.drop_radius_m)

@@ -8,11 +8,12 @@ import pytest
 from core import robots
 from core.control.grasp_place import Phase, immediate
 from core.control.params import BinParams
-from core.control.row import ObjectRow, RowObject, run_row
+from core.control.row import ObjectRow, RowObject, bin_at, run_row
 from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
 from core.control.trials import bin_drop_point
+from core.kinematics.planar import forward_kinematics, point_in_frame
 from core.planning.grasp import plan_grasp
 
 R = 0.0165
@@ -152,3 +153,32 @@ def test_bad_rows_are_refused_with_a_message(arm):
     stack = ControlStack(arm, 0.01, immediate(lambda req: None))
     with pytest.raises(RuntimeError, match="not armed"):
         ObjectRow([B]).start(stack, 0.0)
+
+
+def test_a_bin_placed_on_the_table_holds_the_object_over_that_point(arm):
+    for x, y in ((0.15, 0.25), (-0.10, 0.30), (0.20, 0.10)):
+        b = bin_at(arm, x, y)
+        assert b.kappa.shape == (arm.n_segments,)
+        assert np.all(np.abs(b.kappa) <= arm.kappa_max + 1e-9)
+        tip = forward_kinematics(b.kappa, arm.lengths, arm.base_pose)[-1]  # independent FK
+        held = point_in_frame(tip, (arm.gripper.w_off_along, 2 * arm.gripper.g_off + R))
+        assert np.hypot(held[0] - x, held[1] - y) < 0.002
+    with pytest.raises(ValueError, match="cannot be reached: The object is out of reach"):
+        bin_at(arm, 0.6, 0.1)
+    with pytest.raises(ValueError, match="cannot be reached"):
+        bin_at(arm, 0.0, 0.0)  # on the base
+    with pytest.raises(ValueError, match="finite"):
+        bin_at(arm, float("nan"), 0.2)
+
+
+def test_a_row_goes_to_a_bin_the_operator_placed(arm):
+    sim, loop = _armed_loop(arm)
+    spot = (0.15, 0.25)  # right of the arm, away from the robot file's (straight) bin
+    world = _World(sim, arm)
+    row = run_row(loop, ObjectRow([B, E], bin_params=bin_at(arm, *spot), check_release=world.check),
+                  world.place, 200.0)
+    assert [o.status for o in row.outcomes] == ["released", "released"]
+    for _, xy, captured in world.at_release:
+        assert not captured
+        assert np.hypot(xy[0] - spot[0], xy[1] - spot[1]) < BinParams.from_robot(arm).drop_radius_m
+        assert np.hypot(*(xy - world.drop)) > 0.1  # not at the default bin

@@ -50,6 +50,7 @@ def test_row_trial_releases_the_reachable_and_says_why_the_other_failed(arm):
     assert (out["released"], out["objects"], out["state"]) == (2, 3, "done")
     assert [o["status"] for o in out["row"]] == ["released", "failed", "released"]
     assert out["row"][0]["object"] == [-0.22, 0.2, R] and out["row"][1]["reason"] is not None
+    assert out["bin"] is None and res.bin is None
     json.dumps(out)  # plain JSON
 
 
@@ -71,13 +72,15 @@ def test_cli_row_table_in_mm_and_summary():
     assert lines[3] == f"{released}/2 released"
 
 
-def test_cli_row_json_with_given_objects(capsys):
-    assert trials_main(["--objects-in-a-row", "1", "--object", "-0.6", "0.1", "0.0165",
+def test_cli_row_json_with_given_objects_and_a_placed_bin(capsys):
+    assert trials_main(["--objects-in-a-row", "2", "--object", "-0.6", "0.1", "0.0165",
+                        "--object", "-0.08", "0.33", "0.0165", "--bin", "0.15", "0.25",
                         "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    (o,) = out["row"]
-    assert o["status"] == "failed" and "out of reach" in o["reason"]
-    assert (out["released"], out["objects"]) == (0, 1)
+    far, near = out["row"]
+    assert far["status"] == "failed" and "out of reach" in far["reason"]
+    assert near["status"] == "released" and near["reason"] is None
+    assert (out["released"], out["objects"], out["bin"]) == (1, 2, [0.15, 0.25])
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -85,6 +88,8 @@ def test_cli_row_json_with_given_objects(capsys):
     (["--objects-in-a-row", "0"], "must be >= 1"),
     (["--objects-in-a-row", "2", "--repeats", "3"], "do not apply"),
     (["--objects-in-a-row", "2", "--time-limit", "0"], "--time-limit"),
+    (["--objects-in-a-row", "2", "--bin", "0.3", "0.3"], "the bin at (300, 300) mm cannot be reached"),
+    (["--bin", "0.15", "0.25"], "--bin applies to --objects-in-a-row only"),
 ])
 def test_cli_row_rejects_bad_arguments(capsys, argv, message):
     with pytest.raises(SystemExit) as exc:

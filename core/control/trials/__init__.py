@@ -26,7 +26,7 @@ import numpy as np
 from core.control.grasp_place import Phase, immediate
 from core.control.params import BinParams
 from core.control.planner_spec import DEFAULT_PLANNER, resolve
-from core.control.row import ObjectOutcome, ObjectRow, RowObject, run_row
+from core.control.row import ObjectOutcome, ObjectRow, RowObject, bin_at, run_row
 from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
@@ -68,9 +68,10 @@ class TrialResult:
     final_object: tuple[float, float] | None = None
 
 
-def bin_drop_point(robot: SoftArm, radius: float) -> np.ndarray:
-    """Where the grasped object sits when the arm is at the bin configuration."""
-    b = BinParams.from_robot(robot)
+def bin_drop_point(robot: SoftArm, radius: float, bin_params: BinParams | None = None) -> np.ndarray:
+    """Where the grasped object sits when the arm is at the bin configuration (the robot's
+    ``[bin]`` unless ``bin_params`` is given)."""
+    b = BinParams.from_robot(robot) if bin_params is None else bin_params
     tip = forward_kinematics(b.kappa, robot.lengths, robot.base_pose)[-1]
     return point_in_frame(tip, (robot.gripper.w_off_along, 2 * robot.gripper.g_off + radius))
 
@@ -234,6 +235,7 @@ class RowTrialResult:
     """One row: per-object outcomes (queue order) and the run's totals."""
 
     objects: list[ObjectOutcome]
+    bin: tuple[float, float] | None  # where the operator put the bin; None: the robot's [bin]
     state: str  # "done", or "stopped" (the row's time limit, a device fault)
     reason: str | None
     seed: int
@@ -251,6 +253,7 @@ class RowTrialResult:
 def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int, *,
                   planner: str = DEFAULT_PLANNER, object_time_limit_s: float = 150.0,
                   sim_overrides: dict[str, Any] | None = None,
+                  bin_xy: Sequence[float] | None = None,
                   observe: Callable[[Any], Any] | None = None) -> RowTrialResult:
     """Several objects taken to the bin one after another in one headless run.
 
@@ -260,9 +263,13 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     bin, a failed one is taken off the table). An object counts as released when the machine
     released it *and* it lies within ``bin.drop_radius_m`` of the bin drop point; otherwise it
     fails with the reason (as do planner refusals, lost tracking, ... and an object not
-    released within ``object_time_limit_s``), and the row goes on with the next.
+    released within ``object_time_limit_s``), and the row goes on with the next. ``bin_xy``
+    puts the bin at a point on the table (:func:`core.control.row.bin_at`; ValueError with the
+    reason when it cannot be reached); by default the robot's ``[bin]``.
     """
     row_objects = [RowObject(*(float(v) for v in obj)) for obj in objects]
+    where = None if bin_xy is None else (float(bin_xy[0]), float(bin_xy[1]))
+    bin_params = None if where is None else bin_at(robot, *where)
     rng = np.random.default_rng([seed, 7])
     plan_fn: Callable[..., Any] = resolve(planner)
     sim = SoftArmSim(robot, seed=seed)
@@ -280,17 +287,17 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     def in_bin(obj: RowObject) -> str | None:
         if sim.obj is None or sim.captured:
             return "object still in the gripper after release"
-        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r))))
+        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params))))
         return None if d <= drop_radius else f"object released {d * 1000:.0f} mm from the bin drop point"
 
     wall = time.perf_counter()
     loop.run(0.05)
     loop.arm()
     loop.run(0.5)  # pre-pressurise the root segments
-    row = ObjectRow(row_objects, object_time_limit_s=object_time_limit_s, check_release=in_bin)
+    row = ObjectRow(row_objects, bin_params, object_time_limit_s, check_release=in_bin)
     run_row(loop, row, place, object_time_limit_s * len(row_objects) + 1.0, observe=observe)
     wall = time.perf_counter() - wall
-    return RowTrialResult(list(row.outcomes), row.state, row.reason, seed,
+    return RowTrialResult(list(row.outcomes), where, row.state, row.reason, seed,
                           round(loop.ticks * 0.01, 2), round(wall, 3), loop.ticks, sim.stalls,
                           round(loop.stats().work_ms_p99, 4))
 
@@ -303,6 +310,7 @@ def row_json(result: RowTrialResult) -> dict[str, Any]:
                      "reason": o.reason, "started_s": num(o.started_s), "ended_s": num(o.ended_s),
                      "approach_s": num(o.approach_s), "return_s": num(o.return_s),
                      "replans": o.replans} for o in result.objects],
+            "bin": None if result.bin is None else list(result.bin),
             "released": result.released, "objects": len(result.objects), "state": result.state,
             "reason": result.reason, "seed": result.seed, "sim_s": result.sim_s,
             "wall_s": result.wall_s}

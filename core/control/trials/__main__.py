@@ -2,7 +2,7 @@
 
 ``python -m core.control.trials [--object X Y R ...] [--repeats N] [--seed S] [--json]
 [--workers N] [--robot NAME|PATH] [--planner MODULE:FUNCTION] [--time-limit S] [--sim KEY=VALUE]
-[--objects-in-a-row N]``
+[--objects-in-a-row N [--bin X Y]]``
 
 Without ``--object`` the five spots A-E of :func:`core.control.trials.paper_locations` are used,
 x 5 repeats, with the paper's 3.3 cm object. Trials run in ``--workers`` parallel processes
@@ -12,7 +12,8 @@ object ``{"trials": [...], "loop": {...}}``.
 ``--objects-in-a-row N`` instead takes N objects to the bin one after another in one run
 (:func:`core.control.trials.run_row_trial`): the N ``--object`` given, or without ``--object``
 N drawn from ``--seed`` among reachable spots (paper's object radius); ``--time-limit`` is then
-per object. Prints one row per object (released / failed and why) and "k/N released", or with
+per object; ``--bin X Y`` puts the bin at that point of the table (m) instead of the robot
+file's bin configuration. Prints one row per object (released / failed and why) and "k/N released", or with
 ``--json`` one object ``{"row": [...], "released": k, "objects": N, ...}``.
 """
 
@@ -30,6 +31,7 @@ from typing import Any, Callable, Sequence
 
 from core.control.params import SimParams
 from core.control.planner_spec import DEFAULT_PLANNER
+from core.control.row import bin_at
 from core.control.trials import (RowTrialResult, TrialResult, draw_row_objects, paper_locations,
                                  row_json, run_row_trial, run_trials, summary)
 from core.robots import SoftArm, load
@@ -86,6 +88,8 @@ def format_row_table(result: RowTrialResult) -> str:
         lines.append(f"{o.index + 1:>3} {fmt_mm(o.object.x):>7} {fmt_mm(o.object.y):>7} "
                      f"{fmt_mm(o.object.r):>6} {o.status:<8} {times[0]} {times[1]} "
                      f"{o.replans:>7d}  {o.reason or ''}")
+    if result.bin is not None:
+        lines.append(f"bin at ({fmt_mm(result.bin[0])}, {fmt_mm(result.bin[1])}) mm")
     lines.append(f"{result.released}/{len(result.objects)} released"
                  + (f" (row stopped: {result.reason})" if result.state == "stopped" else ""))
     return "\n".join(lines)
@@ -97,6 +101,13 @@ def run_row_cli(a: argparse.Namespace, ap: argparse.ArgumentParser, robot: SoftA
     n = a.objects_in_a_row
     if a.repeats is not None or a.record is not None or a.csv is not None:
         ap.error("--objects-in-a-row runs one row: --repeats, --record and --csv do not apply")
+    bin_xy = None
+    if a.bin is not None:
+        bin_xy = tuple(a.bin)
+        try:
+            bin_at(robot, *bin_xy)
+        except ValueError as exc:
+            ap.error(f"--bin {a.bin[0]} {a.bin[1]}: {exc}")
     if a.object:
         if len(a.object) != n:
             ap.error(f"--objects-in-a-row {n} with {len(a.object)} --object: give {n} objects, "
@@ -107,7 +118,7 @@ def run_row_cli(a: argparse.Namespace, ap: argparse.ArgumentParser, robot: SoftA
             objects = draw_row_objects(robot, n, a.seed, robot.capture.nominal_object_radius)
         except ValueError as exc:
             ap.error(f"--objects-in-a-row {n}: {exc}")
-    result = run_row_trial(robot, objects, a.seed, planner=a.planner,
+    result = run_row_trial(robot, objects, a.seed, planner=a.planner, bin_xy=bin_xy,
                            object_time_limit_s=a.time_limit, sim_overrides=overrides or None)
     if a.json:
         print(json.dumps(row_json(result)))
@@ -138,6 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--objects-in-a-row", type=int, default=None, metavar="N",
                     help="take N objects to the bin one after another in one run: the N "
                          "--object given, or N drawn from --seed among reachable spots")
+    ap.add_argument("--bin", nargs=2, type=float, default=None, metavar=("X", "Y"),
+                    help="with --objects-in-a-row: put the bin at this point of the table (m)")
     a = ap.parse_args(argv)
     if a.record is not None and (a.record.suffix != ".mcap" or a.record.exists()):
         ap.error(f"--record {a.record}: need a new file ending in .mcap")
@@ -165,6 +178,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 ap.error(f"--object {x} {y} {r}: need finite X Y and R > 0")
     if a.objects_in_a_row is not None:
         return run_row_cli(a, ap, robot, overrides)
+    if a.bin is not None:
+        ap.error("--bin applies to --objects-in-a-row only")
     repeats = 5 if a.repeats is None else a.repeats
     if a.object:
         objects = [(f"#{i + 1}", o) for i, o in enumerate(a.object)]
