@@ -8,7 +8,10 @@ move_to_bin -> release) until the queue is empty. When the machine *stops* on an
 (planner refusal, tracking lost, grasp missed too often, bin not reached, a per-object time
 limit), that object is recorded as failed with the machine's reason and the row goes on with
 the next object. Only the operator's STOP (:meth:`ObjectRow.stop`) or a disarmed stack ends the
-row early; the objects not tried are recorded as skipped, with that reason.
+row early; the objects not tried are recorded as skipped, with that reason. (The operator's STOP
+must go through :meth:`ObjectRow.stop`: a stop the row does not know of looks like a failure
+of the current object, and the row would go on.) A bin given to the row is the machine's for
+that row only.
 
 The row is pure bookkeeping, called from the loop thread (the only one that touches the stack):
 :meth:`ObjectRow.start` and :meth:`ObjectRow.after_tick` return the object whose turn begins, so
@@ -96,6 +99,7 @@ class ObjectRow:
         self.outcomes: list[ObjectOutcome] = []
         self.reason: str | None = None
         self._started_s = 0.0
+        self._robot_bin: BinParams | None = None  # the machine's bin before the row
 
     # -- progress ------------------------------------------------------------------------------
     @property
@@ -116,8 +120,9 @@ class ObjectRow:
             raise RuntimeError(f"the row was already started ({self.state})")
         if not stack.armed:
             raise RuntimeError("row refused: the arm is not armed")
+        self._robot_bin = stack.machine.bin
         if self.bin_params is not None:
-            stack.machine.bin = self.bin_params
+            stack.machine.bin = self.bin_params  # for this row only: put back when it ends
         self.state = "running"
         return self._begin(stack, 0, t)
 
@@ -157,6 +162,7 @@ class ObjectRow:
         nxt = (self.current or 0) + 1
         if nxt >= len(self.objects):
             self.state, self.current = "done", None
+            stack.machine.bin = self._robot_bin
             return None
         return self._begin(stack, nxt, t)
 
@@ -173,6 +179,8 @@ class ObjectRow:
         self.outcomes += [ObjectOutcome(i, o, "skipped", f"row stopped: {reason}")
                           for i, o in enumerate(self.objects) if i not in done]
         self.state, self.current, self.reason = state, None, reason
+        if self._robot_bin is not None:
+            stack.machine.bin = self._robot_bin
 
 
 def run_row(loop: Any, row: ObjectRow, place: Callable[[RowObject], None],

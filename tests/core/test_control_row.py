@@ -127,7 +127,7 @@ def test_operator_stop_holds_the_arm_and_skips_the_rest_with_the_reason(arm):
         control = loop.tick()
         assert row.after_tick(loop.stack, t) is None
     assert control.phase == Phase.STOPPED.value and control.reason == "operator STOP"
-    assert row.state == "stopped"
+    assert row.state == "stopped" and loop.stack.machine.bin is arm.bin
     assert [(o.status, o.reason) for o in row.outcomes] == [
         ("failed", "operator STOP"), ("skipped", "row stopped: operator STOP"),
         ("skipped", "row stopped: operator STOP")]
@@ -141,6 +141,7 @@ def test_a_custom_bin_configuration_is_where_the_objects_go(arm):
     assert row.outcomes[0].released
     m = loop.stack.machine
     assert np.hypot(*(m.palm(loop.stack.kappa_meas) - m.palm(bend.kappa))) <= m.p.release_distance_m
+    assert m.bin is arm.bin  # the row's bin was for the row only
 
 
 def test_bad_rows_are_refused_with_a_message(arm):
