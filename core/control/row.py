@@ -147,6 +147,9 @@ class ObjectRow:
         if not stack.armed:  # a device fault disarmed the stack: nothing more moves
             self._end(stack, "stopped", m.reason or "the arm was disarmed", t)
             return None
+        if m.phase is Phase.IDLE:  # the machine was reset under the row (re-armed, a goto)
+            self._end(stack, "stopped", "the grasp-and-place task was reset", t)
+            return None
         limit = self.object_time_limit_s
         if m.phase not in (Phase.RELEASED, Phase.STOPPED) and limit is not None \
                 and t - self._started_s >= limit:

@@ -133,6 +133,33 @@ def test_operator_stop_holds_the_arm_and_skips_the_rest_with_the_reason(arm):
         ("skipped", "row stopped: operator STOP")]
 
 
+def test_a_disarm_or_re_arm_under_the_row_ends_it_with_the_reason(arm):
+    sim, loop = _armed_loop(arm)
+    row = ObjectRow([B, E])
+    sim.place_object(B.x, B.y, B.r)
+    loop.submit(lambda s, t: row.start(s, t))
+    loop.run(1.0)
+    loop.arm()  # the operator arms again: the machine is back to idle
+    for _ in range(3):
+        t = loop.t
+        loop.tick()
+        row.after_tick(loop.stack, t)
+    assert row.state == "stopped" and row.reason == "the grasp-and-place task was reset"
+    assert [o.status for o in row.outcomes] == ["failed", "skipped"]
+    sim, loop = _armed_loop(arm)
+    row = ObjectRow([B, E])
+    sim.place_object(B.x, B.y, B.r)
+    loop.submit(lambda s, t: row.start(s, t))
+    loop.run(1.0)
+    loop.submit(lambda s, t: s.device_fault(t, "link lost"))
+    t = loop.t
+    loop.tick()
+    row.after_tick(loop.stack, t)
+    assert row.state == "stopped" and row.reason == "link lost"
+    assert [(o.status, o.reason) for o in row.outcomes] == [
+        ("failed", "link lost"), ("skipped", "row stopped: link lost")]
+
+
 def test_a_custom_bin_configuration_is_where_the_objects_go(arm):
     sim, loop = _armed_loop(arm)
     bend = BinParams(np.array([0.0, 0.0, 0.0, 0.0, 2.0, 2.0]), 0.05)
