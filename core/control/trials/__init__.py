@@ -8,7 +8,9 @@ until ``released``, ``stopped`` or a time limit. Success: released, and the obje
 ``bin.drop_radius_m`` of the bin drop point (where the object sits when the gripper is at the
 bin). :func:`paper_locations` are the five spots A-E used with the paper's 3.3 cm object.
 :func:`run_trials` runs a batch through any ``map`` (the builtin: in this process; a process
-pool's ``map``: in parallel - the caller owns the pool).
+pool's ``map``: in parallel - the caller owns the pool). :func:`run_row_trial` takes several
+objects in a row to the bin in one run (:mod:`core.control.row`), e.g. objects drawn by
+:func:`draw_row_objects`.
 
 Command line: ``python -m core.control.trials`` (:mod:`core.control.trials.__main__`).
 """
@@ -24,6 +26,7 @@ import numpy as np
 from core.control.grasp_place import Phase, immediate
 from core.control.params import BinParams
 from core.control.planner_spec import DEFAULT_PLANNER, resolve
+from core.control.row import ObjectOutcome, ObjectRow, RowObject, bin_at, run_row
 from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
@@ -65,9 +68,10 @@ class TrialResult:
     final_object: tuple[float, float] | None = None
 
 
-def bin_drop_point(robot: SoftArm, radius: float) -> np.ndarray:
-    """Where the grasped object sits when the arm is at the bin configuration."""
-    b = BinParams.from_robot(robot)
+def bin_drop_point(robot: SoftArm, radius: float, bin_params: BinParams | None = None) -> np.ndarray:
+    """Where the grasped object sits when the arm is at the bin configuration (the robot's
+    ``[bin]`` unless ``bin_params`` is given)."""
+    b = BinParams.from_robot(robot) if bin_params is None else bin_params
     tip = forward_kinematics(b.kappa, robot.lengths, robot.base_pose)[-1]
     return point_in_frame(tip, (robot.gripper.w_off_along, 2 * robot.gripper.g_off + radius))
 
@@ -189,3 +193,124 @@ def summary(results: Sequence[TrialResult], wall_s: float, workers: int) -> dict
             "speedup_per_process": round(sim_s / cpu_s, 1) if cpu_s > 0 else None,
             "work_ms_p99_max": max((r.work_ms_p99 for r in results), default=0.0),
             "successes": sum(r.success for r in results), "trials": len(results)}
+
+
+# -- several objects in a row (issue #17.3) ------------------------------------------------------
+ROW_QUADRANT = "left"  # drawn objects lie in the left quadrant, like the paper's spots A-E
+
+
+def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float,
+                     spacing_m: float = 0.02, max_draws: int = 2000) -> list[tuple[float, float, float]]:
+    """``n`` objects drawn reproducibly from ``seed`` among reachable spots.
+
+    Candidates are uniform over the left quadrant within the arm's reach (where the paper's
+    spots lie); a candidate is kept when the planner (the reachability map's,
+    :func:`core.planning.reachability.cell_status`) plans a grasp for it from the straight arm,
+    which is where the arm is at the start and after each release at the (straight) bin, and
+    when it keeps ``spacing_m`` clear of the objects drawn before it.
+    """
+    from core.planning.reachability import PLANNABLE, cell_status, map_planner
+    if n < 1:
+        raise ValueError(f"need at least one object, got {n}")
+    rng = np.random.default_rng([seed, 17])
+    planner = map_planner(robot)
+    straight = np.zeros(robot.n_segments)
+    base = np.asarray(robot.base_pose[:2], dtype=float)
+    out: list[tuple[float, float, float]] = []
+    for _ in range(max_draws):
+        x, y = base + rng.uniform(0.0, robot.reach, 2) * (-1.0, 1.0)
+        if np.hypot(x - base[0], y - base[1]) > robot.reach:
+            continue
+        if any(np.hypot(x - ox, y - oy) < radius + r + spacing_m for ox, oy, r in out):
+            continue
+        if cell_status(planner, straight, float(x), float(y), radius) == PLANNABLE:
+            out.append((round(float(x), 4), round(float(y), 4), float(radius)))
+            if len(out) == n:
+                return out
+    raise ValueError(f"found only {len(out)} of {n} reachable, separate spots in {max_draws} draws")
+
+
+@dataclasses.dataclass(frozen=True)
+class RowTrialResult:
+    """One row: per-object outcomes (queue order) and the run's totals."""
+
+    objects: list[ObjectOutcome]
+    bin: tuple[float, float] | None  # where the operator put the bin; None: the robot's [bin]
+    state: str  # "done", or "stopped" (the row's time limit, a device fault)
+    reason: str | None
+    seed: int
+    sim_s: float
+    wall_s: float
+    ticks: int
+    stalls: int
+    work_ms_p99: float
+
+    @property
+    def released(self) -> int:
+        return sum(o.released for o in self.objects)
+
+
+def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int, *,
+                  planner: str = DEFAULT_PLANNER, object_time_limit_s: float = 150.0,
+                  sim_overrides: dict[str, Any] | None = None,
+                  bin_xy: Sequence[float] | None = None,
+                  observe: Callable[[Any], Any] | None = None) -> RowTrialResult:
+    """Several objects taken to the bin one after another in one headless run.
+
+    Like :func:`run_trial` (seeded sim, placement within +-1 mm, arm, pre-pressurise), then an
+    :class:`~core.control.row.ObjectRow`: each object is put on the simulated table when its
+    turn begins (the simulator holds one object at a time: a released object leaves with the
+    bin, a failed one is taken off the table). An object counts as released when the machine
+    released it *and* it lies within ``bin.drop_radius_m`` of the bin drop point; otherwise it
+    fails with the reason (as do planner refusals, lost tracking, ... and an object not
+    released within ``object_time_limit_s``), and the row goes on with the next. ``bin_xy``
+    puts the bin at a point on the table (:func:`core.control.row.bin_at`; ValueError with the
+    reason when it cannot be reached); by default the robot's ``[bin]``.
+    """
+    row_objects = [RowObject(*(float(v) for v in obj)) for obj in objects]
+    where = None if bin_xy is None else (float(bin_xy[0]), float(bin_xy[1]))
+    bin_params = None if where is None else bin_at(robot, *where)
+    rng = np.random.default_rng([seed, 7])
+    plan_fn: Callable[..., Any] = resolve(planner)
+    sim = SoftArmSim(robot, seed=seed)
+    if sim_overrides:
+        sim.p = sim.p.replace(**sim_overrides)
+    stack = ControlStack(robot, 0.01, immediate(
+        lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
+    loop = SimLoop(sim, stack, 0.01)
+    drop_radius = BinParams.from_robot(robot).drop_radius_m
+
+    def place(obj: RowObject) -> None:
+        sim.place_object(obj.x + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M),
+                         obj.y + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M), obj.r)
+
+    def in_bin(obj: RowObject) -> str | None:
+        if sim.obj is None or sim.captured:
+            return "object still in the gripper after release"
+        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params))))
+        return None if d <= drop_radius else f"object released {d * 1000:.0f} mm from the bin drop point"
+
+    wall = time.perf_counter()
+    loop.run(0.05)
+    loop.arm()
+    loop.run(0.5)  # pre-pressurise the root segments
+    row = ObjectRow(row_objects, bin_params, object_time_limit_s, check_release=in_bin)
+    run_row(loop, row, place, object_time_limit_s * len(row_objects) + 1.0, observe=observe)
+    wall = time.perf_counter() - wall
+    return RowTrialResult(list(row.outcomes), where, row.state, row.reason, seed,
+                          round(loop.ticks * 0.01, 2), round(wall, 3), loop.ticks, sim.stalls,
+                          round(loop.stats().work_ms_p99, 4))
+
+
+def row_json(result: RowTrialResult) -> dict[str, Any]:
+    """The ``--json`` form of a row: per-object results (SI units) and the totals."""
+    def num(v: float | None) -> float | None:
+        return None if v is None else round(v, 3)
+    return {"row": [{"object": [o.object.x, o.object.y, o.object.r], "status": o.status,
+                     "reason": o.reason, "started_s": num(o.started_s), "ended_s": num(o.ended_s),
+                     "approach_s": num(o.approach_s), "return_s": num(o.return_s),
+                     "replans": o.replans} for o in result.objects],
+            "bin": None if result.bin is None else list(result.bin),
+            "released": result.released, "objects": len(result.objects), "state": result.state,
+            "reason": result.reason, "seed": result.seed, "sim_s": result.sim_s,
+            "wall_s": result.wall_s}

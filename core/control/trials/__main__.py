@@ -1,12 +1,20 @@
 """``python -m core.control.trials``: the paper's grasp-and-place experiment from the command line.
 
 ``python -m core.control.trials [--object X Y R ...] [--repeats N] [--seed S] [--json]
-[--workers N] [--robot NAME|PATH] [--planner MODULE:FUNCTION] [--time-limit S] [--sim KEY=VALUE]``
+[--workers N] [--robot NAME|PATH] [--planner MODULE:FUNCTION] [--time-limit S] [--sim KEY=VALUE]
+[--objects-in-a-row N [--bin X Y]]``
 
 Without ``--object`` the five spots A-E of :func:`core.control.trials.paper_locations` are used,
 x 5 repeats, with the paper's 3.3 cm object. Trials run in ``--workers`` parallel processes
 (a pool owned here; ``--workers 0``: in this process). Prints a table, or with ``--json`` one
 object ``{"trials": [...], "loop": {...}}``.
+
+``--objects-in-a-row N`` instead takes N objects to the bin one after another in one run
+(:func:`core.control.trials.run_row_trial`): the N ``--object`` given, or without ``--object``
+N drawn from ``--seed`` among reachable spots (paper's object radius); ``--time-limit`` is then
+per object; ``--bin X Y`` puts the bin at that point of the table (m) instead of the robot
+file's bin configuration. Prints one row per object (released / failed and why) and "k/N released", or with
+``--json`` one object ``{"row": [...], "released": k, "objects": N, ...}``.
 """
 
 from __future__ import annotations
@@ -23,7 +31,9 @@ from typing import Any, Callable, Sequence
 
 from core.control.params import SimParams
 from core.control.planner_spec import DEFAULT_PLANNER
-from core.control.trials import TrialResult, paper_locations, run_trials, summary
+from core.control.row import bin_at
+from core.control.trials import (RowTrialResult, TrialResult, draw_row_objects, paper_locations,
+                                 row_json, run_row_trial, run_trials, summary)
 from core.robots import SoftArm, load
 from core.units import fmt_mm
 
@@ -68,23 +78,79 @@ def format_table(results: Sequence[TrialResult]) -> str:
     return "\n".join(lines)
 
 
+def format_row_table(result: RowTrialResult) -> str:
+    """One row per object of a row run (lengths in mm, times in s), then "k/N released"."""
+    lines = [(f"{'#':>3} {'x (mm)':>7} {'y (mm)':>7} {'r (mm)':>6} {'status':<8} "
+              f"{'approach (s)':>12} {'return (s)':>10} {'replans':>7}  reason")]
+    for o in result.objects:
+        times = (f"{o.approach_s:>12.1f}" if o.approach_s is not None else f"{'-':>12}",
+                 f"{o.return_s:>10.1f}" if o.return_s is not None else f"{'-':>10}")
+        lines.append(f"{o.index + 1:>3} {fmt_mm(o.object.x):>7} {fmt_mm(o.object.y):>7} "
+                     f"{fmt_mm(o.object.r):>6} {o.status:<8} {times[0]} {times[1]} "
+                     f"{o.replans:>7d}  {o.reason or ''}")
+    if result.bin is not None:
+        lines.append(f"bin at ({fmt_mm(result.bin[0])}, {fmt_mm(result.bin[1])}) mm")
+    lines.append(f"{result.released}/{len(result.objects)} released"
+                 + (f" (row stopped: {result.reason})" if result.state == "stopped" else ""))
+    return "\n".join(lines)
+
+
+def run_row_cli(a: argparse.Namespace, ap: argparse.ArgumentParser, robot: SoftArm,
+                overrides: dict[str, Any]) -> int:
+    """``--objects-in-a-row N``: one row run in this process, table or JSON."""
+    n = a.objects_in_a_row
+    if a.repeats is not None or a.record is not None or a.csv is not None:
+        ap.error("--objects-in-a-row runs one row: --repeats, --record and --csv do not apply")
+    bin_xy = None
+    if a.bin is not None:
+        bin_xy = tuple(a.bin)
+        try:
+            bin_at(robot, *bin_xy)
+        except ValueError as exc:
+            ap.error(f"--bin {a.bin[0]} {a.bin[1]}: {exc}")
+    if a.object:
+        if len(a.object) != n:
+            ap.error(f"--objects-in-a-row {n} with {len(a.object)} --object: give {n} objects, "
+                     f"or none to draw {n} from --seed")
+        objects = [tuple(o) for o in a.object]
+    else:
+        try:
+            objects = draw_row_objects(robot, n, a.seed, robot.capture.nominal_object_radius)
+        except ValueError as exc:
+            ap.error(f"--objects-in-a-row {n}: {exc}")
+    result = run_row_trial(robot, objects, a.seed, planner=a.planner, bin_xy=bin_xy,
+                           object_time_limit_s=a.time_limit, sim_overrides=overrides or None)
+    if a.json:
+        print(json.dumps(row_json(result)))
+    else:
+        print(format_row_table(result))
+        print(f"simulated {result.sim_s} s in {result.wall_s} s wall")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m core.control.trials", description=__doc__.split("\n")[0])
     ap.add_argument("--object", nargs=3, type=float, action="append", metavar=("X", "Y", "R"),
                     help="object centre and radius (m); repeatable. Default: the paper's A-E")
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=None, help="trials per object (default 5)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true", help="print JSON instead of the table")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--robot", default="soft-arm")
     ap.add_argument("--planner", default=DEFAULT_PLANNER, help="module:function (default %(default)s)")
-    ap.add_argument("--time-limit", type=float, default=150.0, help="simulated s per trial")
+    ap.add_argument("--time-limit", type=float, default=150.0,
+                    help="simulated s per trial (per object with --objects-in-a-row)")
     ap.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE",
                     help="override a [sim] parameter, e.g. stall_rate_hz=0.5 or mocap.noise_m=5e-4")
     ap.add_argument("--record", type=Path, default=None, metavar="PATH.mcap",
                     help="also record the trials (arm, object, phases) as MCAP")
     ap.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
                     help="also write one CSV row per trial (units in the header)")
+    ap.add_argument("--objects-in-a-row", type=int, default=None, metavar="N",
+                    help="take N objects to the bin one after another in one run: the N "
+                         "--object given, or N drawn from --seed among reachable spots")
+    ap.add_argument("--bin", nargs=2, type=float, default=None, metavar=("X", "Y"),
+                    help="with --objects-in-a-row: put the bin at this point of the table (m)")
     a = ap.parse_args(argv)
     if a.record is not None and (a.record.suffix != ".mcap" or a.record.exists()):
         ap.error(f"--record {a.record}: need a new file ending in .mcap")
@@ -94,8 +160,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             SimParams.from_robot(load(a.robot)).replace(**overrides)  # validate names now
     except (ValueError, TypeError) as exc:
         ap.error(str(exc))
-    if a.repeats < 1:
+    if a.repeats is not None and a.repeats < 1:
         ap.error("--repeats must be >= 1")
+    if a.objects_in_a_row is not None and a.objects_in_a_row < 1:
+        ap.error("--objects-in-a-row must be >= 1")
+    if not (math.isfinite(a.time_limit) and a.time_limit > 0):
+        ap.error(f"--time-limit {a.time_limit}: need a number of seconds > 0")
     try:
         robot = load(a.robot)
     except ValueError as exc:
@@ -106,13 +176,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         for x, y, r in a.object:
             if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)) or r <= 0:
                 ap.error(f"--object {x} {y} {r}: need finite X Y and R > 0")
+    if a.objects_in_a_row is not None:
+        return run_row_cli(a, ap, robot, overrides)
+    if a.bin is not None:
+        ap.error("--bin applies to --objects-in-a-row only")
+    repeats = 5 if a.repeats is None else a.repeats
+    if a.object:
         objects = [(f"#{i + 1}", o) for i, o in enumerate(a.object)]
     else:
         r0 = robot.capture.nominal_object_radius
         objects = [(k, (x, y, r0)) for k, (x, y) in paper_locations().items()]
     wall = time.perf_counter()
     from core.labdata.progress import trial_progress  # a bar on a terminal, nothing when piped
-    with trial_progress(len(objects) * a.repeats) as progress:
+    with trial_progress(len(objects) * repeats) as progress:
         batch = dict(planner=a.planner, time_limit_s=a.time_limit,
                      sim_overrides=overrides or None, progress=progress)
         run: Callable[..., Any] = run_trials
@@ -121,9 +197,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             run = functools.partial(record_trials, a.record)
         if a.workers >= 1:
             with cf.ProcessPoolExecutor(a.workers) as pool:
-                results = run(a.robot, objects, a.repeats, a.seed, map_fn=pool.map, **batch)
+                results = run(a.robot, objects, repeats, a.seed, map_fn=pool.map, **batch)
         else:
-            results = run(a.robot, objects, a.repeats, a.seed, **batch)
+            results = run(a.robot, objects, repeats, a.seed, **batch)
     if a.csv is not None:
         from core.labdata.results_csv import write_trials_csv
         write_trials_csv(a.csv, results)

@@ -1,0 +1,250 @@
+"""Several objects in a row (issue #17.3): a queue over the Fig. 3 machine, one object after another.
+
+The paper's state machine (:mod:`core.control.grasp_place`) handles one object: settle, plan,
+approach, grasp, move to the bin, release. :class:`ObjectRow` keeps a queue of objects and,
+after every control tick, looks at the machine: when it has ``released`` the current object at
+the bin, the next one starts (``ControlStack.start``: settle -> plan -> approach -> grasp ->
+move_to_bin -> release) until the queue is empty. When the machine *stops* on an object
+(planner refusal, tracking lost, grasp missed too often, bin not reached, a per-object time
+limit), that object is recorded as failed with the machine's reason and the row goes on with
+the next object. Only the operator's STOP (:meth:`ObjectRow.stop`) or a disarmed stack ends the
+row early; the objects not tried are recorded as skipped, with that reason. (The operator's STOP
+must go through :meth:`ObjectRow.stop`: a stop the row does not know of looks like a failure
+of the current object, and the row would go on.) A bin given to the row is the machine's for
+that row only.
+
+The row is pure bookkeeping, called from the loop thread (the only one that touches the stack):
+:meth:`ObjectRow.start` and :meth:`ObjectRow.after_tick` return the object whose turn begins, so
+the caller can put it into a simulated world (the simulator holds one object at a time);
+:func:`run_row` drives a :class:`core.control.sim_loop.SimLoop` that way. :func:`bin_at` turns a
+bin placed on the table (a point) into the configuration ``move_to_bin`` goes to.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+import numpy as np
+
+from core.control.grasp_place import Phase
+from core.control.params import BinParams, StateMachineParams
+from core.robots import SoftArm
+
+RowState = Literal["idle", "running", "done", "stopped"]
+Status = Literal["released", "failed", "skipped"]
+
+
+@dataclasses.dataclass(frozen=True)
+class RowObject:
+    """One object of the queue: centre ``(x, y)`` and radius ``r`` on the table (m)."""
+
+    x: float
+    y: float
+    r: float
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(v) for v in (self.x, self.y, self.r)) or self.r <= 0:
+            raise ValueError(f"object ({self.x}, {self.y}) radius {self.r}: need finite x, y "
+                             "and a radius > 0 (m)")
+
+
+@dataclasses.dataclass(frozen=True)
+class ObjectOutcome:
+    """What became of one object of the row (times are simulated/loop seconds)."""
+
+    index: int  # 0-based position in the queue
+    object: RowObject
+    status: Status
+    reason: str | None  # None when released
+    started_s: float | None = None
+    ended_s: float | None = None
+    approach_s: float | None = None
+    return_s: float | None = None
+    replans: int = 0
+
+    @property
+    def released(self) -> bool:
+        return self.status == "released"
+
+
+class ObjectRow:
+    """A queue of objects taken to one bin, one after another, over a control stack's machine.
+
+    Args:
+        objects: The queue, in the order the arm takes them (at least one).
+        bin_params: Where ``move_to_bin`` goes; None keeps the robot's ``[bin]``.
+        object_time_limit_s: An object still not released this long after its start fails
+            with that reason (None: only the machine's own timeouts apply).
+        check_release: Optional ``object -> reason or None`` called when the machine says
+            ``released`` (e.g. the trials check the object really lies at the bin); a reason
+            turns the outcome into a failure.
+    """
+
+    def __init__(self, objects: Sequence[RowObject], bin_params: BinParams | None = None,
+                 object_time_limit_s: float | None = None,
+                 check_release: Callable[[RowObject], str | None] | None = None):
+        self.objects = tuple(objects)
+        if not self.objects:
+            raise ValueError("a row needs at least one object")
+        if object_time_limit_s is not None and not object_time_limit_s > 0:
+            raise ValueError(f"object_time_limit_s must be > 0, got {object_time_limit_s}")
+        self.bin_params = bin_params
+        self.object_time_limit_s = object_time_limit_s
+        self.check_release = check_release
+        self.state: RowState = "idle"
+        self.current: int | None = None
+        self.outcomes: list[ObjectOutcome] = []
+        self.reason: str | None = None
+        self._started_s = 0.0
+        self._robot_bin: BinParams | None = None  # the machine's bin before the row
+
+    # -- progress ------------------------------------------------------------------------------
+    @property
+    def released(self) -> int:
+        return sum(o.released for o in self.outcomes)
+
+    def progress(self) -> str:
+        """``"object 2 of 3"`` while running, else e.g. ``"2/3 released"``."""
+        n = len(self.objects)
+        if self.state == "running" and self.current is not None:
+            return f"object {self.current + 1} of {n}"
+        return f"{self.released}/{n} released"
+
+    # -- the loop thread's calls ---------------------------------------------------------------
+    def start(self, stack: Any, t: float) -> RowObject:
+        """Start the first object (the stack must be armed); returns it."""
+        if self.state != "idle":
+            raise RuntimeError(f"the row was already started ({self.state})")
+        if not stack.armed:
+            raise RuntimeError("row refused: the arm is not armed")
+        self._robot_bin = stack.machine.bin
+        if self.bin_params is not None:
+            stack.machine.bin = self.bin_params  # for this row only: put back when it ends
+        self.state = "running"
+        return self._begin(stack, 0, t)
+
+    def _begin(self, stack: Any, index: int, t: float) -> RowObject:
+        self.current = index
+        self._started_s = t
+        stack.start(t)
+        return self.objects[index]
+
+    def _record(self, stack: Any, status: Status, reason: str | None, t: float) -> None:
+        m = stack.machine
+        assert self.current is not None
+        self.outcomes.append(ObjectOutcome(
+            self.current, self.objects[self.current], status, reason, self._started_s, t,
+            m.approach_s, m.return_s, m.replans))
+
+    def after_tick(self, stack: Any, t: float) -> RowObject | None:
+        """Look at the machine after a tick at ``t``; returns the next object if one starts."""
+        if self.state != "running":
+            return None
+        m = stack.machine
+        if not stack.armed:  # a device fault disarmed the stack: nothing more moves
+            self._end(stack, "stopped", m.reason or "the arm was disarmed", t)
+            return None
+        if m.phase is Phase.IDLE:  # the machine was reset under the row (re-armed, a goto)
+            self._end(stack, "stopped", "the grasp-and-place task was reset", t)
+            return None
+        limit = self.object_time_limit_s
+        if m.phase not in (Phase.RELEASED, Phase.STOPPED) and limit is not None \
+                and t - self._started_s >= limit:
+            m.stop(t, f"time limit {limit:g} s reached in {m.phase.value}")
+        if m.phase is Phase.RELEASED:
+            obj = self.objects[self.current]  # type: ignore[index]
+            why = self.check_release(obj) if self.check_release else None
+            self._record(stack, "failed" if why else "released", why, t)
+        elif m.phase is Phase.STOPPED:
+            self._record(stack, "failed", m.reason or "stopped", t)
+        else:
+            return None
+        nxt = (self.current or 0) + 1
+        if nxt >= len(self.objects):
+            self.state, self.current = "done", None
+            stack.machine.bin = self._robot_bin
+            return None
+        return self._begin(stack, nxt, t)
+
+    def stop(self, stack: Any, t: float, reason: str = "operator STOP") -> None:
+        """The operator's STOP: hold the arm and end the row; the rest is skipped with ``reason``."""
+        stack.stop(t, reason)
+        if self.state in ("idle", "running"):
+            self._end(stack, "stopped", reason, t)
+
+    def _end(self, stack: Any, state: RowState, reason: str, t: float) -> None:
+        if self.state == "running" and self.current is not None:
+            self._record(stack, "failed", reason, t)
+        done = {o.index for o in self.outcomes}
+        self.outcomes += [ObjectOutcome(i, o, "skipped", f"row stopped: {reason}")
+                          for i, o in enumerate(self.objects) if i not in done]
+        self.state, self.current, self.reason = state, None, reason
+        if self._robot_bin is not None:
+            stack.machine.bin = self._robot_bin
+
+
+def run_row(loop: Any, row: ObjectRow, place: Callable[[RowObject], None],
+            time_limit_s: float, observe: Callable[[Any], Any] | None = None) -> ObjectRow:
+    """Drive ``row`` on a :class:`~core.control.sim_loop.SimLoop` that is armed already.
+
+    ``place(obj)`` puts each object into the simulated world when its turn begins (the first
+    before the row starts). Ticks until the row is done or ``time_limit_s`` of simulated time
+    passed (then the row is stopped with that reason). ``observe(telemetry)`` sees every tick.
+    """
+    place(row.objects[0])
+    loop.submit(lambda s, t: row.start(s, t))
+    n = round(time_limit_s * 1e9 / loop.period_ns)
+    for _ in range(max(1, n)):
+        t = loop.t
+        control = loop.tick()
+        if observe is not None:
+            observe(control)
+        nxt = row.after_tick(loop.stack, t)
+        if nxt is not None:
+            place(nxt)
+        if row.state not in ("idle", "running"):
+            return row
+    row.stop(loop.stack, loop.t, f"row time limit {time_limit_s:g} s reached")
+    return row
+
+
+def bin_drop_point(robot: SoftArm, kappa: Any, radius: float) -> np.ndarray:
+    """Where an object of ``radius`` held in the gripper sits with the arm at ``kappa`` (m)."""
+    from core.kinematics.planar import forward_kinematics, point_in_frame
+    tip = forward_kinematics(np.asarray(kappa, dtype=float), robot.lengths, robot.base_pose)[-1]
+    return np.asarray(point_in_frame(tip, (robot.gripper.w_off_along,
+                                           2 * robot.gripper.g_off + radius)), dtype=float)
+
+
+def bin_at(robot: SoftArm, x: float, y: float, radius: float | None = None) -> BinParams:
+    """The bin placed at ``(x, y)`` on the table, as the configuration ``move_to_bin`` goes to.
+
+    The configuration is the grasp planner's final pose for an object of ``radius`` (default
+    the robot's nominal object) lying at the bin: with the arm there, the held object is over
+    the bin point, so releasing it drops it there. Only the final pose is needed (the arm moves
+    to the bin directly, not along an approach), so a plan whose approach failed still gives a
+    bin when its final pose was solved. Raises ValueError with the reason when no pose puts the
+    gripper over the point (out of reach, on the base, on the straight arm).
+    """
+    from core.planning.grasp import GraspRefused, plan_grasp
+    r = robot.capture.nominal_object_radius if radius is None else float(radius)
+    where = f"({x * 1000:.0f}, {y * 1000:.0f}) mm"
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r) and r > 0):
+        raise ValueError(f"bin at {where}: need a finite point and an object radius > 0")
+    try:
+        plan = plan_grasp(robot, np.zeros(robot.n_segments), (x, y), r)
+    except GraspRefused as exc:
+        raise ValueError(f"the bin at {where} cannot be reached: {exc}") from None
+    if len(plan.status) == 0 or plan.status[-1] != "ok":
+        raise ValueError(f"the bin at {where} cannot be reached: no arm shape puts the gripper "
+                         "over it")
+    kappa = np.asarray(plan.kappas[-1], dtype=float)
+    miss = float(np.hypot(*(bin_drop_point(robot, kappa, r) - (x, y))))
+    tol = StateMachineParams.from_robot(robot).release_distance_m
+    if miss > tol:  # the solver's palm-point error is far below this
+        raise ValueError(f"the bin at {where} cannot be reached: the closest pose drops "
+                         f"{miss * 1000:.0f} mm away")
+    return BinParams(kappa, robot.bin.drop_radius_m)
