@@ -129,7 +129,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--slip", type=float, default=None, metavar="F",
                     help="extensible arm: racks slip on their pinions, losing F (0..0.5) of each "
                          "move's travel on the proximal platform (default: no slip)")
-    ap.add_argument("--slip-jitter", type=float, default=0.03, metavar="J",
+    ap.add_argument("--slip-jitter", type=float, default=0.015, metavar="J",
                     help="standard deviation of the per-move random part of the slip fraction")
     ap.add_argument("--tip-port", type=int, default=None, metavar="P",
                     help="extensible arm: send the measured tip to UDP 127.0.0.1:P every tick")

@@ -57,7 +57,7 @@ class EmulatorOptions:
     sched_priority: int = 0
     cpus: frozenset[int] | None = None
     slip: float | None = None
-    slip_jitter: float = 0.03
+    slip_jitter: float = 0.015
     tip_noise: float = 0.002
     tip_port: int | None = None
 

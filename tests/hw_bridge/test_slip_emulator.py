@@ -62,7 +62,8 @@ def test_slip_makes_the_racks_fall_short_of_the_encoders_by_the_closed_form() ->
         seg1 = L0 + (1 - f) * (T1 - T2) + (1 - f / 2) * T2
         assert emu.racks.tip == pytest.approx([0, 0, seg1 + seg2], abs=5e-5)
         end = time.monotonic() + 2.0
-        while (frame := rx.latest()) is None and time.monotonic() < end:
+        while ((frame := rx.latest()) is None or frame.seq != emu.tip_seq) \
+                and time.monotonic() < end:  # the frame of the last tick
             time.sleep(0.01)
         assert frame is not None and frame.points.shape == (1, 3)
         assert frame.points[0] == pytest.approx([0, 0, seg1 + seg2], abs=0.003)  # 6 sigma
