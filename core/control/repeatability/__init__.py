@@ -18,10 +18,7 @@ link: a move ends with the motors at their demand) for three ways of positioning
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
-import sys
 from typing import Literal
 
 import numpy as np
@@ -30,8 +27,7 @@ import numpy.typing as npt
 from core.control.closed_loop import ClosedLoopSettings, position
 from core.control.rack_slip import SlipModel, SlippingRacks
 from core.kinematics import delta as dk
-from core.robots import ExtensibleArm, load
-from core.units import fmt_mm
+from core.robots import ExtensibleArm
 
 Array = npt.NDArray[np.float64]
 Mode = Literal["open", "encoders", "tip"]
