@@ -83,3 +83,19 @@ def test_unreachable_target_moves_nothing(slipping, runner_on) -> None:
     with pytest.raises(ValueError, match="out of reach"):
         closed_loop_move(runner, [0.0, 0.0, 3.0], TipSensor(rx))
     assert runner.snapshot.job_id == 0
+
+
+def test_repeatability_run_open_vs_closed_loop_on_the_tip_sensor(slipping, runner_on) -> None:
+    from console.panels.repeatability import run_repeatability
+    port, rx = slipping
+    runner = runner_on(serial_to(port))
+    tip = TipSensor(rx)
+    enc = run_repeatability(runner, ROBOT, TARGET, 1)  # the encoders: no miss to be seen
+    assert enc.source == "encoders" and np.linalg.norm(enc.offset) < 0.001
+    open_ = run_repeatability(runner, ROBOT, TARGET, 2, tip=tip)
+    closed = run_repeatability(runner, ROBOT, TARGET, 2, tip=tip, closed_loop=True)
+    assert open_.message == "" and closed.message == "" and len(closed.tips) == 2
+    assert open_.source == closed.source == "tip sensor" and closed.closed_loop
+    # 10 % slip, no jitter: the open loop misses the same way twice, the closed loop does not.
+    assert np.linalg.norm(open_.offset) > 0.005
+    assert np.linalg.norm(closed.offset) < 0.003
