@@ -6,7 +6,8 @@ with pyserial, a wire model at the configured baud rate (each direction a serial
 wire for a while), the firmware's :class:`~hw_bridge.device.DeviceCore` with its motor bank and,
 for the soft arm, the seeded :class:`core.control.sim.EmulatorPlant` sending one UDP
 motion-capture frame per tick and an optional UDP scene channel (place/remove the object, read
-the scene). What it does is reported through an :data:`EventSink` (the command line prints
+the scene); for the extensible arm, optionally racks that slip on their pinions and a noisy tip
+stream (``--slip``, ``--tip-port``: :mod:`core.control.rack_slip`). What it does is reported through an :data:`EventSink` (the command line prints
 each event as a JSON line). :class:`EmulatorOptions` are its settings.
 
 Command line, stdout protocol and scene channel: ``python -m hw_bridge.emulator``
