@@ -81,7 +81,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
                    help="also stream the lab channels live over the Foxglove WebSocket protocol "
                         "on port P, bound like --host (off by default; read-only)")
-    return p.parse_args(argv)
+    p.add_argument("--slip", type=float, default=None, metavar="F",
+                   help="extensible arm on the emulator: its racks slip on their pinions by F "
+                        "(0..0.5) of each move's travel, and it streams a noisy tip measurement "
+                        "(Repeatability: open vs closed loop on the tip); off by default")
+    args = p.parse_args(argv)
+    if args.slip is not None and not 0.0 <= args.slip <= 0.5:
+        p.error("--slip must be in [0, 0.5]")
+    return args
 
 
 def is_loopback(host: str) -> bool:
@@ -166,7 +173,8 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     device_log: list[str] = []
     if mode == "emulator" and not port_path:  # what the emulator logged after the last start
         device_log = hardware_setup.report_device_log(Path(args.data_dir))
-    services = hardware_setup.attach(robot, store, mode, port_path, cpus=cpus)
+    services = hardware_setup.attach(robot, store, mode, port_path, cpus=cpus,
+                                     slip=getattr(args, "slip", None))
     if args.demo:
         services = services.replace(demo=DemoMotion(store))
     app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
@@ -196,6 +204,11 @@ def main(argv: list[str] | None = None) -> int:
         Path(args.data_dir).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         print(f"serve.py: --data-dir {args.data_dir}: {exc}", file=sys.stderr)
+        return 2
+    if args.slip is not None and (robot.kind != "delta" or args.hardware != "emulator"
+                                  or args.port_path):
+        print("serve.py: --slip needs the extensible arm on the device emulator",
+              file=sys.stderr)
         return 2
     from console.hardware_setup import describe
     status = describe(robot, args.hardware, args.port_path)

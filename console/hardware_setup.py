@@ -100,13 +100,21 @@ def report_device_log(data_root: Path) -> list[str]:
 
 
 def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | None,
-           cpus: CpuPartition | None | Literal["auto"] = "auto") -> ConsoleServices:
+           cpus: CpuPartition | None | Literal["auto"] = "auto",
+           slip: float | None = None) -> ConsoleServices:
     """Start ``robot``'s control loop on its hardware, before the app and its panels exist.
 
     Returns the services with ``hardware`` (what to close), ``soft_control`` (soft arm) or
     ``extensible_runner`` (extensible arm; ``store`` is the console's command/report channel),
     ``bridge_controls`` (None for the extensible arm's in-process mock) and ``cpu_partition``.
+    ``slip`` (extensible arm on the emulator only): the emulator's racks slip on their pinions
+    by that fraction (``--slip``) and stream the tip, read by ``tip_sensor``.
+
+    Raises:
+        ValueError: ``slip`` for another arm or hardware than the extensible arm's emulator.
     """
+    if slip is not None and (robot.kind != "delta" or port_path or mode != "emulator"):
+        raise ValueError("--slip needs the extensible arm on the device emulator")
     from hw_bridge.config import BridgeConfig
 
     out = HardwareAttachment(describe(robot, mode, port_path), kind=link_kind(mode, port_path),
@@ -131,11 +139,22 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
         out.closers.insert(0, runner.close)
         return ConsoleServices(hardware=out, extensible_runner=runner, cpu_partition=part)
     path = port_path
+    tip_sensor = None  # serve.py --slip: the emulator's tip stream
     if path is None:
         from hw_bridge import soft_arm_link
 
         on_cpus = () if part is None else ("--cpus", format_cpus(part.realtime))
-        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus])
+        slip_args: tuple[str, ...] = ()
+        if slip is not None:
+            from hw_bridge.extensible_closed_loop import TipSensor
+            from hw_bridge.mocap import UdpMocapReceiver
+            receiver = UdpMocapReceiver(0)
+            receiver.start()
+            out.closers.append(receiver.stop)
+            tip_sensor = TipSensor(receiver)
+            slip_args = ("--slip", str(slip), "--tip-port", str(receiver.addr[1]))
+        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus,
+                                                  *slip_args])
         out.closers.append(emulator.stop)
         path = emulator.path
         out.port_path = path
@@ -147,4 +166,5 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
     out.closers.insert(0, runner.close)
     runner.start()
     return ConsoleServices(hardware=out, extensible_runner=runner,
-                           bridge_controls=runner.bridge_controls, cpu_partition=part)
+                           bridge_controls=runner.bridge_controls, cpu_partition=part,
+                           tip_sensor=tip_sensor)

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from console.hardware_setup import HardwareAttachment
     from hw_bridge.controls import BridgeControls
     from hw_bridge.cpu_partition import CpuPartition
+    from hw_bridge.extensible_closed_loop import TipSensor
     from hw_bridge.extensible_process import ExtensibleProcess
     from hw_bridge.soft_arm_process import ControlProcess
 
@@ -36,6 +37,9 @@ class ConsoleServices:
         cpu_partition: Where the real-time loop runs and where everything else does (None: no
             pinning).
         demo: The "Run demo motion" button's motion (``serve.py --demo``; None: no button).
+        tip_sensor: The extensible arm's tip measurement
+            (:class:`hw_bridge.extensible_closed_loop.TipSensor`; ``serve.py --slip F`` on the
+            emulator; None: none, the Repeatability panel measures with the encoders).
     """
 
     hardware: HardwareAttachment | None = None
@@ -44,6 +48,7 @@ class ConsoleServices:
     bridge_controls: BridgeControls | None = None
     cpu_partition: CpuPartition | None = None
     demo: DemoMotion | None = None
+    tip_sensor: TipSensor | None = None
 
     def close(self) -> None:
         """Stop what was started: the demo, then loops, links and the emulator."""

@@ -2,7 +2,8 @@
 
 ``python -m hw_bridge.emulator --robot extensible|soft-arm [--baud B] [--drop P] [--corrupt P]
 [--stall-after S] [--disconnect-after S [--disconnect-for D]] [--motors N] [--mocap-port P]
-[--seed S] [--object X Y R] [--control-port P]``
+[--seed S] [--object X Y R] [--control-port P] [--slip F [--slip-jitter J]] [--tip-port P
+[--tip-noise M]]``
 
 * stdout line 1: the pty slave path (open it with pyserial); later lines: JSON events
   (``{"event": "watchdog_tripped", "t": ..., "positions": [...]}``, armed, disarmed,
@@ -26,6 +27,13 @@ object centre while an object is present. ``--object X Y R`` places a disc at st
 ``{"cmd": "place_object", "x": X, "y": Y, "r": R}``, ``{"cmd": "remove_object"}``,
 ``{"cmd": "scene"}`` (answer: ``object`` [x, y, r] or null, ``captured``, ``finger`` polyline
 or null). It stands in for moving the real object by hand.
+
+Extensible arm: ``--slip F`` makes the racks slip on their pinions
+(:mod:`core.control.rack_slip`: each move loses F of its travel on the proximal platform, less
+on distal ones, plus a per-move random part of standard deviation ``--slip-jitter``; the
+encoders do not see it). ``--tip-port P`` sends the tip, as a mocap-like measurement with
+Gaussian noise ``--tip-noise`` (m per axis), every tick to ``127.0.0.1:P`` in the motion-capture
+packet (one point: x, y, z in m). Without these flags the racks follow the encoders exactly.
 
 This module is the command line (argument checks, JSON event lines on stdout, signals); the
 emulator itself is :class:`hw_bridge.pty_emulator.Emulator`.
@@ -118,7 +126,23 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--cpus", default=None, metavar="LIST",
                     help="run on these CPUs (comma-separated), moved there once started up, "
                          "e.g. the real-time CPU of hw_bridge.cpu_partition")
+    ap.add_argument("--slip", type=float, default=None, metavar="F",
+                    help="extensible arm: racks slip on their pinions, losing F (0..0.5) of each "
+                         "move's travel on the proximal platform (default: no slip)")
+    ap.add_argument("--slip-jitter", type=float, default=0.015, metavar="J",
+                    help="standard deviation of the per-move random part of the slip fraction")
+    ap.add_argument("--tip-port", type=int, default=None, metavar="P",
+                    help="extensible arm: send the measured tip to UDP 127.0.0.1:P every tick")
+    ap.add_argument("--tip-noise", type=float, default=0.002, metavar="M",
+                    help="tip measurement noise, m per axis (default 0.002)")
     args = ap.parse_args(argv)
+    if args.slip is not None and not 0.0 <= args.slip <= 0.5:
+        ap.error("--slip must be in [0, 0.5]")
+    if not (math.isfinite(args.slip_jitter) and args.slip_jitter >= 0
+            and math.isfinite(args.tip_noise) and args.tip_noise >= 0):
+        ap.error("--slip-jitter and --tip-noise must be finite and >= 0")
+    if args.tip_port is not None and not 1 <= args.tip_port <= 65535:
+        ap.error("--tip-port must be in 1..65535")
     if args.cpus is not None:
         from hw_bridge.cpu_partition import parse_cpus
         try:

@@ -6,7 +6,8 @@ with pyserial, a wire model at the configured baud rate (each direction a serial
 wire for a while), the firmware's :class:`~hw_bridge.device.DeviceCore` with its motor bank and,
 for the soft arm, the seeded :class:`core.control.sim.EmulatorPlant` sending one UDP
 motion-capture frame per tick and an optional UDP scene channel (place/remove the object, read
-the scene). What it does is reported through an :data:`EventSink` (the command line prints
+the scene); for the extensible arm, optionally racks that slip on their pinions and a noisy tip
+stream (``--slip``, ``--tip-port``: :mod:`core.control.rack_slip`). What it does is reported through an :data:`EventSink` (the command line prints
 each event as a JSON line). :class:`EmulatorOptions` are its settings.
 
 Command line, stdout protocol and scene channel: ``python -m hw_bridge.emulator``
@@ -56,6 +57,10 @@ class EmulatorOptions:
     control_port: int | None = None
     sched_priority: int = 0
     cpus: frozenset[int] | None = None
+    slip: float | None = None
+    slip_jitter: float = 0.015
+    tip_noise: float = 0.002
+    tip_port: int | None = None
 
 
 class _Writer(threading.Thread):
@@ -87,6 +92,9 @@ class Emulator:
     def __init__(self, robot: Robot, options: EmulatorOptions, emit: EventSink):
         self.options = options
         self.emit = emit
+        if (options.slip is not None or options.tip_port is not None) and not isinstance(
+                robot, ExtensibleArm):
+            raise ValueError("--slip and --tip-port need the extensible arm")
         # Set by the command line: a hw_bridge.device_events.HostWatch whose poll() is true once
         # the host process died and the watchdog's outcome was logged (the emulator then exits).
         self.host_watch: Any = None
@@ -123,6 +131,11 @@ class Emulator:
                 self.control.setblocking(False)
         elif options.object is not None or options.control_port is not None:
             raise ValueError("--object and --control-port need the soft arm")
+        self.racks: Any = None  # core.control.rack_slip.SlippingRacks (extensible arm)
+        self.tip_udp: socket.socket | None = None
+        self.tip_seq = 0
+        if options.slip is not None or options.tip_port is not None:
+            self._slip_setup(robot, options)
         self.writer = _Writer(self.master, self.baud, lambda: self.host_present)
         self.rx_pending: list[tuple[float, bytes]] = []
         self.rx_busy_until = now
@@ -130,6 +143,34 @@ class Emulator:
         self.stalled = False
         self.cut = False
         self.requests: set[str] = set()  # filled by signal handlers, served by the loop
+
+    def _slip_setup(self, robot: Robot, options: EmulatorOptions) -> None:
+        """Extensible arm: racks that slip on their pinions (``--slip``) and the tip stream."""
+        assert isinstance(robot, ExtensibleArm)
+        if self.bridge.n_motors != robot.n_motors:
+            raise ValueError(f"--slip needs the arm's {robot.n_motors} motors")
+        from core.control.rack_slip import SlipModel, SlippingRacks
+        model = SlipModel(fraction=options.slip or 0.0,
+                          jitter=options.slip_jitter if options.slip is not None else 0.0,
+                          tip_noise=options.tip_noise,
+                          seed=0 if options.seed is None else options.seed)
+        self.racks = SlippingRacks(robot, model)
+        if options.tip_port is not None:
+            self.tip_udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.tip_addr = ("127.0.0.1", options.tip_port)
+
+    def _step_racks(self, now: float) -> None:
+        """The racks follow the motors (slipping); send the measured tip (one point x, y, z)."""
+        self.racks.step_counts(self.core.motors.position, self.bridge.period_s)
+        if self.tip_udp is None:
+            return
+        self.tip_seq += 1
+        try:
+            self.tip_udp.sendto(encode_mocap_packet(self.tip_seq, now,
+                                                    self.racks.measured_tip()[None], True),
+                                self.tip_addr)
+        except OSError:
+            pass
 
     # -- wire ---------------------------------------------------------------------------------
     def _fault(self, data: bytes) -> bytes | None:
@@ -217,6 +258,8 @@ class Emulator:
                                 self.mocap_addr)
             except OSError:
                 pass
+        if self.racks is not None:
+            self._step_racks(now)
         self._flush_output()
 
     # -- scene channel (soft arm) --------------------------------------------------------------
@@ -301,7 +344,7 @@ class Emulator:
             os.close(self.master)
         except OSError:
             pass
-        for sock in (self.udp, self.control):
+        for sock in (self.udp, self.control, self.tip_udp):
             if sock is not None:
                 sock.close()
 

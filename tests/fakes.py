@@ -46,7 +46,8 @@ class FakeClock:
 
 def console_app(robot: Any, server: Any, *, soft_control: Any = None,
                 extensible_runner: Any = None, bridge_controls: Any = None, hardware: Any = None,
-                demo: bool = False, mirror_commands: bool = True, **kwargs: Any) -> Any:
+                demo: bool = False, mirror_commands: bool = True, tip_sensor: Any = None,
+                **kwargs: Any) -> Any:
     """A ConsoleApp with exactly the services a test names -- the one place tests build them.
 
     ``soft_control="process"`` starts a real :class:`hw_bridge.soft_arm_process.ControlProcess`
@@ -67,5 +68,6 @@ def console_app(robot: Any, server: Any, *, soft_control: Any = None,
     services = ConsoleServices(hardware=hardware, soft_control=soft_control,
                                extensible_runner=extensible_runner,
                                bridge_controls=bridge_controls,
-                               demo=DemoMotion(store) if demo else None)
+                               demo=DemoMotion(store) if demo else None,
+                               tip_sensor=tip_sensor)
     return ConsoleApp(robot, server, store=store, services=services, **kwargs)

@@ -8,11 +8,19 @@ point. Moves are joint-space straight lines within the rack, motor and tip speed
 rack and bending limits), streamed by the :class:`~hw_bridge.extensible_runner.ExtensibleRunner`.
 On the emulator the encoders are exact, so the spread is only encoder quantisation; a real arm
 adds its backlash and friction.
+
+With a tip sensor (``serve.py --slip F``: the emulator's racks slip on their pinions and it
+streams a noisy tip measurement, :mod:`hw_bridge.extensible_closed_loop`), the tip is measured by
+that sensor instead -- the encoders cannot see slip -- and the *Closed loop on the tip* checkbox
+corrects every move to the point on it (Hughes 2020's suggested closed loop, eq. 5 with the
+measured posture, :mod:`core.control.closed_loop`). Open and closed loop can then be compared on
+the same arm (``python -m core.control.repeatability`` does the same study offline).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import html
 import threading
 from typing import Any, Callable
@@ -25,9 +33,11 @@ from console.panels.base import Panel
 from console.panels.paths import extensible_runner
 from console.state import ArmState
 from core.units import fmt_mm, mm_value
+from core.control.closed_loop import ClosedLoopSettings
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import ExtensibleArm
+from hw_bridge.extensible_closed_loop import TipSensor, closed_loop_move
 from hw_bridge.extensible_runner import ExtensibleRunner
 
 Array = npt.NDArray[np.float64]
@@ -42,6 +52,8 @@ class RepeatabilityResult:
     tips: Array
     requested: int
     message: str = ""
+    source: str = "encoders"  # what measured the tips: "encoders" | "tip sensor"
+    closed_loop: bool = False
 
     @property
     def mean(self) -> Array:
@@ -65,17 +77,26 @@ class RepeatabilityResult:
 def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt.ArrayLike,
                       n: int, *, on_progress: Callable[[int, str], None] | None = None,
                       should_stop: Callable[[], bool] = lambda: False,
-                      timeout: float = 120.0) -> RepeatabilityResult:
+                      timeout: float = 120.0, tip: TipSensor | None = None,
+                      closed_loop: bool = False) -> RepeatabilityResult:
     """Retract, move to ``point``, measure; ``n`` times. Blocks (run it on a worker thread).
 
+    Without ``tip`` the tip is measured from the encoders. With a ``tip`` sensor it is measured
+    by the sensor, and ``closed_loop`` corrects each move to the point on it
+    (:func:`hw_bridge.extensible_closed_loop.closed_loop_move`; otherwise the move is open loop).
+
     Raises:
-        ValueError: ``n`` < 1, a bad point, or a point the arm cannot reach (nothing moves).
+        ValueError: ``n`` < 1, a bad point, a point the arm cannot reach, or ``closed_loop``
+            without a tip sensor (nothing moves).
     """
     p = np.asarray(point, dtype=float)
     if p.shape != (3,) or not np.all(np.isfinite(p)):
         raise ValueError(f"point must be 3 finite numbers (m), got {point!r}")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"repetitions must be an integer >= 1, got {n!r}")
+    if closed_loop and tip is None:
+        raise ValueError("closed loop needs a tip sensor (serve.py --slip F starts the "
+                         "emulator's tip stream)")
     ik = solve_tip_ik(robot, p)
     if not ik.reachable:
         raise ValueError(f"point is unreachable: the closest feasible tip is "
@@ -84,18 +105,30 @@ def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt
     runner.start()
     tips: list[Array] = []
     progress = on_progress or (lambda i, s: None)
+    done = functools.partial(RepeatabilityResult, p, requested=n,
+                             source="encoders" if tip is None else "tip sensor",
+                             closed_loop=closed_loop)
     for i in range(n):
         for goal, label in ((home, "retract"), (ik.lengths, "to point")):
             if should_stop():
-                return RepeatabilityResult(p, np.array(tips).reshape(-1, 3), n, "stopped")
+                return done(np.array(tips).reshape(-1, 3), message="stopped")
             progress(i, f"{label} {i + 1}/{n}")
+            if tip is not None and goal is ik.lengths:
+                settings = ClosedLoopSettings() if closed_loop else ClosedLoopSettings(0)
+                try:
+                    reached = closed_loop_move(runner, p, tip, settings=settings,  # type: ignore[arg-type]
+                                               timeout=timeout).measured[-1]
+                except (RuntimeError, TimeoutError) as exc:
+                    return done(np.array(tips).reshape(-1, 3), message=str(exc))
+                break
             result = runner.wait(runner.move_to(goal, f"{label} {i + 1}/{n}"), timeout)
             if result is None or not result.ok:
                 why = "timed out" if result is None else result.message
-                return RepeatabilityResult(p, np.array(tips).reshape(-1, 3), n, why)
-        tips.append(np.asarray(result.final_tip, dtype=float))
+                return done(np.array(tips).reshape(-1, 3), message=why)
+            reached = result.final_tip
+        tips.append(np.asarray(reached, dtype=float))
     progress(n, "done")
-    return RepeatabilityResult(p, np.array(tips), n)
+    return done(np.array(tips))
 
 
 def result_html(r: RepeatabilityResult) -> str:
@@ -114,8 +147,9 @@ def result_html(r: RepeatabilityResult) -> str:
             f"<b>{len(r.tips)}/{r.requested} runs</b> to "
             f"({', '.join(fmt_mm(v, 1) for v in r.point)}) mm{note}"
             f"<table style='border-collapse:collapse'><tr><th></th>{head}</tr>{body}"
-            "</table><span style='opacity:.6'>tip from the encoders; spread = ±(max − min)/2 "
-            "as in Table I</span></div>")
+            f"</table><span style='opacity:.6'>tip from the {r.source}"
+            f"{' (closed loop on it)' if r.closed_loop else ''}; spread = ±(max − min)/2 "
+            "as in Table I (hardware, open loop: ±19 mm one segment, ±29 mm two)</span></div>")
 
 
 class RepeatabilityPanel(Panel):
@@ -133,6 +167,13 @@ class RepeatabilityPanel(Panel):
         self.use_tip = self.gui.add_button("Point ← current tip")
         self.count = self.gui.add_number("Repetitions", 5, min=1, max=50, step=1,
                                          hint="Table I: five moves per point.")
+        sensor = self.app.services.tip_sensor
+        self.closed = self.gui.add_checkbox(
+            "Closed loop on the tip", False, disabled=sensor is None,
+            hint=("Correct every move to the point on the tip sensor (eq. 5 with the measured "
+                  "tip); off: open loop, measured by the tip sensor." if sensor is not None else
+                  "Needs a tip sensor: serve.py --slip F (the emulator's slipping racks and "
+                  "tip stream). The encoders cannot see slip."))
         self.run_btn = self.gui.add_button("Run", color="green", icon=viser.Icon.PLAYER_PLAY)
         self.stop_btn = self.gui.add_button("Stop (hold)", color="red", icon=viser.Icon.PLAYER_STOP)
         self.progress = self.gui.add_progress_bar(0.0, color="blue")
@@ -161,8 +202,9 @@ class RepeatabilityPanel(Panel):
             return
         point = np.array([float(h.value) for h in self.inputs]) / 1e3
         n = int(self.count.value)
+        closed = bool(self.closed.value) and self.app.services.tip_sensor is not None
         self._stop.clear()
-        self._thread = threading.Thread(target=self._work, args=(point, n), daemon=True,
+        self._thread = threading.Thread(target=self._work, args=(point, n, closed), daemon=True,
                                         name="repeatability")
         self._thread.start()
 
@@ -173,7 +215,7 @@ class RepeatabilityPanel(Panel):
         if runner is not None and runner.started:
             runner.stop()
 
-    def _work(self, point: Array, n: int) -> None:
+    def _work(self, point: Array, n: int, closed: bool = False) -> None:
         runner = extensible_runner(self.app)
         self.progress.value = 0.0
 
@@ -182,7 +224,8 @@ class RepeatabilityPanel(Panel):
             self._say(f"Running: {text}…")
         try:
             result = run_repeatability(runner, self.app.robot, point, n,  # type: ignore[arg-type]
-                                       on_progress=progress, should_stop=self._stop.is_set)
+                                       on_progress=progress, should_stop=self._stop.is_set,
+                                       tip=self.app.services.tip_sensor, closed_loop=closed)
         except ValueError as exc:
             self._say(f"⚠ {exc}")
             return
