@@ -41,17 +41,19 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
     url = console_server(robot, "--no-token")
     shots = artifacts_dir / "layout"
     shots.mkdir(exist_ok=True)
-    for size, (width, height) in SIZES.items():
-        context = browser.new_context(viewport={"width": width, "height": height})
-        try:
-            page = context.new_page()
-            page.goto(url)
-            stop = page.get_by_role("button", name="STOP (Esc)")
-            stop.wait_for(timeout=60_000)
-            phase = page.locator('[data-testid="header-phase"]')
-            phase.wait_for(timeout=60_000)
-            page.locator('[data-testid="header-control"]').wait_for(timeout=30_000)
-            time.sleep(2.0)  # the software renderer draws the scene; notices arrive
+    context = browser.new_context(viewport={"width": 1600, "height": 1000})
+    try:
+        page = context.new_page()
+        page.goto(url)
+        stop = page.get_by_role("button", name="STOP (Esc)")
+        stop.wait_for(timeout=60_000)
+        phase = page.locator('[data-testid="header-phase"]')
+        phase.wait_for(timeout=60_000)
+        page.locator('[data-testid="header-control"]').wait_for(timeout=30_000)
+        time.sleep(2.0)  # the software renderer draws the scene; notices arrive
+        for size, (width, height) in SIZES.items():  # one page, resized: as a user turns a tablet
+            page.set_viewport_size({"width": width, "height": height})
+            time.sleep(1.0)
             close_notices(page)
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
@@ -60,5 +62,5 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
                 assert _on_screen(page, phase), f"the phase is off screen: {size}, {tab}"
                 assert page.evaluate("() => scrollY") == 0
                 page.screenshot(path=str(shots / f"{robot}-{size}-{tab.lower()}.png"))
-        finally:
-            context.close()
+    finally:
+        context.close()
