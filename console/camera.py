@@ -172,11 +172,11 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
         # Top-down: the arm's reach, x in [-span, span], y from just behind the base to span.
         top = frame_top_down("Top-down", (-span, span), (-0.25 * span, span), aspect)
         return (perspective, top)
-    # The extensible arm stands at the origin and reaches up to ``span``; it spends its time in
-    # the lower part (retracted it is a tenth of that tall). Frame that working volume, so the
-    # arm fills a good part of the view, rather than the whole table.
-    centre = (0.0, 0.0, 0.22 * span)
-    radius = 0.3 * span
+    # The extensible arm stands at the origin and reaches up to ``span``; it starts straight at
+    # mid-range racks (about half of that tall) and bends from there. Frame that working volume
+    # (full extension just fits), so the arm fills a good part of the view, not the whole table.
+    centre = (0.0, 0.0, 0.45 * span)
+    radius = 0.52 * span
     return (frame_sphere("Perspective", centre, radius, (0.75, -1.0, 0.55), aspect),
             frame_sphere("Front", centre, radius, (0.0, -1.0, 0.12), aspect),
             frame_sphere("Side", centre, radius, (1.0, 0.0, 0.12), aspect),

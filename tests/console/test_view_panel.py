@@ -105,16 +105,22 @@ def test_presets_look_at_the_table_and_keep_the_arm_left_of_the_panel(robot, asp
                 x, y = ndc(pose, c, aspect)
                 assert -1 <= x <= 1 - 2 * (1 - free) + 1e-9 and -1 <= y <= 1, (pose.name, c)
     else:
+        from console.model import DeltaModel
+        from core.kinematics import delta as dk
+        start = tuple(dk.tip_position(robot, DeltaModel(robot).initial()))  # the start pose's tip
         rest = (0.0, 0.0, robot.n_segments * robot.rack_min)       # the retracted arm's top
         for pose in poses:
-            for p in ((0.0, 0.0, 0.0), rest, (0.1, 0.1, 0.3 * span), (-0.1, -0.1, 0.3 * span)):
+            for p in ((0.0, 0.0, 0.0), rest, start, (0.1, 0.1, 0.3 * span),
+                      (-0.1, -0.1, 0.3 * span)):
                 x, y = ndc(pose, p, aspect)
                 assert -1 <= x <= 1 - 2 * (1 - free) + 1e-9 and -1 <= y <= 1, (pose.name, p)
-        # ... and the arm is not tiny: in a wide window the retracted arm spans >= 12 % of the
-        # canvas height (the old camera: 4.5 %).
         persp = poses[0]
-        h = abs(ndc(persp, rest, aspect)[1] - ndc(persp, (0.0, 0.0, 0.0), aspect)[1]) / 2
-        assert h >= (0.12 if aspect > 1.2 else 0.05), h
+        if aspect > 1.2:  # a wide window also shows the fully extended arm's top
+            assert -1 <= ndc(persp, (0.0, 0.0, span), aspect)[1] <= 1
+        # ... and the arm is not tiny: in a wide window the arm at its start pose spans >= 30 %
+        # of the canvas height (the old camera: under 15 %).
+        h = abs(ndc(persp, start, aspect)[1] - ndc(persp, (0.0, 0.0, 0.0), aspect)[1]) / 2
+        assert h >= (0.30 if aspect > 1.2 else 0.1), h
     with pytest.raises(ValueError, match="no camera preset 'Upside-down'"):
         camera.preset(robot.kind, "Upside-down", span, table)
     with pytest.raises(ValueError):
