@@ -9,7 +9,7 @@ and a few translucent ghost arms. Execute streams the path through the
 started on first use; it first joins the path from where the motors are). While it runs the
 panel shows the progress, the measured tip trace and a plot of the commanded and the measured
 tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
-console-wide STOP (any client), whose hook makes the runner hold position, as does a lost lease.
+header's STOP (any client; the one STOP), whose hook makes the runner hold position, as does a lost lease.
 
 Preview answers at once: the requested tip path is drawn while the worker plans, the status
 counts the seconds, and a plan that has not come back within ``PLAN_TIMEOUT_S`` is reported as
@@ -137,7 +137,6 @@ class PathsPanel(Panel):
             hint=f"At most the tip speed limit, {v_max:.0f} mm/s (Table I).")
         self.preview_btn = gui.add_button("Preview", icon=viser.Icon.EYE)
         self.execute_btn = gui.add_button("Execute", color="green", icon=viser.Icon.PLAYER_PLAY)
-        self.stop_btn = gui.add_button("Stop (hold)", color="red", icon=viser.Icon.PLAYER_STOP)
         self.reconnect_btn = gui.add_button(
             "Reconnect hardware", icon=viser.Icon.PLUG_CONNECTED,
             hint="Connect (after a fault: reconnect) and arm the motors; the arm holds still.")
@@ -174,9 +173,6 @@ class PathsPanel(Panel):
         self.preview_btn.on_click(self.operator_only(
             lambda _: self._request_plan(execute=False), "preview a path"))
         self.execute_btn.on_click(self.operator_only(self._on_execute, "execute a path"))
-        # Stop is everyone's: the console-wide STOP, which calls _on_stop among its hooks.
-        self.stop_btn.on_click(lambda e: self.app.stop_motion("Stop (Paths panel)", e.client))
-        self.allow_viewers(self.stop_btn)
         self.reconnect_btn.on_click(self.operator_only(lambda _: self._reconnect(),
                                                        "connect the hardware"))
         self.app.add_stop_hook(self._on_stop)

@@ -175,7 +175,6 @@ class RepeatabilityPanel(Panel):
                   "Needs a tip sensor: serve.py --slip F (the emulator's slipping racks and "
                   "tip stream). The encoders cannot see slip."))
         self.run_btn = self.gui.add_button("Run", color="green", icon=viser.Icon.PLAYER_PLAY)
-        self.stop_btn = self.gui.add_button("Stop (hold)", color="red", icon=viser.Icon.PLAYER_STOP)
         self.progress = self.gui.add_progress_bar(0.0, color="blue")
         self.status = self.gui.add_html("")
         self._stop = threading.Event()
@@ -183,9 +182,6 @@ class RepeatabilityPanel(Panel):
         self.use_tip.on_click(lambda _: self._use_tip())
         self.run_btn.on_click(self.operator_only(lambda _: self._start(),
                                                  "run a repeatability test"))
-        self.stop_btn.on_click(lambda e: self.app.stop_motion("Stop (Repeatability panel)",
-                                                              e.client))
-        self.allow_viewers(self.stop_btn)
         self.app.add_stop_hook(self._halt)
 
     def _use_tip(self) -> None:

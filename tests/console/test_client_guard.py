@@ -24,7 +24,7 @@ from fakes import FakeClient
 from tests.ws_client import RawClient, wait_for
 
 PACE = 1.0 / 80  # below the guard's 100 messages/s per client: every message is judged
-VIEWER_ALLOWED = {"STOP  (Esc)", "Stop (hold)", "Save scene", "Export scene (HTML)",
+VIEWER_ALLOWED = {"STOP  (Esc)", "Save scene", "Export scene (HTML)",
                   # the View panel: each browser's own camera; a measurement moves nothing
                   "Perspective", "Top-down", "Front", "Side", "Reset view", "Measure distance",
                   "Clear measurement"}
