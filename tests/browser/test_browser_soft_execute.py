@@ -98,13 +98,16 @@ def state(page: Any) -> Any:
 def click_table(page: Any, xy: tuple[float, float], count: int) -> None:
     """Click the table at ``xy`` until the Objects panel shows ``count`` objects and selects
     the one there (a busy software renderer can drop a canvas click)."""
-    from test_planner_browser import project
+    from test_planner_browser import close_notifications, project
 
     box = page.locator("canvas").first.bounding_box()
     assert box is not None
     info = page.locator('[data-testid="objects-info"]')
     for attempt in range(3):
         hold_control(page)
+        # The browser's own "Software WebGL" notice can arrive late and stays until closed; a
+        # click while one is shown was lost in a full-suite run (as in test_planner_browser).
+        close_notifications(page)
         page.mouse.click(*project((*xy, 0.0), box["width"], box["height"]))
         try:
             page.wait_for_function(
