@@ -15,7 +15,7 @@ import os
 from typing import Any
 
 from console.header import Tone
-from console.panels.hardware import header_link
+from console.panels.hardware import extensible_link_health, header_link
 from hw_bridge.extensible_jobs import RunnerSnapshot
 from hw_bridge.parent_watch import watch_parent
 
@@ -36,11 +36,7 @@ def link_summary(app: Any) -> str:
     panel's controls, or (in-process mock) the runner's own link once it runs."""
     attachment = app.services.hardware
     kind = None if attachment is None else attachment.kind
-    controls = app.services.bridge_controls
-    runner = app.services.extensible_runner
-    if controls is None and runner is not None and runner.started:
-        controls = runner.bridge_controls
-    health = None if controls is None else controls.health()
+    health = extensible_link_health(app)
     text = header_link(kind, health)[0]
     if health is None and kind == "mock":
         text += " (the in-process mock starts on the first Execute or Reconnect)"

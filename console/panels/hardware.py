@@ -81,6 +81,16 @@ def header_link(kind: str | None, h: LinkHealth | None) -> tuple[str, Tone | Non
     return f"{name} · {h.state} · {armed}", "ok" if ready else "warn"
 
 
+def extensible_link_health(app: Any) -> LinkHealth | None:
+    """The extensible arm's link health: the Hardware panel's controls, or (in-process mock,
+    which has none) the runner's own link once it runs; None before either exists."""
+    controls = app.services.bridge_controls
+    runner = app.services.extensible_runner
+    if controls is None and runner is not None and runner.started:
+        controls = runner.bridge_controls
+    return None if controls is None else controls.health()
+
+
 def no_controls_text(kind: str | None, owner: str = "Control") -> str:
     """Why the panel has nothing to manage, for the attachment ``kind`` (None: no hardware);
     ``owner`` is the panel whose loop then connects and arms the link itself."""
@@ -289,10 +299,8 @@ class HardwarePanel(Panel):
                 handle.disabled = ctl is None
             state = h.state if h is not None else "unconfigured"
             if self.app.robot.kind == "delta":  # the soft arm's Control panel tells its link
-                runner = self.app.services.extensible_runner
-                if ctl is None and runner is not None and runner.started:  # in-process mock
-                    h = runner.bridge_controls.health()
-                self.app.header.show("link", *header_link(self.kind, h))
+                link = h if ctl is not None else extensible_link_health(self.app)  # mock
+                self.app.header.show("link", *header_link(self.kind, link))
             self.connect_btn.disabled = ctl is None
             self.disconnect_btn.disabled = ctl is None or state == "unconfigured"
             self.arm_btn.disabled = ctl is None or state != "inactive"
