@@ -3,6 +3,7 @@ the page only while its tab is open; notifications can cover widgets."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -33,3 +34,18 @@ def close_notices(page: Any) -> None:
             notice.locator("button").first.click(timeout=1_000)
         except PlaywrightError:
             continue
+
+
+def close_notices_until_none(page: Any) -> None:
+    """Close every notification (they can cover the canvas) and wait until none is left: the
+    browser's own "Software WebGL rendering detected" appears at mount and stays until closed,
+    and a close button clicked on a busy page may take seconds to act."""
+    deadline = time.monotonic() + 20
+    notices = page.locator(".mantine-Notification-root")
+    while notices.count() and time.monotonic() < deadline:
+        try:
+            notices.first.locator("button").first.click(timeout=5_000)
+            notices.first.wait_for(state="detached", timeout=5_000)
+        except Exception:  # noqa: BLE001, S110 - closed by itself meanwhile, or slow to detach
+            pass
+    assert notices.count() == 0, [n.inner_text() for n in notices.all()]

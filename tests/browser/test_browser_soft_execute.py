@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from browser_tabs import close_notices, open_tab
+from browser_tabs import close_notices, close_notices_until_none, open_tab
 
 pytestmark = pytest.mark.browser
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
@@ -98,7 +98,7 @@ def state(page: Any) -> Any:
 def click_table(page: Any, xy: tuple[float, float], count: int) -> None:
     """Click the table at ``xy`` until the Objects panel shows ``count`` objects and selects
     the one there (a busy software renderer can drop a canvas click)."""
-    from test_planner_browser import close_notifications, project
+    from test_planner_browser import project
 
     box = page.locator("canvas").first.bounding_box()
     assert box is not None
@@ -107,7 +107,7 @@ def click_table(page: Any, xy: tuple[float, float], count: int) -> None:
         hold_control(page)
         # The browser's own "Software WebGL" notice can arrive late and stays until closed; a
         # click while one is shown was lost in a full-suite run (as in test_planner_browser).
-        close_notifications(page)
+        close_notices_until_none(page)
         page.mouse.click(*project((*xy, 0.0), box["width"], box["height"]))
         try:
             page.wait_for_function(

@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from browser_tabs import open_tab
+from browser_tabs import close_notices_until_none, open_tab
 from core.planning.grasp import plan_grasp
 from core.robots import load
 
@@ -65,21 +65,6 @@ def number(page, label: str):
     return page.get_by_label(label, exact=True)
 
 
-def close_notifications(page) -> None:
-    """Close every notification (they can cover the canvas) and wait until none is left: the
-    browser's own "Software WebGL rendering detected" appears at mount and stays until closed,
-    and a close button clicked on a busy page may take seconds to act."""
-    deadline = time.monotonic() + 20
-    notices = page.locator(".mantine-Notification-root")
-    while notices.count() and time.monotonic() < deadline:
-        try:
-            notices.first.locator("button").first.click(timeout=5_000)
-            notices.first.wait_for(state="detached", timeout=5_000)
-        except Exception:  # noqa: BLE001, S110 - closed by itself meanwhile, or slow to detach
-            pass
-    assert notices.count() == 0, [n.inner_text() for n in notices.all()]
-
-
 def open_console(page, url: str) -> None:
     """Load the console and wait until a click on the table can place an object: the demo
     object planned, this tab holding control (desk mode grants it at connect, but a page that
@@ -91,7 +76,7 @@ def open_console(page, url: str) -> None:
     open_tab(page, "Session")  # the per-browser role line
     page.locator('[data-testid="role"][data-role="operator"]').wait_for(timeout=30_000)
     open_tab(page, "Operate")
-    close_notifications(page)
+    close_notices_until_none(page)
 
 
 def test_click_to_place_plan_step_to_the_last_waypoint_and_refusal(

@@ -19,7 +19,7 @@ from typing import Any, Iterator
 import numpy as np
 import pytest
 import viser.transforms as vtf
-from browser_tabs import open_tab
+from browser_tabs import close_notices, open_tab
 
 from core.robots import load
 
@@ -83,14 +83,6 @@ def table_point(cam: Any, px: float, py: float, width: float, height: float) -> 
     return (o + s * d)[:2]
 
 
-def close_notifications(page) -> None:
-    for notice in page.locator(".mantine-Notification-root").all():
-        try:
-            notice.locator("button").first.click(timeout=2_000)
-        except Exception:  # noqa: BLE001 - already gone
-            pass
-
-
 def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
         page, soft_console, artifacts_dir: Path) -> None:
     from console.panels.view import ViewPanel
@@ -102,7 +94,7 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
     page.locator('[data-testid="plan-summary"][data-state="ok"]').wait_for(timeout=60_000)
     client = wait(lambda: len(server.get_clients()) == 1 and the_client(server), what="client")
     wait(lambda: client.camera._state.update_timestamp != 0.0, what="camera reported")
-    close_notifications(page)
+    close_notices(page)
     page.set_default_timeout(90_000)                                # a loaded CI machine
     page.get_by_text("View", exact=True).click()                    # the folder opens
     page.get_by_role("button", name="Top-down").click()
