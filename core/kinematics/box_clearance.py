@@ -235,10 +235,12 @@ def clearance_of(robot: "ExtensibleArm", delta: npt.ArrayLike, boxes: Sequence[B
 
 
 def _refined(robot: "ExtensibleArm", L: Array, boxes: Sequence[Box], spacing: float,
-             chunk: int = 256) -> Clearance:
+             below: float | None = None, chunk: int = 256) -> Clearance:
     """Dense minimum over the postures ``L`` (R, n, 3): a coarse pass (10 mm along the arc)
     bounds every posture from below (sampled minus half the coarse gap); only postures whose
-    bound is below the best coarse value are sampled every ``spacing``. ``index`` is the row."""
+    bound is below the best coarse value are sampled every ``spacing``. ``index`` is the row.
+    With ``below``, a coarse sample already closer than that is returned at once (the answer
+    "not clear" needs no refinement)."""
     coarse_gap = max(spacing, 0.01)
     mc = samples_for(robot, coarse_gap)
     gap = robot.rack_max / mc
@@ -247,6 +249,9 @@ def _refined(robot: "ExtensibleArm", L: Array, boxes: Sequence[Box], spacing: fl
         pts = backbone_points(robot, dk.delta_from_actuators(L[a:a + chunk], robot.phi,
                                                              robot.L0), mc)
         d_c[a:a + chunk] = np.min([signed_distance(pts, b).min(axis=-1) for b in boxes], axis=0)
+        if below is not None and d_c[a:a + chunk].min() < below:
+            k = a + int(np.argmin(d_c[a:a + chunk]))
+            return dataclasses.replace(_nearest(pts[k - a][None], boxes), index=k)
     rows = np.flatnonzero(d_c - 0.5 * gap <= d_c.min())
     best = NO_BOXES
     m = samples_for(robot, spacing)
@@ -260,13 +265,14 @@ def _refined(robot: "ExtensibleArm", L: Array, boxes: Sequence[Box], spacing: fl
 
 
 def motion_clearance(robot: "ExtensibleArm", lengths: npt.ArrayLike, boxes: Sequence[Box],
-                     spacing: float = DENSE_SPACING) -> Clearance:
+                     spacing: float = DENSE_SPACING, below: float | None = None) -> Clearance:
     """Smallest backbone-to-box distance along straight rack-space lines through the rack
     lengths ``lengths`` (K, n, 3) (the runner streams straight lines in rack space), with the
     backbone sampled every ``spacing`` along the arc and each line subdivided so no backbone
     sample moves more than about ``spacing / 2`` between checked postures.
 
-    ``Clearance.index`` is the interval (0 .. K-2; 0 for K = 1) where it is smallest.
+    ``Clearance.index`` is the interval (0 .. K-2; 0 for K = 1) where it is smallest. With
+    ``below``, the first found closer than that may be returned instead (a quick "not clear").
     """
     if not boxes:
         return NO_BOXES
@@ -274,7 +280,7 @@ def motion_clearance(robot: "ExtensibleArm", lengths: npt.ArrayLike, boxes: Sequ
     if L.ndim != 3 or L.shape[1:] != (robot.n_segments, 3):
         raise ValueError(f"lengths must have shape (K, {robot.n_segments}, 3), got {L.shape}")
     if len(L) == 1:
-        return _refined(robot, L, boxes, spacing)
+        return _refined(robot, L, boxes, spacing, below)
     coarse = backbone_points(robot, dk.delta_from_actuators(L, robot.phi, robot.L0), 8)
     moved = np.linalg.norm(np.diff(coarse, axis=0), axis=-1).max(axis=-1)   # (K-1,)
     parts = np.maximum(1, np.ceil(2.0 * moved / spacing).astype(int))
@@ -283,5 +289,5 @@ def motion_clearance(robot: "ExtensibleArm", lengths: npt.ArrayLike, boxes: Sequ
         frac = (np.arange(1, k + 1) / k)[:, None, None]
         rows.append(L[i] + (L[i + 1] - L[i]) * frac)
         owner.append(np.full(k, i))
-    found = _refined(robot, np.concatenate(rows), boxes, spacing)
+    found = _refined(robot, np.concatenate(rows), boxes, spacing, below)
     return dataclasses.replace(found, index=int(np.concatenate(owner)[found.index]))

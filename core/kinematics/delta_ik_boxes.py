@@ -189,7 +189,8 @@ def solve_clear(robot: "ExtensibleArm", target: Array, free: "_ik.TipIKResult",
                        f"(clearance {_mm(clearance)})")
     if best.error <= s.tolerance:
         return _result(robot, pb, best, s, clearance, iters, count, "")
-    why = (f"the boxes block it: the closest collision-free posture found puts the tip "
+    why = (f"{'the boxes block it' if free.reachable else 'it is out of reach'}: the closest "
+           f"collision-free posture found puts the tip "
            f"{_mm(best.error)} from the target, with the backbone {_mm(best.clear.distance)} "
            f"from box '{best.clear.box}'")
     if free.reachable:

@@ -191,3 +191,22 @@ def test_scene_round_trip_and_bad_input():
         scene.with_box(SHELF)
     assert scene.without("Post").names() == ["Shelf"]
     assert scene.free_name() == "Box 1"
+
+
+def test_route_from_over_the_shelf_to_under_it_detours_clear_of_the_shelf():
+    from core.planning.box_routes import reach_clear
+    over = solve_tip_ik(ARM, OVER_SHELF, boxes=[SHELF], clearance=CLEARANCE)
+    under = np.array([0.20, 0.0, 0.15])
+    got = reach_clear(ARM, under, over.delta, restarts=True, settings=None, boxes=[SHELF],
+                      clearance=CLEARANCE)
+    assert got.refusal == "" and got.result.reachable and got.route is not None
+    chain = np.stack([over.delta, *got.route.postures])
+    np.testing.assert_allclose(chain[-1], got.result.delta)
+    # the straight line is blocked, so this is a detour; every leg is clear when sampled densely
+    direct = interpolated(dk.robot_rack_lengths(ARM, chain[[0, -1]]), parts=200)
+    assert min(min_distance(d, [SHELF]) for d in dk.delta_from_actuators(
+        direct, ARM.phi, ARM.L0)) < CLEARANCE
+    assert len(chain) > 2
+    legs = interpolated(dk.robot_rack_lengths(ARM, chain), parts=200)
+    deltas = dk.delta_from_actuators(legs, ARM.phi, ARM.L0)
+    assert min(min_distance(d, [SHELF]) for d in deltas) >= CLEARANCE - 2.5e-4
