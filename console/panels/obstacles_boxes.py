@@ -66,7 +66,7 @@ class BoxObstaclesPanel(Panel):
         self._selected: str | None = None
         self.selected = gui.add_dropdown("Box", [NONE], initial_value=NONE,
                                          hint="The box the fields show; Update / Remove act on it.")
-        self.name = gui.add_text("Name", "Shelf", hint="Name of a new (or the selected) box.")
+        self.name = gui.add_text("Box name", "Shelf", hint="Name of a new (or the selected) box.")
         self.centre = [gui.add_number(f"Centre {a} (mm)", v, step=1.0)
                        for a, v in zip("xyz", DEFAULT_CENTRE_MM)]
         self.size = [gui.add_number(f"Size {a} (mm)", v, min=0.0, step=1.0,
@@ -78,7 +78,8 @@ class BoxObstaclesPanel(Panel):
         self.remove_button = gui.add_button("Remove box", color="red")
         self.clearance = gui.add_number(
             "Clearance (mm)", mm_value(self._scene.clearance), min=0.0, max=1000.0, step=1.0,
-            hint="Every point of the arm's backbone keeps this far from every box.")
+            hint="Every point of the arm's backbone keeps this far from every box; to keep the "
+                 "racks and platforms clear too, use at least the platform radius plus a margin.")
         self.click_place = gui.add_checkbox(
             "Click on table drops a box", False,
             hint="A click on the table places a box of the typed size standing there.")

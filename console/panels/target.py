@@ -310,6 +310,8 @@ class TargetPanel(Panel):
         command = self.app.store.command
         arrived = command.source == "jog" and np.allclose(command.q, goal, atol=1e-9)
         client_id, rest = self._legs
+        if arrived and rest and not self._measured_at(goal):
+            return  # the motors lag the command: the next leg starts from the corner
         if arrived and rest:  # a route past the boxes: on to its next posture
             self._legs = (client_id, rest[1:])
             self._moving_to = rest[0]
@@ -322,6 +324,15 @@ class TargetPanel(Panel):
         if arrived:
             self.app.store.edit(lambda q: q, "target")
         self._moving_to = None  # after the edit: on_state must not take the arrival for a jog
+
+    def _measured_at(self, goal: Array) -> bool:
+        """Whether the arm as shown (with hardware: measured) is at ``goal``, within 0.5 mm of
+        rack travel, so a route's next leg does not cut the corner behind a lagging arm."""
+        if self.app.store.mirror_commands:
+            return True
+        robot: Any = self.app.robot
+        shown = dk.robot_rack_lengths(robot, np.asarray(self.app.store.display.q))
+        return bool(np.abs(shown - dk.robot_rack_lengths(robot, goal)).max() <= 5e-4)
 
     def report_error(self, message: str) -> None:
         """Show ``message`` now (no state change follows that would trigger a frame)."""
