@@ -31,7 +31,12 @@ import viser
 from console.panels.base import Panel, operator_only
 from console.plan_view import ray_to_table
 from core.kinematics import box_clearance as bc
-from core.planning.box_scene import BoxScene, scene_from_json, scene_to_dict, scene_to_json
+from core.planning.box_scene import (
+    BoxScene,
+    scene_from_json,
+    scene_to_dict,
+    scene_to_json,
+)
 from core.units import fmt_mm, mm_value
 
 BOX_COLOR = (225, 150, 40)       # amber: not the arm's blue, the target's orange or paths' violet

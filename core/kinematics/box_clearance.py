@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -151,7 +152,7 @@ def signed_distance_and_gradient(points: npt.ArrayLike, box: Box) -> tuple[Array
     return dist, grad
 
 
-def backbone_points(robot: "ExtensibleArm", delta: npt.ArrayLike, per_segment: int) -> Array:
+def backbone_points(robot: ExtensibleArm, delta: npt.ArrayLike, per_segment: int) -> Array:
     """Points along the backbone at ``delta`` (..., n, 3): (..., n * per_segment + 1, 3), the
     base first, then ``per_segment`` points per segment at arc fractions 1/m, 2/m, ..., 1."""
     delta = np.asarray(delta, dtype=float)
@@ -175,7 +176,7 @@ def backbone_points(robot: "ExtensibleArm", delta: npt.ArrayLike, per_segment: i
     return np.concatenate([base, pts.reshape(delta.shape[:-2] + (n * per_segment, 3))], axis=-2)
 
 
-def samples_for(robot: "ExtensibleArm", spacing: float = DENSE_SPACING) -> int:
+def samples_for(robot: ExtensibleArm, spacing: float = DENSE_SPACING) -> int:
     """Backbone samples per segment so that samples are at most ``spacing`` apart along the
     longest segment the racks allow."""
     return max(2, math.ceil(robot.rack_max / spacing))
@@ -223,7 +224,7 @@ def _nearest(points: Array, boxes: Sequence[Box]) -> Clearance:
     return best
 
 
-def clearance_of(robot: "ExtensibleArm", delta: npt.ArrayLike, boxes: Sequence[Box],
+def clearance_of(robot: ExtensibleArm, delta: npt.ArrayLike, boxes: Sequence[Box],
                  spacing: float = DENSE_SPACING) -> Clearance:
     """Smallest distance of the backbone at ``delta`` (n, 3) to ``boxes``, sampled every
     ``spacing`` (or closer) along each segment."""
@@ -234,7 +235,7 @@ def clearance_of(robot: "ExtensibleArm", delta: npt.ArrayLike, boxes: Sequence[B
 
 
 
-def _refined(robot: "ExtensibleArm", L: Array, boxes: Sequence[Box], spacing: float,
+def _refined(robot: ExtensibleArm, L: Array, boxes: Sequence[Box], spacing: float,
              below: float | None = None, chunk: int = 256) -> Clearance:
     """Dense minimum over the postures ``L`` (R, n, 3): a coarse pass (10 mm along the arc)
     bounds every posture from below (sampled minus half the coarse gap); only postures whose
@@ -264,7 +265,7 @@ def _refined(robot: "ExtensibleArm", L: Array, boxes: Sequence[Box], spacing: fl
     return best
 
 
-def motion_clearance(robot: "ExtensibleArm", lengths: npt.ArrayLike, boxes: Sequence[Box],
+def motion_clearance(robot: ExtensibleArm, lengths: npt.ArrayLike, boxes: Sequence[Box],
                      spacing: float = DENSE_SPACING, below: float | None = None) -> Clearance:
     """Smallest backbone-to-box distance along straight rack-space lines through the rack
     lengths ``lengths`` (K, n, 3) (the runner streams straight lines in rack space), with the

@@ -27,7 +27,8 @@ active limit and clearance rows in each step:
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -52,12 +53,12 @@ _FD_STEP = 1e-6       # m, central differences of the backbone samples in the ra
 _SCALE = 1.0         # objective in m^2 / 2 (SLSQP starts from an identity Hessian: steps in m)
 
 
-def _points(robot: "ExtensibleArm", pb: "_ik._Problem", L: Array) -> Array:
+def _points(robot: ExtensibleArm, pb: _ik._Problem, L: Array) -> Array:
     """Backbone samples (K, n * SAMPLES, 3) (the base left out) of rack lengths (K, 3n)."""
     return bc.backbone_points(robot, _ik._deltas(pb, L), SAMPLES)[:, 1:]
 
 
-def _constraints(robot: "ExtensibleArm", pb: "_ik._Problem", boxes: Sequence[bc.Box],
+def _constraints(robot: ExtensibleArm, pb: _ik._Problem, boxes: Sequence[bc.Box],
                  need: float) -> tuple:
     n3 = 3 * pb.n
     steps = np.vstack([np.zeros(n3), _FD_STEP * np.eye(n3), -_FD_STEP * np.eye(n3)])
@@ -84,7 +85,7 @@ def _constraints(robot: "ExtensibleArm", pb: "_ik._Problem", boxes: Sequence[bc.
     return (lambda x: cached(x)[0]), (lambda x: cached(x)[1])
 
 
-def _sqp(robot: "ExtensibleArm", pb: "_ik._Problem", x0: Array, boxes: Sequence[bc.Box],
+def _sqp(robot: ExtensibleArm, pb: _ik._Problem, x0: Array, boxes: Sequence[bc.Box],
          need: float, iterations: int) -> Array:
     """One SLSQP run from rack lengths ``x0`` (3n,); returns its end (moved into the limits)."""
     n, Mb = pb.n, pb.M[:2]
@@ -120,7 +121,7 @@ class _Candidate:
     clear: bc.Clearance
 
 
-def _candidate(robot: "ExtensibleArm", pb: "_ik._Problem", L: Array,
+def _candidate(robot: ExtensibleArm, pb: _ik._Problem, L: Array,
                boxes: Sequence[bc.Box]) -> _Candidate:
     L = _ik._feasible(pb, L[None])[0]
     err = float(_ik._evaluate(pb, L[None])[1][0])
@@ -131,9 +132,9 @@ def _mm(x: float) -> str:
     return f"{x * 1e3:.1f} mm"
 
 
-def solve_clear(robot: "ExtensibleArm", target: Array, free: "_ik.TipIKResult",
+def solve_clear(robot: ExtensibleArm, target: Array, free: _ik.TipIKResult,
                 warm: Array | None, boxes: Sequence[bc.Box], clearance: float, restarts: bool,
-                s: IKSettings) -> "_ik.TipIKResult":
+                s: IKSettings) -> _ik.TipIKResult:
     """The collision-free answer, given the plain IK's answer ``free`` (see the module)."""
     n = robot.n_segments
     pb = _ik._Problem(target, n, _dk.rack_matrix(robot.phi), robot.phi, robot.L0, robot.d,
@@ -198,8 +199,8 @@ def solve_clear(robot: "ExtensibleArm", target: Array, free: "_ik.TipIKResult",
     return _result(robot, pb, best, s, clearance, iters, count, why)
 
 
-def _result(robot: "ExtensibleArm", pb: "_ik._Problem", cand: _Candidate, s: IKSettings,
-            clearance: float, iterations: int, starts: int, refusal: str) -> "_ik.TipIKResult":
+def _result(robot: ExtensibleArm, pb: _ik._Problem, cand: _Candidate, s: IKSettings,
+            clearance: float, iterations: int, starts: int, refusal: str) -> _ik.TipIKResult:
     lengths = cand.L.reshape(pb.n, 3)
     delta = _ik._deltas(pb, cand.L[None])[0]
     tip = _dk.tip_position(robot, delta)

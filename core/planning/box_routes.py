@@ -20,7 +20,8 @@ boxes, then the route to its answer.
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
 Array = npt.NDArray[np.float64]
 
 
-def retracted(robot: "ExtensibleArm", delta: npt.ArrayLike) -> Array:
+def retracted(robot: ExtensibleArm, delta: npt.ArrayLike) -> Array:
     """``delta`` (n, 3) with each segment's bend kept and its racks as short as they go."""
     d = np.asarray(delta, dtype=float).copy()
     L = dk.robot_rack_lengths(robot, d)
@@ -54,7 +55,7 @@ def straightened(delta: npt.ArrayLike) -> Array:
     return d
 
 
-def _candidates(robot: "ExtensibleArm", start: Array, goal: Array) -> list[list[Array]]:
+def _candidates(robot: ExtensibleArm, start: Array, goal: Array) -> list[list[Array]]:
     """Chains of via postures, shortest first (the goal closes every chain)."""
     a, b = retracted(robot, start), retracted(robot, goal)
     sa, sg = straightened(start), straightened(goal)
@@ -74,7 +75,7 @@ class Route:
     nearest_box: str = ""
 
 
-def clear_route(robot: "ExtensibleArm", start: npt.ArrayLike, goal: npt.ArrayLike,
+def clear_route(robot: ExtensibleArm, start: npt.ArrayLike, goal: npt.ArrayLike,
                 boxes: Sequence[bc.Box], clearance: float) -> Route:
     """Straight rack-space legs from ``start`` to ``goal`` (Delta, (n, 3) each) that keep the
     backbone ``clearance`` from every box (see the module).
@@ -112,7 +113,7 @@ class ClearReach:
     refusal: str
 
 
-def reach_clear(robot: "ExtensibleArm", target: npt.ArrayLike, start: npt.ArrayLike, *,
+def reach_clear(robot: ExtensibleArm, target: npt.ArrayLike, start: npt.ArrayLike, *,
                 restarts: bool, settings: IKSettings | None, boxes: Sequence[bc.Box],
                 clearance: float) -> ClearReach:
     """Tip IK to ``target`` keeping ``clearance`` from ``boxes``, warm-started at ``start``

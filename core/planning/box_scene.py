@@ -52,24 +52,24 @@ class BoxScene:
                 return b
         raise ValueError(f"no box named '{name}'")
 
-    def with_box(self, box: bc.Box) -> "BoxScene":
+    def with_box(self, box: bc.Box) -> BoxScene:
         """This scene plus ``box`` (ValueError for a name in use or a box at the base)."""
         if box.name in self.names():
             raise ValueError(f"a box named '{box.name}' exists already")
         return BoxScene(self.boxes + (box,), self.clearance)
 
-    def replaced(self, name: str, box: bc.Box) -> "BoxScene":
+    def replaced(self, name: str, box: bc.Box) -> BoxScene:
         """Box ``name`` replaced by ``box`` (which may be renamed)."""
         self.get(name)
         if box.name != name and box.name in self.names():
             raise ValueError(f"a box named '{box.name}' exists already")
         return BoxScene(tuple(box if b.name == name else b for b in self.boxes), self.clearance)
 
-    def without(self, name: str) -> "BoxScene":
+    def without(self, name: str) -> BoxScene:
         self.get(name)
         return BoxScene(tuple(b for b in self.boxes if b.name != name), self.clearance)
 
-    def with_clearance(self, clearance: float) -> "BoxScene":
+    def with_clearance(self, clearance: float) -> BoxScene:
         return BoxScene(self.boxes, bc.check_clearance(clearance))
 
     def free_name(self, stem: str = "Box") -> str:
