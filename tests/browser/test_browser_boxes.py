@@ -39,9 +39,11 @@ def field(page, label: str):
 
 
 def fill(page, label: str, value: str) -> None:
+    """Type ``value`` into the input labelled ``label`` (generous timeouts: on a loaded 2-core
+    box the page can take a minute to make its inputs editable)."""
     box = field(page, label)
-    box.fill(value)
-    box.press("Tab")
+    box.fill(value, timeout=120_000)
+    box.press("Tab", timeout=60_000)
 
 
 def wait_until(what: str, fn: Callable[[], bool], timeout: float = 30.0,
@@ -89,8 +91,8 @@ def backbone_distance_mm(delta: np.ndarray) -> float:
 def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     page.goto(console_server("extensible"))
-    page.get_by_text("Obstacles (boxes)", exact=True).wait_for(timeout=60_000)
-    page.locator('[data-testid="tip-readout"]').wait_for(timeout=10_000)
+    page.get_by_text("Obstacles (boxes)", exact=True).wait_for(timeout=180_000)  # loaded box
+    page.locator('[data-testid="tip-readout"]').wait_for(timeout=120_000)
     open_tab(page, "Operate")
     close_notices(page)
     # Without the shelf the plain IK's arc would pass through it (so this is a real detour).
@@ -101,7 +103,7 @@ def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
     for axis, c, s in zip("xyz", SHELF_CENTRE_MM, SHELF_SIZE_MM):
         fill(page, f"Centre {axis} (mm)", f"{c:g}")
         fill(page, f"Size {axis} (mm)", f"{s:g}")
-    page.get_by_role("button", name="Add box").click()
+    page.get_by_role("button", name="Add box").click(timeout=120_000)
     wait_until("the shelf in the server's scene", lambda: info.get_attribute("data-count") == "1",
                show=info.inner_text)
     assert info.get_attribute("data-names") == "Shelf"
