@@ -98,6 +98,7 @@ class Recorder:
             raise ValueError(f"suffix must be one of {SUFFIXES}, got {suffix!r}")
         self.suffix = suffix
         self.taps: list[Callable[[dict[str, Any], int], None]] = []
+        self._start_hooks: list[Callable[[], None]] = []
         self.data = data
         self.model = model
         self.name_of = name_of
@@ -145,7 +146,17 @@ class Recorder:
             self._thread = threading.Thread(target=self._write, args=(path, q, header),
                                             name="console-recorder", daemon=True)
             self._thread.start()
+        for hook in list(self._start_hooks):
+            try:
+                hook()
+            except Exception:  # a panel's hook must never stop a recording from starting
+                log.exception("recording start hook failed")
         return path
+
+    def add_start_hook(self, fn: Callable[[], None]) -> None:
+        """Call ``fn()`` right after every :meth:`start` (e.g. to log the current obstacle
+        scene, which is otherwise logged only when it changes)."""
+        self._start_hooks.append(fn)
 
     def stop(self) -> Path | None:
         """Finish the recording (flushes and closes the file); returns its path."""

@@ -18,7 +18,8 @@ planner and the tip target's IK) start when a browser opens, not on the first re
 "Hardware:" line and the tip target's warnings read the link supervisor's health (the same
 source as the Hardware panel and the header's Link field); this panel pushes the header's Phase
 field for the extensible arm: idle, moving to target, running path t/T s, holding after STOP,
-fault.
+fault. With box obstacles (the Obstacles panel) the plan keeps the arm's whole backbone their
+clearance away along the whole motion, or says why it cannot ("blocked", naming the box).
 """
 
 from __future__ import annotations
@@ -41,11 +42,12 @@ from console.header import Tone
 from console.lab_feed import path_plan_record
 from console.panels.base import Panel
 from console.panels.extensible_status import link_summary, runner_phase, worker_pool
+from console.panels.obstacles_boxes import box_scene_of
 from console.panels.plot_data import thin
 from console.state import ArmState
 from core.units import fmt_mm
 from core.kinematics import delta as dk
-from core.planning.paths import PATH_KINDS, MotionPath, build_path, plan_path
+from core.planning.paths import PATH_KINDS, BlockedPath, MotionPath, build_path, plan_path
 from hw_bridge.extensible_jobs import JobResult
 from hw_bridge.extensible_process import ExtensibleProcess
 
@@ -71,6 +73,7 @@ class PathRequest:
     size: float
     speed: float
     start: tuple[float, ...]  # flattened commanded posture the path starts from
+    obstacles: int = 0  # version of the box obstacles it was planned around
 
 
 def extensible_runner(app: Any) -> ExtensibleProcess:
@@ -197,7 +200,7 @@ class PathsPanel(Panel):
         q = np.asarray(self.app.store.command.q, dtype=float)
         return PathRequest(str(self.kind.value), str(self.plane.value),
                            float(self.size.value) / 1e3, float(self.speed.value) / 1e3,
-                           tuple(np.round(q.ravel(), 9)))
+                           tuple(np.round(q.ravel(), 9)), box_scene_of(self.app)[1])
 
     def _request_plan(self, execute: bool) -> None:
         try:
@@ -216,9 +219,10 @@ class PathsPanel(Panel):
                 return  # already planning this one (its status counts the seconds)
         self._draw_requested(waypoints)
         pool = self._plan_pool()
+        scene, _ = box_scene_of(self.app)
         try:
             future = pool.submit(plan_path, self.app.robot, waypoints, speed=req.speed,
-                                 start_delta=q)
+                                 start_delta=q, boxes=scene.boxes, clearance=scene.clearance)
         except (RuntimeError, BrokenProcessPool) as exc:
             self._drop_pool(pool)
             self._set_status(f"⚠ Planning failed: the planner worker is gone ({exc}); "
@@ -301,7 +305,9 @@ class PathsPanel(Panel):
             pool = self._pool
             if isinstance(exc, BrokenProcessPool) and pool is not None:
                 self._drop_pool(pool)
-            self._set_status(f"⚠ Planning failed: {exc or type(exc).__name__}", "error")
+            blocked = isinstance(exc, BlockedPath)
+            self._set_status(f"⚠ {'Blocked by the boxes' if blocked else 'Planning failed'}: "
+                             f"{exc or type(exc).__name__}", "blocked" if blocked else "error")
             return
         self._planned = (req, path)
         self.app.recorder.log("plan", path_plan_record(req, waypoints, path))  # lab data
@@ -309,7 +315,9 @@ class PathsPanel(Panel):
         ok = path.max_error <= MAX_EXECUTE_ERROR
         summary = (f"{req.kind} {fmt_mm(req.size, 0)} mm in {req.plane} at "
                    f"{fmt_mm(req.speed, 0)} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
-                   f"max planned tip error {fmt_mm(path.max_error, 2)} mm, {path.jumps} jumps")
+                   f"max planned tip error {fmt_mm(path.max_error, 2)} mm, {path.jumps} jumps"
+                   + (f", backbone ≥ {fmt_mm(path.clearance, 1)} mm from box "
+                      f"'{path.nearest_box}'" if path.nearest_box else ""))
         if not ok:
             self._set_status(f"⚠ {summary}. The path leaves the reachable workspace: shrink it "
                              "or move the arm.", "infeasible")

@@ -18,6 +18,14 @@ A typed or released target is answered at once ("Solving the IK for (x, y, z) mm
 the result or by why nothing moves (IK error, no answer within ``IK_TIMEOUT_S``, a running
 path, control lost, motors not armed): never silence. Only the operator may move the target
 (``operator_only``).
+
+Box obstacles (the Obstacles panel, ``console.panels.obstacles_boxes``): with boxes placed, the
+worker process solves the IK with them (every backbone point keeps the clearance from every
+box) and a route there whose straight rack-space legs -- what the hold-to-run set-point and the
+runner follow -- stay clear too (``core.planning.box_routes.reach_clear``: direct, or through
+straightened / retracted postures, moved through leg by leg). When the boxes leave no
+collision-free posture or route, nothing moves and the status says why: which box, how close
+("blocked").
 """
 
 from __future__ import annotations
@@ -34,10 +42,13 @@ import viser
 
 from console.panels.base import Panel, operator_only
 from console.panels.extensible_status import link_summary, worker_pool
+from console.panels.obstacles_boxes import box_scene_of
 from console.state import ArmState
 from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
+from core.planning.box_routes import ClearReach, reach_clear
+from core.planning.box_scene import BoxScene
 from core.robot_sections import IKSettings
 
 Array = npt.NDArray[np.float64]
@@ -47,6 +58,7 @@ MISS_COLOR = (210, 40, 40)
 ARRIVAL_POLL_S = 0.05
 IK_TIMEOUT_S = 20.0  # s: a solve takes < 1 s unloaded; past this the worker is restarted
 _AXES = ("x", "y", "z")
+BLOCKED = "Blocked by the boxes: "  # an error message that starts so is shown as "blocked"
 
 
 class _IKWorker:
@@ -102,6 +114,7 @@ class TargetPanel(Panel):
     title = "Tip target"
     order = 5.0
     kinds = ("delta",)
+    _route_len = 1  # postures of the last route moved along (1: straight there)
 
     def build(self) -> None:
         self.settings = IKSettings.from_robot(self.app.robot)  # type: ignore[arg-type]
@@ -128,6 +141,7 @@ class TargetPanel(Panel):
         self._target = tip.copy()
         self._dragging = False
         self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
+        self._legs: tuple[int, list[Array]] = (0, [])  # (client id, route postures still to go)
         # (n, target, result, error, info): replaced whole by the worker, shown by on_state.
         self._latest: tuple[int, Array, TipIKResult | None, str | None, str | None] = (
             0, tip, None, None, None)
@@ -202,6 +216,7 @@ class TargetPanel(Panel):
         pending = self._latest[4] is not None or self._moving_to is not None
         self.worker.cancel()
         self._moving_to = None
+        self._legs = (0, [])
         if pending:
             self.report_error(f"Not moved to the target: motion stopped ({reason}).")
 
@@ -214,15 +229,30 @@ class TargetPanel(Panel):
             return
         moving = self.app.hold.target()
         q0 = np.asarray(self.app.store.command.q if moving is None else moving)
-        result = self._solve(target, q0, final)
-        if generation != self.worker.generation:
-            return
+        scene, _ = box_scene_of(self.app)
+        if scene.boxes:
+            reach = self._solve_clear(target, q0, final, scene)
+            if generation != self.worker.generation:
+                return
+            if reach.refusal or reach.route is None:
+                self._publish(target, reach.result, BLOCKED + (reach.refusal or "no route"))
+                self._show()
+                return
+            result, legs = reach.result, list(reach.route.postures)
+        else:
+            result = self._solve(target, q0, final)
+            legs = [result.delta]
+            if generation != self.worker.generation:
+                return
+        self._route_len = len(legs)
         self._publish(target, result, None)
         # Set before the move starts: a frame of the move ("jog") must not read as someone
         # else's command, which would put the target back on the tip and clear this status.
-        self._moving_to = result.delta
-        if not self.app.hold.move_to(client_id, result.delta):
+        self._legs = (client_id, legs[1:])
+        self._moving_to = legs[0]
+        if not self.app.hold.move_to(client_id, legs[0]):
             self._moving_to = None
+            self._legs = (0, [])
             self.report_error("Not moved: you no longer hold control.")
         else:
             self._show()
@@ -235,10 +265,20 @@ class TargetPanel(Panel):
 
     def _solve(self, target: Array, q0: Array, final: bool) -> TipIKResult:
         """Worker thread: the IK in the worker process (this thread waits without the GIL)."""
+        return self._in_pool(solve_tip_ik, self.app.robot, target, q0, restarts=final,
+                             settings=self.settings)
+
+    def _solve_clear(self, target: Array, q0: Array, final: bool,
+                     scene: BoxScene) -> ClearReach:
+        """Worker thread: the IK with the boxes and a clear route there, in the worker process."""
+        return self._in_pool(reach_clear, self.app.robot, target, q0, restarts=final,
+                             settings=self.settings, boxes=scene.boxes,
+                             clearance=scene.clearance)
+
+    def _in_pool(self, fn: Any, *args: Any, **kwargs: Any) -> Any:
         pool = self._ik_pool()
         try:
-            return pool.submit(solve_tip_ik, self.app.robot, target, q0, restarts=final,
-                               settings=self.settings).result(timeout=IK_TIMEOUT_S)
+            return pool.submit(fn, *args, **kwargs).result(timeout=IK_TIMEOUT_S)
         except cf.process.BrokenProcessPool:
             self._drop_pool(pool)
             raise RuntimeError("the IK worker process stopped; try again") from None
@@ -268,9 +308,31 @@ class TargetPanel(Panel):
         if goal is None or self.app.hold.target() is not None:
             return
         command = self.app.store.command
-        if command.source == "jog" and np.allclose(command.q, goal, atol=1e-9):
+        arrived = command.source == "jog" and np.allclose(command.q, goal, atol=1e-9)
+        client_id, rest = self._legs
+        if arrived and rest and not self._measured_at(goal):
+            return  # the motors lag the command: the next leg starts from the corner
+        if arrived and rest:  # a route past the boxes: on to its next posture
+            self._legs = (client_id, rest[1:])
+            self._moving_to = rest[0]
+            if not self.app.hold.move_to(client_id, rest[0]):
+                self._moving_to = None
+                self._legs = (0, [])
+                self.report_error("Stopped on the way: you no longer hold control.")
+            return
+        self._legs = (0, [])
+        if arrived:
             self.app.store.edit(lambda q: q, "target")
         self._moving_to = None  # after the edit: on_state must not take the arrival for a jog
+
+    def _measured_at(self, goal: Array) -> bool:
+        """Whether the arm as shown (with hardware: measured) is at ``goal``, within 0.5 mm of
+        rack travel, so a route's next leg does not cut the corner behind a lagging arm."""
+        if self.app.store.mirror_commands:
+            return True
+        robot: Any = self.app.robot
+        shown = dk.robot_rack_lengths(robot, np.asarray(self.app.store.display.q))
+        return bool(np.abs(shown - dk.robot_rack_lengths(robot, goal)).max() <= 5e-4)
 
     def report_error(self, message: str) -> None:
         """Show ``message`` now (no state change follows that would trigger a frame)."""
@@ -307,7 +369,7 @@ class TargetPanel(Panel):
         self._shown, self._hardware_note = n, note
         self._set_inputs(target)
         self.status.content = self._status_html(result, error, info, target, note)
-        if result is not None and not result.reachable:
+        if result is not None and not result.reachable and error is None:
             self.miss.points = np.stack([result.tip, target])[None]
             self.miss.visible = True
         else:
@@ -334,7 +396,11 @@ class TargetPanel(Panel):
     def _status_html(self, result: TipIKResult | None, error: str | None,
                      info: str | None = None, target: Array | None = None,
                      note: str = "") -> str:
-        if error is not None:
+        if error is not None and error.startswith(BLOCKED):
+            body = (f"<b style='color:#c92a2a'>⚠ {html.escape(BLOCKED.strip())}</b> "
+                    f"{html.escape(error[len(BLOCKED):])}. Not moved.")
+            state = "blocked"
+        elif error is not None:
             body, state = f"⚠ {html.escape(error)}", "error"
         elif info is not None:
             body, state = html.escape(info), "solving"
@@ -343,6 +409,12 @@ class TargetPanel(Panel):
         elif result.reachable:
             body = (f"Target {mm_xyz(result.tip)} mm reachable (IK error "
                     f"{fmt_mm(result.error, 2)} mm): the tip goes there.")
+            if result.nearest_box:
+                body += (f" The backbone keeps {fmt_mm(result.clearance, 1)} mm from box "
+                         f"'{html.escape(result.nearest_box)}'"
+                         + (f", moving via {self._route_len - 1} posture"
+                            f"{'s' if self._route_len > 2 else ''} around the boxes."
+                            if self._route_len > 1 else "."))
             state = "reachable"
         else:
             r: Any = self.app.robot
@@ -356,9 +428,11 @@ class TargetPanel(Panel):
         if note:
             body += f"<br><b style='color:#e67700'>⚠ {html.escape(note)}</b>"
         distance = "" if result is None else f"{fmt_mm(result.error, 3)}"
+        clear = "" if result is None or not result.nearest_box else fmt_mm(result.clearance, 2)
         return (f'<div data-testid="target-status" data-state="{state}" '
                 f'data-motors="{"still" if note else "follow"}" '
-                f'data-error-mm="{distance}" style="font-size:0.85em">{body}</div>')
+                f'data-error-mm="{distance}" data-clearance-mm="{clear}" '
+                f'data-route="{self._route_len}" style="font-size:0.85em">{body}</div>')
 
     def _tip(self, q: npt.ArrayLike) -> Array:
         return dk.tip_position(self.app.robot, np.asarray(q))  # type: ignore[arg-type]

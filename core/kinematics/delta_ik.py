@@ -54,13 +54,19 @@ same problem (``polish_iterations``) and kept if closer. Reachable targets never
 
 The final rack lengths are moved into the feasible set once more and the error is re-evaluated
 by forward kinematics. Solver settings come from the robot file's optional ``[ik]`` table.
+
+Box obstacles. With ``boxes`` every backbone point must also keep ``clearance`` from every box:
+one more set-based task with priority over the tip, solved in
+:mod:`core.kinematics.delta_ik_boxes` (which imports this module, hence the import inside
+:func:`solve_tip_ik`); the result then carries the clearance and, when no collision-free
+posture reaches the target, the reason (which box, how close).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -93,6 +99,12 @@ class TipIKResult:
         reachable: ``error <= tolerance``.
         starts: Starts iterated: 1 when the warm start converged, otherwise the warm start (if
             any) plus the batch of seeds.
+        clearance: With boxes: the smallest distance from the backbone (sampled every
+            millimetre) to a box (m; negative inside one); ``inf`` without boxes.
+        nearest_box: With boxes: the name of the box that distance is to.
+        clear: ``clearance`` is at least the clearance asked for (always True without boxes).
+        refusal: With boxes: why no collision-free posture reaches the target (which box, how
+            close), "" when one does. ``reachable`` is False then.
     """
 
     delta: Array
@@ -102,6 +114,10 @@ class TipIKResult:
     iterations: int
     reachable: bool
     starts: int
+    clearance: float = math.inf
+    nearest_box: str = ""
+    clear: bool = True
+    refusal: str = ""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -280,7 +296,8 @@ def _polish(pb: _Problem, L: Array, max_iterations: int) -> tuple[Array, float, 
 
 def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
                  delta0: npt.ArrayLike | None = None, *, restarts: bool = True,
-                 settings: IKSettings | None = None) -> TipIKResult:
+                 settings: IKSettings | None = None, boxes: Sequence[Any] = (),
+                 clearance: float = 0.0) -> TipIKResult:
     """Postures that put the tip at ``target_xyz`` with every rack and bend within its limits.
 
     Args:
@@ -292,17 +309,29 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
         restarts: Iterate the batch of seeds when the warm start stalls above the tolerance.
             Turn off to follow one continuous branch (path tracking).
         settings: Overrides the robot file's ``[ik]`` settings.
+        boxes: Box obstacles (:class:`core.kinematics.box_clearance.Box`): every backbone
+            point must stay ``clearance`` away from each (a set-based task with priority over
+            the tip, :mod:`core.kinematics.delta_ik_boxes`).
+        clearance: Distance (m) the backbone keeps from every box.
 
     Returns:
         The best configuration found; for an unreachable target the closest feasible one found,
-        with ``error`` its distance and ``reachable`` False.
+        with ``error`` its distance and ``reachable`` False. With boxes, the closest
+        collision-free one, and ``refusal`` says why when none reaches the target.
 
     Raises:
-        ValueError: the robot is not a delta arm, or the target / warm start has the wrong
-            shape or is not finite.
+        ValueError: the robot is not a delta arm, or the target / warm start / boxes /
+            clearance is bad.
     """
     _check_robot(robot)
     target = _check_target(target_xyz)
+    if boxes:
+        from core.kinematics.delta_ik_boxes import check_boxes, solve_clear  # it imports us
+        box_list, need = check_boxes(boxes, clearance)
+        free = solve_tip_ik(robot, target, delta0, restarts=restarts, settings=settings)
+        warm_delta = None if delta0 is None else _check_delta0(delta0, robot.n_segments)
+        s = settings if settings is not None else IKSettings.from_robot(robot)
+        return solve_clear(robot, target, free, warm_delta, box_list, need, restarts, s)
     n = robot.n_segments
     s = settings if settings is not None else IKSettings.from_robot(robot)
     M = _dk.rack_matrix(robot.phi)

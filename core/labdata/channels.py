@@ -10,7 +10,8 @@ tools and are not read back.
 Record kinds with a typed channel: ``state`` (``q``, ``seq``, ``source``, optional ``command``),
 ``action`` (``what``, ``who``, ``client``, extra details), and for ``log(kind, data)``:
 ``objects``, ``plan``, ``phase``, ``timing``, ``link``, ``fault`` and ``overlay``; any other kind
-goes to ``/console/<kind>`` as a ``softarm.Record``.
+goes to ``/console/<kind>`` as a ``softarm.Record`` (``boxes``, the extensible arm's box
+obstacles, also draws them as cubes on ``/scene/boxes``).
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ OBJECT_SCENE = ChannelSpec("/scene/objects", S.SCENE_UPDATE)
 PLAN = ChannelSpec("/plan", S.PLAN)
 PLAN_SCENE = ChannelSpec("/scene/plan", S.SCENE_UPDATE)
 OVERLAY_SCENE = ChannelSpec("/scene/overlays", S.SCENE_UPDATE)
+BOX_SCENE = ChannelSpec("/scene/boxes", S.SCENE_UPDATE)  # the extensible arm's box obstacles
 PHASE = ChannelSpec("/control/phase", S.PHASE)
 TIMING = ChannelSpec("/control/loop_timing", S.TIMING)
 LINK = ChannelSpec("/link/health", S.LINK)
@@ -62,8 +64,8 @@ EVENTS = ChannelSpec("/events", S.LOG)
 
 #: Every fixed channel (``/console/<kind>`` channels are made on demand with :func:`spec_for`).
 CHANNELS: tuple[ChannelSpec, ...] = (CONFIGURATION, TIP, ARM_SCENE, OBJECTS, OBJECT_SCENE, PLAN,
-                                     PLAN_SCENE, OVERLAY_SCENE, PHASE, TIMING, LINK, ACTIONS,
-                                     FAULTS, EVENTS)
+                                     PLAN_SCENE, OVERLAY_SCENE, BOX_SCENE, PHASE, TIMING, LINK,
+                                     ACTIONS, FAULTS, EVENTS)
 #: ``log(kind, data)`` kinds with their own typed channel (data fields are the message's fields).
 TYPED_KINDS: dict[str, ChannelSpec] = {"objects": OBJECTS, "plan": PLAN, "phase": PHASE,
                                        "timing": TIMING, "link": LINK, "fault": FAULTS}
@@ -240,6 +242,7 @@ def log_message(ns: int, level: int, message: str, name: str) -> dict[str, Any]:
 ARM_RGB, END_RGB, OBJECT_RGB, PLAN_RGB, WAYPOINT_RGB = ((38, 110, 150), (30, 30, 40),
                                                         (60, 170, 90), (200, 40, 160),
                                                         (235, 130, 30))
+BOX_RGB = (225, 150, 40)
 
 
 def _circle(x: float, y: float, r: float, z: float, n: int = 48) -> Array:
@@ -297,6 +300,10 @@ def _scene_for(kind: str, data: dict[str, Any], ns: int,
         spheres = [sphere(p, 0.008, WAYPOINT_RGB) for p in points]
         return [(PLAN_SCENE.topic, scene_update(ns, [entity(ns, "plan", lines=lines,
                                                             spheres=spheres)]))]
+    if kind == "boxes":  # data: core.planning.box_scene.scene_to_dict
+        cubes = [{"pose": _pose(b["centre"]), "size": dict(zip("xyz", map(float, b["size"]))),
+                  "color": _color(BOX_RGB, 0.4)} for b in data.get("boxes") or []]
+        return [(BOX_SCENE.topic, scene_update(ns, [entity(ns, "boxes", cubes=cubes)]))]
     if kind == "overlay":
         pts = np.asarray(data.get("points", ()), dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2:
@@ -345,7 +352,7 @@ def messages_for(rec: dict[str, Any], ns: int,
     topic = "/console/" + (_KIND_RE.sub("_", kind).strip("_") or "record")
     out = [(topic, {"timestamp": stamp(ns), "kind": kind, "who": who, "client": client,
                     "data": data})]
-    if kind == "overlay" and isinstance(data, dict):
+    if kind in ("overlay", "boxes") and isinstance(data, dict):
         out += _scene_for(kind, data, ns, arm)
     return out
 

@@ -25,6 +25,14 @@ centre, a size and a plane; :func:`polyline` takes any list).
    (theta <= theta_max) and that set is convex, so every interpolated sample is too;
 4. motor demands: U^-1 L in encoder counts (:func:`delta.motor_counts_from_lengths`).
 
+Box obstacles (``boxes``, ``clearance``; :mod:`core.kinematics.box_clearance`): every sampled
+tip target must itself be ``clearance`` from every box; each IK sample is solved with the boxes
+(a set-based clearance task, :mod:`core.kinematics.delta_ik_boxes`) and ``PATH_MARGIN`` more
+clearance, so the straight rack-space lines between samples keep the rest; and the finished
+motion -- every 100 Hz sample and the lines between them, which the runner streams -- is
+checked by dense forward kinematics (:func:`box_clearance.motion_clearance`). A path that
+cannot keep clear raises :class:`BlockedPath`, naming the box, where and how close.
+
 Settings come from the robot file's optional ``[paths]`` table.
 """
 
@@ -32,11 +40,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
+from core.kinematics import box_clearance as bc
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robot_sections import IKSettings, PathSettings
@@ -48,6 +57,11 @@ if TYPE_CHECKING:
     from core.robots import ExtensibleArm
 
 Array = npt.NDArray[np.float64]
+PATH_MARGIN = 0.001  # m of clearance the IK samples keep beyond the asked one (for the lines)
+
+
+class BlockedPath(ValueError):
+    """No collision-free path: the message names the box, where and how close."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,6 +81,9 @@ class MotionPath:
         rate_hz: Sample rate.
         jumps: Branch switches plus IK intervals still steeper than ``jump_ratio`` after
             bisection; the racks cross them at their speed limit, the tip off the path.
+        clearance: Planned with boxes: the smallest distance from the backbone to a box over
+            the whole motion, sampled densely (m); ``inf`` without boxes.
+        nearest_box: The box that distance is to ("" without boxes).
     """
 
     times: Array
@@ -78,6 +95,8 @@ class MotionPath:
     errors: Array
     rate_hz: float
     jumps: int
+    clearance: float = math.inf
+    nearest_box: str = ""
 
     @property
     def duration(self) -> float:
@@ -130,7 +149,8 @@ def _sample_polyline(points: Array, spacing: float) -> Array:
 
 
 def _track(robot: "ExtensibleArm", targets: Array, first: Array, ik: IKSettings,
-           ps: PathSettings) -> tuple[Array, Array, int]:
+           ps: PathSettings, boxes: tuple[bc.Box, ...] = (),
+           clearance: float = 0.0) -> tuple[Array, Array, int]:
     """Warm-started IK along ``targets`` with bisection of steep intervals.
 
     When the branch being followed cannot reach a target (a rack limit ends it) the seeded
@@ -148,12 +168,14 @@ def _track(robot: "ExtensibleArm", targets: Array, first: Array, ik: IKSettings,
         while stack:
             tgt, depth = stack[-1]
             prev = dk.delta_from_actuators(out_L[-1], robot.phi, robot.L0)
-            res = solve_tip_ik(robot, tgt, prev, restarts=False, settings=ik)
+            res = solve_tip_ik(robot, tgt, prev, restarts=False, settings=ik, boxes=boxes,
+                               clearance=clearance)
             ds = float(np.linalg.norm(tgt - out_t[-1]))
             travel += ds
             if res.error > ik.tolerance and travel - last_retry >= ps.retry_spacing:
                 last_retry = travel
-                other = solve_tip_ik(robot, tgt, prev, restarts=True, settings=ik)
+                other = solve_tip_ik(robot, tgt, prev, restarts=True, settings=ik, boxes=boxes,
+                                     clearance=clearance)
                 if other.error < res.error - ik.tolerance:
                     jumps += 1
                     stack.pop()
@@ -201,7 +223,8 @@ def _tip_chord_bound(robot: "ExtensibleArm", L: Array, substeps: int = 8) -> Arr
 
 def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float | None = None,
               start_delta: npt.ArrayLike | None = None,
-              settings: PathSettings | None = None) -> MotionPath:
+              settings: PathSettings | None = None, boxes: Sequence[bc.Box] = (),
+              clearance: float = 0.0) -> MotionPath:
     """Time-parametrised joint path within the rack, bending and speed limits that moves the tip
     along ``waypoints``.
 
@@ -213,12 +236,17 @@ def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float 
             starts at its tip and first moves to ``waypoints[0]``; otherwise it starts at
             ``waypoints[0]`` (cold IK).
         settings: Overrides the robot file's ``[paths]`` settings.
+        boxes: Box obstacles the whole backbone keeps ``clearance`` from, along the whole
+            motion (see "Box obstacles" above).
+        clearance: That distance (m).
 
     Returns:
         The :class:`MotionPath`.
 
     Raises:
-        ValueError: bad waypoints, speed above the limit or not positive, bad start posture.
+        BlockedPath: the boxes leave no collision-free path (which box, where, how close).
+        ValueError: bad waypoints, speed above the limit or not positive, bad start posture,
+            bad boxes or clearance.
     """
     if getattr(robot, "kind", None) != "delta":
         raise ValueError(f"robot must be an extensible (delta) arm, got {type(robot).__name__}")
@@ -238,14 +266,54 @@ def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float 
         L_start = dk.limit_rack_lengths(robot, dk.robot_rack_lengths(robot, sd))
         start_tip = dk.tip_position(robot, dk.delta_from_actuators(L_start, robot.phi, robot.L0))
         points = np.vstack([start_tip, points])
-    else:
-        L_start = solve_tip_ik(robot, points[0], settings=ik).lengths
-
+    box_list, need = _check_boxes(boxes, clearance)
     spacing = min(ps.spacing, v / ps.rate_hz)
-    targets, L, jumps = _track(robot, _sample_polyline(points, spacing), L_start, ik, ps)
+    samples = _sample_polyline(points, spacing)
+    if box_list:
+        _check_targets(samples, box_list, need)
+    if start_delta is None:
+        first = solve_tip_ik(robot, points[0], settings=ik, boxes=box_list,
+                             clearance=need + PATH_MARGIN if box_list else 0.0)
+        if first.refusal:
+            raise BlockedPath(f"the path's first point {_mm_xyz(points[0])} mm: {first.refusal}")
+        L_start = first.lengths
+    keep = need + PATH_MARGIN if box_list else 0.0
+    targets, L, jumps = _track(robot, samples, L_start, ik, ps, box_list, keep)
     targets, L = _densify(targets, L, spacing)
 
-    return timed_path(robot, targets, L, speed=v, settings=ps, jumps=jumps)
+    path = timed_path(robot, targets, L, speed=v, settings=ps, jumps=jumps)
+    if not box_list:
+        return path
+    found = bc.motion_clearance(robot, path.lengths, box_list)
+    if not found.clear_of(need):
+        k = found.index
+        raise BlockedPath(f"no collision-free path: at t = {path.times[k]:.2f} s (tip "
+                          f"{_mm_xyz(path.tips[k])} mm, target {_mm_xyz(path.targets[k])} mm) "
+                          f"{found.describe()}, closer than the clearance {need * 1e3:.1f} mm")
+    return dataclasses.replace(path, clearance=found.distance, nearest_box=found.box)
+
+
+def _mm_xyz(p: Array) -> str:
+    return "(" + ", ".join(f"{v * 1e3:.0f}" for v in np.asarray(p, dtype=float)) + ")"
+
+
+def _check_boxes(boxes: Sequence[bc.Box], clearance: float) -> tuple[tuple[bc.Box, ...], float]:
+    items = tuple(boxes or ())
+    if not all(isinstance(b, bc.Box) for b in items):
+        raise ValueError("boxes must be core.kinematics.box_clearance.Box objects")
+    return items, bc.check_clearance(clearance)
+
+
+def _check_targets(samples: Array, boxes: tuple[bc.Box, ...], clearance: float) -> None:
+    """The tip is a backbone point: every tip target must be ``clearance`` from every box."""
+    for box in boxes:
+        d = bc.signed_distance(samples, box)
+        k = int(np.argmin(d))
+        if d[k] < clearance:
+            where = "inside" if d[k] < 0 else f"{d[k] * 1e3:.1f} mm from"
+            raise BlockedPath(f"the path's tip passes {where} box '{box.name}' at "
+                              f"{_mm_xyz(samples[k])} mm, closer than the clearance "
+                              f"{clearance * 1e3:.1f} mm")
 
 
 def timed_path(robot: "ExtensibleArm", targets: npt.ArrayLike, lengths: npt.ArrayLike, *,

@@ -1,0 +1,262 @@
+"""The extensible arm's Obstacles panel: the operator adds / selects / updates / removes boxes
+(typed or by a table click), sets the clearance, saves and loads them; bad input and viewers
+change nothing; the boxes are drawn, reach the tip target and the path planner (which refuse
+with the box's name when blocked), and are recorded (read back with the ``mcap`` reader)."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import re
+
+import numpy as np
+import pytest
+
+from core.kinematics import box_clearance as bc
+from core.kinematics import delta as dk
+from core.planning.box_scene import BoxScene, scene_from_json, scene_to_json
+from core.robots import load
+
+EXT = load("extensible")
+
+
+def user(handle, client, value=None):
+    """What viser does with a browser's click / edit: store the value, then call back."""
+    import viser
+
+    if value is not None:
+        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
+            handle._impl.value)(value)
+    for cb in list(handle._impl.update_cb):
+        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
+
+
+def type_box(panel, client, name, centre_mm, size_mm):
+    user(panel.name, client, name)
+    for h, v in zip(panel.centre, centre_mm):
+        user(h, client, v)
+    for h, v in zip(panel.size, size_mm):
+        user(h, client, v)
+
+
+class SyncPool:
+    """A worker pool that runs the call at once, here (what the spawned worker would return)."""
+
+    def submit(self, fn, *args, **kwargs) -> cf.Future:
+        fut: cf.Future = cf.Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except Exception as exc:  # noqa: BLE001
+            fut.set_exception(exc)
+        return fut
+
+    def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
+        pass
+
+
+class FakeRunner:
+    from hw_bridge.extensible_jobs import RunnerSnapshot
+
+    started = False
+    period_s = 0.01
+    snapshot = RunnerSnapshot("disconnected")
+
+    def stop(self) -> None:
+        pass
+
+
+@pytest.fixture
+def gated(server):
+    from fakes import console_app
+
+    from console.access import AccessControl
+    from console.panels.extensible_panels import EXTENSIBLE_PANELS
+
+    app = console_app(EXT, server, panels=EXTENSIBLE_PANELS, extensible_runner=FakeRunner(),
+                      access=AccessControl("tok"))
+    try:
+        yield app
+    finally:
+        app.stop()
+
+
+def state_of(html: str, key: str = "state") -> str:
+    return re.search(rf'data-{key}="([^"]*)"', html).group(1)
+
+
+def test_operator_places_edits_and_removes_boxes_and_bad_input_changes_nothing(gated):
+    from fakes import FakeClient
+
+    from console.panels.obstacles_boxes import BoxObstaclesPanel, box_scene_of
+
+    app = gated
+    panel = app.panel(BoxObstaclesPanel)
+    op = FakeClient(1)
+    app.access.take(op.client_id, "tok", name="Alice")
+    type_box(panel, op, "Shelf", (200, 0, 250), (200, 300, 20))
+    user(panel.add_button, op)
+    scene, v1 = box_scene_of(app)
+    assert scene.boxes == (bc.Box("Shelf", (0.2, 0.0, 0.25), (0.2, 0.3, 0.02)),)
+    assert len(panel._handles) == 1
+    np.testing.assert_allclose(panel._handles[0].position, (0.2, 0.0, 0.25))
+    assert state_of(panel.info.content, "names") == "Shelf"
+    assert state_of(panel.info.content, "selected") == "Shelf"
+    # Bad input: a clear message, nothing changes.
+    for size, why in (((200, 0, 20), "size must be > 0"), ((200, -5, 20), "size must be > 0")):
+        type_box(panel, op, "Bad", (200, 0, 100), size)
+        user(panel.add_button, op)
+        assert box_scene_of(app) == (scene, v1) and why in op.notes[-1][1]
+    type_box(panel, op, "Base", (0, 0, 0), (100, 100, 100))
+    user(panel.add_button, op)
+    assert box_scene_of(app) == (scene, v1) and "contains the arm's base" in op.notes[-1][1]
+    assert state_of(panel.info.content) == "error"
+    panel.centre[1]._impl.value = float("nan")  # what a raw message could carry
+    user(panel.add_button, op)
+    assert box_scene_of(app) == (scene, v1) and "finite" in op.notes[-1][1]
+    user(panel.clearance, op, -3.0)
+    assert box_scene_of(app)[0].clearance == scene.clearance and "Clearance" in op.notes[-1][1]
+    # Update the selected box, then a second one by a table click, then remove.
+    type_box(panel, op, "Shelf", (220, 10, 240), (200, 300, 20))
+    user(panel.update_button, op)
+    assert box_scene_of(app)[0].get("Shelf").centre == (0.22, 0.01, 0.24)
+    import viser
+    user(panel.click_place, op, True)
+    type_box(panel, op, "Crate", (0, 0, 0), (100, 80, 60))
+    panel._on_scene_click(viser.SceneClickEvent(op, op.client_id, (0.3, -0.2, 1.0),
+                                                (0.0, 0.0, -1.0), (0.5, 0.5), None))
+    crate = box_scene_of(app)[0].get("Crate 1")
+    np.testing.assert_allclose(crate.centre, (0.3, -0.2, 0.03))  # standing on the table
+    assert len(panel._handles) == 2
+    user(panel.clearance, op, 35.0)
+    assert box_scene_of(app)[0].clearance == pytest.approx(0.035)
+    user(panel.selected, op, "Shelf")
+    user(panel.remove_button, op)
+    assert box_scene_of(app)[0].names() == ["Crate 1"] and len(panel._handles) == 1
+
+
+def test_viewers_change_nothing_and_scene_files_round_trip(gated):
+    import viser
+    from fakes import FakeClient, ScopedClient
+
+    from console.panels.obstacles_boxes import BoxObstaclesPanel, box_scene_of
+
+    app = gated
+    panel = app.panel(BoxObstaclesPanel)
+    op, viewer = FakeClient(1), FakeClient(2)
+    app.access.take(op.client_id, "tok", name="Alice")
+    shelf = bc.make_box("Shelf", (0.2, 0.0, 0.25), (0.2, 0.3, 0.02))
+    post = bc.make_box("Post", (0.0, 0.0, 0.17), (0.04, 0.04, 0.04))
+    text = scene_to_json(BoxScene((shelf, post), 0.025)).encode()
+    user(panel.load_button, op, viser.UploadedFile("shelf.json", text))
+    before = box_scene_of(app)
+    assert before[0] == BoxScene((shelf, post), 0.025)
+    user(panel.add_button, viewer)
+    user(panel.remove_button, viewer)
+    user(panel.update_button, viewer)
+    user(panel.clearance, viewer, 5.0)
+    user(panel.selected, viewer, "Post")
+    user(panel.click_place, viewer, True)
+    user(panel.centre[0], viewer, 999.0)
+    user(panel.load_button, viewer, viser.UploadedFile("x.json", scene_to_json(BoxScene()).encode()))
+    assert box_scene_of(app) == before
+    assert panel.clearance.value == 25.0 and panel.selected.value == "Shelf"
+    assert panel.click_place.value is False and panel.centre[0].value == 200.0
+    refused = {b.split(" — ")[0].removeprefix("Only the operator can ")
+               for t, b in viewer.notes if t == "Not allowed"}
+    assert {"add a box", "remove a box", "change a box", "change the clearance",
+            "select a box", "change how clicks on the table act", "edit a box",
+            "load a box scene"} <= refused
+    # A bad file is refused with its reason and changes nothing.
+    bad = json.dumps({"boxes": [{"name": "A", "centre": [0, 0, 0.3], "size": [0.1, 0.1, -1]}]})
+    user(panel.load_button, op, viser.UploadedFile("bad.json", bad.encode()))
+    assert box_scene_of(app) == before and "Could not load bad.json" in op.notes[-1][1]
+    # Save: a download for anyone, the same scene back.
+    client = ScopedClient(app.server, 3)
+    panel._on_save(viser.GuiEvent(client=client, client_id=3, target=panel.save_button))
+    assert scene_from_json(client.downloads[0][1]) == before[0]
+
+
+def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated, monkeypatch):
+    from fakes import FakeClient
+
+    from console.panels.obstacles_boxes import BoxObstaclesPanel
+    from console.panels.paths import PathsPanel
+    from console.panels.target import TargetPanel
+
+    app = gated
+    obstacles, target, paths = (app.panel(BoxObstaclesPanel), app.panel(TargetPanel),
+                                app.panel(PathsPanel))
+    monkeypatch.setattr(target, "_ik_pool", lambda: SyncPool())
+    monkeypatch.setattr(paths, "_plan_pool", lambda: SyncPool())
+    op = FakeClient(1)
+    app.access.take(op.client_id, "tok", name="Alice")
+    ceiling = bc.make_box("Ceiling", (0.0, 0.0, 0.26), (2.0, 2.0, 0.02))
+    obstacles.set_scene(BoxScene((ceiling,), 0.02), "Ceiling")
+    app.store.request(np.zeros((EXT.n_segments, 3)) + [0, 0, 0.04], "jog")  # 180 mm, straight
+    q_before = np.array(app.store.command.q)
+    assert bc.clearance_of(EXT, q_before, [ceiling]).clear_of(0.02)  # the start pose is clear
+    target.solve(np.array([0.2, 0.0, 0.32]), True, op.client_id, target.worker.generation)
+    status = target.status.content
+    assert state_of(status) == "blocked" and "Ceiling" in status and "Not moved" in status
+    assert app.hold.target() is None and np.array_equal(app.store.command.q, q_before)
+    # A shelf beside the arm: the target over its edge is reached with the backbone clear.
+    shelf = bc.make_box("Shelf", (0.2, 0.0, 0.25), (0.2, 0.3, 0.02))
+    obstacles.set_scene(BoxScene((shelf,), 0.02), "Shelf")
+    target.solve(np.array([0.2, 0.0, 0.32]), True, op.client_id, target.worker.generation)
+    status = target.status.content
+    assert state_of(status) == "reachable", status
+    assert float(state_of(status, "clearance-mm")) >= 20.0
+    goal = app.hold.target()
+    assert goal is not None
+    legs = [goal] + target._legs[1]
+    assert bc.clearance_of(EXT, legs[-1], [shelf]).clear_of(0.02)
+    np.testing.assert_allclose(dk.tip_position(EXT, legs[-1]), [0.2, 0.0, 0.32], atol=1e-3)
+    chain = dk.robot_rack_lengths(EXT, np.stack([q_before, *legs]))
+    assert bc.motion_clearance(EXT, chain, [shelf]).clear_of(0.02)
+    app.hold.cancel()
+    target._on_stop("test")
+    # A path through a box is refused by the planner, naming it.
+    post = bc.make_box("Post", (0.1, 0.0, 0.1), (0.04, 0.04, 0.04))  # on the tip's way in x
+    obstacles.set_scene(BoxScene((post,), 0.02), "Post")
+    app.store.request(np.zeros((EXT.n_segments, 3)), "jog")  # retracted: tip at z = 100 mm
+    assert bc.clearance_of(EXT, app.store.command.q, [post]).clear_of(0.02)
+    paths.size.value = 300.0
+    paths.plane.value = "xz"
+    paths.kind.value = "linear"
+    paths._request_plan(execute=False)
+    assert state_of(paths.status.content) == "blocked", paths.status.content
+    assert "box &#x27;Post&#x27;" in paths.status.content
+    assert paths._current_request().obstacles == obstacles.current()[1]
+
+
+def test_boxes_are_recorded_and_read_back_with_the_mcap_reader(gated, tmp_path):
+    from fakes import FakeClient
+    from mcap.reader import make_reader
+
+    from console.panels.obstacles_boxes import BoxObstaclesPanel
+
+    app = gated
+    panel = app.panel(BoxObstaclesPanel)
+    op = FakeClient(1)
+    app.access.take(op.client_id, "tok", name="Alice")
+    type_box(panel, op, "Shelf", (200, 0, 250), (200, 300, 20))
+    user(panel.add_button, op)  # before the recording: logged when it starts
+    path = app.recorder.start("boxes", op)
+    type_box(panel, op, "Wall", (-250, 0, 200), (20, 300, 400))
+    user(panel.add_button, op)
+    app.recorder.stop()
+    records, cubes = [], []
+    with open(path, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            data = json.loads(message.data)
+            if channel.topic == "/console/boxes":
+                records.append(data["data"])
+            elif channel.topic == "/scene/boxes":
+                cubes.append(data["entities"][0]["cubes"])
+    assert [[b["name"] for b in r["boxes"]] for r in records] == [["Shelf"], ["Shelf", "Wall"]]
+    assert records[-1]["boxes"][1] == {"name": "Wall", "centre": [-0.25, 0.0, 0.2],
+                                       "size": [0.02, 0.3, 0.4]}
+    assert records[-1]["clearance"] == pytest.approx(0.02)
+    assert scene_from_json(json.dumps(records[-1])).names() == ["Shelf", "Wall"]
+    assert [c["size"] for c in cubes[-1]] == [{"x": 0.2, "y": 0.3, "z": 0.02},
+                                              {"x": 0.02, "y": 0.3, "z": 0.4}]
