@@ -49,8 +49,8 @@ OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can draw per second
 PLOT_HZ = 4.0
-TABLE_HZ = 2.0  # the kappa table follows the measurement at this rate
-COUNTERS_HZ = 1.0  # link and loop lines (their counters change on every refresh)
+TABLE_HZ = 2.0  # the kappa table follows the drawn arm at most at this rate
+COUNTERS_HZ = 0.2  # link and loop lines (their counters change on every refresh; news at once)
 HISTORY_S = 10.0
 STATS_TICKS = 1000
 FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
@@ -58,6 +58,12 @@ FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
 
 __all__ = ["ControlPanel", "control_for", "fault_markdown", "header_link", "header_phase",
            "kappa_html", "link_line", "state_html", "table_point"]
+
+
+def kappa_html_key(c: Any) -> tuple[Any, ...]:
+    """What of a telemetry sample the κ table shows at once: the targets (as printed) and
+    whether a measurement exists."""
+    return (tuple(f"{v:+.2f}" for v in c.kappa_ref), c.kappa_meas is None)
 
 
 def target_object(target: ExecuteTarget) -> Any:
@@ -125,6 +131,7 @@ class ControlPanel(Panel):
 
         self._plot_at = 0.0
         self._table_at = 0.0
+        self._table_key: Any = None
         self._counters_at = 0.0
         self._link_key: Any = None
         self._fwd_seq = self.app.store.command.seq
@@ -395,11 +402,15 @@ class ControlPanel(Panel):
         if len(self.plots.hist) < 2:
             return
         now = time.monotonic()
-        if now - self._table_at >= 1.0 / TABLE_HZ:
-            # The κ table is a few hundred bytes: it follows the measurement at 2 Hz (only the
-            # plot waits for a move beyond the noise), so what it shows is never seconds old.
-            self._table_at = now
-            table = kappa_html(self.ctl.view) if self.ctl.view else ""
+        view = self.ctl.view
+        c = None if view is None else view.snapshot.control
+        # The κ table follows the drawn arm (at most TABLE_HZ): its measured row changes when
+        # the 3D view sent a new frame (a still arm's measurement noise stays inside the view's
+        # dead band and costs viewers nothing), its target row whenever a target changes.
+        key = None if c is None else (kappa_html_key(c), self.app.view.frames_sent)
+        if now - self._table_at >= 1.0 / TABLE_HZ and key != self._table_key:
+            self._table_at, self._table_key = now, key
+            table = kappa_html(view) if view else ""
             if table != self.kappa_md.content:
                 self.kappa_md.content = table
         self.plots.draw(now)
