@@ -48,6 +48,7 @@ from console.state import ArmState
 OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can draw per second
+PUMP_POLL_S = 0.004  # how often the pump looks for a new view
 PLOT_HZ = 4.0
 TABLE_HZ = 2.0  # the kappa table follows the drawn arm at most at this rate
 COUNTERS_HZ = 0.2  # link and loop lines (their counters change on every refresh; news at once)
@@ -259,8 +260,16 @@ class ControlPanel(Panel):
 
     # -- the pump: loop snapshot -> view, history, forwarded jog commands ----------------------
     def _pump_loop(self) -> None:
+        # Each new view as it arrives (polled every PUMP_POLL_S: a reference check), else at
+        # PUMP_HZ: pumping on a timer of its own at the publish rate, the pump and the publisher
+        # drifted through each other and one view in several was never drawn.
         period = 1.0 / PUMP_HZ
-        while not self._pump_stop.wait(period):
+        last, last_at = None, 0.0
+        while not self._pump_stop.wait(PUMP_POLL_S):
+            view, now = self.ctl.view, time.monotonic()
+            if view is last and now - last_at < period:
+                continue
+            last, last_at = view, now
             try:
                 self._pump_once()
             except Exception:  # never let a display hiccup end the pump

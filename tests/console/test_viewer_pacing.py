@@ -269,3 +269,49 @@ def test_kappa_table_follows_the_drawn_arm_not_the_noise() -> None:
     finally:
         panel.close()
         server.stop()
+
+
+# -- the arm view's dead band while the arm moves -------------------------------------------------
+
+def test_a_slow_steady_move_is_drawn_every_frame_and_noise_still_is_not(server, monkeypatch
+                                                                        ) -> None:
+    """A grasp-and-place approach moves the soft arm's points by a few mm/s: inside the still
+    arm's 0.5 mm band for several frames, so it was drawn at ~10 frames/s. Moving steadily, the
+    band is 0.1 mm: every frame of a 6 mm/s move (0.2 mm per frame at 30 Hz) is drawn once the
+    steadiness has been measured over ``moving_steps`` frames; noise is never steady."""
+    import console.arm_view as arm_view
+    from console.arm_view import make_arm_view
+    from console.dead_band import DeadBand
+    from console.model import model_for
+
+    clock = FakeClock()
+    monkeypatch.setattr(arm_view.time, "monotonic", clock)
+    view = make_arm_view(server.scene, model_for(SOFT))
+    band = view.dead_band
+    assert band.moving_position < band.position and band.moving_angle < band.angle
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    direction = np.array([1.0, -1.0, 1.0, 1.0, -1.0, 1.0])
+    tip = lambda k: view.frames(k)[-1, :3, 3]  # noqa: E731
+    per_unit = np.linalg.norm(tip(q + 1e-3 * direction) - tip(q)) / 1e-3
+    step = 2e-4 / per_unit * direction  # the tip moves 0.2 mm per frame
+    clock.t += 5.0
+    assert view.update(q)
+    start = view.frames_sent
+    for k in range(1, 91):  # 3 s at 30 frames/s
+        clock.t += 1 / 30
+        view.update(q + k * step)
+        moved_from_sent = np.linalg.norm(tip(q + k * step) - view.frames(view._sent_q)[-1, :3, 3])
+        assert moved_from_sent <= band.position + 1e-9  # never more than the wide band behind
+    sent = view.frames_sent - start
+    assert sent >= 90 - band.moving_steps  # every frame once it is known to move
+    assert not band.moved(view.frames(q), view.frames(q + step))  # one step: inside the band
+    # Noise of the same size per frame, never steady: held by the wide band, averaged.
+    rng = np.random.default_rng(5)
+    end = q + 90 * step
+    clock.t += 5.0
+    view.update(end)
+    start = view.frames_sent
+    for _ in range(300):  # 10 s
+        clock.t += 1 / 30
+        view.update(end + 2.0 * rng.standard_normal(6) * np.abs(step))
+    assert view.frames_sent - start <= 2
