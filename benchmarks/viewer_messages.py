@@ -124,6 +124,8 @@ def main() -> int:
     p.add_argument("--warmup", type=float, default=3.0)
     p.add_argument("--move", action="store_true", help="trials / demo motion instead of still")
     p.add_argument("--data-dir", default="/tmp/viewer_messages")
+    p.add_argument("--band", choices=("default", "still-only"), default="default",
+                   help="the arm view's dead band: as shipped, or without its moving band")
     a = p.parse_args()
 
     import bench_viewers as bv
@@ -135,6 +137,9 @@ def main() -> int:
     args = serve.parse_args(["--robot", a.robot, "--port", "0", "--lab", "--no-token",
                              "--data-dir", a.data_dir, "--rt-cpu", "none"])
     server, app, _ = serve.build(args, robot, "viewer messages")
+    if a.band == "still-only":
+        import dataclasses
+        app.view.dead_band = dataclasses.replace(app.view.dead_band, moving_steadiness=2.0)
     app.start()
     stop = threading.Event()
     try:

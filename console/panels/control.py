@@ -136,6 +136,7 @@ class ControlPanel(Panel):
         self._counters_at = 0.0
         self._link_key: Any = None
         self._fwd_seq = self.app.store.command.seq
+        self._reported: ControlView | None = None  # the view last reported to the store
         self._stopped = False
         self._last_fault: str | None = None
         self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
@@ -311,7 +312,12 @@ class ControlPanel(Panel):
                 # Never after STOP: only Arm / Execute clear a stop (jogging does not).
                 if c.phase in FORWARD_PHASES and not self._stopped:
                     self.ctl.goto(np.asarray(cmd.q))
-            store.report(c.kappa_meas, "control")
+            if view is not self._reported:
+                # Each measurement once: a view pumped again (none newer in time) reported
+                # twice reads to the 3D view as an arm that stopped exactly there, and a still
+                # arm's noise got drawn.
+                self._reported = view
+                store.report(c.kappa_meas, "control")
 
     def _notify_fault(self, fault: str | None) -> None:
         """Tell every browser once when a new hardware fault appears (not the operator's

@@ -315,3 +315,31 @@ def test_a_slow_steady_move_is_drawn_every_frame_and_noise_still_is_not(server, 
         clock.t += 1 / 30
         view.update(end + 2.0 * rng.standard_normal(6) * np.abs(step))
     assert view.frames_sent - start <= 2
+
+
+def test_the_pump_reports_each_measurement_once() -> None:
+    """A view pumped again (the publisher late) is not reported again: the same state twice
+    reads to the arm view as an arm that stopped exactly there, which drew a still arm's noise."""
+    from test_control_console import FakeControl, fake_view
+
+    from fakes import console_app
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    app = console_app(SOFT, server, panels=(), soft_control=FakeControl(),
+                      mirror_commands=False)
+    panel = app.add_panel(ControlPanel)
+    panel._pump_stop.set()  # the test drives the pump itself
+    panel._pump.join(2.0)
+    try:
+        seqs = []
+        for k in range(3):
+            panel.ctl.view = fake_view(armed=True, kappa_meas=(0.5 + k, -1.0, 2.0, 0.0, 3.0, -6.0))
+            for _ in range(3):  # pumped three times before the next view arrives
+                panel._pump_once()
+                seqs.append(app.store.display.seq)
+        assert len(set(seqs)) == 3 and seqs[0] == seqs[2] and seqs[3] == seqs[5]
+        np.testing.assert_allclose(app.store.display.q, (2.5, -1.0, 2.0, 0.0, 3.0, -6.0))
+        assert app.store.display.source == "control"
+    finally:
+        panel.close()
+        server.stop()
