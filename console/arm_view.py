@@ -12,9 +12,10 @@ only assigns to them, so no node is ever re-created while the arm moves. Two way
   for the viewer benchmark and as the reference the skinned tubes are tested against).
 
 A dead band (:class:`DeadBand`: 0.5 mm, 0.5 deg, on the drawn frames averaged over up to 2 s
-while they jitter) skips a frame when nothing drawn moved more than it since the last one sent,
-so a still arm with measurement noise costs (almost) nothing; a held-back frame is sent when the
-display goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frames(q)`` methods
+while they jitter; 0.1 mm, 0.1 deg while they move steadily) skips a frame when nothing drawn
+moved more than it since the last one sent, so a still arm with measurement noise costs (almost)
+nothing and a slow move is still drawn every frame; a held-back frame is sent when the display
+goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frames(q)`` methods
 (vectorised numpy, no viser), which tests check against the kinematics without a server.
 
 * Soft planar arm: the backbone as a tube lying on the table (z = half-width), dark rings at the
@@ -172,7 +173,8 @@ class ArmView(ABC):
         self._mean_at = now
         settled = self._last_q is not None and np.array_equal(q, self._last_q)
         self._last_q = q
-        if self._sent is not None and not band.moved(self._sent, self._mean):
+        moving = steady if self._steadiness.steps >= band.moving_steps else 0.0
+        if self._sent is not None and not band.moved(self._sent, self._mean, moving):
             if settled and not np.array_equal(q, self._sent_q):
                 # The arm stopped exactly here (a source that keeps reporting the same state
                 # never lets the display go idle): draw where it ended, once.

@@ -12,7 +12,9 @@ to that browser for good (pages that never finished loading).
 :func:`install` replaces each buffer's ``message_event`` with :class:`LoopSafeEvent`, whose
 ``set()`` from any other thread is handed to the event loop (``call_soon_threadsafe``); nothing
 in viser reads the event synchronously (it is only awaited and cleared by the buffer's window
-generator). Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
+generator). A set inside an atomic block waits for the block's end (one wake-up per frame), and
+a window holds up to ``WINDOW_MESSAGES`` (viser: 128, less than a frame of the extensible arm).
+Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
 
 :func:`install` also makes a message's wire form (``Message.as_serializable_dict``) computed once
 and shared by every viewer (:func:`share_wire_dicts`): viser serialises every message again for
@@ -37,12 +39,21 @@ import numpy.typing as npt
 
 
 class LoopSafeEvent(asyncio.Event):
-    """``asyncio.Event`` that may be set from any thread: off the loop, ``set()`` is scheduled."""
+    """``asyncio.Event`` that may be set from any thread: off the loop, ``set()`` is scheduled.
 
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+    With ``buffer`` (the viser message buffer whose event this is), a set() from another
+    thread while the buffer is in an atomic block (``server.atomic()``: the render thread's
+    frame) is deferred to the block's end (:func:`install` patches ``atomic_end``): viser's
+    consumers take no message during the block, so waking them then only made each of 50
+    viewers' window loops spin once per burst for nothing, several times a frame.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, buffer: Any = None) -> None:
         super().__init__()
         self._owner = loop
+        self._buffer = buffer
         self._pending = False  # a set() is scheduled on the loop and has not run yet
+        self.deferred = False  # a set() waits for the buffer's atomic block to end
 
     def set(self) -> None:
         try:
@@ -52,6 +63,12 @@ class LoopSafeEvent(asyncio.Event):
         if running is self._owner:
             super().set()
             return
+        buffer = self._buffer
+        if buffer is not None and buffer.atomic_counter > 0:
+            self.deferred = True
+            if buffer.atomic_counter > 0:  # (else the block ended meanwhile: schedule now)
+                return
+        self.deferred = False
         # One scheduled set() serves every message pushed before it runs: scheduling writes
         # to the loop's wake-up socket, and viser sets the event once per message (a frame of
         # the extensible arm is ~115 messages; a system call each cost ~1/3 of the render
@@ -70,6 +87,7 @@ class LoopSafeEvent(asyncio.Event):
         super().set()
 
 
+WINDOW_MESSAGES = 512  # largest window of messages sent as one websocket frame
 _WIRE = "_viser_fixes_wire"  # where a message keeps its shared wire dict (in its __dict__)
 
 
@@ -200,13 +218,24 @@ def install() -> bool:
     if getattr(cls, "_loop_safe_event", False):
         return False
     original_init = cls.__init__
+    original_atomic_end = cls.atomic_end
 
     @functools.wraps(original_init)
     def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
         original_init(self, *args, **kwargs)
-        self.message_event = LoopSafeEvent(self.event_loop)
+        self.message_event = LoopSafeEvent(self.event_loop, self)
+        # A frame of the extensible arm is ~120 messages: one window (one websocket frame
+        # per viewer), not two.
+        self.max_window_size = max(self.max_window_size, WINDOW_MESSAGES)
+
+    @functools.wraps(original_atomic_end)
+    def atomic_end(self: Any) -> None:
+        original_atomic_end(self)  # at the outermost end it wakes the loop (viser's own)
+        if self.atomic_counter == 0:
+            self.message_event.deferred = False
 
     cls.__init__ = __init__
+    cls.atomic_end = atomic_end
     cls._loop_safe_event = True
     return True
 

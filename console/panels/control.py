@@ -48,9 +48,10 @@ from console.state import ArmState
 OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
 PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can draw per second
+PUMP_POLL_S = 0.004  # how often the pump looks for a new view
 PLOT_HZ = 4.0
-TABLE_HZ = 2.0  # the kappa table follows the measurement at this rate
-COUNTERS_HZ = 1.0  # link and loop lines (their counters change on every refresh)
+TABLE_HZ = 2.0  # the kappa table follows the drawn arm at most at this rate
+COUNTERS_HZ = 0.2  # link and loop lines (their counters change on every refresh; news at once)
 HISTORY_S = 10.0
 STATS_TICKS = 1000
 FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
@@ -58,6 +59,12 @@ FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
 
 __all__ = ["ControlPanel", "control_for", "fault_markdown", "header_link", "header_phase",
            "kappa_html", "link_line", "state_html", "table_point"]
+
+
+def kappa_html_key(c: Any) -> tuple[Any, ...]:
+    """What of a telemetry sample the κ table shows at once: the targets (as printed) and
+    whether a measurement exists."""
+    return (tuple(f"{v:+.2f}" for v in c.kappa_ref), c.kappa_meas is None)
 
 
 def target_object(target: ExecuteTarget) -> Any:
@@ -125,9 +132,11 @@ class ControlPanel(Panel):
 
         self._plot_at = 0.0
         self._table_at = 0.0
+        self._table_key: Any = None
         self._counters_at = 0.0
         self._link_key: Any = None
         self._fwd_seq = self.app.store.command.seq
+        self._reported: ControlView | None = None  # the view last reported to the store
         self._stopped = False
         self._last_fault: str | None = None
         self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
@@ -252,8 +261,16 @@ class ControlPanel(Panel):
 
     # -- the pump: loop snapshot -> view, history, forwarded jog commands ----------------------
     def _pump_loop(self) -> None:
+        # Each new view as it arrives (polled every PUMP_POLL_S: a reference check), else at
+        # PUMP_HZ: pumping on a timer of its own at the publish rate, the pump and the publisher
+        # drifted through each other and one view in several was never drawn.
         period = 1.0 / PUMP_HZ
-        while not self._pump_stop.wait(period):
+        last, last_at = None, 0.0
+        while not self._pump_stop.wait(PUMP_POLL_S):
+            view, now = self.ctl.view, time.monotonic()
+            if view is last and now - last_at < period:
+                continue
+            last, last_at = view, now
             try:
                 self._pump_once()
             except Exception:  # never let a display hiccup end the pump
@@ -295,7 +312,12 @@ class ControlPanel(Panel):
                 # Never after STOP: only Arm / Execute clear a stop (jogging does not).
                 if c.phase in FORWARD_PHASES and not self._stopped:
                     self.ctl.goto(np.asarray(cmd.q))
-            store.report(c.kappa_meas, "control")
+            if view is not self._reported:
+                # Each measurement once: a view pumped again (none newer in time) reported
+                # twice reads to the 3D view as an arm that stopped exactly there, and a still
+                # arm's noise got drawn.
+                self._reported = view
+                store.report(c.kappa_meas, "control")
 
     def _notify_fault(self, fault: str | None) -> None:
         """Tell every browser once when a new hardware fault appears (not the operator's
@@ -395,11 +417,15 @@ class ControlPanel(Panel):
         if len(self.plots.hist) < 2:
             return
         now = time.monotonic()
-        if now - self._table_at >= 1.0 / TABLE_HZ:
-            # The κ table is a few hundred bytes: it follows the measurement at 2 Hz (only the
-            # plot waits for a move beyond the noise), so what it shows is never seconds old.
-            self._table_at = now
-            table = kappa_html(self.ctl.view) if self.ctl.view else ""
+        view = self.ctl.view
+        c = None if view is None else view.snapshot.control
+        # The κ table follows the drawn arm (at most TABLE_HZ): its measured row changes when
+        # the 3D view sent a new frame (a still arm's measurement noise stays inside the view's
+        # dead band and costs viewers nothing), its target row whenever a target changes.
+        key = None if c is None else (kappa_html_key(c), self.app.view.frames_sent)
+        if now - self._table_at >= 1.0 / TABLE_HZ and key != self._table_key:
+            self._table_at, self._table_key = now, key
+            table = kappa_html(view) if view else ""
             if table != self.kappa_md.content:
                 self.kappa_md.content = table
         self.plots.draw(now)

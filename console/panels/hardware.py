@@ -15,6 +15,11 @@ Refresh: :meth:`HardwarePanel.on_state` (render thread) at most ``REFRESH_HZ``. 
 only runs when the displayed arm state changes (``ConsoleApp._render_loop`` waits for a new
 display state), which a disarmed arm never produces, so an idle thread refreshes as well when
 ``on_state`` has been silent: a fault on an idle link still shows.
+
+What viewers are sent (a still console should cost them ~nothing): the readout's news (state,
+arming, fault, watchdog, e-stop, losses and errors) at once, its ever-growing counters and round
+trip every ``COUNTERS_S``; the round-trip plot (0..``axis_top`` ms) only when p50 or p99 moved a
+visible amount (``PlotPacer``: 3 % of the axis) at most ``PLOT_HZ``, else every ``PLOT_STILL_S``.
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ from viser import uplot
 from console.header import Tone
 from console.lab_feed import LinkFeed
 from console.panels.base import Panel, operator_only
-from console.panels.plot_data import thin
+from console.panels.plot_data import PlotPacer, axis_top, thin
 from console.state import ArmState
 from hw_bridge.controls import BridgeControls
 from hw_bridge.interface import LinkHealth
@@ -44,7 +49,11 @@ OTHER = "(type a path or URL below)"
 BAUDS = ("1000000", "115200", "230400", "460800", "921600", "2000000")
 REFRESH_HZ = 4.0
 HISTORY = 240  # round-trip samples in the plot (a minute at REFRESH_HZ)
-PLOT_STILL_S = 5.0  # s between redraws of a round-trip plot that does not change
+PLOT_POINTS = 60  # of them drawn (x 3 float64 columns: ~1.4 KB a redraw, to every viewer)
+PLOT_HZ = 0.5  # largest redraw rate of the round-trip plot while it visibly changes
+PLOT_STILL_S = 30.0  # s between redraws of a round-trip plot that shows nothing new
+PLOT_MIN_TOP = 1.0  # ms: the plot's y axis spans at least 0..1 ms
+COUNTERS_S = 5.0  # s between readouts that only count on (sent, received, round trip)
 
 
 def format_health(h: LinkHealth | None) -> str:
@@ -67,6 +76,15 @@ def format_health(h: LinkHealth | None) -> str:
     if h.fault:
         lines.append(f"**Fault:** {h.fault}")
     return "  \n".join(lines)
+
+
+def health_news(h: LinkHealth | None) -> Any:
+    """What of the health a person must see at once (everything but the counters that grow on
+    every read and the round trip's jitter)."""
+    if h is None:
+        return None
+    return (h.state, h.armed, h.fault, h.watchdog_tripped, h.estop, h.port, h.lost,
+            h.crc_errors, h.bad_frames, h.device_rx_errors)
 
 
 def header_link(kind: str | None, h: LinkHealth | None) -> tuple[str, Tone | None]:
@@ -167,8 +185,8 @@ class HardwarePanel(Panel):
             series=(uplot.Series(label="t (s)"),
                     uplot.Series(label="p50 (ms)", stroke="#1c7ed6", width=2),
                     uplot.Series(label="p99 (ms)", stroke="#e8590c", width=1)),
-            scales={"x": uplot.Scale(time=False)},
-            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="ms")),
+            scales=self._scales(PLOT_MIN_TOP),
+            axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="ms", scale="ms")),
             title="Round trip", aspect=2.0, visible=False)
         self._inputs = (self.port_list, self.port_text, self.baud)
         self._buttons = (self.connect_btn, self.disconnect_btn, self.arm_btn, self.disarm_btn)
@@ -176,10 +194,11 @@ class HardwarePanel(Panel):
         self._lock = threading.Lock()
         self._faults = FaultTracker()
         self._link_feed = LinkFeed(self.app.recorder)  # link health -> lab data
-        self._t0 = time.monotonic()
+        self.clock = time.monotonic  # what the panel's pacing reads (tests move it by hand)
+        self._t0 = self.clock()
         self._samples: collections.deque = collections.deque(maxlen=HISTORY)
-        self._plotted: np.ndarray | None = None
-        self._plotted_at = 0.0
+        self._pacer = PlotPacer(PLOT_HZ, still_s=PLOT_STILL_S)
+        self._top = PLOT_MIN_TOP
         self._readout_key: Any = ()
         self._readout_at = 0.0
         self._received = -1
@@ -271,13 +290,13 @@ class HardwarePanel(Panel):
 
     # -- display -----------------------------------------------------------------------------
     def on_state(self, state: ArmState) -> None:
-        if time.monotonic() - self._refreshed_at >= 1.0 / REFRESH_HZ:
+        if self.clock() - self._refreshed_at >= 1.0 / REFRESH_HZ:
             self.refresh()
 
     def _idle_loop(self) -> None:
         period = 1.0 / REFRESH_HZ
         while not self._quit.wait(period) and not self.app.stopped:
-            if time.monotonic() - self._refreshed_at < period:
+            if self.clock() - self._refreshed_at < period:
                 continue  # on_state is refreshing
             try:
                 self.refresh()
@@ -287,7 +306,7 @@ class HardwarePanel(Panel):
     def refresh(self) -> None:
         """Show the newest health; notify each new fault once to every browser."""
         with self._lock:
-            self._refreshed_at = time.monotonic()
+            self._refreshed_at = self.clock()
             ctl = self.controls()
             h = None if ctl is None else ctl.health()
             # (viser sends a property only when its value changes)
@@ -307,12 +326,11 @@ class HardwarePanel(Panel):
             self.disarm_btn.disabled = ctl is None or state != "active"
             if ctl is None:
                 return
-            # Counters change on every refresh: once a second is readable; a change of state,
-            # arming, fault, watchdog or e-stop is shown at once.
-            now = time.monotonic()
-            key = None if h is None else (h.state, h.armed, h.fault, h.watchdog_tripped, h.estop,
-                                          h.port)
-            if key != self._readout_key or now - self._readout_at >= 1.0:
+            # Counters change on every refresh: every COUNTERS_S is readable (and costs viewers
+            # little); news (state, arming, fault, watchdog, e-stop, losses) is shown at once.
+            now = self.clock()
+            key = health_news(h)
+            if key != self._readout_key or now - self._readout_at >= COUNTERS_S:
                 self._readout_key, self._readout_at = key, now
                 self.readout.content = format_health(h)
             if h is None:
@@ -330,23 +348,29 @@ class HardwarePanel(Panel):
             self.app.notify_all("Hardware fault", body, color="red")
             self.app.recorder.action(f"hardware fault: {'; '.join(new)}", None)
 
+    @staticmethod
+    def _scales(top: float) -> dict[str, Any]:
+        return {"x": uplot.Scale(time=False), "ms": uplot.Scale(auto=False, range=(0.0, top))}
+
     def _plot(self, h: LinkHealth) -> None:
         if h.rtt_ms_p50 is None or h.received == self._received:
             return  # no new telemetry: do not stretch the plot with stale numbers
         self._received = h.received
         p99 = h.rtt_ms_p99 if h.rtt_ms_p99 is not None else float("nan")
-        now = time.monotonic()
+        now = self.clock()
         self._samples.append((now - self._t0, h.rtt_ms_p50, p99))
-        # Redraw when the round trip changed (0.1 ms) or every PLOT_STILL_S: a steady link's
-        # plot costs each viewer a redraw every few seconds, not REFRESH_HZ of them.
-        last = self._plotted
-        newest = np.array([h.rtt_ms_p50, p99])
-        if (last is not None and now - self._plotted_at < PLOT_STILL_S
-                and np.allclose(newest, last, rtol=0.0, atol=0.1, equal_nan=True)):
-            return
-        self._plotted, self._plotted_at = newest, now
+        if len(self._samples) < 2:
+            return  # the plot is hidden until it has a line to show
         data = np.asarray(self._samples, dtype=float)
-        self.plot.data = thin((data[:, 0], data[:, 1], data[:, 2]))
+        top = axis_top(data[:, 1:], PLOT_MIN_TOP)
+        # A steady link's plot costs each viewer a redraw every PLOT_STILL_S; a jittering
+        # one at most PLOT_HZ, and only for jitter a person could see on the axis.
+        if not self._pacer.due(now, (h.rtt_ms_p50, p99), top):
+            return
+        if top != self._top:
+            self._top = top
+            self.plot.scales = self._scales(top)
+        self.plot.data = thin((data[:, 0], data[:, 1], data[:, 2]), PLOT_POINTS)
 
     def close(self) -> None:
         self._quit.set()

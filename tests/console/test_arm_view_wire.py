@@ -219,3 +219,45 @@ def test_a_window_is_encoded_once_for_every_client() -> None:
     skip.excluded_self_client = 7
     first = encode_window(buffer, [skip], zstd)
     assert encode_window(buffer, [skip], zstd) is not first
+
+
+def test_a_frame_in_an_atomic_block_wakes_the_viewers_once_at_its_end(server) -> None:
+    """Pushes inside ``server.atomic()`` (the render thread's frame) schedule no wake-up: the
+    viewers' window loops take nothing during the block; its end wakes them once, and every
+    viewer receives the frame's messages in one websocket frame."""
+    install()
+    buffer = server._websock_server._broadcast_buffer
+    loop = buffer.event_loop
+    scheduled = []
+    original = loop.call_soon_threadsafe
+
+    def counting(callback, *args, **kwargs):  # type: ignore[no-untyped-def]
+        scheduled.append(callback)
+        return original(callback, *args, **kwargs)
+
+    view = make_arm_view(server.scene, model_for(SOFT), dead_band=None)
+    clients = [RawClient(server) for _ in range(2)]
+    try:
+        time.sleep(0.5)
+        frames0 = [c.frames for c in clients]
+        loop.call_soon_threadsafe = counting  # type: ignore[method-assign]
+        try:
+            with server.atomic():
+                for k in range(5):  # five frames' worth of bone poses: ~250 messages
+                    view.update(np.full(6, 2.0 + k))
+                during = list(scheduled)
+            after = list(scheduled)
+        finally:
+            del loop.call_soon_threadsafe
+        assert during == []
+        assert len(after) == 1  # viser's own wake-up at the block's end
+        n = view.skin.n_bones
+        deadline = time.monotonic() + 10.0
+        while not all(received_bones(c, view.body.name, n) is not None for c in clients):
+            assert time.monotonic() < deadline, "the viewers did not receive the frame"
+            time.sleep(0.02)
+        time.sleep(0.2)
+        assert [c.frames - f for c, f in zip(clients, frames0)] == [1, 1]
+    finally:
+        for c in clients:
+            c.close()
