@@ -125,11 +125,9 @@ class GraspPlanner:
 
         # Warm starts: the first radius from the best table configuration (or kappa_meas);
         # later radii from the previous waypoint moved along its sensitivity d kappa / d r_a
-        # (the optimal kappa(r_a) is smooth), with a second-order term from the waypoint before
-        # it when there is one; the plain previous waypoint is the first restart.
+        # (the optimal kappa(r_a) is smooth); the plain previous waypoint is the first restart.
         wps: list[_Waypoint] = []
         prev: _Waypoint | None = None
-        prev2: _Waypoint | None = None
         witness: Array | None = None
         for i, ra in enumerate(radii.tolist(), start=1):
             if prev is None:
@@ -140,12 +138,7 @@ class GraspPlanner:
                 x0, lam0 = x, lam
                 if prev.dk is not None:
                     dr = ra - prev.radius
-                    x0 = x + dr * prev.dk
-                    if prev2 is not None:
-                        # Second order: the parabola through the waypoint before as well.
-                        h = prev2.radius - prev.radius
-                        x0 += (dr / h) ** 2 * (prev2.kappa - x - h * prev.dk)
-                    x0 = np.minimum(np.maximum(x0, m.lo), m.hi)
+                    x0 = np.minimum(np.maximum(x + dr * prev.dk, m.lo), m.hi)
                     lam0 = (lam[0] + dr * prev.dl[0], lam[1] + dr * prev.dl[1])
             wp = self._solve_radius(c, ra, x0, lam0, km, w, i, first_restart=x,
                                     tangent=i < num_moves)
@@ -158,7 +151,6 @@ class GraspPlanner:
                                         [x + frac * (witness - x), witness], wp)
             wps.append(wp)
             if wp.status == gs.OK:
-                prev2 = prev if prev is not None and prev.dk is not None else None
                 prev = wp
         wps = self._secure_clearance(wps, km, d1, c, r_o, w)
         return self._assemble(wps, km, ctr, r_o, d1, d2, num_moves, dd, w, t_start)
