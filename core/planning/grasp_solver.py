@@ -51,8 +51,6 @@ class SolverOptions:
     min_alpha: float = 1e-4
     clearance_tol: float = 1e-9  # m
     max_step: float = 16.0       # 1/m, longest curvature step per iteration (damping)
-    polish_tol: float = 1e-5     # m, violation below which a stationary iterate is corrected
-                                 # onto the constraints without another Newton iteration
 
 
 @dataclasses.dataclass
@@ -356,32 +354,6 @@ def solve(
             if gmax <= opts.gtol * scale or step <= opts.xtol:
                 status = OK
                 break
-        elif free and abs(e.real) <= opts.polish_tol and abs(e.imag) <= opts.polish_tol:
-            # Early exit: nearly on the constraints and already stationary, so one min-norm
-            # Gauss-Newton correction onto the constraints (no Hessian, no QP) replaces the last
-            # Newton iteration, when the corrected point passes the same convergence test.
-            lbc = complex(l0, -l1)              # Re(J_j lbc) = Re J_j l0 + Im J_j l1
-            J = p.J
-            scale = max(1.0, max(map(abs, grad)))
-            if max(abs(g - (Jj * lbc).real) for g, Jj in zip(grad, J)) <= opts.gtol * scale:
-                axx = sum(v.real * v.real for v in J)
-                ayy = sum(v.imag * v.imag for v in J)
-                axy = sum(v.real * v.imag for v in J)
-                det = axx * ayy - axy * axy
-                if det > 1e-30:
-                    ex, ey = e.real, e.imag
-                    zx = (ayy * ex - axy * ey) / det
-                    zy = (axx * ey - axy * ex) / det
-                    xp = [min(max(xj - Jj.real * zx - Jj.imag * zy, a), b)
-                          for xj, Jj, a, b in zip(x, J, lo, hi)]
-                    q = PointEval(kn, xp)
-                    if abs(q.e.real) <= opts.ctol and abs(q.e.imag) <= opts.ctol:
-                        gp = [a * (b - c) for a, b, c in zip(w2, xp, xo)]
-                        if max(abs(g - (Jj * lbc).real) for g, Jj in zip(gp, q.J)) <= (
-                                opts.gtol * max(1.0, max(map(abs, gp)))):
-                            x, p, grad = xp, q, gp
-                            status = OK
-                            break
     viol = max(abs(p.e.real), abs(p.e.imag))
     if status == NO_CONVERGENCE and any(act) and viol > opts.ctol:
         status = CURVATURE_LIMIT
