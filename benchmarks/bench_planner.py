@@ -225,7 +225,8 @@ def report_set(s: ObjectSet, names, ms, ok, same, swept, skipped: dict) -> tuple
     worst = np.argsort(ratio)[:3]
     objs = [o for o, b in zip(s.objects, both) if b]
     print("  slowest relative to CasADi sqpmethod: " + "; ".join(
-        f"{objs[i]} {a0[both][i]:.2f} vs {a1[both][i]:.2f} ms" for i in worst))
+        f"({objs[i][0]:.3f}, {objs[i][1]:.3f}, r={objs[i][2]:.4f}) {a0[both][i]:.2f} vs "
+        f"{a1[both][i]:.2f} ms" for i in worst))
     if same:
         print(f"  same final configuration as CasADi sqpmethod (max |dkappa| < 1e-3): "
               f"{100 * np.mean(same):.0f}% of {len(same)} plans both solved")
