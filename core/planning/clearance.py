@@ -15,7 +15,7 @@ result is a guaranteed lower bound, not a sampled estimate.
 from __future__ import annotations
 
 import dataclasses
-import functools
+import math
 
 import numpy as np
 import numpy.typing as npt
@@ -68,13 +68,6 @@ class LineCertificate:
     evaluations: int
 
 
-@functools.lru_cache(maxsize=8)
-def _taus(samples: int) -> Array:
-    tau = np.linspace(0.0, 1.0, samples + 1)
-    tau.flags.writeable = False
-    return tau
-
-
 def certify_lines(
     model: ArmModel,
     starts: Array,
@@ -97,53 +90,70 @@ def certify_lines(
         samples: Least initial number of intervals per line.
         max_depth: Maximum number of bisection rounds.
         slack: Target Lipschitz slack of the initial sampling (m); more samples are taken (up
-            to 64 per line) for lines whose configurations move a lot.
+            to 64) on lines whose configurations move a lot.
 
     Returns:
         :class:`LineCertificate`.
     """
     a = np.asarray(starts, float)
     b = np.asarray(ends, float)
-    n = a.shape[0]
-    lam = model.displacement_bound(b - a)                         # (n,) per unit tau
-    # Enough samples that the Lipschitz slack Lambda / (2 S) stays below `slack`, so that
-    # usually one batched evaluation settles every line and no bisection is needed.
-    samples = int(min(max(samples, np.ceil(lam.max(initial=0.0) / (2.0 * slack))), 64))
-    tau = _taus(samples)
-    clr = model.body_clearance(a[:, None, :] + tau[:, None] * (b - a)[:, None, :], center,
-                               radius)                            # (n, S+1)
-    evaluations = clr.size
-    sampled_min = clr.min(axis=1)
-    worst_tau = tau[clr.argmin(axis=1)]
-    lb = 0.5 * (clr[:, :-1] + clr[:, 1:]) - (0.5 / samples) * lam[:, None]
-    bound = lb.min(axis=1)
-    # Bisect intervals that might hide a dip below `required` and whose ends are clear.
-    refine = (lb < required) & (np.minimum(clr[:, :-1], clr[:, 1:]) >= required)
-    if refine.any():
-        li, j = np.nonzero(refine)
-        t0, t1 = tau[j], tau[j + 1]
-        c0, c1 = clr[li, j], clr[li, j + 1]
-        bound = np.where(refine.any(axis=1), np.inf, bound)
-        keep = ~refine
-        for line in np.unique(li):
-            bound[line] = min(bound[line], lb[line][keep[line]].min(initial=np.inf))
-        for depth in range(max_depth):
-            tm = 0.5 * (t0 + t1)
-            cm = model.body_clearance(a[li] + tm[:, None] * (b - a)[li], center, radius)
-            evaluations += cm.size
-            for k in range(len(li)):
-                if cm[k] < sampled_min[li[k]]:
-                    sampled_min[li[k]], worst_tau[li[k]] = cm[k], tm[k]
-            li = np.concatenate([li, li])
-            t0, t1 = np.concatenate([t0, tm]), np.concatenate([tm, t1])
-            c0, c1 = np.concatenate([c0, cm]), np.concatenate([cm, c1])
-            lbi = 0.5 * (c0 + c1) - 0.5 * lam[li] * (t1 - t0)
-            refine = (lbi < required) & (np.minimum(c0, c1) >= required)
-            done = ~refine if depth < max_depth - 1 else np.ones_like(refine)
-            for k in np.flatnonzero(done):
-                bound[li[k]] = min(bound[li[k]], lbi[k])
-            if done.all():
-                break
-            li, t0, t1, c0, c1 = li[refine], t0[refine], t1[refine], c0[refine], c1[refine]
-    bound = np.minimum(bound, sampled_min)
-    return LineCertificate(bound, sampled_min, worst_tau, clr[:, -1].copy(), evaluations)
+    span = b - a
+    lam = model.displacement_bound(span).tolist()                 # (n,) per unit tau
+    # Per line, enough intervals S that the Lipschitz slack Lambda / (2 S) stays below `slack`,
+    # so that usually one batched evaluation (ends included) settles every line and no
+    # bisection is needed. The bookkeeping is in Python lists: a few lines of a few dozen
+    # samples each, where numpy calls would cost more than the arithmetic.
+    counts, taus, lines = [], [], []
+    for i, lm in enumerate(lam):
+        s_i = min(max(samples, math.ceil(lm / (2.0 * slack))), 64)
+        counts.append(s_i)
+        taus += [k / s_i for k in range(s_i + 1)]
+        lines += [i] * (s_i + 1)
+    li = np.array(lines, dtype=np.intp)
+    clr = model.body_clearance(a[li] + np.array(taus)[:, None] * span[li], center,
+                               radius).tolist()
+    evaluations = len(clr)
+    bound, sampled_min, worst_tau = [], [], []
+    todo = []                       # (line, t0, t1, c0, c1) intervals to bisect
+    pos = 0
+    end_clearance = []
+    for i, s_i in enumerate(counts):
+        vals = clr[pos:pos + s_i + 1]
+        pos += s_i + 1
+        end_clearance.append(vals[-1])
+        k_min = min(range(s_i + 1), key=vals.__getitem__)
+        sampled_min.append(vals[k_min])
+        worst_tau.append(k_min / s_i)
+        half = 0.5 * lam[i] / s_i
+        best = math.inf
+        for k in range(s_i):
+            c0, c1 = vals[k], vals[k + 1]
+            lb = 0.5 * (c0 + c1) - half
+            if lb < required and min(c0, c1) >= required:
+                todo.append((i, k / s_i, (k + 1) / s_i, c0, c1))
+            elif lb < best:
+                best = lb
+        bound.append(best)
+    for depth in range(max_depth):
+        if not todo:
+            break
+        li = np.array([t[0] for t in todo], dtype=np.intp)
+        tm = [0.5 * (t[1] + t[2]) for t in todo]
+        cm = model.body_clearance(a[li] + np.array(tm)[:, None] * span[li], center,
+                                  radius).tolist()
+        evaluations += len(cm)
+        nxt = []
+        for (i, t0, t1, c0, c1), t_mid, c_mid in zip(todo, tm, cm):
+            if c_mid < sampled_min[i]:
+                sampled_min[i], worst_tau[i] = c_mid, t_mid
+            half = 0.25 * lam[i] * (t1 - t0)
+            for u0, u1, v0, v1 in ((t0, t_mid, c0, c_mid), (t_mid, t1, c_mid, c1)):
+                lb = 0.5 * (v0 + v1) - half
+                if lb < required and min(v0, v1) >= required and depth < max_depth - 1:
+                    nxt.append((i, u0, u1, v0, v1))
+                elif lb < bound[i]:
+                    bound[i] = lb
+        todo = nxt
+    bound = np.minimum(np.array(bound), sampled_min)
+    return LineCertificate(bound, np.array(sampled_min), np.array(worst_tau),
+                           np.array(end_clearance), evaluations)

@@ -95,10 +95,28 @@ def _seed_table(key: tuple) -> tuple[Array, Array, Array]:
     return kappas, pts[:, -1], np.exp(1j * th[:, -1])
 
 
+@functools.lru_cache(maxsize=8)
+def _table_key(model: ArmModel, size: int) -> tuple:
+    """The seed table's cache key of a model (memoised per model object)."""
+    return (tuple(model.lengths.tolist()), model.base, model.theta0, tuple(model.lo.tolist()),
+            tuple(model.hi.tolist()), model.half_width, int(size))
+
+
 def _table(model: ArmModel, size: int) -> tuple[Array, Array, Array]:
-    key = (tuple(model.lengths.tolist()), model.base, model.theta0, tuple(model.lo.tolist()),
-           tuple(model.hi.tolist()), model.half_width, int(size))
-    return _seed_table(key)
+    return _seed_table(_table_key(model, size))
+
+
+@functools.lru_cache(maxsize=16)
+def _cost_terms(key: tuple, kappa_off: tuple, weights: tuple) -> tuple[Array, float, float]:
+    """Per table configuration sum w k^2 - 2 k . (w ko), and sum w ko^2 and mean(w): the parts
+    of :func:`best_start`'s score that depend only on kappa_off and the weights (memoised, as
+    a plan's start configuration and weights rarely change between plans)."""
+    kappas = _seed_table(key)[0]
+    w = np.array(weights)
+    ko = np.array(kappa_off)
+    score = (kappas * kappas) @ w - 2.0 * (kappas @ (w * ko))
+    score.flags.writeable = False
+    return score, float(w @ (ko * ko)), float(w.mean())
 
 
 def seeds_near(model: ArmModel, center: complex, offset: complex, count: int,
@@ -115,17 +133,18 @@ def best_start(model: ArmModel, center: complex, offset: complex, kappa_off: Arr
     """Start for the first waypoint: the table configuration (or kappa_off itself) that best
     trades the cost sum R (kappa - kappa_off)^2 against beta * (distance of its object-centre
     point from ``center``)^2. Far cheaper than letting the SQP walk out of a straight arm."""
-    kappas, tips, heading = _table(model, table_size)
-    w = np.asarray(weights, float)
-    ko = np.asarray(kappa_off, float)
+    key = _table_key(model, table_size)
+    kappas, tips, heading = _seed_table(key)
+    ko = np.asarray(kappa_off, float).tolist()
     # sum_n w_n (k_n - ko_n)^2 = sum w k^2 - 2 k . (w ko) + const, dropping the constant.
+    w = tuple(np.asarray(weights, float).tolist())
+    base, ko_cost, w_mean = _cost_terms(key, tuple(ko), w)
     r = tips + offset * heading - center
-    score = (kappas * kappas) @ w - 2.0 * (kappas @ (w * ko))
-    score += (beta * w.mean()) * (r.real * r.real + r.imag * r.imag)
+    score = base + (beta * w_mean) * (r.real * r.real + r.imag * r.imag)
     k = int(np.argmin(score))
-    q0, _ = model.point_py(ko.tolist(), offset)
-    if beta * w.mean() * abs(q0 - center) ** 2 <= score[k] + float(w @ (ko * ko)):
-        return ko
+    q0, _ = model.point_py(ko, offset)
+    if beta * w_mean * abs(q0 - center) ** 2 <= score[k] + ko_cost:
+        return np.asarray(kappa_off, float)
     return kappas[k]
 
 

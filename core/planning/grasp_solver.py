@@ -24,7 +24,7 @@ about 3x) and only the KKT solve goes to LAPACK.
 from __future__ import annotations
 
 import dataclasses
-from operator import mul
+from operator import add, mul, sub
 
 import numpy as np
 import numpy.typing as npt
@@ -156,14 +156,34 @@ def solve(
     zeros_c = [0.0] * (2 + nc)
     G = hc = nu = None
     W = []
+    grad = None
     for it in range(1, opts.max_iter + 1):
         J = p.J
         Jx = [v.real for v in J]
         Jy = [v.imag for v in J]
         ex, ey = p.e.real, p.e.imag
-        grad = [a * (b - c) for a, b, c in zip(w2, x, xo)]
+        if grad is None:
+            grad = [a * (b - c) for a, b, c in zip(w2, x, xo)]
         W = kn.kkt_rows(p, lam)
-        if nc:
+        shift = 0.0
+        free = False
+        if not nc and not any(act):
+            # Common case first: no bound active and no clearance rows. Accept the plain
+            # Newton-KKT step when it has positive curvature and stays in the bounds; anything
+            # else goes through the active-set loop below (which re-solves from scratch).
+            sol = kkt_solve(W + [Jx + reg_x, Jy + reg_y], [-g for g in grad] + [-ex, -ey])
+            d = sol[:n]
+            l0, l1 = sol[n], sol[n + 1]
+            gd = sum(map(mul, grad, d))
+            jxd = sum(map(mul, Jx, d))
+            jyd = sum(map(mul, Jy, d))
+            dd = sum(map(mul, d, d))
+            xu = list(map(add, x, d))
+            free = ((dd <= 1e-30 or l0 * jxd + l1 * jyd - gd > 1e-12 * wmax * dd)
+                    and min(map(sub, xu, lo)) >= -1e-12 and max(map(sub, xu, hi)) <= 1e-12)
+        if free:
+            pass
+        elif nc:
             pts, Jp = model.arc_points(np.array(x)[None], p.sstar)
             u = pts[0] - clearance.center
             u = np.conj(u / np.maximum(np.abs(u), 1e-12))
@@ -171,8 +191,7 @@ def solve(
             hc = (p.dist - clearance.rho).tolist()
             for j in range(n):
                 W[j] += [-g[j] for g in G]
-        shift = 0.0
-        for _ in range(opts.max_qp_iter):
+        for _ in range(0 if free else opts.max_qp_iter):
             if any(act) or shift:
                 rows, rhs = [], []
                 for j in range(n):
@@ -310,24 +329,28 @@ def solve(
                 break
             x, p, lam, mu = trial.x, trial, (0.0, 0.0), 0.0
             act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, lo, hi)]
+            grad = None
             continue
-        step = max(map(abs, map(float.__sub__, trial.x, x)))
+        step = max(map(abs, map(sub, trial.x, x)))
         x, p, lam = trial.x, trial, (l0, l1)
+        grad = [a * (b - c) for a, b, c in zip(w2, x, xo)]
         e = p.e
         if abs(e.real) <= opts.ctol and abs(e.imag) <= opts.ctol and (
                 not nc or float((p.dist - clearance.rho).min()) >= -opts.clearance_tol):
             # KKT test at the new point with the QP's multipliers (Newton-accurate): the
             # gradient of the Lagrangian must vanish on the free variables.
-            gmax = 0.0
-            scale = 1.0
-            for j, (wj, xj, oj, Jj) in enumerate(zip(w2, x, xo, p.J)):
-                gj = wj * (xj - oj)
-                scale = max(scale, abs(gj))
-                if not act[j]:
-                    r = gj - Jj.real * l0 - Jj.imag * l1
-                    if nc:
-                        r -= sum(g[j] * nu_i for g, nu_i in zip(G, nu))
-                    gmax = max(gmax, abs(r))
+            scale = max(1.0, max(map(abs, grad)))
+            if free:
+                lbc = complex(l0, -l1)          # Re(J_j lbc) = Re J_j l0 + Im J_j l1
+                gmax = max(abs(g - (Jj * lbc).real) for g, Jj in zip(grad, p.J))
+            else:
+                gmax = 0.0
+                for j, (gj, Jj) in enumerate(zip(grad, p.J)):
+                    if not act[j]:
+                        r = gj - Jj.real * l0 - Jj.imag * l1
+                        if nc:
+                            r -= sum(g[j] * nu_i for g, nu_i in zip(G, nu))
+                        gmax = max(gmax, abs(r))
             if gmax <= opts.gtol * scale or step <= opts.xtol:
                 status = OK
                 break

@@ -138,7 +138,7 @@ class GraspPlanner:
                 x0, lam0 = x, lam
                 if prev.dk is not None:
                     dr = ra - prev.radius
-                    x0 = np.clip(x + dr * prev.dk, m.lo, m.hi)
+                    x0 = np.minimum(np.maximum(x + dr * prev.dk, m.lo), m.hi)
                     lam0 = (lam[0] + dr * prev.dl[0], lam[1] + dr * prev.dl[1])
             wp = self._solve_radius(c, ra, x0, lam0, km, w, i, first_restart=x,
                                     tangent=i < num_moves)
