@@ -25,10 +25,10 @@ runner (the loop is the only writer to the hardware) and waits for them. STOP cl
 from __future__ import annotations
 
 import dataclasses
-import functools
 import html
 import queue
 import threading
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -86,10 +86,14 @@ def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt
     home = dk.robot_rack_lengths(robot, np.zeros((robot.n_segments, 3)))
     runner.start()
     tips: list[Array] = []
+    corrections = 0
+    t0 = time.monotonic()
     progress = on_progress or (lambda i, s: None)
-    done = functools.partial(RepeatabilityResult, p, requested=n,
-                             source="encoders" if tip is None else "tip sensor",
-                             closed_loop=closed_loop)
+
+    def done(reached: Array, message: str = "") -> RepeatabilityResult:
+        return RepeatabilityResult(p, reached, n, message,
+                                   "encoders" if tip is None else "tip sensor", closed_loop,
+                                   seconds=time.monotonic() - t0, corrections=corrections)
     for i in range(n):
         for goal, label in ((home, "retract"), (ik.lengths, "to point")):
             if should_stop():
@@ -99,8 +103,8 @@ def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt
                 if tip is not None and goal is ik.lengths:
                     used = settings if closed_loop else dataclasses.replace(settings,
                                                                             iterations=0)
-                    reached = closed_loop_move(runner, p, tip, settings=used,
-                                               timeout=timeout).measured[-1]
+                    moved = closed_loop_move(runner, p, tip, settings=used, timeout=timeout)
+                    reached, corrections = moved.measured[-1], corrections + moved.corrections
                     break
                 result = runner.wait(runner.move_to(goal, f"{label} {i + 1}/{n}"), timeout)
             except (RuntimeError, TimeoutError) as exc:
@@ -285,11 +289,11 @@ class RepeatabilityPanel(Panel):
 
         def show(c: Comparison) -> None:
             self.progress.value = round(100.0 * c.done / c.total, 1)
-            self.table.content = comparison_html(c)
-            self.plot.content = error_plot_svg(c)
-            if c.finished:
+            if c.finished:  # before the table: its data-state says the run is over
                 self._say("Stopped." if gate.closed else ("Done." if not c.message else
                                                            f"⚠ {c.message}"))
+            self.plot.content = error_plot_svg(c)
+            self.table.content = comparison_html(c)
         try:
             run_comparison(gate, self.app.robot, req.point, req.n, tip,  # type: ignore[arg-type]
                            on_update=show, should_stop=lambda: gate.closed,

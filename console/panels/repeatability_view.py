@@ -26,8 +26,7 @@ Array = npt.NDArray[np.float64]
 Loop = Literal["open", "closed"]
 _AXES = ("x", "y", "z")
 COLOURS: dict[Loop, str] = {"open": "#e8590c", "closed": "#1c7ed6"}
-LABELS: dict[Loop, str] = {"open": "open loop (IK racks)",
-                           "closed": "closed loop on the tip (eq. 5)"}
+LABELS: dict[Loop, str] = {"open": "open loop", "closed": "closed loop on the tip"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,6 +39,8 @@ class RepeatabilityResult:
     message: str = ""
     source: str = "encoders"  # what measured the tips: "encoders" | "tip sensor"
     closed_loop: bool = False
+    seconds: float = 0.0  # how long the run took (retracts included)
+    corrections: int = 0  # closed-loop correction moves, all repetitions together
 
     @property
     def mean(self) -> Array:
@@ -73,11 +74,15 @@ class LoopStats:
         moves: Moves measured.
         mean_error: Mean of |tip - point|.
         spread: +-(max - min) / 2 per axis (3,).
+        seconds_per_move: Time per repetition (retract, move, corrections, measurements), s.
+        corrections_per_move: Closed-loop correction moves per repetition.
     """
 
     moves: int
     mean_error: float
     spread: Array
+    seconds_per_move: float = 0.0
+    corrections_per_move: float = 0.0
 
     @property
     def mean_spread(self) -> float:
@@ -89,7 +94,9 @@ class LoopStats:
         """The figures of ``result``; None before its first move was measured."""
         if result is None or len(result.tips) == 0:
             return None
-        return cls(len(result.tips), float(result.errors.mean()), result.spread)
+        k = len(result.tips)
+        return cls(k, float(result.errors.mean()), result.spread, result.seconds / k,
+                   result.corrections / k)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -139,31 +146,48 @@ class Comparison:
 
 
 def _cell(testid: str, value_m: float | None, decimals: int = 1, prefix: str = "") -> str:
-    style = "padding:1px 5px;text-align:right"
+    style = "padding:1px 4px;text-align:right"
     if value_m is None or not math.isfinite(value_m):
         return f'<td style="{style}" data-testid="{testid}">—</td>'
     return (f'<td style="{style}" data-testid="{testid}" data-mm="{value_m * 1e3:.4f}">'
             f"{prefix}{fmt_mm(value_m, decimals)}</td>")
 
 
+_TD = "padding:1px 4px;text-align:center"
+
+
 def _loop_row(c: Comparison, loop: Loop) -> str:
     s = c.stats(loop)
-    left = "padding:1px 5px;text-align:left"
-    dot = f'<span style="color:{COLOURS[loop]}">●</span> '
+    name = f'<td style="padding:1px 4px"><span style="color:{COLOURS[loop]}">●</span> {LABELS[loop]}</td>'
     if loop == "closed" and not c.sensor:
-        return (f'<tr data-testid="rep-row-closed" style="opacity:.55"><td style="{left}">{dot}'
-                f'{LABELS[loop]}</td><td style="{left}" colspan="5">needs the tip sensor '
-                "(serve.py --slip F)</td></tr>")
+        return (f'<tr data-testid="rep-row-closed" style="opacity:.55">{name}<td colspan="4" '
+                'style="padding:1px 4px">needs the tip sensor (serve.py --slip F)</td></tr>')
     result = c.open if loop == "open" else c.closed
     moves = f"{0 if result is None else len(result.tips)}/{c.requested}"
-    axes = "—" if s is None else " / ".join(fmt_mm(v, 1) for v in s.spread)
-    return (f'<tr data-testid="rep-row-{loop}"><td style="{left}">{dot}{LABELS[loop]}</td>'
-            f'<td style="text-align:center">{c.segments}</td>'
-            f'<td style="text-align:center" data-testid="rep-{loop}-moves">{moves}</td>'
+    return (f'<tr data-testid="rep-row-{loop}">{name}<td style="{_TD}">{c.segments}</td>'
+            f'<td style="{_TD}" data-testid="rep-{loop}-moves">{moves}</td>'
             + _cell(f"rep-{loop}-mean", None if s is None else s.mean_error)
             + _cell(f"rep-{loop}-spread", None if s is None else s.mean_spread, prefix="±")
-            + f'<td style="text-align:right;padding:1px 5px" data-testid="rep-{loop}-axes">'
-            f"{axes}</td></tr>")
+            + "</tr>")
+
+
+def _detail_lines(c: Comparison) -> str:
+    """Each loop's +- spread per axis (the table shows their mean) and its time per move."""
+    axes, cost = [], []
+    for loop in ("open", "closed"):
+        s = c.stats(loop)  # type: ignore[arg-type]
+        if s is None:
+            continue
+        axes.append(f'{loop} <span data-testid="rep-{loop}-axes">'
+                    f"{' / '.join(fmt_mm(v, 1) for v in s.spread)}</span>")
+        fixes = (f" ({s.corrections_per_move:.1f} corrections per move)"
+                 if loop == "closed" else "")
+        cost.append(f'{loop} <span data-testid="rep-{loop}-seconds">'
+                    f"{s.seconds_per_move:.1f}</span> s{fixes}")
+    if not axes:
+        return ""
+    return (f"<div>± per axis x / y / z (mm): {' · '.join(axes)}</div>"
+            f"<div>Time per move (retract, move, measure): {' · '.join(cost)}</div>")
 
 
 def _table_i_rows(segments: int) -> str:
@@ -172,11 +196,10 @@ def _table_i_rows(segments: int) -> str:
         fade = "" if n == segments else "opacity:.55;"
         rows.append(
             f'<tr data-testid="rep-row-table-i-{n}" style="{fade}font-style:italic">'
-            f'<td style="padding:1px 5px">Table I, hardware, open loop</td>'
-            f'<td style="text-align:center">{n}</td><td style="text-align:center">5 × 3 pts</td>'
-            f'<td style="text-align:right;padding:1px 5px">—</td>'
-            f'<td style="text-align:right;padding:1px 5px" data-testid="rep-table-i-{n}" '
-            f'data-mm="{pm:.4f}">±{pm:.0f}</td><td></td></tr>')
+            f'<td style="padding:1px 4px">Table I, hardware, open loop</td>'
+            f'<td style="{_TD}">{n}</td><td style="{_TD}">5×3</td><td style="{_TD}">—</td>'
+            f'<td style="padding:1px 4px;text-align:right" data-testid="rep-table-i-{n}" '
+            f'data-mm="{pm:.4f}">±{pm:.0f}</td></tr>')
     return "".join(rows)
 
 
@@ -195,9 +218,8 @@ def verdict(c: Comparison) -> str:
 
 def comparison_html(c: Comparison) -> str:
     """The comparison table with Table I's rows, a verdict line and what measured the tips."""
-    head = "".join(f'<th style="padding:1px 5px">{h}</th>' for h in (
-        "positioning", "segments", "moves", "mean error (mm)", "± spread (mm)",
-        "± x / y / z (mm)"))
+    head = "".join(f'<th style="padding:1px 4px;font-weight:600">{h}</th>' for h in (
+        "", "seg&shy;ments", "moves", "mean error (mm)", "± spread (mm)"))
     measured = ("tips measured by the tip sensor (the emulator: the true tip plus noise; the "
                 "encoders cannot see slip)" if c.sensor else
                 "tips measured by the encoders (no tip sensor: they cannot see slip)")
@@ -209,7 +231,7 @@ def comparison_html(c: Comparison) -> str:
             f"<table style='border-collapse:collapse;width:100%'><tr>{head}</tr>"
             f"{_loop_row(c, 'open')}{_loop_row(c, 'closed')}{_table_i_rows(c.segments)}</table>"
             + (f'<div data-testid="rep-verdict" style="margin-top:3px"><b>{line}</b></div>'
-               if line else "")
+               if line else "") + _detail_lines(c)
             + f"<span style='opacity:.65'>Error: |tip − point|. ± spread: (max − min)/2 per axis"
             f" over the moves, mean of x, y, z (Table I's ±, \"in each dimension\"); {measured}."
             " Table I: 5 moves from retracted to each of 3 points.</span></div>")

@@ -141,6 +141,9 @@ def test_one_click_fills_both_rows_from_the_runners_measured_tips(server) -> Non
     assert cell(html, "rep-open-mean") > 10.0 and cell(html, "rep-closed-mean") < 1.5
     assert cell(html, "rep-closed-spread") < cell(html, "rep-open-spread")
     assert "Closed loop beats open loop" in html
+    # The loop's cost: every move after the first in a closed-loop repetition is a correction.
+    moves_out = sum(j.label == "closed loop" for j in fake.jobs.values())
+    assert f"({(moves_out - 8) / 4:.1f} corrections per move)" in html and moves_out > 8
     assert cell(html, "rep-table-i-1") == 19.0 and cell(html, "rep-table-i-2") == 29.0
     assert panel.progress.value == 100.0
     panel.close()
