@@ -197,10 +197,12 @@ def run_comparison(runner: Any, robot: ExtensibleArm, point: npt.ArrayLike, n: i
 
 @dataclasses.dataclass(frozen=True)
 class RunRequest:
-    """What the button asks the worker for: ``n`` moves per loop to ``point`` (m)."""
+    """What the button asks the worker for: ``n`` moves per loop to ``point`` (m); ``stops``:
+    how many STOPs the panel had seen when it was asked (a STOP since cancels it)."""
 
     point: Array
     n: int
+    stops: int
 
 
 class RepeatabilityPanel(Panel):
@@ -234,6 +236,7 @@ class RepeatabilityPanel(Panel):
         self._requests: queue.SimpleQueue[RunRequest | None] = queue.SimpleQueue()
         self._busy = threading.Event()
         self._gate: StopGate | None = None
+        self._stops = 0  # STOPs seen (a request from before the newest one never runs)
         self.use_tip.on_click(lambda _: self._use_tip())
         self.run_btn.on_click(self.operator_only(lambda _: self._request(),
                                                  "run a repeatability test"))
@@ -255,10 +258,11 @@ class RepeatabilityPanel(Panel):
             return
         self._busy.set()
         self._requests.put(RunRequest(np.array([float(h.value) for h in self.inputs]) / 1e3,
-                                      int(self.count.value)))
+                                      int(self.count.value), self._stops))
 
     def _halt(self, reason: str = "") -> None:
         """Stop hook: no further move is queued and the runner holds now."""
+        self._stops += 1
         gate = self._gate
         if gate is not None:
             gate.close()
@@ -282,6 +286,8 @@ class RepeatabilityPanel(Panel):
 
     def _run(self, req: RunRequest) -> None:
         gate = self._gate = StopGate(extensible_runner(self.app))
+        if req.stops != self._stops:  # STOP came between the click and now
+            gate.close()
         tip = self.app.services.tip_sensor
         self.progress.value = 0.0
         self.plot.content = ""

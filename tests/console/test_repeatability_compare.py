@@ -202,3 +202,15 @@ def test_error_plot_scales_to_the_largest_error() -> None:
     svg = error_plot_svg(c)
     assert svg.count('class="rep-dot-open"') == 2 and 'class="rep-dot-closed"' not in svg
     assert ">20</text>" in svg  # ticks 0..20 mm cover 18 mm
+
+
+def test_a_request_older_than_the_newest_stop_moves_nothing(server) -> None:
+    from console.panels.repeatability import RunRequest
+    fake = SlippingRunner()
+    panel = panel_with(server, fake)
+    req = RunRequest(POINT, 2, panel._stops)  # clicked ...
+    panel.app.stop_motion("test")             # ... STOP before the worker took it
+    panel._run(req)
+    assert fake.jobs == {} and 'data-state="stopped"' in panel.table.content
+    assert "Stopped." in panel.status.content
+    panel.close()
