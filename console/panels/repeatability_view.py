@@ -274,8 +274,7 @@ def error_plot_svg(c: Comparison, width: int = 300, height: int = 150) -> str:
                          f'fill="currentColor">{i + 1}</text>')
     parts.append(f'<text x="{left + w / 2:.1f}" y="{height - 2}" text-anchor="middle" '
                  'fill="currentColor">move</text>')
-    parts.append(f'<text x="{left}" y="10" fill="currentColor">tip error |tip − point| (mm)'
-                 "</text>")
+    parts.append(f'<text x="{left}" y="10" fill="currentColor">tip error (mm)</text>')
     shift = {"open": -3.0, "closed": 3.0}
     for loop, e in errs.items():
         for i, v in enumerate(e):
@@ -284,7 +283,7 @@ def error_plot_svg(c: Comparison, width: int = 300, height: int = 150) -> str:
                          f'data-mm="{v:.3f}"><title>{loop} loop, move {i + 1}: '
                          f"{v:.1f} mm</title></circle>")
     for j, loop in enumerate(("open", "closed")):
-        lx = left + w - 150 + 78 * j
+        lx = left + w - 140 + 72 * j
         parts.append(f'<circle cx="{lx}" cy="7" r="3.5" fill="{COLOURS[loop]}"/>'
                      f'<text x="{lx + 6}" y="10" fill="currentColor">{loop} loop</text>')
     parts.append("</svg>")

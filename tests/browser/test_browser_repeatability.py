@@ -77,7 +77,8 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
     assert solve_tip_ik(ROBOT, np.array(POINT_MM) / 1e3).reachable
     url = console_server(str(patient_robot(tmp_path)), "--hardware", "emulator", "--slip", "0.2",
                          "--data-dir", str(tmp_path / "runs"))
-    page.set_viewport_size({"width": 1400, "height": 1000})
+    page.set_default_timeout(90_000)  # clicks on a loaded 2-core box (software WebGL)
+    page.set_viewport_size({"width": 1000, "height": 900})  # less canvas to render in software
     page.goto(url)
     page.get_by_text("Tip target", exact=True).wait_for(timeout=120_000)  # a loaded 2-core box
     close_notices(page)
@@ -97,6 +98,10 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
                    show=lambda: link_text(page))
 
     try:
+        # The header above the tabs changes height while a loaded box's lease lapses and comes
+        # back ("nobody" / "client 0"), so the tab is seldom "stable" for Playwright: click it
+        # where it is now, then let open_tab wait until it shows.
+        page.get_by_role("tab", name="Experiments", exact=True).click(force=True)
         open_tab(page, "Experiments")
     except Exception:
         shoot(page, artifacts_dir / "browser_repeatability_tab_failure.png")
@@ -111,15 +116,24 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
     box.fill(str(MOVES))
     box.press("Tab")
     time.sleep(0.5)  # the values reach the server
-    t0 = time.monotonic()
-    page.get_by_role("button", name="Run open vs closed loop").click()
     table = page.locator('[data-testid="rep-compare"]')
     status = page.locator('[data-testid="rep-status"]')
-    wait_until("the comparison running", lambda: table.count() > 0, 20,
-               show=lambda: status.inner_text() if status.count() else "no status")
-    shoot(page, artifacts_dir / "browser_repeatability_running.png")
-    wait_until("the comparison done", lambda: table.get_attribute("data-state") != "running",
-               120, show=lambda: f"{status.inner_text()} | {link_text(page)}")
+    for attempt in range(2):
+        # A STOP is right to end the run; on a loaded box the lease can lapse (7 s without an
+        # answer from this tab) and stop it: then run it once more.
+        t0 = time.monotonic()
+        page.get_by_role("button", name="Run open vs closed loop").click()
+        wait_until("the comparison running",
+                   lambda: table.count() > 0 and table.get_attribute("data-state") == "running",
+                   30, show=lambda: status.inner_text() if status.count() else "no status")
+        if attempt == 0:
+            shoot(page, artifacts_dir / "browser_repeatability_running.png")
+        wait_until("the comparison done",
+                   lambda: table.get_attribute("data-state") != "running", 180,
+                   show=lambda: f"{status.inner_text()} | {link_text(page)}")
+        if table.get_attribute("data-state") == "done":
+            break
+        print(f"run {attempt + 1} ended early: {status.inner_text()} {table.inner_text()[:80]}")
     elapsed = time.monotonic() - t0
     assert table.get_attribute("data-state") == "done", (table.inner_text(), status.inner_text())
     for loop in ("open", "closed"):

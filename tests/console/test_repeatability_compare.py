@@ -14,7 +14,7 @@ import pytest
 import viser
 
 from console.access import AccessControl
-from console.panels.repeatability import RepeatabilityPanel, run_comparison
+from console.panels.repeatability import TIP_SAMPLES, RepeatabilityPanel, run_comparison
 from console.panels.repeatability_view import error_plot_svg
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -51,6 +51,7 @@ class SlippingRunner:
         self.measured: list[tuple[int, np.ndarray]] = []
         self.stops = 0
         self.on_move = on_move
+        self.samples: set[int | None] = set()
 
     def start(self) -> SlippingRunner:
         return self
@@ -76,7 +77,8 @@ class SlippingRunner:
     def stop(self) -> None:
         self.stops += 1
 
-    def measure(self) -> np.ndarray:
+    def measure(self, samples: int | None = None) -> np.ndarray:
+        self.samples.add(samples)
         t = tip_of(self.true)
         self.measured.append((self.rep, t))
         return t
@@ -126,6 +128,7 @@ def test_one_click_fills_both_rows_from_the_runners_measured_tips(server) -> Non
     assert threading.current_thread().name not in fake.threads  # the click only enqueued
     wait_for(lambda: 'data-state="done"' in panel.table.content)
     assert fake.threads == {"repeatability"}  # every move queued by the panel's worker
+    assert fake.samples == {TIP_SAMPLES}  # both loops measure alike
     html = panel.table.content
     # Independent expectation: the tips the fake measured last in each repetition.
     for loop, reps in (("open", range(1, 5)), ("closed", range(5, 9))):
