@@ -43,14 +43,18 @@ class TipSensor:
         self.samples = samples
         self.timeout = timeout
 
-    def measure(self) -> Array:
-        """Mean tip of the next ``samples`` valid frames received after this call."""
+    def measure(self, samples: int | None = None) -> Array:
+        """Mean tip of the next ``samples`` (default: the sensor's) valid frames received after
+        this call."""
+        want = self.samples if samples is None else samples
+        if want < 1:
+            raise ValueError(f"samples must be >= 1, got {want}")
         t0 = time.monotonic()
         seen: set[int] = set()
         tips: list[Array] = []
-        while len(tips) < self.samples:
+        while len(tips) < want:
             if time.monotonic() - t0 > self.timeout:
-                raise TimeoutError(f"tip sensor: {len(tips)} of {self.samples} frames in "
+                raise TimeoutError(f"tip sensor: {len(tips)} of {want} frames in "
                                    f"{self.timeout:.1f} s")
             f = self.source.latest()
             if (f is not None and f.valid and f.t_received > t0 and f.seq not in seen
@@ -64,10 +68,12 @@ class TipSensor:
 
 def closed_loop_move(runner: ExtensibleRunner, target: npt.ArrayLike, tip: TipSensor, *,
                      settings: ClosedLoopSettings = ClosedLoopSettings(),
-                     timeout: float = 60.0) -> ClosedLoopResult:
+                     timeout: float = 60.0, samples: int | None = None) -> ClosedLoopResult:
     """Move the tip to ``target`` (m) and correct on ``tip`` (blocks; not on the loop thread).
 
     ``settings.iterations = 0`` is the open loop with a measurement of where it ended.
+    ``samples``: tip frames averaged per measurement (default: the sensor's); a tolerance
+    below the averaged noise makes every move correct up to ``settings.iterations`` times.
 
     Raises:
         ValueError: the target is out of reach (nothing moves).
@@ -81,4 +87,4 @@ def closed_loop_move(runner: ExtensibleRunner, target: npt.ArrayLike, tip: TipSe
         if result is None or not result.ok:
             raise RuntimeError("move timed out" if result is None else result.message)
 
-    return position(runner.robot, target, move, tip.measure, settings=settings)
+    return position(runner.robot, target, move, lambda: tip.measure(samples), settings=settings)

@@ -8,8 +8,10 @@ slip, so the emulator and the closed-loop studies have something to correct.
 
 Model (per move, in motor travel m = U^-1 L, metres of rack driven by one pinion):
 
-* When motor k starts a move (it was at rest for at least ``rest_s``), a slip fraction is drawn
-  for that move: ``s_k = fraction * load_i + jitter * N(0, 1)``, clipped to [0, 0.5], where
+* When motor k starts a move (it was at rest for at least ``rest_s``, or it reverses: the
+  pinion's teeth take up the other flank, and the runner queues the next move as soon as one
+  settles, so between a retract and the move out a motor may rest for less than ``rest_s``), a
+  slip fraction is drawn for that move: ``s_k = fraction * load_i + jitter * N(0, 1)``, clipped to [0, 0.5], where
   ``load_i = (n - i) / n`` for a motor on platform i (0-based): the proximal platform carries
   every segment beyond it, the last one only its own.
 * While it moves, the rack follows the pinion by ``(1 - s_k)`` of the encoder's travel:
@@ -53,7 +55,8 @@ class SlipModel:
         fraction: Mean fraction of its travel that the most loaded (proximal) rack loses.
         jitter: Standard deviation of the per-move random part of the fraction.
         tip_noise: Standard deviation (m) of the tip measurement per axis.
-        rest_s: A motor still for at least this long starts a new move (new draw).
+        rest_s: A motor still for at least this long starts a new move (new draw); so does a
+            motor that reverses.
         seed: Seed of the slip draws and the measurement noise.
     """
 
@@ -96,18 +99,20 @@ class SlippingRacks:
         self.actual_m = np.zeros((n, 3))   # the racks' true travel
         self.slip = self.mean.copy()       # the fraction of the current (or last) move
         self.rest = np.full((n, 3), np.inf)  # how long each motor has been still (s)
+        self.direction = np.zeros((n, 3))  # sign of each motor's last motion (0: none yet)
 
     def step(self, encoder_m: npt.ArrayLike, dt: float) -> None:
         """The motors moved to ``encoder_m`` (n, 3) (m from the retracted pose) in ``dt`` s."""
         new = np.asarray(encoder_m, dtype=float).reshape(self.encoder_m.shape)
         d = new - self.encoder_m
         moving = d != 0.0
-        start = moving & (self.rest >= self.model.rest_s)
+        start = moving & ((self.rest >= self.model.rest_s) | (np.sign(d) != self.direction))
         if start.any():
             draw = self.mean[start] + self.model.jitter * self.rng.standard_normal(int(start.sum()))
             self.slip[start] = np.clip(draw, 0.0, 0.5)
         self.actual_m += (1.0 - self.slip) * d
         self.rest = np.where(moving, 0.0, self.rest + dt)
+        self.direction = np.where(moving, np.sign(d), self.direction)
         self.encoder_m = new
         if not new.any() and not moving.any():
             self.actual_m[:] = 0.0  # retracted onto the hard stops: re-homed

@@ -1,4 +1,4 @@
-"""The Repeatability panel's closed-loop toggle and serve.py's --slip (issue #17.4)."""
+"""The Repeatability panel without and with a tip sensor, and serve.py's --slip (issue #17.4)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from console.panels.repeatability import (RepeatabilityPanel, RepeatabilityResult, result_html,
-                                          run_repeatability)
+from console.panels.repeatability import RepeatabilityPanel, run_repeatability
+from console.panels.repeatability_view import Comparison, RepeatabilityResult, comparison_html
 from core.robots import load
 from fakes import console_app
 
@@ -31,18 +31,21 @@ class FakeTip:
         return np.zeros(3)
 
 
-def test_closed_loop_toggle_is_disabled_without_a_tip_sensor(server) -> None:
+def test_without_a_tip_sensor_the_panel_says_there_is_nothing_to_compare(server) -> None:
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner())
     panel = app.add_panel(RepeatabilityPanel)
-    assert panel is not None and panel.closed.disabled and panel.closed.value is False
-    assert "--slip" in panel.closed.hint
+    assert panel is not None and panel.run_btn.label == "Run open loop (encoders)"
+    assert "--slip" in panel.run_btn.hint
+    assert 'data-state="no-slip"' in panel.note.content and "--slip" in panel.note.content
+    assert "nothing to beat" in panel.note.content
 
 
-def test_closed_loop_toggle_is_offered_with_a_tip_sensor(server) -> None:
+def test_with_a_tip_sensor_the_panel_offers_the_comparison(server) -> None:
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
                       tip_sensor=FakeTip())
     panel = app.add_panel(RepeatabilityPanel)
-    assert panel is not None and not panel.closed.disabled
+    assert panel is not None and panel.run_btn.label == "Run open vs closed loop"
+    assert 'data-state="slip"' in panel.note.content
 
 
 def test_closed_loop_without_a_tip_sensor_is_refused_and_moves_nothing() -> None:
@@ -52,11 +55,14 @@ def test_closed_loop_without_a_tip_sensor_is_refused_and_moves_nothing() -> None
 
 def test_result_names_what_measured_the_tip() -> None:
     tips = np.zeros((2, 3))
-    enc = result_html(RepeatabilityResult(np.zeros(3), tips, 2))
-    assert "tip from the encoders;" in enc and "±19 mm" in enc
-    closed = result_html(RepeatabilityResult(np.zeros(3), tips, 2, source="tip sensor",
-                                             closed_loop=True))
-    assert "tip from the tip sensor (closed loop on it)" in closed
+    enc = comparison_html(Comparison(np.zeros(3), 2, 2, False,
+                                     open=RepeatabilityResult(np.zeros(3), tips, 2)))
+    assert "tips measured by the encoders" in enc and "±19" in enc and "±29" in enc
+    assert "needs the tip sensor" in enc  # no closed loop row without one
+    closed = comparison_html(Comparison(
+        np.zeros(3), 2, 2, True, open=RepeatabilityResult(np.zeros(3), tips, 2, source="tip sensor"),
+        closed=RepeatabilityResult(np.zeros(3), tips, 2, source="tip sensor", closed_loop=True)))
+    assert "tips measured by the tip sensor" in closed and "closed loop on the tip" in closed
 
 
 @pytest.mark.parametrize("args", [("--robot", "soft-arm", "--slip", "0.1"),

@@ -80,6 +80,33 @@ def test_per_move_draws_have_the_models_mean_and_spread_and_are_seeded() -> None
     assert np.array_equal(s, fractions(model))  # same seed, same draws
 
 
+def test_a_motor_that_reverses_after_a_short_rest_draws_a_new_slip() -> None:
+    """The runner queues the next move as soon as one settles (a retract, then the move out):
+    the motors rest for less than rest_s, but every move out must still get its own draw, or
+    the open loop would repeat one slip forever (issue #17.4's live comparison)."""
+    model = SlipModel(fraction=0.08, jitter=0.02, tip_noise=0.0, seed=3)
+    racks = SlippingRacks(ARM1, model)
+    out_m, dt, fractions = 0.15, 0.01, []
+    for _ in range(60):
+        for goal in (out_m, 0.0):  # out, then back to the retracted pose, tick by tick
+            start = racks.encoder_m.copy()
+            for k in range(1, 31):
+                racks.step(start + (goal - start) * k / 30, dt)
+            racks.step(np.full((1, 3), goal), dt)  # one tick at rest (< rest_s)
+            if goal:
+                fractions.append(1 - (racks.actual_m / racks.encoder_m).ravel())
+    s = np.array(fractions)  # (moves, motors)
+    assert s.std(axis=0) == pytest.approx([0.02] * 3, rel=0.3)  # every move a new draw
+    assert s.mean() == pytest.approx(0.08, abs=0.01)
+    # In one direction without a rest the move goes on: no new draw on the way.
+    racks = SlippingRacks(ARM1, model)
+    racks.step(np.full((1, 3), 0.05), dt)
+    first = racks.slip.copy()
+    racks.step(np.full((1, 3), 0.05), dt)  # one still tick
+    racks.step(np.full((1, 3), 0.10), dt)
+    assert np.array_equal(racks.slip, first)
+
+
 def test_a_correction_move_slips_only_on_its_own_travel() -> None:
     f = 0.1
     racks = SlippingRacks(ARM1, SlipModel(fraction=f, jitter=0.0, tip_noise=0.0))

@@ -73,6 +73,9 @@ def test_tip_sensor_averages_fresh_valid_frames_and_times_out() -> None:
                    MocapFrame(2, now, now, pts(9.0), False),    # invalid: skipped
                    MocapFrame(3, now, now, pts(0.03), True)])
     assert TipSensor(src, samples=2).measure() == pytest.approx([0.02, 0.0, 0.3])
+    src = _Frames([MocapFrame(4, now, now, pts(0.04), True),
+                   MocapFrame(5, now, now, pts(9.0), True)])
+    assert TipSensor(src, samples=2).measure(samples=1) == pytest.approx([0.04, 0.0, 0.3])
     with pytest.raises(TimeoutError):
         TipSensor(_Frames([]), samples=1, timeout=0.05).measure()
 
