@@ -159,6 +159,47 @@ def run_to_grasp(page: Any, n: int, palms: list) -> set[str] | None:
     return counted
 
 
+def test_clean_start_shows_no_fault_and_execute_does_not_arm(
+        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
+    """Issue 19.3 and 19.4's first load."""
+    try:
+        open_operate(page, console_server("soft-arm", "--no-token"))
+        # First load: the planner and the Waypoints panel tell the same plan of Object 1.
+        summary = page.locator('[data-testid="plan-summary"]')
+        wp = page.locator('[data-testid="waypoint-info"]')
+        n = summary.get_attribute("data-waypoints")
+        assert n and int(n) >= 2 and "Place an object" not in summary.inner_text()
+        wait_until("waypoints agree", lambda: wp.get_attribute("data-count") == n, 10.0, page)
+        assert f"Waypoint 1 of {n}" in wp.inner_text()
+        # A clean start: no fault in the header nor in the Control panel, for 5 s.
+        header = page.locator('[data-testid="header-link"]')
+        end = time.monotonic() + 5.0
+        while time.monotonic() < end:
+            for text in (header.inner_text(), page.locator(
+                    '[data-testid="control-link"]').inner_text()):
+                assert "link lost" not in text and "ault" not in text, text
+            assert page.get_by_text("Fault:").count() == 0
+            assert not any("fault" in t.lower() for t in notes(page)), notes(page)
+            time.sleep(0.2)
+        assert "mock device" in header.inner_text()
+        page.screenshot(path=str(artifacts_dir / "browser_soft_clean_start.png"))
+        # Execute while disarmed: refused with what to do, and nothing arms.
+        assert "disarmed" in state(page).inner_text()
+        hold_control(page)
+        page.get_by_role("button", name="Execute grasp-and-place").click()
+        wait_until("told to arm first",
+                   lambda: any("Arm first" in t for t in notes(page)), 10.0, page)
+        time.sleep(2.0)
+        assert "disarmed" in state(page).inner_text() and "ARMED" not in state(page).inner_text()
+        # (idle, or stopped if a loaded machine's slow tab lost its lease, which STOPs)
+        assert state(page).get_attribute("data-phase") in ("idle", "stopped"), \
+            state(page).inner_text()
+        assert "disarmed" in page.locator('[data-testid="control-link"]').inner_text()
+    except BaseException:
+        failure_shot(page, artifacts_dir / "browser_soft_clean_start_failure.png")
+        raise
+
+
 def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     """Issues 19.1 and 19.4."""
@@ -212,45 +253,4 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         assert d2 < 55.0 and d_old > d2 + 30.0, (palm, d2, d_old, palms)
     except BaseException:
         failure_shot(page, artifacts_dir / "browser_soft_execute_failure.png")
-        raise
-
-
-def test_clean_start_shows_no_fault_and_execute_does_not_arm(
-        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    """Issue 19.3 and 19.4's first load."""
-    try:
-        open_operate(page, console_server("soft-arm", "--no-token"))
-        # First load: the planner and the Waypoints panel tell the same plan of Object 1.
-        summary = page.locator('[data-testid="plan-summary"]')
-        wp = page.locator('[data-testid="waypoint-info"]')
-        n = summary.get_attribute("data-waypoints")
-        assert n and int(n) >= 2 and "Place an object" not in summary.inner_text()
-        wait_until("waypoints agree", lambda: wp.get_attribute("data-count") == n, 10.0, page)
-        assert f"Waypoint 1 of {n}" in wp.inner_text()
-        # A clean start: no fault in the header nor in the Control panel, for 5 s.
-        header = page.locator('[data-testid="header-link"]')
-        end = time.monotonic() + 5.0
-        while time.monotonic() < end:
-            for text in (header.inner_text(), page.locator(
-                    '[data-testid="control-link"]').inner_text()):
-                assert "link lost" not in text and "ault" not in text, text
-            assert page.get_by_text("Fault:").count() == 0
-            assert not any("fault" in t.lower() for t in notes(page)), notes(page)
-            time.sleep(0.2)
-        assert "mock device" in header.inner_text()
-        page.screenshot(path=str(artifacts_dir / "browser_soft_clean_start.png"))
-        # Execute while disarmed: refused with what to do, and nothing arms.
-        assert "disarmed" in state(page).inner_text()
-        hold_control(page)
-        page.get_by_role("button", name="Execute grasp-and-place").click()
-        wait_until("told to arm first",
-                   lambda: any("Arm first" in t for t in notes(page)), 10.0, page)
-        time.sleep(2.0)
-        assert "disarmed" in state(page).inner_text() and "ARMED" not in state(page).inner_text()
-        # (idle, or stopped if a loaded machine's slow tab lost its lease, which STOPs)
-        assert state(page).get_attribute("data-phase") in ("idle", "stopped"), \
-            state(page).inner_text()
-        assert "disarmed" in page.locator('[data-testid="control-link"]').inner_text()
-    except BaseException:
-        failure_shot(page, artifacts_dir / "browser_soft_clean_start_failure.png")
         raise
