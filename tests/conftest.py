@@ -3,7 +3,9 @@
 Browser tests take ``browser`` (session-wide Chromium from /usr/bin/chromium; skipped when it is
 missing, except under CI=true where that fails) and ``console_server`` (a factory that starts
 ``serve.py --robot NAME`` on a free 127.0.0.1 port, waits until it serves, returns its URL and
-kills it at teardown). Screenshots go to ``artifacts/`` (gitignored) via ``artifacts_dir``.
+kills it at teardown). ``module_console_server`` and ``module_page`` are the same for the tests
+of one module, to share one loaded console. Screenshots go to ``artifacts/`` (gitignored) via
+``artifacts_dir``.
 ``serve_module`` is ``serve.py`` imported as a module (its ``build`` makes an in-process console).
 """
 
@@ -31,7 +33,8 @@ CHROMIUM_ARGS = [
     "--disable-sync",
     "--no-first-run",
 ]
-SERVER_START_TIMEOUT = 30.0
+SERVER_START_TIMEOUT = 60.0  # (about 2 s on a quiet machine)
+
 
 
 def _free_port() -> int:
@@ -67,23 +70,40 @@ def browser() -> Iterator[object]:
             chromium.close()
 
 
+def _new_page(browser: object) -> tuple[object, object]:
+    context = browser.new_context(viewport={"width": 1280, "height": 800})  # type: ignore[attr-defined]
+    return context, context.new_page()
+
+
 @pytest.fixture
 def page(browser: object) -> Iterator[object]:
     """A fresh 1280x800 page; closed after the test."""
-    context = browser.new_context(viewport={"width": 1280, "height": 800})  # type: ignore[attr-defined]
-    pg = context.new_page()
+    context, pg = _new_page(browser)
     try:
         yield pg
     finally:
         context.close()
 
 
-@pytest.fixture
-def console_server() -> Iterator[Callable[..., str]]:
-    """Factory: ``console_server("soft-arm")`` starts serve.py and returns its base URL."""
-    procs: list[subprocess.Popen[bytes]] = []
+@pytest.fixture(scope="module")
+def module_page(browser: object) -> Iterator[object]:
+    """A 1280x800 page shared by the tests of one module (each console load costs seconds of
+    software rendering); closed after the module's last test."""
+    context, pg = _new_page(browser)
+    try:
+        yield pg
+    finally:
+        context.close()
 
-    def start(robot: str, *extra: str) -> str:
+
+class ConsoleServers:
+    """Starts ``serve.py --robot NAME`` subprocesses on free ports; :meth:`close` kills them."""
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen[bytes]] = []
+
+    def start(self, robot: str, *extra: str) -> str:
+        """Start serve.py, wait until it serves, return its base URL."""
         port = _free_port()
         log = REPO / "artifacts" / f"serve-{Path(robot).stem}-{port}.log"  # one per server
         log.parent.mkdir(exist_ok=True)
@@ -93,7 +113,7 @@ def console_server() -> Iterator[Callable[..., str]]:
              "--port", str(port), "--hardware", "mock", *extra],
             cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
         out.close()
-        procs.append(proc)
+        self.procs.append(proc)
         url = f"http://127.0.0.1:{port}/"
         deadline = time.monotonic() + SERVER_START_TIMEOUT
         while time.monotonic() < deadline:
@@ -108,14 +128,30 @@ def console_server() -> Iterator[Callable[..., str]]:
         pytest.fail(f"serve.py did not serve {url} within {SERVER_START_TIMEOUT:.0f} s:\n"
                     f"{log.read_text()}")
 
-    yield start
-    for proc in procs:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+    def close(self) -> None:
+        for proc in self.procs:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=5)
+
+
+@pytest.fixture
+def console_server() -> Iterator[Callable[..., str]]:
+    """Factory: ``console_server("soft-arm")`` starts serve.py and returns its base URL."""
+    servers = ConsoleServers()
+    yield servers.start
+    servers.close()
+
+
+@pytest.fixture(scope="module")
+def module_console_server() -> Iterator[Callable[..., str]]:
+    """``console_server`` for one module: the servers live until its last test ends."""
+    servers = ConsoleServers()
+    yield servers.start
+    servers.close()
 
 
 @pytest.fixture
@@ -145,3 +181,4 @@ def serve_module() -> object:
 def pytest_configure(config: pytest.Config) -> None:
     """Register the ``browser`` marker (tests that drive Chromium against serve.py)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
+
