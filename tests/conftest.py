@@ -34,7 +34,20 @@ CHROMIUM_ARGS = [
     "--no-first-run",
 ]
 SERVER_START_TIMEOUT = 60.0  # (about 2 s on a quiet machine)
-
+# The 3D view's drawing-buffer scale in browser tests (viser's ``?fixedDpr=``): Chromium draws
+# WebGL in software here, and its cost grows with the pixels drawn; half the resolution draws a
+# quarter of them. Page layout (CSS pixels), clicks and DOM screenshots are unchanged; only the
+# 3D picture is coarser. BROWSER_TEST_DPR=1 draws at full resolution.
+RENDER_DPR = os.environ.get("BROWSER_TEST_DPR", "0.5")
+# Run in every page before its own scripts: the console's pages (http) draw at RENDER_DPR;
+# exported files opened from disk are left alone.
+_DPR_SCRIPT = """(() => {
+    if (location.protocol !== "http:") return;
+    const q = new URLSearchParams(location.search);
+    if (q.has("fixedDpr")) return;
+    q.set("fixedDpr", "%s");
+    history.replaceState(history.state, "", location.pathname + "?" + q + location.hash);
+})();"""
 
 
 def _free_port() -> int:
@@ -64,6 +77,15 @@ def browser() -> Iterator[object]:
     with sync_playwright() as pw:
         chromium = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True,
                                       args=CHROMIUM_ARGS)
+        if RENDER_DPR != "1":
+            new_context = chromium.new_context
+
+            def scaled_context(*args: object, **kwargs: object) -> object:
+                context = new_context(*args, **kwargs)
+                context.add_init_script(_DPR_SCRIPT % float(RENDER_DPR))
+                return context
+
+            chromium.new_context = scaled_context  # type: ignore[method-assign]
         try:
             yield chromium
         finally:
