@@ -200,7 +200,50 @@ def serve_module() -> object:
     return module
 
 
+# Tests (besides the browser tests) whose assertions hold wall-clock limits (a 300 ms hold, the
+# 100 Hz loop's period, link timeouts and watchdogs, the lease, shutdown within 2 s, a rate).
+TIMING_FILES = frozenset({
+    "tests/console/test_client_guard.py", "tests/console/test_client_guard_flood.py",
+    "tests/console/test_lab_access.py", "tests/console/test_lab_hold.py",
+    "tests/console/test_lab_many_clients.py", "tests/console/test_lease_warning.py",
+    "tests/console/test_no_orphans.py", "tests/console/test_serve_lifecycle.py",
+    "tests/hw_bridge/test_cpu_partition.py", "tests/hw_bridge/test_extensible_bridge.py",
+    "tests/hw_bridge/test_extensible_closed_loop.py", "tests/hw_bridge/test_extensible_process.py",
+    "tests/hw_bridge/test_extensible_runner.py", "tests/hw_bridge/test_hw_emulator.py",
+    "tests/hw_bridge/test_hw_lifecycle.py", "tests/hw_bridge/test_hw_mocap.py",
+    "tests/hw_bridge/test_link_supervisor.py", "tests/hw_bridge/test_loop.py",
+    "tests/hw_bridge/test_parent_watch.py", "tests/hw_bridge/test_realtime.py",
+    "tests/hw_bridge/test_slip_emulator.py", "tests/hw_bridge/test_soft_arm_emulator.py",
+})
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Register the ``browser`` marker (tests that drive Chromium against serve.py)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
 
+
+def xdist_group_of(nodeid: str) -> str | None:
+    """The group a test runs in under ``pytest -n 2 --dist loadgroup`` (scripts/test): every
+    browser test (tests/browser/) on one worker, one after another (each loads Chromium's
+    software renderer, and several hold timings: a 300 ms hold, the lease), and likewise the
+    tests of ``TIMING_FILES``; None for the others, which spread over both workers."""
+    path = nodeid.split("::", 1)[0]
+    if path.startswith("tests/browser/"):
+        return "browser"
+    return "timing" if path in TIMING_FILES else None
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """``--dist loadgroup`` by :func:`xdist_group_of`. (pytest-xdist's own loadgroup groups by an
+    ``xdist_group`` marker it appends to the node id, which pytest 9 no longer lets it change:
+    every test would be on its own.)"""
+    if config.getoption("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_group_of(nodeid) or nodeid
+
+    return GroupScheduling(config, log)
