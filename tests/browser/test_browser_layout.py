@@ -4,6 +4,7 @@ size (``artifacts/layout/``) for people to look at."""
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -68,7 +69,7 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
             close_notices(page)
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
-                drawn(page)
+                time.sleep(0.5)  # the tab's panels settle (two animation frames were too few)
                 assert _on_screen(page, stop), f"STOP is off screen or covered: {size}, {tab}"
                 assert _on_screen(page, phase), f"the phase is off screen: {size}, {tab}"
                 assert page.evaluate("() => scrollY") == 0
