@@ -44,6 +44,7 @@ class Streamer:
         self.message = "not connected"
         self.last_result: JobResult | None = None
         self.on_result: Callable[[JobResult], None] = lambda r: None
+        self._held: list[JobResult] | None = None  # results of the tick being computed
         self.measured_L: Array | None = None
         self.snapshot = RunnerSnapshot("disconnected", message=self.message)
 
@@ -132,7 +133,10 @@ class Streamer:
 
     def _finish(self, result: JobResult) -> None:
         self.last_result = result
-        self.on_result(result)
+        if self._held is not None:  # inside update: told once its snapshot is published
+            self._held.append(result)
+        else:
+            self.on_result(result)
 
     def settle_link(self) -> None:
         if self.link is not None and self.hold_L is not None:
@@ -141,6 +145,22 @@ class Streamer:
     # -- one tick --------------------------------------------------------------------------
     def update(self, encoders: Counts, t: float,
                periods: int = 1) -> tuple[Counts | None, RunnerSnapshot]:
+        """One tick: the demand to write (None: write nothing) and the snapshot it published.
+
+        A job that ends in this tick is reported (``on_result``) only after the snapshot that
+        shows it ended (``holding``, its ``last_result``) is published, so whoever is woken by
+        the result reads telemetry that agrees with it.
+        """
+        self._held = []
+        try:
+            return self._update(encoders, t, periods)
+        finally:
+            held, self._held = self._held, None
+            for result in held:
+                self.on_result(result)
+
+    def _update(self, encoders: Counts, t: float,
+                periods: int) -> tuple[Counts | None, RunnerSnapshot]:
         if encoders.size == 0:  # no link (never connected, disconnected, or after a fault)
             self.armed, self.measured_L = False, None
             state = "fault" if self.fault else "disconnected"

@@ -3,7 +3,9 @@
 Browser tests take ``browser`` (session-wide Chromium from /usr/bin/chromium; skipped when it is
 missing, except under CI=true where that fails) and ``console_server`` (a factory that starts
 ``serve.py --robot NAME`` on a free 127.0.0.1 port, waits until it serves, returns its URL and
-kills it at teardown). Screenshots go to ``artifacts/`` (gitignored) via ``artifacts_dir``.
+kills it at teardown). ``module_console_server`` and ``module_page`` are the same for the tests
+of one module, to share one loaded console. Screenshots go to ``artifacts/`` (gitignored) via
+``artifacts_dir``.
 ``serve_module`` is ``serve.py`` imported as a module (its ``build`` makes an in-process console).
 """
 
@@ -31,7 +33,21 @@ CHROMIUM_ARGS = [
     "--disable-sync",
     "--no-first-run",
 ]
-SERVER_START_TIMEOUT = 30.0
+SERVER_START_TIMEOUT = 60.0  # (about 2 s on a quiet machine)
+# The 3D view's drawing-buffer scale in browser tests (viser's ``?fixedDpr=``): Chromium draws
+# WebGL in software here, and its cost grows with the pixels drawn; half the resolution draws a
+# quarter of them. Page layout (CSS pixels), clicks and DOM screenshots are unchanged; only the
+# 3D picture is coarser. BROWSER_TEST_DPR=1 draws at full resolution.
+RENDER_DPR = os.environ.get("BROWSER_TEST_DPR", "0.5")
+# Run in every page before its own scripts: the console's pages (http) draw at RENDER_DPR;
+# exported files opened from disk are left alone.
+_DPR_SCRIPT = """(() => {
+    if (location.protocol !== "http:") return;
+    const q = new URLSearchParams(location.search);
+    if (q.has("fixedDpr")) return;
+    q.set("fixedDpr", "%s");
+    history.replaceState(history.state, "", location.pathname + "?" + q + location.hash);
+})();"""
 
 
 def _free_port() -> int:
@@ -61,29 +77,55 @@ def browser() -> Iterator[object]:
     with sync_playwright() as pw:
         chromium = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True,
                                       args=CHROMIUM_ARGS)
+        if RENDER_DPR != "1":
+            new_context = chromium.new_context
+
+            def scaled_context(*args: object, **kwargs: object) -> object:
+                context = new_context(*args, **kwargs)
+                context.add_init_script(_DPR_SCRIPT % float(RENDER_DPR))
+                return context
+
+            chromium.new_context = scaled_context  # type: ignore[method-assign]
         try:
             yield chromium
         finally:
             chromium.close()
 
 
+def _new_page(browser: object) -> tuple[object, object]:
+    context = browser.new_context(viewport={"width": 1280, "height": 800})  # type: ignore[attr-defined]
+    return context, context.new_page()
+
+
 @pytest.fixture
 def page(browser: object) -> Iterator[object]:
     """A fresh 1280x800 page; closed after the test."""
-    context = browser.new_context(viewport={"width": 1280, "height": 800})  # type: ignore[attr-defined]
-    pg = context.new_page()
+    context, pg = _new_page(browser)
     try:
         yield pg
     finally:
         context.close()
 
 
-@pytest.fixture
-def console_server() -> Iterator[Callable[..., str]]:
-    """Factory: ``console_server("soft-arm")`` starts serve.py and returns its base URL."""
-    procs: list[subprocess.Popen[bytes]] = []
+@pytest.fixture(scope="module")
+def module_page(browser: object) -> Iterator[object]:
+    """A 1280x800 page shared by the tests of one module (each console load costs seconds of
+    software rendering); closed after the module's last test."""
+    context, pg = _new_page(browser)
+    try:
+        yield pg
+    finally:
+        context.close()
 
-    def start(robot: str, *extra: str) -> str:
+
+class ConsoleServers:
+    """Starts ``serve.py --robot NAME`` subprocesses on free ports; :meth:`close` kills them."""
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen[bytes]] = []
+
+    def start(self, robot: str, *extra: str) -> str:
+        """Start serve.py, wait until it serves, return its base URL."""
         port = _free_port()
         log = REPO / "artifacts" / f"serve-{Path(robot).stem}-{port}.log"  # one per server
         log.parent.mkdir(exist_ok=True)
@@ -93,7 +135,7 @@ def console_server() -> Iterator[Callable[..., str]]:
              "--port", str(port), "--hardware", "mock", *extra],
             cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
         out.close()
-        procs.append(proc)
+        self.procs.append(proc)
         url = f"http://127.0.0.1:{port}/"
         deadline = time.monotonic() + SERVER_START_TIMEOUT
         while time.monotonic() < deadline:
@@ -108,14 +150,30 @@ def console_server() -> Iterator[Callable[..., str]]:
         pytest.fail(f"serve.py did not serve {url} within {SERVER_START_TIMEOUT:.0f} s:\n"
                     f"{log.read_text()}")
 
-    yield start
-    for proc in procs:
-        proc.terminate()
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
+    def close(self) -> None:
+        for proc in self.procs:
+            proc.terminate()
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=5)
+
+
+@pytest.fixture
+def console_server() -> Iterator[Callable[..., str]]:
+    """Factory: ``console_server("soft-arm")`` starts serve.py and returns its base URL."""
+    servers = ConsoleServers()
+    yield servers.start
+    servers.close()
+
+
+@pytest.fixture(scope="module")
+def module_console_server() -> Iterator[Callable[..., str]]:
+    """``console_server`` for one module: the servers live until its last test ends."""
+    servers = ConsoleServers()
+    yield servers.start
+    servers.close()
 
 
 @pytest.fixture
@@ -142,6 +200,50 @@ def serve_module() -> object:
     return module
 
 
+# Tests (besides the browser tests) whose assertions hold wall-clock limits (a 300 ms hold, the
+# 100 Hz loop's period, link timeouts and watchdogs, the lease, shutdown within 2 s, a rate).
+TIMING_FILES = frozenset({
+    "tests/console/test_client_guard.py", "tests/console/test_client_guard_flood.py",
+    "tests/console/test_lab_access.py", "tests/console/test_lab_hold.py",
+    "tests/console/test_lab_many_clients.py", "tests/console/test_lease_warning.py",
+    "tests/console/test_no_orphans.py", "tests/console/test_serve_lifecycle.py",
+    "tests/hw_bridge/test_cpu_partition.py", "tests/hw_bridge/test_extensible_bridge.py",
+    "tests/hw_bridge/test_extensible_closed_loop.py", "tests/hw_bridge/test_extensible_process.py",
+    "tests/hw_bridge/test_extensible_runner.py", "tests/hw_bridge/test_hw_emulator.py",
+    "tests/hw_bridge/test_hw_lifecycle.py", "tests/hw_bridge/test_hw_mocap.py",
+    "tests/hw_bridge/test_link_supervisor.py", "tests/hw_bridge/test_loop.py",
+    "tests/hw_bridge/test_parent_watch.py", "tests/hw_bridge/test_realtime.py",
+    "tests/hw_bridge/test_slip_emulator.py", "tests/hw_bridge/test_soft_arm_emulator.py",
+})
+
+
 def pytest_configure(config: pytest.Config) -> None:
     """Register the ``browser`` marker (tests that drive Chromium against serve.py)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
+
+
+def xdist_group_of(nodeid: str) -> str | None:
+    """The group a test runs in under ``pytest -n 2 --dist loadgroup`` (scripts/test): every
+    browser test (tests/browser/) on one worker, one after another (each loads Chromium's
+    software renderer, and several hold timings: a 300 ms hold, the lease), and likewise the
+    tests of ``TIMING_FILES``; None for the others, which spread over both workers."""
+    path = nodeid.split("::", 1)[0]
+    if path.startswith("tests/browser/"):
+        return "browser"
+    return "timing" if path in TIMING_FILES else None
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """``--dist loadgroup`` by :func:`xdist_group_of`. (pytest-xdist's own loadgroup groups by an
+    ``xdist_group`` marker it appends to the node id, which pytest 9 no longer lets it change:
+    every test would be on its own.)"""
+    if config.getoption("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_group_of(nodeid) or nodeid
+
+    return GroupScheduling(config, log)

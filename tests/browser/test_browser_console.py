@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 import pytest
+from browser_tabs import open_console
 
 from console.model import DeltaModel
 from core.kinematics import delta as dk
@@ -23,17 +24,6 @@ from core.robots import load
 
 pytestmark = pytest.mark.browser
 READOUT_TOL = 0.051  # the readout shows one decimal (mm, degrees)
-
-
-def open_console(page, url: str) -> None:
-    """Load the console and wait until the panels are there; close viser's WebGL notice."""
-    page.goto(url)
-    page.get_by_text("Readout", exact=True).wait_for(timeout=15_000)
-    page.locator('[data-testid="tip-readout"]').wait_for(timeout=10_000)
-    notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-    if notice.count():
-        notice.locator("button").first.click()
-        notice.wait_for(state="detached", timeout=5_000)
 
 
 def slider(page, label: str):
@@ -81,7 +71,7 @@ def canvas_png(page) -> bytes:
 def test_soft_arm_jog_moves_tip_as_forward_kinematics(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     robot = load("soft-arm")
-    open_console(page, console_server("soft-arm"))
+    open_console(page, console_server("soft-arm"), "Readout", '[data-testid="tip-readout"]')
     straight = pk.forward_kinematics(np.zeros(6), robot.lengths, robot.base_pose)[-1]
     wait_for_readout(page, {"tip-0": straight[0] * 1e3, "tip-1": straight[1] * 1e3,
                             "tip-2": wrap_deg(straight[2])})
@@ -141,7 +131,7 @@ def _boundary(robot, q: np.ndarray, index: tuple[int, int], good: float, bad: fl
 def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     robot = load("extensible")
-    open_console(page, console_server("extensible"))
+    open_console(page, console_server("extensible"), "Readout", '[data-testid="tip-readout"]')
     # It starts straight with every rack at mid-range (issue 19.5: room to bend both ways).
     start = DeltaModel(robot).initial()
     assert np.all(start[:, :2] == 0.0)

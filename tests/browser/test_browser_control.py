@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from browser_tabs import close_notices, open_tab
+from browser_tabs import close_notices, open_console, open_tab
 from core.control.trials import paper_locations
 
 pytestmark = pytest.mark.browser
@@ -130,21 +130,10 @@ def execute_at(page: Any, x: float, y: float) -> None:
     page.get_by_role("button", name="Execute grasp-and-place").click()
 
 
-def open_console(page: Any, url: str) -> None:
-    """Load the console once every panel is built (the Session panel's shared status shows).
-
-    serve.py answers HTTP before its panels exist; a browser that connects that early gets no
-    per-browser Session widgets (role, Take control), so reload it if they are missing.
-    """
-    page.goto(url)
-    page.locator('[data-testid="holder"]').wait_for(timeout=60_000)
-    open_tab(page, "Session")
-    if page.locator('[data-testid="role"]').count() == 0:
-        page.reload()
-        open_tab(page, "Session")
-    page.locator('[data-testid="role"]').wait_for(timeout=60_000)
-    open_tab(page, "Operate")
-    page.locator('[data-testid="control-state"]').wait_for(timeout=30_000)
+def open_control(page: Any, url: str) -> None:
+    """Load the console once every panel is built (this browser's Session role line shows) and
+    the Control panel's state line is there."""
+    open_console(page, url, "Control", '[data-testid="control-state"]', role="any")
 
 
 def start_grasp(page: Any, x: float, y: float, until: tuple[str, ...], timeout: float,
@@ -177,7 +166,7 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
 
 
 def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
-    open_console(page, url)
+    open_control(page, url)
     # The control process is up. (Arm reconnects a link that a fault closed.)
     link = page.locator('[data-testid="control-link"]')
     link.wait_for(timeout=60_000)
@@ -235,7 +224,7 @@ def test_click_to_grasp_on_the_default_emulator_console(
 
     page.set_viewport_size({"width": 1024, "height": 760})
     try:
-        open_console(page, console_server("soft-arm", "--no-token", "--hardware", "emulator"))
+        open_control(page, console_server("soft-arm", "--no-token", "--hardware", "emulator"))
         link = page.locator('[data-testid="control-link"]')
         link.wait_for(timeout=60_000)
         assert "emulator" in link.inner_text(), link.inner_text()

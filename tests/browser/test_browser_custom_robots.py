@@ -27,7 +27,7 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
 
 def test_four_segment_soft_arm_grasps_and_places_from_the_browser(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    from test_browser_control import (close_notices, kappa_measured, open_console, start_grasp,
+    from test_browser_control import (close_notices, kappa_measured, open_control, start_grasp,
                                       wait_phase)
 
     robot_file = DATA / "soft-4x80mm.toml"
@@ -37,7 +37,7 @@ def test_four_segment_soft_arm_grasps_and_places_from_the_browser(
     x, y = -0.53 * total, 0.53 * total  # up and to the left, within reach of this arm
     page.set_viewport_size({"width": 1024, "height": 760})
     try:
-        open_console(page, console_server(str(robot_file), "--no-token"))
+        open_control(page, console_server(str(robot_file), "--no-token"))
         page.locator('[data-testid="control-link"]').wait_for(timeout=60_000)
         close_notices(page)
         start_grasp(page, x, y, ("grasp", "move_to_bin"), timeout=60.0)
@@ -51,7 +51,7 @@ def test_four_segment_soft_arm_grasps_and_places_from_the_browser(
 
 def test_three_segment_extensible_arm_reaches_a_typed_target(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    from test_browser_extensible import open_console, readout_tip, type_target, wait_until
+    from test_browser_extensible import open_extensible, readout_tip, type_target, wait_until
 
     robot_file = DATA / "extensible-3seg.toml"
     arm = load(robot_file)
@@ -60,7 +60,7 @@ def test_three_segment_extensible_arm_reaches_a_typed_target(
     ik = solve_tip_ik(arm, target / 1e3)
     assert ik.reachable and np.linalg.norm(dk.tip_position(arm, ik.delta) - target / 1e3) < 1e-3
     try:
-        open_console(page, console_server(str(robot_file)))
+        open_extensible(page, console_server(str(robot_file)))
         type_target(page, target)
         wait_until("the tip readout at the target",
                    lambda: np.abs(readout_tip(page) - target).max() <= 1.0, timeout=20.0,

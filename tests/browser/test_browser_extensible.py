@@ -21,12 +21,12 @@ import time
 import urllib.error
 import urllib.request
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 import pytest
 
-from browser_tabs import open_tab
+from browser_tabs import open_console, open_tab
 from console.model import DeltaModel
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -37,20 +37,18 @@ pytestmark = pytest.mark.browser
 REPO = Path(__file__).resolve().parents[2]
 ROBOT = load("extensible")
 READOUT_MM = 0.051  # the readout shows 0.1 mm
-@pytest.fixture
-def extensible_console(console_server: Callable[..., str]) -> Callable[[], str]:
-    """serve.py for the extensible (it composes every panel of that robot), on the mock device."""
-    return lambda: console_server("extensible")
+@pytest.fixture(scope="module")
+def extensible_page(module_page: Any, module_console_server: Callable[..., str]) -> Any:
+    """serve.py for the extensible (it composes every panel of that robot), on the mock device,
+    loaded once for the typed-target and the path tests (a load costs seconds of software
+    rendering; each test types its own start)."""
+    open_extensible(module_page, module_console_server("extensible"))
+    return module_page
 
 
-def open_console(page, url: str) -> None:
-    page.goto(url)
-    page.get_by_text("Tip target", exact=True).wait_for(timeout=60_000)  # a loaded 2-core box
-    page.locator('[data-testid="tip-readout"]').wait_for(timeout=10_000)
-    notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-    if notice.count():
-        notice.locator("button").first.click()
-        notice.wait_for(state="detached", timeout=5_000)
+def open_extensible(page, url: str) -> None:
+    """Load an extensible console: the Tip target panel and the tip readout there."""
+    open_console(page, url, "Tip target", '[data-testid="tip-readout"]')
 
 
 def field(page, label: str):
@@ -92,8 +90,8 @@ def jog_posture(page) -> np.ndarray:
 
 
 def test_typed_target_moves_the_tip_and_the_jog_sliders(
-        page, extensible_console: Callable[[], str], artifacts_dir: Path) -> None:
-    open_console(page, extensible_console())
+        extensible_page: Any, artifacts_dir: Path) -> None:
+    page = extensible_page
     target = np.array([120.0, -60.0, 350.0])  # mm
     ik = solve_tip_ik(ROBOT, target / 1e3)
     assert ik.reachable and np.linalg.norm(dk.tip_position(ROBOT, ik.delta) - target / 1e3) < 1e-3
@@ -125,8 +123,8 @@ def test_typed_target_moves_the_tip_and_the_jog_sliders(
 
 
 def test_path_preview_and_execute_on_mock_hardware(
-        page, extensible_console: Callable[[], str], artifacts_dir: Path) -> None:
-    open_console(page, extensible_console())
+        extensible_page: Any, artifacts_dir: Path) -> None:
+    page = extensible_page
     start = np.array([100.0, 0.0, 300.0])
     type_target(page, start)
     wait_until("the tip at the start", lambda: np.abs(readout_tip(page) - start).max() <= 1.0)
@@ -211,7 +209,7 @@ def emulator_log() -> str:
 
 def test_emulator_console_measured_tip_reaches_a_typed_target(
         page, emulator_console: str, artifacts_dir: Path) -> None:
-    open_console(page, emulator_console)
+    open_extensible(page, emulator_console)
     # The operator connects and arms the emulator's pty through the Hardware panel (the
     # runner's bridge_controls). serve.py armed the link at start already, but on a loaded box
     # a CPU stall while it built the GUI can trip it before the page opens (nothing re-arms by

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_tabs import open_tab
+from browser_tabs import open_console
 from lab_rig import jog_button
 
 from console.model import DeltaModel
@@ -66,13 +66,7 @@ def hold(page, label: str, sign: str, seconds: float) -> None:
 
 def test_every_action_moves_or_says_why_from_the_start_pose(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    page.goto(console_server("extensible"))
-    page.get_by_text("Tip target", exact=True).wait_for(timeout=60_000)  # a loaded 2-core box
-    open_tab(page, "Operate")
-    page.locator('[data-testid="tip-readout"]').wait_for(timeout=10_000)
-    notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-    if notice.count():
-        notice.locator("button").first.click()
+    open_console(page, console_server("extensible"), "Tip target", '[data-testid="tip-readout"]')
     start = dk.tip_position(ROBOT, DeltaModel(ROBOT).initial()) * 1e3  # mid-range, straight
     wait_until("the readout at the start pose", lambda: np.abs(readout_tip(page) - start).max()
                <= 0.5, 20, show=lambda: str(readout_tip(page)))

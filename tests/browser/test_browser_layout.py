@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from browser_tabs import close_notices, open_tab
+from playwright.sync_api import Error as PlaywrightError
 
 pytestmark = pytest.mark.browser
 
@@ -29,6 +29,11 @@ _ON_SCREEN = """el => {
     const top = document.elementFromPoint(x, y);
     return top !== null && (el === top || el.contains(top));
 }"""
+
+
+def drawn(page: Any) -> None:
+    """Wait until the page has laid out and painted what changed (two animation frames)."""
+    page.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
 
 
 def _on_screen(page: Any, locator: Any) -> bool:
@@ -50,14 +55,21 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
         phase = page.locator('[data-testid="header-phase"]')
         phase.wait_for(timeout=60_000)
         page.locator('[data-testid="header-control"]').wait_for(timeout=30_000)
-        time.sleep(2.0)  # the software renderer draws the scene; notices arrive
+        # The browser's own notice arrives at mount (software rendering here): wait for it
+        # rather than a fixed time, so it is closed below and covers nothing.
+        notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+        try:
+            notice.wait_for(timeout=10_000)
+        except PlaywrightError:
+            pass  # (a GPU-rendered browser shows none)
         for size, (width, height) in SIZES.items():  # one page, resized: as a user turns a tablet
             page.set_viewport_size({"width": width, "height": height})
-            time.sleep(1.0)
+            page.wait_for_function("w => innerWidth === w", arg=width)
+            drawn(page)
             close_notices(page)
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
-                time.sleep(0.5)
+                time.sleep(0.5)  # the tab's panels settle (two animation frames were too few)
                 assert _on_screen(page, stop), f"STOP is off screen or covered: {size}, {tab}"
                 assert _on_screen(page, phase), f"the phase is off screen: {size}, {tab}"
                 assert page.evaluate("() => scrollY") == 0

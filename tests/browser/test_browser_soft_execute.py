@@ -21,7 +21,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from browser_tabs import close_notices, close_notices_until_none, open_tab
+from browser_tabs import (
+    click_scene,
+    close_notices,
+    close_notices_until_none,
+    open_console,
+    open_tab,
+)
 
 pytestmark = pytest.mark.browser
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
@@ -47,16 +53,15 @@ def wait_until(what: str, fn: Callable[[], Any], timeout: float, page: Any) -> A
 
 
 def open_operate(page: Any, url: str) -> None:
-    """Load the console, hold control (desk mode gives it to the first tab; take it if a slow
-    start lost it), and open the Operate tab once the Control panel shows the loop."""
+    """Load the console (its per-browser Session widgets there, the demo object planned), hold
+    control (desk mode gives it to the first tab; take it if a slow start lost it), and open
+    the Operate tab once the Control panel shows the loop."""
     page.set_viewport_size({"width": 1024, "height": 900})
-    page.goto(url)
-    page.locator('[data-testid="holder"]').wait_for(timeout=90_000)  # (in the header)
-    time.sleep(1.0)  # the per-browser greeting arrives
+    open_console(page, url, "Control", '[data-testid="plan-summary"][data-state="ok"]',
+                 role="any", timeout_ms=90_000)
     hold_control(page)
     show_tab(page, "Operate")
     page.locator('[data-testid="control-link"]').wait_for(timeout=60_000)
-    page.locator('[data-testid="plan-summary"][data-state="ok"]').wait_for(timeout=60_000)
 
 
 def hold_control(page: Any) -> None:
@@ -108,7 +113,7 @@ def click_table(page: Any, xy: tuple[float, float], count: int) -> None:
         # The browser's own "Software WebGL" notice can arrive late and stays until closed; a
         # click while one is shown was lost in a full-suite run (as in test_planner_browser).
         close_notices_until_none(page)
-        page.mouse.click(*project((*xy, 0.0), box["width"], box["height"]))
+        click_scene(page, *project((*xy, 0.0), box["width"], box["height"]))
         try:
             page.wait_for_function(
                 "n => document.querySelector('[data-testid=\"objects-info\"]')"
@@ -159,11 +164,62 @@ def run_to_grasp(page: Any, n: int, palms: list) -> set[str] | None:
     return counted
 
 
-def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
-        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    """Issues 19.1 and 19.4."""
+@pytest.fixture(scope="module")
+def operate_page(module_page: Any, module_console_server: Callable[..., str]) -> Any:
+    """One soft-arm console (``--no-token``) loaded once for both tests (a load costs seconds of
+    software rendering): the clean start is checked first, then the run on the same console."""
+    open_operate(module_page, module_console_server("soft-arm", "--no-token"))
+    return module_page
+
+
+def test_clean_start_shows_no_fault_and_execute_does_not_arm(
+        operate_page: Any, artifacts_dir: Path) -> None:
+    """Issue 19.3 and 19.4's first load (the first test on this console)."""
+    page = operate_page
     try:
-        open_operate(page, console_server("soft-arm", "--no-token"))
+        # First load: the planner and the Waypoints panel tell the same plan of Object 1.
+        summary = page.locator('[data-testid="plan-summary"]')
+        wp = page.locator('[data-testid="waypoint-info"]')
+        n = summary.get_attribute("data-waypoints")
+        assert n and int(n) >= 2 and "Place an object" not in summary.inner_text()
+        wait_until("waypoints agree", lambda: wp.get_attribute("data-count") == n, 10.0, page)
+        assert f"Waypoint 1 of {n}" in wp.inner_text()
+        # A clean start: no fault in the header nor in the Control panel, for 5 s.
+        header = page.locator('[data-testid="header-link"]')
+        end = time.monotonic() + 5.0
+        while time.monotonic() < end:
+            for text in (header.inner_text(), page.locator(
+                    '[data-testid="control-link"]').inner_text()):
+                assert "link lost" not in text and "ault" not in text, text
+            assert page.get_by_text("Fault:").count() == 0
+            assert not any("fault" in t.lower() for t in notes(page)), notes(page)
+            time.sleep(0.2)
+        assert "mock device" in header.inner_text()
+        page.screenshot(path=str(artifacts_dir / "browser_soft_clean_start.png"))
+        # Execute while disarmed: refused with what to do, and nothing arms.
+        assert "disarmed" in state(page).inner_text()
+        hold_control(page)
+        page.get_by_role("button", name="Execute grasp-and-place").click()
+        wait_until("told to arm first",
+                   lambda: any("Arm first" in t for t in notes(page)), 10.0, page)
+        time.sleep(2.0)
+        assert "disarmed" in state(page).inner_text() and "ARMED" not in state(page).inner_text()
+        # (idle, or stopped if a loaded machine's slow tab lost its lease, which STOPs)
+        assert state(page).get_attribute("data-phase") in ("idle", "stopped"), \
+            state(page).inner_text()
+        assert "disarmed" in page.locator('[data-testid="control-link"]').inner_text()
+    except BaseException:
+        failure_shot(page, artifacts_dir / "browser_soft_clean_start_failure.png")
+        raise
+
+
+def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
+        operate_page: Any, artifacts_dir: Path) -> None:
+    """Issues 19.1 and 19.4 (on the console the clean-start test left: disarmed, Object 1)."""
+    page = operate_page
+    try:
+        hold_control(page)
+        show_tab(page, "Operate")
         close_notices(page)
         click_table(page, OBJECT_2, 2)
         click_table(page, OBJECT_3, 3)
@@ -212,45 +268,4 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         assert d2 < 55.0 and d_old > d2 + 30.0, (palm, d2, d_old, palms)
     except BaseException:
         failure_shot(page, artifacts_dir / "browser_soft_execute_failure.png")
-        raise
-
-
-def test_clean_start_shows_no_fault_and_execute_does_not_arm(
-        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    """Issue 19.3 and 19.4's first load."""
-    try:
-        open_operate(page, console_server("soft-arm", "--no-token"))
-        # First load: the planner and the Waypoints panel tell the same plan of Object 1.
-        summary = page.locator('[data-testid="plan-summary"]')
-        wp = page.locator('[data-testid="waypoint-info"]')
-        n = summary.get_attribute("data-waypoints")
-        assert n and int(n) >= 2 and "Place an object" not in summary.inner_text()
-        wait_until("waypoints agree", lambda: wp.get_attribute("data-count") == n, 10.0, page)
-        assert f"Waypoint 1 of {n}" in wp.inner_text()
-        # A clean start: no fault in the header nor in the Control panel, for 5 s.
-        header = page.locator('[data-testid="header-link"]')
-        end = time.monotonic() + 5.0
-        while time.monotonic() < end:
-            for text in (header.inner_text(), page.locator(
-                    '[data-testid="control-link"]').inner_text()):
-                assert "link lost" not in text and "ault" not in text, text
-            assert page.get_by_text("Fault:").count() == 0
-            assert not any("fault" in t.lower() for t in notes(page)), notes(page)
-            time.sleep(0.2)
-        assert "mock device" in header.inner_text()
-        page.screenshot(path=str(artifacts_dir / "browser_soft_clean_start.png"))
-        # Execute while disarmed: refused with what to do, and nothing arms.
-        assert "disarmed" in state(page).inner_text()
-        hold_control(page)
-        page.get_by_role("button", name="Execute grasp-and-place").click()
-        wait_until("told to arm first",
-                   lambda: any("Arm first" in t for t in notes(page)), 10.0, page)
-        time.sleep(2.0)
-        assert "disarmed" in state(page).inner_text() and "ARMED" not in state(page).inner_text()
-        # (idle, or stopped if a loaded machine's slow tab lost its lease, which STOPs)
-        assert state(page).get_attribute("data-phase") in ("idle", "stopped"), \
-            state(page).inner_text()
-        assert "disarmed" in page.locator('[data-testid="control-link"]').inner_text()
-    except BaseException:
-        failure_shot(page, artifacts_dir / "browser_soft_clean_start_failure.png")
         raise

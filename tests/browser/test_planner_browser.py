@@ -17,8 +17,8 @@ from typing import Callable
 
 import numpy as np
 import pytest
+from browser_tabs import click_scene, open_console
 
-from browser_tabs import close_notices_until_none, open_tab
 from core.planning.grasp import plan_grasp
 from core.robots import load
 
@@ -65,23 +65,18 @@ def number(page, label: str):
     return page.get_by_label(label, exact=True)
 
 
-def open_console(page, url: str) -> None:
+def open_planner(page, url: str) -> None:
     """Load the console and wait until a click on the table can place an object: the demo
-    object planned, this tab holding control (desk mode grants it at connect, but a page that
-    loads slower than the lease's first-answer grace gets it back only when it answers; a
-    click before that is refused), and no notification left over the canvas."""
-    page.goto(url)
-    page.get_by_text("Grasp planner", exact=True).wait_for(timeout=60_000)
-    wait_state(page, ("ok",), timeout=60)          # the demo object is planned at start
-    open_tab(page, "Session")  # the per-browser role line
-    page.locator('[data-testid="role"][data-role="operator"]').wait_for(timeout=30_000)
-    open_tab(page, "Operate")
-    close_notices_until_none(page)
+    object planned (at start), this tab holding control (desk mode grants it at connect, but a
+    page that loads slower than the lease's first-answer grace gets it back only when it
+    answers; a click before that is refused), and no notification left over the canvas."""
+    open_console(page, url, "Grasp planner", '[data-testid="plan-summary"][data-state="ok"]',
+                 role="operator", no_notices=True)
 
 
 def test_click_to_place_plan_step_to_the_last_waypoint_and_refusal(
         page, grasp_console, artifacts_dir: Path) -> None:
-    open_console(page, grasp_console())
+    open_planner(page, grasp_console())
     info = page.locator('[data-testid="objects-info"]')
     assert info.inner_text().startswith("1 object")
     box = page.locator("canvas").first.bounding_box()
@@ -91,7 +86,7 @@ def test_click_to_place_plan_step_to_the_last_waypoint_and_refusal(
     # it into a scene click (no event reaches the server, no refusal either): click again,
     # as a person would, at most twice more.
     for attempt in range(3):
-        page.mouse.click(box["x"] + px, box["y"] + py)
+        click_scene(page, box["x"] + px, box["y"] + py)
         try:
             page.wait_for_function(
                 "() => document.querySelector('[data-testid=\"objects-info\"]')"
