@@ -141,6 +141,8 @@ def test_a_click_places_the_bin_the_arm_can_hold_an_object_over(rig):
     box = app.grasp_session.bin_view
     wait_for(lambda: box.shown == table_bin)
     assert box.label.visible and tuple(box.box.position[:2]) == pytest.approx(BIN_XY)
+    from console.panels.view import legend_html
+    assert "Bin: where" in legend_html("planar") and "Clear table into bin" in legend_html("planar")
     wait_for(lambda: 'data-bin="150,250"' in objects_panel.info.content)
     # Out of reach: refused with the reason, the bin stays where it was.
     click_at(objects_panel, operator, 0.6, 0.1)

@@ -22,7 +22,7 @@ from hw_bridge.soft_arm_process import ControlProcess
 SOFT = load("soft-arm")
 R = 0.0165
 OBJECTS = ((-0.22, 0.20, R), (-0.16, 0.28, R), (-0.08, 0.33, R))
-BIN_XY = (-0.05, 0.38)
+BIN_XY = (0.05, 0.40)  # clear of the objects (its box is 100 mm wide)
 
 
 def wait_for(pred, timeout=20.0, what="condition", every=None):
@@ -35,8 +35,6 @@ def wait_for(pred, timeout=20.0, what="condition", every=None):
                 return
         except (AttributeError, TypeError):
             pass  # view not there yet
-        except AssertionError:
-            raise
         if time.monotonic() > end:
             raise AssertionError(f"{what} not reached within {timeout} s")
         time.sleep(0.02)
