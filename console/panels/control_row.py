@@ -112,6 +112,7 @@ class RowControls:
         self.sent: SentRow | None = None
         self._ids = itertools.count(1)
         self._taken_off: set[tuple[int, int]] = set()  # (row id, index) removed from the table
+        self._recorded_end: int | None = None  # the row whose end went into the recording
 
     # -- the button (operator only) ------------------------------------------------------------
     def _refuse(self, event: Any, title: str, message: str) -> None:
@@ -170,6 +171,18 @@ class RowControls:
         busy = c is not None and c.phase not in IDLE_PHASES + ("settling",)
         self.button.disabled = running or busy
         self._take_off_released(report)
+        self._record_end(report)
+
+    def _record_end(self, report: Any) -> None:
+        """Once per row: its end and every object's outcome into the recording."""
+        if report is None or report.running or report.row_id == self._recorded_end:
+            return
+        self._recorded_end = report.row_id
+        outcomes = "; ".join(
+            f"{_name(self.sent, report, o.index)}: {o.status}"
+            + ("" if o.reason is None else f" ({o.reason})") for o in report.outcomes)
+        self.app.recorder.action(f"row {report.state}: {report.released} of {report.n} "
+                                 f"released -- {outcomes}", None)
 
     def _take_off_released(self, report: Any) -> None:
         """Remove every object this console sent that the row released from the table."""

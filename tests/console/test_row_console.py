@@ -186,8 +186,12 @@ def test_the_row_is_sent_shown_and_released_objects_leave_the_table(rig):
     app, objects_panel, control, ctl, operator, _ = rig
     table_bin = place_scene(app, objects_panel, operator)
     names = tuple(o.name for o in app.grasp_session.view().objects)
+    assert names == ("Object 1", "Object 2", "Object 3")
+    actions = []
+    app.recorder.action = lambda what, client=None, **kw: actions.append(what)
     show(control, view_with(armed=True))
     user(control.row.button, operator)
+    assert actions == ["clear table into bin: 3 objects into the bin at (150, 250) mm"]
     (row_id, objects, bin_xy, kappa), = ctl.sent
     assert objects == [(x, y, R) for x, y in OBJECTS]  # every object, in the panel's order
     assert bin_xy == BIN_XY and kappa == table_bin.kappa
@@ -217,6 +221,9 @@ def test_the_row_is_sent_shown_and_released_objects_leave_the_table(rig):
         in status
     assert not control.row.button.disabled
     assert "object" not in app.header.text("phase")  # the panel's own phase line again
+    show(control, view_with(phase="released", row=done))  # the end is recorded once
+    assert actions[1:] == ["row done: 2 of 3 released -- Object 1: released; Object 2: failed "
+                           "(planner refused: out of reach); Object 3: released"]
 
     stopped = RowReport(row_id + 1, "stopped", None, 2, (
         ObjectOutcome(0, rows[1], "failed", "operator STOP"),
