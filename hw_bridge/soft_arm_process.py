@@ -23,8 +23,8 @@ channel (``"emulator"``), MockHardware with the same plant (``"mock"``), or a re
   begins into the simulated world (sim: from the loop thread; hardware: handed to a placer
   thread, so the loop never waits on the emulator's scene channel), and STOP ends the row;
 * the child publishes a :class:`ControlView` (the loop snapshot, recent stats, the true object,
-  the gripper finger for drawing and the newest row's report) at ``publish_hz``; :attr:`ControlProcess.view` is the newest
-  one (a reference swap, no lock for readers).
+  the gripper finger for drawing and the newest row's report) at ``publish_hz``;
+  :attr:`ControlProcess.view` is the newest one (a reference swap, no lock for readers).
 """
 
 from __future__ import annotations
@@ -151,8 +151,9 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         if not objects:
             raise ValueError("no objects to take to the bin")
         kappa = np.asarray(cmd.bin_kappa, float)
-        if kappa.shape != (robot.n_segments,) or not np.all(np.isfinite(kappa)):
-            raise ValueError(f"the bin needs {robot.n_segments} finite curvatures (1/m)")
+        if kappa.shape != (robot.n_segments,) or not np.all(np.abs(kappa) <= robot.kappa_max):
+            raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
+                             f"±{robot.kappa_max:g} 1/m")
         place(objects[0].x, objects[0].y, objects[0].r)
         s.start_row(cmd.row_id, objects, BinParams(kappa, robot.bin.drop_radius_m), t,
                     place_row_object)

@@ -11,13 +11,13 @@ file is refused with its reason and changes nothing).
 Sharing: the objects and the selection are the same for every browser and drive the plan, so
 every change -- a click on the table, a gizmo drag, typing x / y / r, selecting, adding,
 removing, loading, the click-placement toggle -- is :func:`~console.panels.base.operator_only`.
+A viewer's edit snaps back (fields, selection, and a dragged object returns to its place);
+"Save scene" (a download that changes nothing) works for everyone.
 
 "Table click places" says what a click on free table puts there (:data:`CLICK_PLACES`): an
 object, or the bin that "Clear table into bin" (Control panel) takes every object to
 (``console.table_bin``: the arm must be able to hold an object over the point, else the click
 is refused with the reason). The bin is saved in the scene JSON (optional ``"bin"`` key).
-A viewer's edit snaps back (fields, selection, and a dragged object returns to its place);
-"Save scene" (a download that changes nothing) works for everyone.
 """
 
 from __future__ import annotations
@@ -139,7 +139,6 @@ class ObjectsPanel(Panel):
     @operator_only(action="change how clicks on the table act")
     def _on_click_mode(self, event) -> None:
         self._click_mode = bool(self.click_place.value)
-        self._click_target = str(self.click_target.value)
 
     @operator_only(action="change how clicks on the table act")
     def _on_click_target(self, event) -> None:

@@ -1,5 +1,5 @@
 """Several objects in a row through the soft arm's control process, on the simulated arm and on
-the device emulator (issue #17.3): RunRow is refused while disarmed (nothing placed), takes three objects to a bin
+the device emulator (issue #17.3): RunRow is refused while disarmed (nothing placed) and for bad input, takes three objects to a bin
 placed on the table one after another (each put into the emulator's world when its turn begins,
 from the loop thread, or with the emulator by the process's placer thread), refuses other tasks meanwhile, and the operator's STOP ends a
 row with the rest skipped.
@@ -74,6 +74,13 @@ def test_three_objects_to_a_placed_bin_then_stop_a_row(device, tmp_path):
         assert ctl.view.object_xy is None and ctl.view.row is None  # nothing placed or run
         ctl.arm().result(10)
         wait_for(lambda: ctl.view.snapshot.control.prepressurised, what="pre-pressure")
+        if device == "sim":  # bad input: a clear message, nothing runs
+            with pytest.raises(RuntimeError, match="6 curvatures within ±16.7 1/m"):
+                ctl.run_row(9, OBJECTS, BIN_XY, [99.0] * 6).result(10)
+            with pytest.raises(RuntimeError, match="radius"):
+                ctl.run_row(9, [(-0.1, 0.3, 0.0)], BIN_XY, bin_params.kappa).result(10)
+            time.sleep(0.2)
+            assert ctl.view.row is None and ctl.view.snapshot.control.phase == "idle"
 
         ctl.run_row(1, OBJECTS, BIN_XY, bin_params.kappa).result(10)
         seen: dict[int, tuple[float, float]] = {}  # where each object was first seen on its turn
