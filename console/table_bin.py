@@ -105,13 +105,13 @@ class BinLocator:
         threading.Thread(target=work, name="bin-locator", daemon=True).start()
 
 
-def open_box_mesh(half: float, height: float = BIN_HEIGHT, wall: float = BIN_WALL,
-                  ) -> tuple[Array, Any]:
+def open_box_mesh(half: float, height: float = BIN_HEIGHT,
+                  wall: float = BIN_WALL) -> tuple[Array, Any]:
     """Four walls of a square box, open at the top, centred on the origin (no floor)."""
-    boxes = []
-    for cx, cy, hx, hy in ((0, half - wall / 2, half, wall / 2), (0, -half + wall / 2, half, wall / 2),
-                           (half - wall / 2, 0, wall / 2, half), (-half + wall / 2, 0, wall / 2, half)):
-        boxes.append(_cuboid(cx, cy, hx, hy, height))
+    side = half - wall / 2  # the walls' centre lines
+    walls = ((0, side, half, wall / 2), (0, -side, half, wall / 2),
+             (side, 0, wall / 2, half), (-side, 0, wall / 2, half))
+    boxes = [_cuboid(cx, cy, hx, hy, height) for cx, cy, hx, hy in walls]
     verts = np.concatenate([v for v, _ in boxes])
     faces = np.concatenate([f + 8 * i for i, (_, f) in enumerate(boxes)])
     return verts, faces.astype(np.uint32)

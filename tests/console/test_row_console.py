@@ -22,8 +22,8 @@ from console.panels.control import ControlPanel
 from console.panels.control_row import NO_BIN, NO_OBJECTS
 from console.panels.objects import ObjectsPanel
 from console.plan_view import SessionView, TableObject, scene_from_json, scene_to_json
-from console.table_bin import (TableBin, bin_point_from_scene_json, locate_bin,
-                               scene_json_with_bin)
+from console.table_bin import (BIN_HEIGHT, TableBin, bin_point_from_scene_json, locate_bin,
+                               open_box_mesh, scene_json_with_bin)
 from core.control.row import ObjectOutcome, RowObject, bin_at
 from core.control.row_stack import RowReport
 from core.robots import load
@@ -262,3 +262,12 @@ def test_the_bin_in_scene_json_and_recordings_and_old_files_load():
     feed_grasp(Recorder(), dataclasses.replace(view, bin=None), {"objects"})
     assert "bin" not in logged[-1][1]
     assert isinstance(table_bin, TableBin)
+
+
+def test_the_bin_is_an_open_box_as_wide_as_its_drop_circle():
+    v, f = open_box_mesh(0.05)
+    assert v[:, :2].min() == pytest.approx(-0.05) and v[:, :2].max() == pytest.approx(0.05)
+    assert v[:, 2].min() == 0.0 and v[:, 2].max() == pytest.approx(BIN_HEIGHT)
+    assert f.min() == 0 and f.max() == len(v) - 1 and len(f) == 4 * 12  # four closed walls
+    centroids = v[f].mean(axis=1)  # every triangle lies in a wall band: no floor, no lid
+    assert np.abs(centroids[:, :2]).max(axis=1).min() >= 0.046 - 1e-9

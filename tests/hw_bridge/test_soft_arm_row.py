@@ -1,8 +1,8 @@
 """Several objects in a row through the soft arm's control process, on the simulated arm and on
-the device emulator (issue #17.3): RunRow is refused while disarmed (nothing placed) and for bad input, takes three objects to a bin
-placed on the table one after another (each put into the emulator's world when its turn begins,
-from the loop thread, or with the emulator by the process's placer thread), refuses other tasks meanwhile, and the operator's STOP ends a
-row with the rest skipped.
+the device emulator (issue #17.3): RunRow is refused while disarmed (nothing placed) and for bad
+input, takes three objects to a bin placed on the table one after another (each put into the
+world when its turn begins: from the loop thread, or with the emulator by the process's placer
+thread), refuses other tasks meanwhile, and the operator's STOP ends a row with the rest skipped.
 
 Independent expectations: every object ends at the placed bin point (the emulator's own world,
 through its scene channel), each object appears at its spot in the mocap stream when its turn
@@ -115,8 +115,9 @@ def test_three_objects_to_a_placed_bin_then_stop_a_row(device, tmp_path):
         ctl.run_row(2, OBJECTS[:2], BIN_XY, bin_params.kappa).result(10)
         wait_for(lambda: ctl.view.row.row_id == 2 and ctl.view.row.running, what="row 2")
         ctl.stop_arm("operator STOP").result(10)
-        wait_for(lambda: ctl.view.row.state == "stopped"  # (the view's two parts may be a
-                 and ctl.view.snapshot.control.phase == "stopped", what="row 2 stopped")  # tick apart)
+        # (the view's report and telemetry may be a tick apart: wait for both)
+        wait_for(lambda: ctl.view.row.state == "stopped"
+                 and ctl.view.snapshot.control.phase == "stopped", what="row 2 stopped")
         report = ctl.view.row
         assert [(o.status, o.reason) for o in report.outcomes] == [
             ("failed", "operator STOP"), ("skipped", "row stopped: operator STOP")]
