@@ -28,6 +28,7 @@ from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableOb
                                validate_object)
 from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
+from console.table_bin import BinView, TableBin
 from core.planning.grasp import GraspPlanner, GraspRefused
 from core.planning.reachability import ReachMap
 
@@ -49,6 +50,8 @@ class GraspSession:
         self.robot = robot
         self.planner = GraspPlanner(robot)
         self.scene = PlanScene(app.server, robot)
+        self.bin_view = BinView(app.server.scene)
+        self._bin: TableBin | None = None  # where "Clear table into bin" takes the objects
         self.default_radius = robot.capture.nominal_object_radius
         self._cond = threading.Condition()
         self._objects = [TableObject("Object 1", -0.20, 0.20, self.default_radius)]
@@ -82,7 +85,7 @@ class GraspSession:
         with self._cond:
             return SessionView(tuple(self._objects), self._selected, self._outcome, self._index,
                                self._playing, self._speed, self._trail, self._reach,
-                               self._reach_note, self._trail_from)
+                               self._reach_note, self._trail_from, self._bin)
 
     def add_listener(self, fn: Callable[[SessionView], None]) -> None:
         with self._cond:
@@ -144,6 +147,12 @@ class GraspSession:
             self._objects = list(objects)
             self._selected = objects[0].name if objects else None
             self._changed("objects", plan=False)
+
+    def set_bin(self, table_bin: TableBin | None) -> None:
+        """Place the bin (``console.table_bin.locate_bin`` found its pose) or take it away."""
+        with self._cond:
+            self._bin = table_bin
+            self._changed("objects", "bin")
 
     def request_plan(self) -> None:
         with self._cond:
@@ -332,6 +341,8 @@ class GraspSession:
         view = self.view()
         try:
             with self.app.server.atomic():
+                if "bin" in dirty:
+                    self.bin_view.draw(view.bin)
                 if "objects" in dirty:
                     self.scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
                 if dirty & {"plan", "inspect"}:

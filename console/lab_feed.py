@@ -96,7 +96,9 @@ def path_plan_record(req: Any, waypoints: Any, path: Any) -> dict[str, Any]:
 def feed_grasp(recorder: Any, view: Any, dirty: set[str]) -> None:
     """Record the grasp session's objects and plan when they changed (``dirty``)."""
     if "objects" in dirty:
+        table_bin = getattr(view, "bin", None)
         recorder.log("objects", {"objects": [dataclasses.asdict(o) for o in view.objects],
-                                 "selected": view.selected})
+                                 "selected": view.selected,
+                                 **({} if table_bin is None else {"bin": table_bin.record()})})
     if "plan" in dirty and view.outcome is not None:
         recorder.log("plan", plan_record(view.outcome))

@@ -386,6 +386,7 @@ class SessionView:
     reach: ReachMap | str | None
     reach_note: str = ""
     trail_from: int = 0     # the trail shows no waypoint before this one ("Clear trails")
+    bin: Any = None         # console.table_bin.TableBin: where a row takes the objects, or None
 
 
 def outcome_html(outcome: Outcome | None) -> str:

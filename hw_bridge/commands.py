@@ -98,8 +98,24 @@ class ExecutePlan:
     r: float
 
 
+@dataclasses.dataclass(frozen=True)
+class RunRow:
+    """Take every object of ``objects`` (``(x, y, r)`` each, m, in this order) to the bin, one
+    after another (:class:`core.control.row_stack.RowControlStack`); the arm must be armed.
+
+    ``bin_kappa`` is the configuration ``move_to_bin`` goes to for this row (the bin placed at
+    ``bin_xy`` on the table, :func:`core.control.row.bin_at`). ``row_id`` names the row in the
+    published reports.
+    """
+
+    row_id: int
+    objects: tuple[tuple[float, float, float], ...]
+    bin_xy: tuple[float, float]
+    bin_kappa: tuple[float, ...]
+
+
 SoftArmCommand = Union[BridgeCommand, Goto, StopArm, StartGrasp, PlaceObject, GraspAt,
-                       ExecutePlan]
+                       ExecutePlan, RunRow]
 SCENE_COMMANDS = (PlaceObject, GraspAt, ExecutePlan)  # they put the object into the world first
 
 

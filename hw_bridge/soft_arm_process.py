@@ -18,9 +18,13 @@ channel (``"emulator"``), MockHardware with the same plant (``"mock"``), or a re
   tick (dispatched on their type; the link verbs by the world's
   :class:`~hw_bridge.link_supervisor.LinkSupervisor`), and each returns a Future that the reply
   resolves (with the loop's error, if it refused);
-* the child publishes a :class:`ControlView` (the loop snapshot, recent stats, the true object
-  and the gripper finger for drawing) at ``publish_hz``; :attr:`ControlProcess.view` is the newest
-  one (a reference swap, no lock for readers).
+* :class:`~hw_bridge.commands.RunRow` takes a row of objects to a bin, one after another: the
+  stack is a :class:`core.control.row_stack.RowControlStack`, which puts each object whose turn
+  begins into the simulated world (sim: from the loop thread; hardware: handed to a placer
+  thread, so the loop never waits on the emulator's scene channel), and STOP ends the row;
+* the child publishes a :class:`ControlView` (the loop snapshot, recent stats, the true object,
+  the gripper finger for drawing and the newest row's report) at ``publish_hz``;
+  :attr:`ControlProcess.view` is the newest one (a reference swap, no lock for readers).
 """
 
 from __future__ import annotations
@@ -28,13 +32,14 @@ from __future__ import annotations
 import concurrent.futures as cf
 import dataclasses
 import gc
+import queue
 import threading
 from typing import Any, Literal
 
 import numpy as np
 
 from hw_bridge.commands import (BRIDGE_COMMANDS, SCENE_COMMANDS, Arm, Connect, Disarm, Disconnect,
-                               ExecutePlan, Goto, GraspAt, PlaceObject, SoftArmCommand,
+                               ExecutePlan, Goto, GraspAt, PlaceObject, RunRow, SoftArmCommand,
                                StartGrasp, StopArm)
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
@@ -44,6 +49,8 @@ from hw_bridge.soft_arm_worlds import HardwareWorld, SimWorld
 
 
 ARM_FIRST = "Arm first (press Arm): Execute does not arm the arm"
+ROW_ARM_FIRST = "Arm first (press Arm): clearing the table does not arm the arm"
+TASKS = (Goto, StartGrasp, GraspAt, ExecutePlan, RunRow)  # refused while a row runs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +72,7 @@ class ControlView:
     link: Any = None  # hw_bridge.interface.LinkHealth with hardware
     fault: str | None = None
     slow_ticks: tuple[SlowTick, ...] = ()  # the loop's latest late / long ticks
+    row: Any = None  # core.control.row_stack.RowReport of the newest row (None before one)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,7 +93,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         pin_process(opts.cpus.other)  # real-time CPU; the loop moves there once all started
         opts = dataclasses.replace(opts, emulator_args=(
             *opts.emulator_args, "--cpus", format_cpus(opts.cpus.realtime)))
-    from core.control.stack import ControlStack
+    from core.control.row_stack import RowControlStack
     from core.robots import load
     from hw_bridge.loop import LoopRunner
     from hw_bridge.planner_process import ProcessPlanner
@@ -110,20 +118,55 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     if helper_priority:
         promote_threads(helper_priority)  # the receive thread configure() started
     planner = ProcessPlanner(robot_source, cpus=None if opts.cpus is None else opts.cpus.other)
-    stack = ControlStack(robot, 0.01, planner)
+    stack = RowControlStack(robot, 0.01, planner)
     runner = LoopRunner(world.device, stack, 0.01)
 
     def place(x: float, y: float, r: float) -> None:
         if world.kind == "sim":
             world.sim.place_object(x, y, r)
 
-    def link(s: ControlStack, cmd: Any) -> None:
+    # A row's later objects: the sim's are placed by the loop thread itself; with hardware a
+    # placer thread talks to the emulator / mock plant (the loop only queues them).
+    to_place: queue.SimpleQueue = queue.SimpleQueue()
+
+    def place_row_object(obj: Any) -> None:
+        if world.kind == "sim":
+            world.sim.place_object(obj.x, obj.y, obj.r)
+        else:
+            to_place.put(obj)
+
+    def placer() -> None:
+        while (obj := to_place.get()) is not None:
+            try:
+                world.place_object(obj.x, obj.y, obj.r)
+            except (RuntimeError, OSError, ValueError):
+                pass  # the machine does not see it: that object fails with its reason
+
+    def run_row(s: RowControlStack, t: float, cmd: RunRow) -> None:
+        from core.control.params import BinParams
+        from core.control.row import RowObject
+        if not s.armed:
+            raise RuntimeError(ROW_ARM_FIRST)
+        objects = [RowObject(*o) for o in cmd.objects]  # ValueError names a bad one
+        if not objects:
+            raise ValueError("no objects to take to the bin")
+        kappa = np.asarray(cmd.bin_kappa, float)
+        if kappa.shape != (robot.n_segments,) or not np.all(np.abs(kappa) <= robot.kappa_max):
+            raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
+                             f"±{robot.kappa_max:g} 1/m")
+        place(objects[0].x, objects[0].y, objects[0].r)
+        s.start_row(cmd.row_id, objects, BinParams(kappa, robot.bin.drop_radius_m), t,
+                    place_row_object)
+
+    def link(s: RowControlStack, cmd: Any) -> None:
         world.apply(cmd, s)
         if isinstance(cmd, (Arm, Connect)):
             runner.fault = None  # armed, or a fresh link: the old fault is history
 
-    def apply(s: ControlStack, t: float, cmd: SoftArmCommand) -> None:
+    def apply(s: RowControlStack, t: float, cmd: SoftArmCommand) -> None:
         """Loop thread: one command, dispatched on its type."""
+        if isinstance(cmd, TASKS):
+            s.require_no_row()  # STOP first: nothing else takes over the arm mid-row
         if isinstance(cmd, BRIDGE_COMMANDS):
             link(s, cmd)
         elif isinstance(cmd, Goto):
@@ -134,6 +177,8 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             s.start(t)
         elif isinstance(cmd, PlaceObject):
             place(cmd.x, cmd.y, cmd.r)
+        elif isinstance(cmd, RunRow):
+            run_row(s, t, cmd)
         elif isinstance(cmd, (GraspAt, ExecutePlan)):
             if not s.armed:  # arming is the operator's own, visible act: never implied here
                 raise RuntimeError(ARM_FIRST)
@@ -163,7 +208,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             fault = fault or runner.fault
             view = ControlView(runner.snapshot, runner.stats(last=stats_ticks), scheduling(),
                                obj_xy, radius, captured, finger, world.kind, link, fault,
-                               tuple(runner.slow_ticks))
+                               tuple(runner.slow_ticks), stack.row_report())
             replies.put(("view", view))
             n += 1
             if helper_priority and n % int(publish_hz) == 1:  # queue feeders start lazily
@@ -182,10 +227,22 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     runner.start(sched_priority=sched_priority)
     pub = threading.Thread(target=publish, name="control-publish", daemon=True)
     pub.start()
+    if world.kind != "sim":
+        threading.Thread(target=placer, name="row-placer", daemon=True).start()
     if helper_priority:
         promote_threads(helper_priority)
     try:
         def handle(cid: int, cmd: Any) -> None:
+            if isinstance(cmd, RunRow) and world.kind != "sim":
+                if not stack.armed:  # (the loop checks again) no object placed when refused
+                    replies.put(("reply", cid, ROW_ARM_FIRST))
+                    return
+                if cmd.objects and not stack.row_running:  # the first object, before the row
+                    try:
+                        world.place_object(*cmd.objects[0])
+                    except (RuntimeError, OSError, ValueError) as exc:
+                        replies.put(("reply", cid, str(exc)))
+                        return
             if isinstance(cmd, scene_first):
                 try:
                     world.place_object(cmd.x, cmd.y, cmd.r)
@@ -200,6 +257,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         serve_commands(commands, handle)  # until None or the console went away
     finally:
         stop.set()
+        to_place.put(None)
         runner.stop()
         pub.join(2.0)
         world.close()
@@ -282,6 +340,15 @@ class ControlProcess(LoopProcess):
         rows = lambda a: tuple(tuple(float(v) for v in row) for row in np.asarray(a, float))  # noqa: E731
         return self.send(ExecutePlan(rows(plan.kappas), rows(plan.palm_poses), float(x),
                                      float(y), float(r)))
+
+    def run_row(self, row_id: int, objects: Any, bin_xy: Any, bin_kappa: Any) -> cf.Future:
+        """Take ``objects`` ((x, y, r) each, m) to the bin at ``bin_xy`` (``bin_kappa``: the
+        configuration over it, :func:`core.control.row.bin_at`) one after another; armed only.
+        Its progress and outcomes are ``view.row`` (a :class:`core.control.row_stack.RowReport`
+        with this ``row_id``)."""
+        return self.send(RunRow(int(row_id), tuple(tuple(float(v) for v in o) for o in objects),
+                                (float(bin_xy[0]), float(bin_xy[1])),
+                                tuple(float(v) for v in np.asarray(bin_kappa).ravel())))
 
     def connect_link(self, port: str, baud: int = 0) -> cf.Future:
         """Close the link and open ``port`` at ``baud`` (0: the robot file's); inactive."""

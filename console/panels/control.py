@@ -6,7 +6,8 @@ in a child process (the console's own threads would delay a loop thread here); `
 starts it and hands it over as ``app.services.soft_control``. The panel only sends commands
 (applied by the loop at its next tick) and reads the newest published view, never locks.
 
-Widgets: Arm / Disarm, what Execute acts on, *Execute grasp-and-place*, *Click to grasp*, the
+Widgets: Arm / Disarm, what Execute acts on, *Execute grasp-and-place*, *Click to grasp*,
+*Clear table into bin* (every object to the placed bin, :mod:`console.panels.control_row`), the
 state machine's state and reason, a hardware fault in bold (every browser is told once; nothing
 re-arms until the operator does), one line of link health (device, lifecycle state, armed, round
 trip p99, lost demands), measured vs target kappa per segment in numbers, and the live plots of
@@ -37,6 +38,7 @@ import viser
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
 from console.panels.control_plots import ControlPlots
+from console.panels.control_row import RowControls
 from console.panels.control_text import (IDLE_PHASES, ExecuteTarget, execute_target,
                                          fault_markdown, header_link, header_phase, kappa_html,
                                          link_line, state_html, table_point)
@@ -108,6 +110,7 @@ class ControlPanel(Panel):
                                            hint="one click on the table places (or selects) an "
                                                 "object there in the Objects panel and runs the "
                                                 "whole grasp-and-place; arm first")
+        self.row = RowControls(self)  # "Clear table into bin" and the row's status
         self.kappa_md = gui.add_markdown("")
         self.loop_md = gui.add_markdown("<small>loop: –</small>")
         self.plots = ControlPlots(gui, self.app.robot.n_segments, int(HISTORY_S * PUMP_HZ))
@@ -354,7 +357,7 @@ class ControlPanel(Panel):
         if died:
             self.state_md.content = (f"**Control process died:** {died}. The arm is not "
                                      "commanded; restart the console.")
-            for btn in (self.arm_btn, self.disarm_btn, self.execute_btn):
+            for btn in (self.arm_btn, self.disarm_btn, self.execute_btn, self.row.button):
                 btn.disabled = True
             return
         if view is None:
@@ -364,7 +367,8 @@ class ControlPanel(Panel):
             return
         c = view.snapshot.control
         self.state_md.content = state_html(view, self.target)
-        self.app.header.show("phase", *header_phase(view, self.target))
+        self.app.header.show("phase", *(self.row.header(view) or header_phase(view, self.target)))
+        self.row.show(view)
         self.app.header.show("link", *header_link(view))
         if c is not None:
             busy = c.phase not in IDLE_PHASES + ("settling",)

@@ -13,6 +13,11 @@ every change -- a click on the table, a gizmo drag, typing x / y / r, selecting,
 removing, loading, the click-placement toggle -- is :func:`~console.panels.base.operator_only`.
 A viewer's edit snaps back (fields, selection, and a dragged object returns to its place);
 "Save scene" (a download that changes nothing) works for everyone.
+
+"Table click places" says what a click on free table puts there (:data:`CLICK_PLACES`): an
+object, or the bin that "Clear table into bin" (Control panel) takes every object to
+(``console.table_bin``: the arm must be able to hold an object over the point, else the click
+is refused with the reason). The bin is saved in the scene JSON (optional ``"bin"`` key).
 """
 
 from __future__ import annotations
@@ -25,6 +30,10 @@ import viser
 from console.panels.base import Panel, operator_only
 from console.panels.planner import SessionView, session_for
 from console.plan_view import ray_to_table, scene_from_json, scene_to_json
+from console.table_bin import (BinLocator, TableBin, bin_point_from_scene_json,
+                               scene_json_with_bin)
+
+CLICK_PLACES = ("Object", "Bin")  # what a click on free table places (dropdown options)
 
 
 def mm(metres: float) -> float:
@@ -46,6 +55,11 @@ class ObjectsPanel(Panel):
         self.click_place = self.gui.add_checkbox(
             "Click on table places object", True,
             hint="A click on free table places an object; a click on an object selects it.")
+        self.click_target = self.gui.add_dropdown(
+            "Table click places", CLICK_PLACES, initial_value=CLICK_PLACES[0],
+            hint="What a click on free table places: an object, or the bin that 'Clear table "
+                 "into bin' (Control panel) takes every object to.")
+        self.bins = BinLocator(self.app.robot)
         self.selected = self.gui.add_dropdown(
             "Selected", [o.name for o in view.objects] or ["(none)"],
             initial_value=view.selected or "(none)")
@@ -61,8 +75,10 @@ class ObjectsPanel(Panel):
         self.info = self.gui.add_html("")
         self._mirror = False
         self._click_mode = bool(self.click_place.value)
+        self._click_target = str(self.click_target.value)
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
         self.click_place.on_update(self._on_click_mode)
+        self.click_target.on_update(self._on_click_target)
         self.selected.on_update(self._on_select)
         for handle in (self.x, self.y, self.r):
             handle.on_update(self._on_typed)
@@ -84,7 +100,11 @@ class ObjectsPanel(Panel):
         if not self.click_place.value:
             return
         hit = ray_to_table(event.ray_origin, event.ray_direction)
-        if hit is not None:
+        if hit is None:
+            return
+        if self.click_target.value == "Bin":
+            self._place_bin_at(event, hit)
+        else:
             self._place_at(event, hit)
 
     @operator_only(action="place or select an object")
@@ -93,6 +113,21 @@ class ObjectsPanel(Panel):
             self.session.place(*hit, r=float(self.r.value) / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
+
+    @operator_only(action="place the bin")
+    def _place_bin_at(self, event, hit: tuple[float, float]) -> None:
+        self._find_bin(event.client, hit)
+
+    def _find_bin(self, client: Any, point: tuple[float, float]) -> None:
+        """Work out the bin at ``point`` off this thread; place it, or tell ``client`` why not."""
+        def done(found: TableBin | None, error: str | None) -> None:
+            if found is not None:
+                self.session.set_bin(found)
+                self.app.recorder.action(f"bin placed: {found.describe()}", client)
+            elif client is not None:
+                client.add_notification("Bin", f"Not placed: {error}", color="red",
+                                        auto_close_seconds=8)
+        self.bins.request(point[0], point[1], done)
 
     @operator_only(action="move an object")
     def _on_gizmo(self, name: str, event: viser.TransformControlsEvent) -> None:
@@ -104,6 +139,10 @@ class ObjectsPanel(Panel):
     @operator_only(action="change how clicks on the table act")
     def _on_click_mode(self, event) -> None:
         self._click_mode = bool(self.click_place.value)
+
+    @operator_only(action="change how clicks on the table act")
+    def _on_click_target(self, event) -> None:
+        self._click_target = str(self.click_target.value)
 
     @operator_only(action="select an object")
     def _on_select(self, event) -> None:
@@ -152,6 +191,8 @@ class ObjectsPanel(Panel):
             self.session.redraw_objects()  # the gizmo goes back to the object
         elif target is self.click_place:
             self.click_place.value = self._click_mode
+        elif target is self.click_target:
+            self.click_target.value = self._click_target
         elif target is self.selected:
             self.selected.value = self.session.view().selected or "(none)"
         elif target is not None and id(target) in self._fields:
@@ -159,18 +200,24 @@ class ObjectsPanel(Panel):
 
     def _on_save(self, event) -> None:
         if event.client is not None:
-            text = scene_to_json(list(self.session.view().objects))
+            view = self.session.view()
+            text = scene_json_with_bin(scene_to_json(list(view.objects)), view.bin)
             event.client.send_file_download("grasp_scene.json", text.encode())
 
     @operator_only(action="load a scene")
     def _on_load(self, event) -> None:
         upload = self.load_button.value
         try:
-            objects = scene_from_json(upload.content.decode("utf-8"), self.app.robot)
+            text = upload.content.decode("utf-8")
+            objects = scene_from_json(text, self.app.robot)
+            bin_point = bin_point_from_scene_json(text)  # None in files without a bin
         except (ValueError, UnicodeDecodeError) as exc:
             self._error(event, f"Could not load {upload.name}: {exc}")
             return
         self.session.set_objects(objects)
+        self.session.set_bin(None)  # the file's bin once its pose is found (if it has one)
+        if bin_point is not None:
+            self._find_bin(event.client, bin_point)
 
     # -- display (grasp worker thread) -----------------------------------------------------
     def refresh(self, view: SessionView) -> None:
@@ -196,6 +243,9 @@ class ObjectsPanel(Panel):
         text = (f"{count} object{'s' if count != 1 else ''} on the table"
                 + (f"; selected: <b>{html.escape(view.selected)}</b>{where}" if view.selected
                    else ""))
+        table_bin = getattr(view, "bin", None)
+        text += f"; {table_bin.describe()}" if table_bin is not None else "; no bin"
         sel = html.escape(view.selected or "", quote=True)
-        self.info.content = (f'<small data-testid="objects-info" data-selected="{sel}">'
-                             f"{text}</small>")
+        where_bin = "" if table_bin is None else f"{mm(table_bin.x):.0f},{mm(table_bin.y):.0f}"
+        self.info.content = (f'<small data-testid="objects-info" data-selected="{sel}" '
+                             f'data-bin="{where_bin}">{text}</small>')

@@ -53,6 +53,7 @@ def _legend(kind: str) -> tuple[LegendEntry, ...]:
         from console.plan_view import (CAPTURE_COLOR, CIRCLE_COLOR, FAIL_COLOR, GHOST_COLOR,
                                        GHOST_SEL_COLOR, OBJECT_COLOR, OBJECT_SEL_COLOR,
                                        PALM_COLOR, REACH_COLORS)
+        from console.table_bin import BIN_COLOR
         from core.planning.reachability import FAILS, PLANNABLE
         return (
             LegendEntry((BODY_COLOR, GRIPPER_COLOR), "fill", "Arm and its gripper"),
@@ -70,6 +71,7 @@ def _legend(kind: str) -> tuple[LegendEntry, ...]:
             LegendEntry((REACH_COLORS[PLANNABLE],), "area", "Table: a grasp can be planned"),
             LegendEntry((REACH_COLORS[FAILS],), "area", "Table: planning fails here"),
             LegendEntry((control.OBJECT_COLOR,), "fill", "Control's grasp-and-place object"),
+            LegendEntry((BIN_COLOR,), "ring", "Bin: where 'Clear table into bin' takes them"),
             LegendEntry((MEASURE_COLOR,), "line", "Measurement (View → Measure distance)"),
         )
     from console.panels.paths import GHOST_COLOR as PATH_GHOST_COLOR
