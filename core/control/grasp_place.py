@@ -203,10 +203,15 @@ class GraspAndPlace:
                                  reason=reason)
         return self._pending
 
+    def _side_sign(self) -> float:
+        """+1 when the plan grasps with the left finger (the paper's), -1 with the right one."""
+        return -1.0 if getattr(self.plan, "side", "left") == "right" else 1.0
+
     def palm(self, kappa: npt.ArrayLike) -> Array:
-        """Palm point [x, y] of a configuration (gripper straight)."""
+        """Palm point [x, y] of a configuration (gripper straight), on the plan's side."""
         tip = fk(kappa, self._lengths, self.robot.base_pose)[-1]
-        return np.array(point_in_pose(tip, *self.robot.gripper.w_off))
+        g = self.robot.gripper
+        return np.array(point_in_pose(tip, g.w_off_along, self._side_sign() * g.g_off))
 
     def _to_gripper(self, kappa: Array, xy: Array) -> Array:
         tip = fk(kappa, self._lengths, self.robot.base_pose)[-1]
@@ -346,8 +351,9 @@ class GraspAndPlace:
             return Decision(Phase.GRASP, gripper_closed=True)
         if obs.object_xy is None:
             return Decision(Phase.GRASP, gripper_closed=True, reason="waiting to see the object")
-        aim = np.array([self.robot.gripper.w_off_along,
-                        2 * self.robot.gripper.g_off + float(obs.object_radius or 0.0)])
+        # Where the plan put the object in the gripper frame: on the closing finger's side.
+        aim = np.array([self.robot.gripper.w_off_along, self._side_sign() * (
+            2 * self.robot.gripper.g_off + float(obs.object_radius or 0.0))])
         rel = self._to_gripper(obs.kappa, obs.object_xy)
         if float(np.hypot(*(rel - aim))) > self.p.capture_check_m:
             self.gripper_closed = False
