@@ -53,7 +53,7 @@ class GripperSpec:
     @property
     def sides(self) -> tuple[Side, ...]:
         """The sides of the arm it can grasp on: ``("left",)`` (the paper's single finger,
-        closing to the gripper's left) or ``("left", "right")`` (two back-to-back fingers on
+        closing to the gripper's left) or ``("left", "right")`` (two stacked fingers on
         the gripper channel, :mod:`core.planning.sides`)."""
         return ("left", "right") if self.fingers == "both" else ("left",)
 

@@ -13,7 +13,7 @@ first). When it cannot be pushed free (squeezed between finger and palm) the fin
 and stops there. The object is **captured** when its centre ends inside the pocket: the polygon
 root -> palm -> finger -> finger tip -> root. Everything is batched over K objects.
 
-**Two fingers** (robot file ``[gripper] fingers = "both"``, the back-to-back pair chosen in
+**Two fingers** (robot file ``[gripper] fingers = "both"``, the stacked pair chosen in
 :mod:`core.planning.sides`): a second finger, the mirror image (y -> -y) of the first, grows
 from the same palm end and curls to the right on the same channel (one ``turn`` for both; when
 one finger is blocked by the object both stop, which changes nothing for the finger holding it).

@@ -1,4 +1,4 @@
-"""Grasping on both sides of the soft arm: why two back-to-back fingers, and the mirrored planner.
+"""Grasping on both sides of the soft arm: why two stacked fingers, and the mirrored planner.
 
 Katzschmann 2015 grasps only in the left quadrant: its gripper is one pleated finger that closes
 toward the gripper's left (§5.3). Planning a right-quadrant object for that finger is possible
@@ -7,24 +7,27 @@ the S sweeps the arm through the object (the planner reports 30+ mm of sweep on 
 spots mirrored) and the grasps fail in simulation. §5.3 lists three ways out:
 
 1. **two smaller grippers next to each other** -- chosen (robot file ``[gripper] fingers =
-   "both"``). A lab builds it from what it has: a second finger cast in the same lost-wax mould
-   and mounted back to back with the first, constraint layers together, on the same palm, and a
-   tee in the gripper's fluid line so the one gripper drive cylinder (channel 2N) closes both.
-   Nothing else changes: still 2N + 1 channels, the same firmware, serial protocol and
-   controller, the same arm; the pair is about as wide as the paper's gripper when each finger
-   is half as thick ("smaller"). Both fingers close on every grasp; the one on the object's side
-   holds it, the other curls in the air on the far side. The cost: a second finger's mass at the
-   tip (the arm drags < 40 g) and its curl on the far side, which needs free table there.
+   "both"``). A lab builds it from what it has: two fingers cast in the paper's lost-wax mould at
+   half height, stacked one above the other on the same palm, the lower one mounted upside down
+   so it closes to the right, and a tee in the gripper's fluid line so the one gripper drive
+   cylinder (channel 2N) closes both. Nothing else changes: still 2N + 1 channels, the same
+   firmware, serial protocol and controller, the same arm; seen from above the pair is the
+   paper's gripper (same length, width and palm), so each finger keeps the paper's capture
+   region (Fig. 6), mirrored for the right one. Both fingers close on every grasp; the one on
+   the object's side holds it, the other curls in the air on the far side. The cost: the
+   half-height fingers hold tall objects lower down, the far finger's curl needs free table, and
+   the pair adds a little mass at the tip (the arm drags < 40 g).
 2. a flipped arm (roller supports on the top face, the arm turned 180° at its root): the gripper
    then closes to the right only, so a session can serve one side at a time and every change of
    side is a remount and a recalibration of the motion-capture markers -- the Fig. 7 experiment
    on both sides could not run in one go.
-3. starting from an extreme curvature in the right quadrant: no hardware change, but the left
-   quadrant is then out of reach without going back through the straight pose, every grasp
-   starts from a strained arm (the planner's cost is the deformation from the start), and the
-   reachable part of the right quadrant is a thin band outside the curl.
+3. starting from an extreme curvature in the right quadrant: no hardware change, but the finger
+   still closes to the left, so the arm must wrap around the object to face it with the palm
+   (the S-shapes above, from a curled start instead); every grasp then starts from a strained
+   arm (the planner's cost is the deformation from the start), and the left quadrant needs a
+   move back through the straight pose first.
 
-With a back-to-back pair the arm's kinematics and the right finger are the mirror image of the
+With a stacked pair the arm's kinematics and the right finger are the mirror image of the
 left ones about the base's heading line (curvature kappa -> -kappa, the table reflected across
 the line through the base along its heading). So a right-side grasp is planned by mirroring the
 request, planning it with Algorithm 1 unchanged (:class:`core.planning.grasp.GraspPlanner`) and

@@ -15,7 +15,7 @@ infeasible (the disc would overlap the open gripper or the arm, so nobody could 
 The result saves to JSON or ``.npz`` and renders to SVG (:meth:`CaptureMap.to_svg`); the
 console draws it from the data.
 
-**Sides**: a gripper with two back-to-back fingers (``[gripper] fingers = "both"``,
+**Sides**: a gripper with two stacked fingers (``[gripper] fingers = "both"``,
 :mod:`core.planning.sides`) has a second capture region on its right. ``side="right"``
 characterises it on the mirror image of the left grid (y -> -y in the gripper frame), with the
 model disc mirrored too; :func:`mirror_agreement` compares the two maps cell by cell.
