@@ -203,9 +203,22 @@ class GraspAndPlace:
                                  reason=reason)
         return self._pending
 
+    @property
+    def closing_side(self) -> str:
+        """The finger the plan grasps with: ``left`` (the paper's) or ``right``.
+
+        A plan without a ``side`` (a :class:`WaypointPlan` sent by the console) is read from
+        its final palm pose: the object centre lies on the closing finger's side of it.
+        """
+        side = getattr(self.plan, "side", None)
+        if side is None and self.plan is not None and self.plan_center is not None:
+            pose = np.asarray(self.plan.palm_poses, dtype=float)[-1]
+            d = self.plan_center - pose[:2]
+            return "right" if math.cos(pose[2]) * d[1] - math.sin(pose[2]) * d[0] < 0 else "left"
+        return "right" if side == "right" else "left"
+
     def _side_sign(self) -> float:
-        """+1 when the plan grasps with the left finger (the paper's), -1 with the right one."""
-        return -1.0 if getattr(self.plan, "side", "left") == "right" else 1.0
+        return -1.0 if self.closing_side == "right" else 1.0
 
     def palm(self, kappa: npt.ArrayLike) -> Array:
         """Palm point [x, y] of a configuration (gripper straight), on the plan's side."""

@@ -145,3 +145,30 @@ def test_reach_map_covers_both_sides_symmetrically():
     np.testing.assert_array_equal(reach.status, reach.status[:, ::-1])
     one = reachability_map(ONE_FINGER, R0, (-0.3, 0.3), (0.1, 0.4), 0.04)
     assert (one.status[:, one.xs > 0] == PLANNABLE).sum() < (right == PLANNABLE).sum()
+
+
+def test_console_execute_path_grasps_on_the_right_without_a_side_field():
+    """The console sends only waypoints and palm poses (``WaypointPlan``, no ``side``): the
+    machine reads the closing finger from the final palm pose and the object, and the grasp
+    on the right succeeds in the simulator."""
+    from core.control.grasp_place import Phase, WaypointPlan, immediate
+    from core.control.sim import SoftArmSim
+    from core.control.sim_loop import SimLoop
+    from core.control.stack import ControlStack
+
+    x, y = 0.16, 0.28
+    plan = plan_grasp_sided(ARM, np.zeros(6), (x, y), R0)
+    sim = SoftArmSim(ARM, seed=2)
+    sim.place_object(x, y, R0)
+    stack = ControlStack(ARM, 0.01, immediate(lambda req: None))
+    loop = SimLoop(sim, stack, 0.01)
+    loop.run(0.05)
+    loop.arm()
+    loop.run(0.5)
+    loop.submit(lambda s, t: s.execute(WaypointPlan(plan.kappas, plan.palm_poses), (x, y), t))
+    captured = []
+    loop.run(120.0, until=lambda c: captured.append(sim.captured) or (
+        c is not None and c.phase in (Phase.RELEASED.value, Phase.STOPPED.value)))
+    assert stack.machine.phase is Phase.RELEASED, stack.machine.reason
+    assert stack.machine.closing_side == "right" and any(captured)
+    assert not sim.captured and sim.obj.xy[0] > 0  # put down, on the right finger's side

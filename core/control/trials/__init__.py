@@ -143,7 +143,7 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
     elif m.phase is not Phase.RELEASED:
         failure = f"time limit {time_limit_s:g} s reached in {m.phase.value}"
     else:
-        drop = bin_drop_point(robot, r, side=getattr(m.plan, "side", "left"))
+        drop = bin_drop_point(robot, r, side=m.closing_side)
         if sim.obj is None or sim.captured:
             failure = "object still in the gripper after release"
         else:
