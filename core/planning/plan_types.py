@@ -208,7 +208,8 @@ def format_plan(plan: GraspPlan) -> str:
     """Human-readable table of a plan's waypoints: lengths in mm, angles in degrees, the unit
     in every header (``to_dict`` / ``--json`` stay SI)."""
     cx, cy = plan.center
-    lines = [f"Object at ({fmt_mm(cx)}, {fmt_mm(cy)}) mm, r = {fmt_mm(plan.radius)} mm: "
+    finger = ", right finger" if plan.side == "right" else ""
+    lines = [f"Object at ({fmt_mm(cx)}, {fmt_mm(cy)}) mm, r = {fmt_mm(plan.radius)} mm{finger}: "
              f"{plan.summary()}",
              f"d1 = {fmt_mm(plan.d1)} mm, d2 = {fmt_mm(plan.d2)} mm, numMoves = {plan.num_moves}, "
              f"delta_d = {fmt_mm(plan.delta_d)} mm",
