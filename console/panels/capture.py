@@ -133,10 +133,11 @@ class CapturePanel(Panel):
                 agree = mirror_agreement(self.maps["left"], self.maps["right"])
                 self.summary.content += (f"\n\nRight map = the left one mirrored in "
                                          f"**{agree:.0%}** of the cells")
+            fitted = lambda m: m.to_svg(scale=2500.0).replace(  # noqa: E731 - the panel's width
+                "<svg ", "<svg style='max-width:100%;height:auto' ", 1)
             self.drawing.content = "".join(
-                f"<div><small>{side} finger</small>{m.to_svg(scale=2500.0)}</div>"
-                if len(self.maps) > 1 else m.to_svg(scale=2500.0)
-                for side, m in self.maps.items())
+                f"<div><small>{side} finger</small>{fitted(m)}</div>" if len(self.maps) > 1
+                else fitted(m) for side, m in self.maps.items())
             self.save_btn.disabled = False
         except Exception as exc:  # report, never kill the console
             self.summary.content = f"**Characterisation failed:** {exc}"
