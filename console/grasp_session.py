@@ -3,7 +3,7 @@ the Objects, Grasp planner and Waypoints panels share (one per console, ``sessio
 
 Callbacks only call :class:`GraspSession` methods, which take a lock, record the request and
 wake one worker thread. The worker plans the newest request with
-:class:`core.planning.grasp.GraspPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
+:class:`core.planning.sides.SidedPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
 second, on the newest position only), steps waypoint playback, redraws the grasp layer
 (:class:`console.plan_view.PlanScene`, of which it is the only writer) and then tells the panels,
 which refresh their widgets. Who may change it is decided by the panels (operator-only
@@ -29,7 +29,8 @@ from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableOb
 from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
 from console.table_bin import BinView, TableBin
-from core.planning.grasp import GraspPlanner, GraspRefused
+from core.planning.feasibility import GraspRefused
+from core.planning.sides import SidedPlanner
 from core.planning.reachability import ReachMap
 
 if TYPE_CHECKING:
@@ -48,7 +49,7 @@ class GraspSession:
         self.app = app
         robot = app.robot
         self.robot = robot
-        self.planner = GraspPlanner(robot)
+        self.planner = SidedPlanner(robot)  # the side the object lies on (core.planning.sides)
         self.scene = PlanScene(app.server, robot)
         self.bin_view = BinView(app.server.scene)
         self._bin: TableBin | None = None  # where "Clear table into bin" takes the objects

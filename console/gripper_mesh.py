@@ -8,6 +8,9 @@ closes, z up). :func:`gripper_vertices` scales it to the robot file's ``[gripper
 layer with constant curvature (``[sim.gripper] closed_turn`` over the finger's length, the same
 finger model as the simulator's capture sweep), keeping the layer's length: the finger bends,
 it does not stretch. The arm view sends both shapes once and then moves them by one pose.
+A gripper with two fingers (``[gripper] fingers = "both"``, :mod:`core.planning.sides`) is drawn
+as two half-height copies stacked on the same palm (the pair as tall as one), the lower one the
+mirror image of the upper, each curling toward its own side.
 Pure numpy (plus trimesh to read the file).
 """
 
@@ -33,13 +36,14 @@ class GripperShape:
     half_width: float
     palm_length: float
     closed_turn: float
+    fingers: str = "left"     # "left" (the paper's) or "both" (two stacked fingers)
 
     @classmethod
     def of(cls, robot: object) -> "GripperShape":
         """The soft-arm robot's gripper (``[gripper]`` and ``[sim.gripper]``)."""
         g, sim = robot.gripper, robot.sim.gripper  # type: ignore[attr-defined]
         return cls(float(g.length), float(g.half_width), float(sim.palm_length),
-                   float(sim.closed_turn))
+                   float(sim.closed_turn), str(g.fingers))
 
 
 def load_asset(path: Path = ASSET) -> tuple[Array, npt.NDArray[np.int64]]:
@@ -96,6 +100,17 @@ def gripper_vertices(shape: GripperShape, closed: bool,
     """Vertices in the tip frame and faces of the gripper, open or closed."""
     vertices, faces = asset if asset is not None else load_asset()
     v = fit(vertices, shape)
+    if shape.fingers != "both":
+        if closed:
+            v = bend(v, shape, shape.closed_turn)
+        return to_tip_frame(v).astype(np.float32), faces
+    # Two fingers: the left one in the upper half (z in [0, half_width]), the right one, its
+    # mirror image across the gripper's axis, in the lower half.
     if closed:
         v = bend(v, shape, shape.closed_turn)
-    return to_tip_frame(v).astype(np.float32), faces
+    half = shape.half_width / 2
+    upper = v * np.array([1.0, 1.0, 0.5]) + [0.0, 0.0, half]
+    lower = v * np.array([1.0, -1.0, 0.5]) - [0.0, 0.0, half]
+    both = np.concatenate([upper, lower])
+    faces2 = np.concatenate([faces, faces[:, ::-1] + len(v)])  # mirrored: winding reversed
+    return to_tip_frame(both).astype(np.float32), faces2

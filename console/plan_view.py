@@ -192,8 +192,11 @@ def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool,
     shown = trail_mask(plan.n, index, trail, trail_from)
     palm = np.c_[plan.palm_poses[:, :2], np.full(plan.n, Z_PLAN)]
     final = plan.palm_poses[-1]
+    # The capture region is on the closing finger's side: the gripper's left, or its right
+    # for a plan of the right finger (core.planning.sides).
+    side = -1.0 if getattr(plan, "side", "left") == "right" else 1.0
     left = np.array([-math.sin(final[2]), math.cos(final[2])])
-    aim = final[:2] + left * (robot.gripper.g_off + robot.capture.nominal_object_radius)
+    aim = final[:2] + side * left * (robot.gripper.g_off + robot.capture.nominal_object_radius)
     ghost_colors = np.repeat(trail_colors(shown, index), ghosts.shape[1], 0)
     return {
         "circles": circles, "circle_colors": np.repeat(circle_colors[:, None], 2, 1),

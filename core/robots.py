@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
-from typing import Any, Mapping, Union
+from typing import Any, Literal, Mapping, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -26,7 +26,7 @@ from core.robot_schema import RobotFileError, Section, check_number, tomllib
 from core.robot_sections import BridgeSection, EmulatorSection, IKSettings, PathSettings
 
 __all__ = ["ROBOTS_DIR", "CaptureSpec", "ExtensibleArm", "GripperSpec", "MAX_SEGMENTS", "Robot",
-           "RobotFileError", "SoftArm", "available", "check_number", "load", "parse"]
+           "RobotFileError", "Side", "SoftArm", "available", "check_number", "load", "parse"]
 
 ROBOTS_DIR = Path(__file__).resolve().parent.parent / "data" / "robots"
 
@@ -34,6 +34,9 @@ ROBOTS_DIR = Path(__file__).resolve().parent.parent / "data" / "robots"
 #: drive cylinders, 3N motors), and a typo
 #: (``count = 100000``) is refused at load instead of hanging start-up.
 MAX_SEGMENTS = {"planar": 15, "delta": 4}
+
+#: A side of the soft arm, seen from its base along the base heading.
+Side = Literal["left", "right"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,6 +48,14 @@ class GripperSpec:
     g_off: float
     max_object_radius: float
     half_width: float
+    fingers: Literal["left", "both"] = "left"
+
+    @property
+    def sides(self) -> tuple[Side, ...]:
+        """The sides of the arm it can grasp on: ``("left",)`` (the paper's single finger,
+        closing to the gripper's left) or ``("left", "right")`` (two stacked fingers on
+        the gripper channel, :mod:`core.planning.sides`)."""
+        return ("left", "right") if self.fingers == "both" else ("left",)
 
     @property
     def w_off(self) -> npt.NDArray[np.float64]:
@@ -187,6 +198,7 @@ def _soft_arm(top: Section, source: Path) -> SoftArm:
         g_off=grip.num("g_off", lo=0, hi=10.0),
         max_object_radius=grip.num("max_object_radius", lo=0, hi=10.0, strict_lo=True),
         half_width=grip.num("half_width", lo=0, hi=10.0, strict_lo=True),
+        fingers=grip.choice("fingers", ("left", "both"), default="left"),
     )
     if gripper.w_off_along > gripper.length:
         raise grip.error("w_off_along", f"must be <= gripper.length ({gripper.length:g}), "

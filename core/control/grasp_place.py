@@ -203,10 +203,28 @@ class GraspAndPlace:
                                  reason=reason)
         return self._pending
 
+    @property
+    def closing_side(self) -> str:
+        """The finger the plan grasps with: ``left`` (the paper's) or ``right``.
+
+        A plan without a ``side`` (a :class:`WaypointPlan` sent by the console) is read from
+        its final palm pose: the object centre lies on the closing finger's side of it.
+        """
+        side = getattr(self.plan, "side", None)
+        if side is None and self.plan is not None and self.plan_center is not None:
+            pose = np.asarray(self.plan.palm_poses, dtype=float)[-1]
+            d = self.plan_center - pose[:2]
+            return "right" if math.cos(pose[2]) * d[1] - math.sin(pose[2]) * d[0] < 0 else "left"
+        return "right" if side == "right" else "left"
+
+    def _side_sign(self) -> float:
+        return -1.0 if self.closing_side == "right" else 1.0
+
     def palm(self, kappa: npt.ArrayLike) -> Array:
-        """Palm point [x, y] of a configuration (gripper straight)."""
+        """Palm point [x, y] of a configuration (gripper straight), on the plan's side."""
         tip = fk(kappa, self._lengths, self.robot.base_pose)[-1]
-        return np.array(point_in_pose(tip, *self.robot.gripper.w_off))
+        g = self.robot.gripper
+        return np.array(point_in_pose(tip, g.w_off_along, self._side_sign() * g.g_off))
 
     def _to_gripper(self, kappa: Array, xy: Array) -> Array:
         tip = fk(kappa, self._lengths, self.robot.base_pose)[-1]
@@ -346,8 +364,9 @@ class GraspAndPlace:
             return Decision(Phase.GRASP, gripper_closed=True)
         if obs.object_xy is None:
             return Decision(Phase.GRASP, gripper_closed=True, reason="waiting to see the object")
-        aim = np.array([self.robot.gripper.w_off_along,
-                        2 * self.robot.gripper.g_off + float(obs.object_radius or 0.0)])
+        # Where the plan put the object in the gripper frame: on the closing finger's side.
+        aim = np.array([self.robot.gripper.w_off_along, self._side_sign() * (
+            2 * self.robot.gripper.g_off + float(obs.object_radius or 0.0))])
         rel = self._to_gripper(obs.kappa, obs.object_xy)
         if float(np.hypot(*(rel - aim))) > self.p.capture_check_m:
             self.gripper_closed = False

@@ -12,6 +12,12 @@ object is pushed out of every capsule it overlaps (quasi-static, frictionless, d
 first). When it cannot be pushed free (squeezed between finger and palm) the finger is blocked
 and stops there. The object is **captured** when its centre ends inside the pocket: the polygon
 root -> palm -> finger -> finger tip -> root. Everything is batched over K objects.
+
+**Two fingers** (robot file ``[gripper] fingers = "both"``, the stacked pair chosen in
+:mod:`core.planning.sides`): a second finger, the mirror image (y -> -y) of the first, grows
+from the same palm end and curls to the right on the same channel (one ``turn`` for both; when
+one finger is blocked by the object both stop, which changes nothing for the finger holding it).
+Its capsules take part in every push, and an object is captured in either pocket.
 """
 
 from __future__ import annotations
@@ -46,11 +52,22 @@ class GripperGeometry:
     closed_turn: float
     capture_turn: float
     sweep_steps: int
+    both: bool = False        # a mirrored second finger closing to the right
 
     @classmethod
-    def from_params(cls, length: float, g: GripperSimParams, arm_half_width: float) -> "GripperGeometry":
+    def from_params(cls, length: float, g: GripperSimParams, arm_half_width: float,
+                    fingers: str = "left") -> "GripperGeometry":
+        """From ``[sim.gripper]``; ``fingers`` is the robot file's ``[gripper] fingers``."""
         return cls(length, g.palm_length, g.finger_half_width, arm_half_width, g.closed_turn,
-                   g.capture_turn, g.sweep_steps)
+                   g.capture_turn, g.sweep_steps, fingers == "both")
+
+    @classmethod
+    def of(cls, robot, params: GripperSimParams | None = None,
+           arm_half_width: float | None = None) -> "GripperGeometry":
+        """The soft-arm robot's simulated gripper (``[gripper]`` and ``[sim]``)."""
+        g = robot.sim.gripper if params is None else params
+        hw = robot.sim.arm_half_width if arm_half_width is None else arm_half_width
+        return cls.from_params(robot.gripper.length, g, hw, robot.gripper.fingers)
 
     @property
     def finger_length(self) -> float:
@@ -72,10 +89,29 @@ class GripperGeometry:
         return pts
 
     def half_widths(self) -> Array:
-        """Capsule half-widths per polyline segment, (M-1,)."""
-        hw = np.full(_FINGER_POINTS + 2, self.finger_half_width)
+        """Capsule half-widths, (S,), matching :meth:`capsules`."""
+        hw = np.full(_FINGER_POINTS + 2 + (_FINGER_POINTS if self.both else 0),
+                     self.finger_half_width)
         hw[0] = self.arm_half_width
         return hw
+
+    def capsules(self, turn: npt.ArrayLike) -> tuple[Array, Array]:
+        """Segment ends ``(a, b)``, each (K, S, 2): arm stub, palm, finger (and mirrored finger)."""
+        line = self.centreline(turn)
+        a, b = line[:, :-1], line[:, 1:]
+        if not self.both:
+            return a, b
+        mirror = line[:, 2:] * np.array([1.0, -1.0])  # palm end and the right finger
+        return (np.concatenate([a, mirror[:, :-1]], axis=1),
+                np.concatenate([b, mirror[:, 1:]], axis=1))
+
+    def outline(self, turn: float) -> Array:
+        """One polyline (M, 2) to draw the gripper closed to ``turn``: stub, root, palm, finger;
+        with two fingers the right finger tip, back to the palm end, then the left finger."""
+        line = self.centreline(turn)[0]
+        if not self.both:
+            return line
+        return np.concatenate([line[:2:-1] * np.array([1.0, -1.0]), line[2:]])
 
 
 def capsule_contacts(p: Array, a: Array, b: Array) -> tuple[Array, Array]:
@@ -122,7 +158,15 @@ def push_out(p: Array, r: Array, a: Array, b: Array, hw: Array,
 
 
 def in_pocket(geom: GripperGeometry, turn: npt.ArrayLike, p: Array) -> npt.NDArray[np.bool_]:
-    """Whether centres p (K, 2) lie inside the pocket polygon of a gripper closed to ``turn``."""
+    """Whether centres p (K, 2) lie inside a pocket polygon of a gripper closed to ``turn``
+    (the left finger's, or with two fingers also the right one's: the mirror image)."""
+    inside = _in_left_pocket(geom, turn, p)
+    if geom.both:
+        inside |= _in_left_pocket(geom, turn, p * np.array([1.0, -1.0]))
+    return inside
+
+
+def _in_left_pocket(geom: GripperGeometry, turn: npt.ArrayLike, p: Array) -> npt.NDArray[np.bool_]:
     poly = geom.centreline(turn)[:, 1:]  # root, palm end, finger...; closed back to the root
     x, y = p[:, 0:1], p[:, 1:2]
     x0, y0 = poly[..., 0], poly[..., 1]
@@ -174,8 +218,8 @@ def close_sweep(geom: GripperGeometry, p: npt.ArrayLike, r: npt.ArrayLike,
             break
         idx = np.flatnonzero(active)
         proposed = np.minimum(turn[idx] + step, end)
-        line = geom.centreline(proposed)
-        q, resid = push_out(p[idx], r[idx], line[:, :-1], line[:, 1:], hw)
+        a, b = geom.capsules(proposed)
+        q, resid = push_out(p[idx], r[idx], a, b, hw)
         ok = resid <= _BLOCK_TOL
         p[idx[ok]] = q[ok]
         turn[idx[ok]] = proposed[ok]

@@ -2,7 +2,8 @@
 
 The trials' ``--planner`` and the loop's planning worker process take such a name; the function
 takes ``(robot, kappa_meas, center, radius)`` and returns a plan (see
-:func:`core.planning.grasp.plan_grasp`, the default).
+:func:`core.planning.sides.plan_grasp_sided`, the default: Algorithm 1 on the side of the arm
+the object lies on, for a gripper that closes to both sides).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import importlib
 from typing import Any, Callable
 
-DEFAULT_PLANNER = "core.planning.grasp:plan_grasp"
+DEFAULT_PLANNER = "core.planning.sides:plan_grasp_sided"
 
 
 def resolve(spec: str) -> Callable[..., Any]:

@@ -86,7 +86,7 @@ class SoftArmSim:
         self.n = robot.n_segments
         self.rng = np.random.default_rng(seed)
         self.geom = GripperGeometry.from_params(robot.gripper.length, self.p.gripper,
-                                                self.p.arm_half_width)
+                                                self.p.arm_half_width, robot.gripper.fingers)
         self.t = 0.0
         k0 = np.zeros(self.n) if kappa0 is None else np.asarray(kappa0, dtype=float)
         if k0.shape != (self.n,) or np.any(np.abs(k0) > robot.kappa_max):
@@ -102,7 +102,8 @@ class SoftArmSim:
         self.stuck_until = np.full(self.n, -np.inf)
         self.slip_until = np.full(self.n, -np.inf)
         self.slip_target = np.zeros(self.n)
-        self._grip_cache: tuple[float, Array] = (math.nan, np.zeros((0, 2)))
+        self._grip_cache: tuple[float, Array, Array] = (math.nan, np.zeros((0, 2)),
+                                                        np.zeros((0, 2)))
         # Bound on how far any backbone point moves per unit curvature change of each segment.
         ln = robot.lengths
         self._sweep_weights = ln * (np.cumsum(ln[::-1])[::-1] + robot.gripper.length)
@@ -139,8 +140,9 @@ class SoftArmSim:
         return self.shape()[-1]
 
     def gripper_polyline(self) -> Array:
-        """Gripper centreline in the world (M, 2), from the arm stub to the finger tip."""
-        return from_frame(self.tip_pose(), self.geom.centreline(self.turn)[0])
+        """Gripper centreline in the world (M, 2), from the arm stub to the finger tip (with two
+        fingers from the right finger's tip to the left one's, :meth:`GripperGeometry.outline`)."""
+        return from_frame(self.tip_pose(), self.geom.outline(self.turn))
 
     # -- dynamics ------------------------------------------------------------------------------
     def step(self, demands: npt.ArrayLike, dt: float) -> None:
@@ -238,11 +240,12 @@ class SoftArmSim:
             parts_a.append(body[:-1]), parts_b.append(body[1:])
             parts_hw.append(np.full(body.shape[0] - 1, self.p.arm_half_width))
         if grip_near:
-            if self._grip_cache[0] != self.turn:
-                self._grip_cache = (self.turn, self.geom.centreline(self.turn)[0][1:])
-            grip = from_frame(ends[-1], self._grip_cache[1])
-            parts_a.append(grip[:-1]), parts_b.append(grip[1:])
-            parts_hw.append(np.full(grip.shape[0] - 1, self.geom.finger_half_width))
+            if self._grip_cache[0] != self.turn:  # the gripper's capsules without the arm stub
+                a, b = self.geom.capsules(self.turn)
+                self._grip_cache = (self.turn, a[0, 1:], b[0, 1:])
+            parts_a.append(from_frame(ends[-1], self._grip_cache[1]))
+            parts_b.append(from_frame(ends[-1], self._grip_cache[2]))
+            parts_hw.append(np.full(self._grip_cache[1].shape[0], self.geom.finger_half_width))
         a, b = np.concatenate(parts_a), np.concatenate(parts_b)
         q, _ = push_out(obj.xy[None], np.array([obj.radius]), a[None], b[None],
                         np.concatenate(parts_hw))

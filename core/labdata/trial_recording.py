@@ -18,6 +18,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from core.control.planner_spec import DEFAULT_PLANNER
 from core.labdata.channels import ArmGeometry
 from core.labdata.mcap_file import McapLog
 from core.labdata.telemetry import LoopRecords
@@ -84,7 +85,7 @@ def _recorded_trial(job: tuple) -> tuple[Any, list[dict[str, Any]]]:
 
 def record_trials(path: str | Path, robot_src: str,
                   objects: Sequence[tuple[str, Sequence[float]]], repeats: int, seed: int, *,
-                  map_fn: Callable[..., Any] = map, planner: str = "core.planning.grasp:plan_grasp",
+                  map_fn: Callable[..., Any] = map, planner: str = DEFAULT_PLANNER,
                   time_limit_s: float = 150.0, sim_overrides: dict[str, Any] | None = None,
                   progress: Callable[[int, int, Any], None] | None = None,
                   hz: float = 10.0) -> list[Any]:

@@ -119,7 +119,8 @@ class GraspPlan:
         d1, d2, num_moves, delta_d: Algorithm 1's quantities.
         weights: Cost weights R (N,).
         radii: (n,) approach radii r_a.
-        phis: (n,) angle of the palm point on its circle (rad); palm heading is phi + pi/2.
+        phis: (n,) angle of the palm point on its circle (rad); palm heading is phi + pi/2
+            (``side`` left: counter-clockwise circles) or phi - pi/2 (right: clockwise).
         kappas: (n, N) waypoint curvatures.
         palm_poses: (n, 3) [x, y, theta] of the palm point w_t.
         clearance: (n,) gap between the arm body and the object's disk at each waypoint (m).
@@ -133,6 +134,8 @@ class GraspPlan:
         status: (n,) ``ok`` or a failure reason per waypoint.
         failures: Failed radii with reasons.
         total_ms: Wall time of the whole plan.
+        side: The side of the arm the gripper closes toward: ``left`` (Algorithm 1 as in the
+            paper) or ``right`` (the mirror image, :mod:`core.planning.sides`).
     """
 
     center: Array
@@ -159,6 +162,7 @@ class GraspPlan:
     status: tuple[str, ...]
     failures: tuple[RadiusFailure, ...]
     total_ms: float
+    side: str = "left"
 
     @property
     def n(self) -> int:
@@ -204,7 +208,8 @@ def format_plan(plan: GraspPlan) -> str:
     """Human-readable table of a plan's waypoints: lengths in mm, angles in degrees, the unit
     in every header (``to_dict`` / ``--json`` stay SI)."""
     cx, cy = plan.center
-    lines = [f"Object at ({fmt_mm(cx)}, {fmt_mm(cy)}) mm, r = {fmt_mm(plan.radius)} mm: "
+    finger = ", right finger" if plan.side == "right" else ""
+    lines = [f"Object at ({fmt_mm(cx)}, {fmt_mm(cy)}) mm, r = {fmt_mm(plan.radius)} mm{finger}: "
              f"{plan.summary()}",
              f"d1 = {fmt_mm(plan.d1)} mm, d2 = {fmt_mm(plan.d2)} mm, numMoves = {plan.num_moves}, "
              f"delta_d = {fmt_mm(plan.delta_d)} mm",

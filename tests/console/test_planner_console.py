@@ -16,7 +16,7 @@ from console.plan_view import (TableObject, circle_segments, ghost_segments, obj
                                plan_geometry, ray_to_table, reach_mesh, scene_from_json,
                                scene_to_json)
 from core.kinematics import planar as pk
-from core.planning.grasp import plan_grasp
+from core.planning.sides import plan_grasp_sided
 from core.planning.reachability import PLANNABLE, from_json, reachability_map, to_json
 from core.robots import load
 from fakes import FakeClient
@@ -48,7 +48,7 @@ def dataclass_dict(o: TableObject) -> dict:
 
 
 def test_drawing_geometry_matches_the_plan_and_the_kinematics():
-    plan = plan_grasp(ROBOT, np.zeros(6), (-0.2, 0.2), 0.0165)
+    plan = plan_grasp_sided(ROBOT, np.zeros(6), (-0.2, 0.2), 0.0165)
     segs = circle_segments(plan.center, plan.radii, 0.03)
     d = np.hypot(segs[..., 0] - plan.center[0], segs[..., 1] - plan.center[1])
     np.testing.assert_allclose(d.reshape(plan.n, -1), np.repeat(plan.radii, d.size // plan.n)
@@ -84,7 +84,7 @@ def test_reachability_map_agrees_with_the_planner_and_round_trips():
     for i, y in enumerate(reach.ys):
         for j, x in enumerate(reach.xs):
             try:
-                ok = plan_grasp(ROBOT, np.zeros(6), (x, y), 0.0165).success
+                ok = plan_grasp_sided(ROBOT, np.zeros(6), (x, y), 0.0165).success
             except ValueError:
                 ok = False
             assert (reach.status[i, j] == PLANNABLE) == ok, (x, y)
@@ -134,7 +134,8 @@ def test_session_plans_refuses_inspects_and_plays(console):
     assert first.plan is not None and first.plan.success
     name = s.place(-0.12, 0.28)
     out = wait_for(lambda: (o := s.view().outcome) and o.obj and o.obj.name == name and o)
-    ref = plan_grasp(ROBOT, np.zeros(6), (-0.12, 0.28), ROBOT.capture.nominal_object_radius)
+    ref = plan_grasp_sided(ROBOT, np.zeros(6), (-0.12, 0.28),
+                           ROBOT.capture.nominal_object_radius)
     np.testing.assert_allclose(out.plan.kappas, ref.kappas, atol=1e-9)
     seq = s.view().outcome.seq
     assert s.place(-0.121, 0.281) == name                 # a click on an object selects it

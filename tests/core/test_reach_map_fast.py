@@ -12,10 +12,15 @@ import pytest
 from core import robots
 from core.planning import reachability as reach_mod
 from core.planning.grasp import GraspPlanner
+from core.robot_schema import tomllib
 from core.planning.reachability import (FAILS, PLANNABLE, UNREACHABLE, cell_status, grid_axis,
                                         map_planner, reachability_map)
 
-ROBOT = robots.load("soft-arm")
+# The paper's single finger (closing to the left): its right quadrant is where Algorithm 1
+# finds a final pose but fails the approach (FAILS), the outcome this test must meet.
+_SHIPPED = tomllib.loads(robots.load("soft-arm").source.read_text())
+ROBOT = robots.parse({**_SHIPPED, "gripper": {**_SHIPPED["gripper"], "fingers": "left"}},
+                     robots.load("soft-arm").source)
 RADIUS = ROBOT.capture.nominal_object_radius
 X, Y, STEP = (-0.30, 0.30), (0.10, 0.50), 0.02
 

@@ -15,6 +15,11 @@ infeasible (the disc would overlap the open gripper or the arm, so nobody could 
 The result saves to JSON or ``.npz`` and renders to SVG (:meth:`CaptureMap.to_svg`); the
 console draws it from the data.
 
+**Sides**: a gripper with two stacked fingers (``[gripper] fingers = "both"``,
+:mod:`core.planning.sides`) has a second capture region on its right. ``side="right"``
+characterises it on the mirror image of the left grid (y -> -y in the gripper frame), with the
+model disc mirrored too; :func:`mirror_agreement` compares the two maps cell by cell.
+
 Command line: ``python -m core.control.capture`` (:mod:`core.control.capture.__main__`).
 """
 
@@ -45,10 +50,13 @@ class CaptureModel:
     diameter: float
 
     @classmethod
-    def from_robot(cls, robot: SoftArm, radius: float | None = None) -> "CaptureModel":
+    def from_robot(cls, robot: SoftArm, radius: float | None = None,
+                   side: str = "left") -> "CaptureModel":
+        """The disc for the finger closing toward ``side`` (right: y mirrored)."""
         r = robot.capture.nominal_object_radius if radius is None else radius
         g = robot.gripper
-        return cls((g.w_off_along, 2 * g.g_off + r), robot.capture.diameter)
+        normal = 2 * g.g_off + r
+        return cls((g.w_off_along, -normal if side == "right" else normal), robot.capture.diameter)
 
     def contains(self, points: npt.ArrayLike) -> npt.NDArray[np.bool_]:
         """Whether object centres (..., 2) in the gripper frame lie in the disc."""
@@ -70,6 +78,7 @@ class CaptureMap:
     model: CaptureModel
     gripper_open: Array               # (M, 2) centreline, for drawing
     gripper_closed: Array
+    side: str = "left"                # the finger characterised: left (the paper's) or right
 
     @property
     def successes(self) -> int:
@@ -100,7 +109,7 @@ class CaptureMap:
                 "outcome": self.outcome.tolist(), "rate": self.rate.tolist(),
                 "model": {"center": list(self.model.center), "diameter": self.model.diameter},
                 "gripper_open": self.gripper_open.tolist(),
-                "gripper_closed": self.gripper_closed.tolist(),
+                "gripper_closed": self.gripper_closed.tolist(), "side": self.side,
                 "summary": {"successes": self.successes,
                             "equivalent_diameter": self.equivalent_diameter(),
                             "centroid": list(self.centroid()),
@@ -112,7 +121,8 @@ class CaptureMap:
                    float(d["spacing"]), int(d["repeats"]), np.array(d["outcome"], np.int8),
                    np.array(d["rate"], float),
                    CaptureModel(tuple(d["model"]["center"]), float(d["model"]["diameter"])),
-                   np.array(d["gripper_open"], float), np.array(d["gripper_closed"], float))
+                   np.array(d["gripper_open"], float), np.array(d["gripper_closed"], float),
+                   str(d.get("side", "left")))
 
     def save(self, path: str | Path) -> Path:
         """Write ``.json`` or ``.npz`` (by suffix)."""
@@ -121,7 +131,8 @@ class CaptureMap:
         if path.suffix == ".json":
             path.write_text(json.dumps(d))
         elif path.suffix == ".npz":
-            np.savez(path, **{k: np.asarray(v) for k, v in d.items() if k not in ("model", "summary")},
+            np.savez(path, **{k: np.asarray(v) for k, v in d.items()
+                              if k not in ("model", "summary")},
                      model_center=np.array(self.model.center), model_diameter=self.model.diameter)
         else:
             raise ValueError(f"{path}: use a .json or .npz file name")
@@ -135,6 +146,8 @@ class CaptureMap:
         with np.load(path) as z:
             d = {k: z[k] for k in z.files}
         d["model"] = {"center": d.pop("model_center"), "diameter": float(d.pop("model_diameter"))}
+        if "side" in d:
+            d["side"] = str(d["side"])
         return cls.from_dict(d)
 
     def to_svg(self, scale: float = 4000.0) -> str:
@@ -167,12 +180,39 @@ class CaptureMap:
 
 
 def _initial_overlap(geom: GripperGeometry, p: Array, r: float) -> npt.NDArray[np.bool_]:
-    line = geom.centreline(0.0)[0]
-    dist, _ = capsule_contacts(p, line[:-1], line[1:])
+    a, b = geom.capsules(0.0)
+    dist, _ = capsule_contacts(p, a[0], b[0])
     return np.any(dist < r + geom.half_widths(), axis=1)
 
 
-def characterise(robot: SoftArm, radius: float | None = None, *, spacing: float = 0.005,
+def grid_rows(robot: SoftArm, spacing: float, side: str = "left",
+              y_range: tuple[float, float] | None = None) -> Array:
+    """The grid's y values (gripper frame): around the left finger by default, the exact
+    mirror image of those for the right finger."""
+    L = robot.gripper.length
+    yr = y_range or (-0.2 * L, 0.9 * L)
+    ys = np.round(np.arange(yr[0], yr[1] + 1e-9, spacing), 6)
+    return -ys[::-1] + 0.0 if side == "right" and y_range is None else ys
+
+
+def mirror_agreement(left: CaptureMap, right: CaptureMap) -> float:
+    """Fraction of the left map's cells whose mirror cell (x, -y) in the right map has the
+    same outcome (nan when no cell has a mirror on the right grid)."""
+    same = total = 0
+    for j, y in enumerate(left.ys):
+        jj = np.flatnonzero(np.isclose(right.ys, -y, atol=1e-9))
+        if jj.size == 0:
+            continue
+        for i, x in enumerate(left.xs):
+            ii = np.flatnonzero(np.isclose(right.xs, x, atol=1e-9))
+            if ii.size:
+                total += 1
+                same += int(left.outcome[j, i] == right.outcome[jj[0], ii[0]])
+    return same / total if total else math.nan
+
+
+def characterise(robot: SoftArm, radius: float | None = None, *, side: str = "left",
+                 spacing: float = 0.005,
                  x_range: tuple[float, float] | None = None,
                  y_range: tuple[float, float] | None = None, repeats: int = 1,
                  placement_noise: float = 0.001, seed: int = 0, params: SimParams | None = None,
@@ -182,6 +222,8 @@ def characterise(robot: SoftArm, radius: float | None = None, *, spacing: float 
     Args:
         robot: The soft arm (gripper length, offsets, ``[sim.gripper]``).
         radius: Object radius (default the paper's 3.3 cm object).
+        side: The finger: ``left`` (the paper's) or ``right`` (a gripper with ``fingers =
+            "both"``), whose default grid is the left one mirrored (:func:`grid_rows`).
         spacing: Grid step (the paper: 5 mm).
         x_range, y_range: Grid extent in the gripper frame (default: around the gripper).
         repeats: Placements per cell; repeats > 1 add uniform +-placement_noise (the paper's
@@ -190,18 +232,22 @@ def characterise(robot: SoftArm, radius: float | None = None, *, spacing: float 
         params: Simulation parameters (default from the robot file).
         progress: ``(done_rows, rows)`` callback after each grid row.
     """
+    if side not in ("left", "right"):
+        raise ValueError(f"side must be 'left' or 'right', got {side!r}")
+    if side not in robot.gripper.sides:
+        raise ValueError("this gripper closes to its left only ([gripper] fingers = \"left\")")
     if spacing <= 0 or repeats < 1:
         raise ValueError(f"need spacing > 0 and repeats >= 1, got {spacing}, {repeats}")
     p = SimParams.from_robot(robot) if params is None else params
     r = robot.capture.nominal_object_radius if radius is None else float(radius)
     if not r > 0:
         raise ValueError(f"object radius must be > 0, got {r}")
-    geom = GripperGeometry.from_params(robot.gripper.length, p.gripper, p.arm_half_width)
+    geom = GripperGeometry.from_params(robot.gripper.length, p.gripper, p.arm_half_width,
+                                       robot.gripper.fingers)
     L = robot.gripper.length
     xr = x_range or (-0.3 * L, 1.2 * L)
-    yr = y_range or (-0.2 * L, 0.9 * L)
     xs = np.round(np.arange(xr[0], xr[1] + 1e-9, spacing), 6)
-    ys = np.round(np.arange(yr[0], yr[1] + 1e-9, spacing), 6)
+    ys = grid_rows(robot, spacing, side, y_range)
     rng = np.random.default_rng(seed)
     outcome = np.empty((len(ys), len(xs)), np.int8)
     rate = np.zeros((len(ys), len(xs)))
@@ -218,5 +264,5 @@ def characterise(robot: SoftArm, radius: float | None = None, *, spacing: float 
             progress(j + 1, len(ys))
     closed = close_sweep(geom, np.array([[1e3, 1e3]]), r).turn[0]
     return CaptureMap(xs, ys, r, spacing, repeats, outcome, rate,
-                      CaptureModel.from_robot(robot, r), geom.centreline(0.0)[0, 1:],
-                      geom.centreline(closed)[0, 1:])
+                      CaptureModel.from_robot(robot, r, side), geom.centreline(0.0)[0, 1:],
+                      geom.outline(closed)[0 if geom.both else 1:], side)

@@ -1,9 +1,12 @@
 """``python -m core.control.capture``: the Fig. 6 capture-region characterisation from the command line.
 
 ``python -m core.control.capture [--robot NAME|PATH] [--radius R] [--spacing S] [--repeats N] [--seed S]
-[--out F.json|F.npz] [--svg F.svg]`` prints the grid (o success, x failure, blank infeasible;
-each row's y in mm) and a summary against the disc model, lengths in mm
-(:func:`core.control.capture.characterise`). Arguments are SI (m), like the saved map and CSV.
+[--side left|right|both] [--out F.json|F.npz] [--svg F.svg]`` prints the grid (o success, x
+failure, blank infeasible; each row's y in mm) and a summary against the disc model, lengths in
+mm (:func:`core.control.capture.characterise`). Arguments are SI (m), like the saved map and CSV.
+``--side right`` characterises the right finger of a two-finger gripper on the mirrored grid;
+``--side both`` both fingers, then how many cells of the right map mirror the left one's
+(``--out`` / ``--svg`` / ``--csv`` then get ``-left`` / ``-right`` before their suffix).
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from core.control.capture import FAILURE, INFEASIBLE, SUCCESS, CaptureMap, characterise
+from core.control.capture import (FAILURE, INFEASIBLE, SUCCESS, CaptureMap, characterise,
+                                  mirror_agreement)
 from core.robots import SoftArm, load
 from core.units import fmt_mm
 
@@ -29,26 +33,39 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--svg", type=Path, default=None, help="write the Fig. 6 drawing")
     ap.add_argument("--csv", type=Path, default=None,
                     help="also write one CSV row per grid point (units in the header)")
+    ap.add_argument("--side", choices=("left", "right", "both"), default="left",
+                    help="which finger: left (the paper's), right, or both (two-finger gripper)")
     a = ap.parse_args(argv)
     robot = load(a.robot)
     if not isinstance(robot, SoftArm):
         ap.error(f"{a.robot} is not a soft planar arm")
     from core.labdata.progress import row_progress  # a bar on a terminal, nothing when piped
+    sides = ("left", "right") if a.side == "both" else (a.side,)
+    maps: dict[str, CaptureMap] = {}
     try:
-        with row_progress("capture grid") as progress:
-            cmap = characterise(robot, a.radius, spacing=a.spacing, repeats=a.repeats,
-                                seed=a.seed, progress=progress)
+        for side in sides:
+            with row_progress(f"capture grid ({side})") as progress:
+                maps[side] = characterise(robot, a.radius, side=side, spacing=a.spacing,
+                                          repeats=a.repeats, seed=a.seed, progress=progress)
     except ValueError as exc:
         ap.error(str(exc))
-    if a.csv:
-        from core.labdata.results_csv import write_capture_csv
-        write_capture_csv(a.csv, cmap)
-    if a.out:
-        cmap.save(a.out)
-    if a.svg:
-        a.svg.write_text(cmap.to_svg())
     rows = {SUCCESS: "o", FAILURE: "x", INFEASIBLE: " "}
-    print(format_summary(cmap, rows))
+    for side, cmap in maps.items():
+        def named(path: Path) -> Path:
+            return path if len(maps) == 1 else path.with_name(f"{path.stem}-{side}{path.suffix}")
+        if a.csv:
+            from core.labdata.results_csv import write_capture_csv
+            write_capture_csv(named(a.csv), cmap)
+        if a.out:
+            cmap.save(named(a.out))
+        if a.svg:
+            named(a.svg).write_text(cmap.to_svg())
+        if len(maps) > 1:
+            print(f"{side} finger:")
+        print(format_summary(cmap, rows))
+    if len(maps) > 1:
+        print(f"right map = mirror image of the left one in "
+              f"{mirror_agreement(maps['left'], maps['right']):.0%} of the cells")
     return 0
 
 

@@ -6,7 +6,9 @@ the full grasp-and-place through the control cycle on a simulated clock
 (:class:`core.control.sim_loop.SimLoop`, the loop runner's order and timing without a thread),
 until ``released``, ``stopped`` or a time limit. Success: released, and the object put down within
 ``bin.drop_radius_m`` of the bin drop point (where the object sits when the gripper is at the
-bin). :func:`paper_locations` are the five spots A-E used with the paper's 3.3 cm object.
+bin). :func:`paper_locations` are the five spots A-E used with the paper's 3.3 cm object;
+:func:`sided_objects` mirrors them to the right side of the arm (A'-E', for a gripper with
+fingers on both sides: :mod:`core.planning.sides`) and :func:`per_side` counts successes per side.
 :func:`run_trials` runs a batch through any ``map`` (the builtin: in this process; a process
 pool's ``map``: in parallel - the caller owns the pool). :func:`run_row_trial` takes several
 objects in a row to the bin in one run (:mod:`core.control.row`), e.g. objects drawn by
@@ -31,7 +33,8 @@ from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
 from core.kinematics.planar import forward_kinematics, point_in_frame
-from core.robots import SoftArm, load
+from core.planning.sides import mirror_xy, object_side
+from core.robots import Side, SoftArm, load
 
 PLACEMENT_TOLERANCE_M = 0.001  # the paper: user placement within +-1 mm
 
@@ -45,6 +48,34 @@ def paper_locations() -> dict[str, tuple[float, float]]:
     """
     return {"A": (-0.26, 0.10), "B": (-0.22, 0.20), "C": (-0.13, 0.17),
             "D": (-0.16, 0.28), "E": (-0.08, 0.33)}
+
+
+SIDE_CHOICES = ("left", "right", "both")
+
+
+def sided_objects(robot: SoftArm, objects: Sequence[tuple[str, Sequence[float]]],
+                  side: str) -> list[tuple[str, tuple[float, float, float]]]:
+    """The batch's objects for ``side``: ``left`` as given (the paper's experiment), ``right``
+    their mirror images across the base's heading line (label + "'"), ``both`` each object
+    and then each mirror image (:mod:`core.planning.sides`)."""
+    if side not in SIDE_CHOICES:
+        raise ValueError(f"side must be one of {', '.join(SIDE_CHOICES)}, got {side!r}")
+    given = [(lab, (float(o[0]), float(o[1]), float(o[2]))) for lab, o in objects]
+    mirrored = []
+    for lab, (x, y, r) in given:
+        mx, my = mirror_xy(robot, (x, y))
+        mirrored.append((f"{lab}'", (float(mx), float(my), r)))
+    return {"left": given, "right": mirrored, "both": given + mirrored}[side]
+
+
+def per_side(results: Sequence["TrialResult"]) -> dict[str, dict[str, int]]:
+    """``{"left": {"successes": k, "trials": n}, "right": ...}`` for the sides that ran."""
+    out: dict[str, dict[str, int]] = {}
+    for r in results:
+        d = out.setdefault(r.side, {"successes": 0, "trials": 0})
+        d["trials"] += 1
+        d["successes"] += int(r.success)
+    return {s: out[s] for s in ("left", "right") if s in out}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,14 +97,17 @@ class TrialResult:
     occlusions: int = 0
     work_ms_p99: float = 0.0
     final_object: tuple[float, float] | None = None
+    side: str = "left"  # the side of the arm the object was placed on
 
 
-def bin_drop_point(robot: SoftArm, radius: float, bin_params: BinParams | None = None) -> np.ndarray:
+def bin_drop_point(robot: SoftArm, radius: float, bin_params: BinParams | None = None,
+                   side: Side = "left") -> np.ndarray:
     """Where the grasped object sits when the arm is at the bin configuration (the robot's
-    ``[bin]`` unless ``bin_params`` is given)."""
+    ``[bin]`` unless ``bin_params`` is given), held by the finger closing toward ``side``."""
     b = BinParams.from_robot(robot) if bin_params is None else bin_params
     tip = forward_kinematics(b.kappa, robot.lengths, robot.base_pose)[-1]
-    return point_in_frame(tip, (robot.gripper.w_off_along, 2 * robot.gripper.g_off + radius))
+    normal = 2 * robot.gripper.g_off + radius
+    return point_in_frame(tip, (robot.gripper.w_off_along, -normal if side == "right" else normal))
 
 
 def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "",
@@ -109,7 +143,7 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
     elif m.phase is not Phase.RELEASED:
         failure = f"time limit {time_limit_s:g} s reached in {m.phase.value}"
     else:
-        drop = bin_drop_point(robot, r)
+        drop = bin_drop_point(robot, r, side=m.closing_side)
         if sim.obj is None or sim.captured:
             failure = "object still in the gripper after release"
         else:
@@ -123,7 +157,8 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
         label=label, seed=seed, sim_s=round(loop.ticks * 0.01, 2), wall_s=round(wall, 3),
         ticks=loop.ticks, replans=m.replans, stalls=sim.stalls, occlusions=sim.occlusions,
         work_ms_p99=round(stats.work_ms_p99, 4),
-        final_object=None if sim.obj is None else (float(sim.obj.xy[0]), float(sim.obj.xy[1])))
+        final_object=None if sim.obj is None else (float(sim.obj.xy[0]), float(sim.obj.xy[1])),
+        side=object_side(robot, (x, y)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -192,7 +227,8 @@ def summary(results: Sequence[TrialResult], wall_s: float, workers: int) -> dict
             "speedup_vs_real_time": round(sim_s / wall_s, 1) if wall_s > 0 else None,
             "speedup_per_process": round(sim_s / cpu_s, 1) if cpu_s > 0 else None,
             "work_ms_p99_max": max((r.work_ms_p99 for r in results), default=0.0),
-            "successes": sum(r.success for r in results), "trials": len(results)}
+            "successes": sum(r.success for r in results), "trials": len(results),
+            "sides": per_side(results)}
 
 
 # -- several objects in a row (issue #17.3) ------------------------------------------------------

@@ -2,12 +2,16 @@
 
 ``python -m core.control.trials [--object X Y R ...] [--repeats N] [--seed S] [--json]
 [--workers N] [--robot NAME|PATH] [--planner MODULE:FUNCTION] [--time-limit S] [--sim KEY=VALUE]
-[--objects-in-a-row N [--bin X Y]]``
+[--side left|right|both] [--objects-in-a-row N [--bin X Y]]``
 
 Without ``--object`` the five spots A-E of :func:`core.control.trials.paper_locations` are used,
-x 5 repeats, with the paper's 3.3 cm object. Trials run in ``--workers`` parallel processes
+x 5 repeats, with the paper's 3.3 cm object. ``--side right`` runs their mirror images across
+the arm's base line instead (A'-E', the Fig. 7 experiment mirrored), ``--side both`` the spots
+and then their mirror images (also for ``--object``); the table and the JSON report the
+successes per side. Trials run in ``--workers`` parallel processes
 (a pool owned here; ``--workers 0``: in this process). Prints a table, or with ``--json`` one
-object ``{"trials": [...], "loop": {...}}``.
+object ``{"trials": [...], "loop": {...}}`` (``loop.sides``: ``{"left": {"successes": k,
+"trials": n}, "right": ...}``).
 
 ``--objects-in-a-row N`` instead takes N objects to the bin one after another in one run
 (:func:`core.control.trials.run_row_trial`): the N ``--object`` given, or without ``--object``
@@ -32,8 +36,9 @@ from typing import Any, Callable, Sequence
 from core.control.params import SimParams
 from core.control.planner_spec import DEFAULT_PLANNER
 from core.control.row import bin_at
-from core.control.trials import (RowTrialResult, TrialResult, draw_row_objects, paper_locations,
-                                 row_json, run_row_trial, run_trials, summary)
+from core.control.trials import (SIDE_CHOICES, RowTrialResult, TrialResult, draw_row_objects,
+                                 paper_locations, per_side, row_json, run_row_trial, run_trials,
+                                 sided_objects, summary)
 from core.robots import SoftArm, load
 from core.units import fmt_mm
 
@@ -74,6 +79,8 @@ def format_table(results: Sequence[TrialResult]) -> str:
     for r in results:
         by.setdefault(r.label, []).append(r.success)
     lines.append("per spot: " + ", ".join(f"{k or '-'} {sum(v)}/{len(v)}" for k, v in by.items()))
+    lines.append("per side: " + ", ".join(f"{side} {d['successes']}/{d['trials']}"
+                                           for side, d in per_side(results).items()))
     lines.append(f"total: {sum(r.success for r in results)}/{len(results)} successes")
     return "\n".join(lines)
 
@@ -146,6 +153,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="also record the trials (arm, object, phases) as MCAP")
     ap.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
                     help="also write one CSV row per trial (units in the header)")
+    ap.add_argument("--side", choices=SIDE_CHOICES, default="left",
+                    help="left: the spots as given (the paper's experiment); right: their mirror "
+                         "images across the arm's base line; both: each, then its mirror image")
     ap.add_argument("--objects-in-a-row", type=int, default=None, metavar="N",
                     help="take N objects to the bin one after another in one run: the N "
                          "--object given, or N drawn from --seed among reachable spots")
@@ -177,6 +187,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)) or r <= 0:
                 ap.error(f"--object {x} {y} {r}: need finite X Y and R > 0")
     if a.objects_in_a_row is not None:
+        if a.side != "left":
+            ap.error("--side applies to a batch of trials, not to --objects-in-a-row")
         return run_row_cli(a, ap, robot, overrides)
     if a.bin is not None:
         ap.error("--bin applies to --objects-in-a-row only")
@@ -186,6 +198,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         r0 = robot.capture.nominal_object_radius
         objects = [(k, (x, y, r0)) for k, (x, y) in paper_locations().items()]
+    objects = sided_objects(robot, objects, a.side)
     wall = time.perf_counter()
     from core.labdata.progress import trial_progress  # a bar on a terminal, nothing when piped
     with trial_progress(len(objects) * repeats) as progress:

@@ -1,8 +1,9 @@
 """``python -m core.planning.grasp``: plan one grasp from the command line.
 
 ``python -m core.planning.grasp --object X Y R [--json] [--robot soft-arm] [--kappa K ...]
-[--delta-d D]`` prints the plan (:func:`core.planning.grasp.plan_grasp`); a refusal goes to
-stderr with exit code 2 (1 if planning failed).
+[--delta-d D]`` prints the plan (:func:`core.planning.sides.plan_grasp_sided`: Algorithm 1,
+for the right finger when the gripper has one and the object lies on the right); a refusal
+goes to stderr with exit code 2 (1 if planning failed).
 """
 
 from __future__ import annotations
@@ -14,8 +15,8 @@ import sys
 import numpy as np
 
 from core.planning.feasibility import GraspRefused
-from core.planning.grasp import plan_grasp
 from core.planning.plan_types import format_plan
+from core.planning.sides import plan_grasp_sided
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -34,7 +35,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         robot = robots.load(args.robot)
         km = np.zeros(robot.n_segments) if args.kappa is None else np.array(args.kappa)
-        plan = plan_grasp(robot, km, args.object[:2], args.object[2], delta_d=args.delta_d)
+        if not isinstance(robot, robots.SoftArm):
+            ap.error(f"{args.robot} is not a soft planar arm")
+        plan = plan_grasp_sided(robot, km, args.object[:2], args.object[2],
+                                delta_d=args.delta_d)
     except GraspRefused as exc:
         print(f"refused ({exc.reason}): {exc}", file=sys.stderr)
         return 2

@@ -1,7 +1,9 @@
 """Where on the table a grasp can be planned: a grid map for the console's shading.
 
-Every cell centre of a table grid is planned with :func:`core.planning.grasp.plan_grasp` from a
-given start (the paper's straight arm by default) for one object radius. To keep the map cheap,
+Every cell centre of a table grid is planned with Algorithm 1 from a given start (the paper's
+straight arm by default) for one object radius, on the side of the arm the cell lies on when the
+gripper closes to both sides (:class:`core.planning.sides.SidedPlanner`; the paper's single
+finger plans every cell for the left). To keep the map cheap,
 cells that no sampled final configuration comes near (the object centre a configuration holds at
 the final radius, arm body clear) are marked unreachable without planning; the others are
 planned, with ``levels`` (the console's ``DEFAULT_LEVELS`` = 2) coarse to fine: every 4th cell
@@ -24,15 +26,15 @@ import numpy.typing as npt
 
 from core.planning.arm_model import ArmModel
 from core.planning.feasibility import GraspRefused
-from core.planning.grasp import GraspPlanner
 from core.planning.plan_types import PlannerConfig
+from core.planning.sides import SidedPlanner
 
 Array = npt.NDArray[np.float64]
 
 UNREACHABLE, PLANNABLE, FAILS = 0, 1, 2
 # Bump when a change to this module or to the planner can change a map: cached maps
-# (console.reach_cache) of another version are recomputed.
-ALGORITHM_VERSION = 2
+# (console.reach_cache) of another version are recomputed. 3: both sides (core.planning.sides).
+ALGORITHM_VERSION = 3
 DEFAULT_LEVELS = 2          # coarse-to-fine levels of the console's map (about half the plans)
 
 
@@ -71,15 +73,15 @@ class ReachMap:
         return UNREACHABLE
 
 
-def map_planner(robot) -> GraspPlanner:
-    """The planner whose answers the map records, one cell at a time."""
+def map_planner(robot) -> SidedPlanner:
+    """The planner whose answers the map records, one cell at a time (on the cell's side)."""
     # Coarser search than an operator's plan (fewer restarts and inserted waypoints): the map
     # is a guide, the plan for a placed object is authoritative.
     cfg = dataclasses.replace(PlannerConfig.from_robot(robot), max_restarts=2, max_insertions=1)
-    return GraspPlanner(robot, cfg)
+    return SidedPlanner(robot, cfg)
 
 
-def cell_status(planner: GraspPlanner, kappa_meas: npt.ArrayLike, x: float, y: float,
+def cell_status(planner: SidedPlanner, kappa_meas: npt.ArrayLike, x: float, y: float,
                 radius: float) -> int:
     """The planner's own answer for one cell: PLANNABLE, FAILS or UNREACHABLE (refused)."""
     try:
@@ -168,12 +170,15 @@ def reachability_map(robot, radius: float, x_range: tuple[float, float],
 
 def _candidates(robot, model: ArmModel, radius: float, xs: Array, ys: Array, samples: int,
                 near: float) -> npt.NDArray[np.bool_]:
-    """Cells within ``near`` of the object centre some sampled clear final configuration holds."""
+    """Cells within ``near`` of the object centre some sampled final configuration holds (in
+    either finger when the gripper has two)."""
     rng = np.random.default_rng(0)
     k = rng.uniform(model.lo, model.hi, (samples, model.n))
     pts, th = model.frames(k)
     g = robot.gripper
-    held = pts[:, -1] + complex(g.w_off_along, 2 * g.g_off + radius) * np.exp(1j * th[:, -1])
+    normals = [2 * g.g_off + radius] + ([-(2 * g.g_off + radius)] if "right" in g.sides else [])
+    held = np.concatenate([pts[:, -1] + complex(g.w_off_along, n) * np.exp(1j * th[:, -1])
+                           for n in normals])
     dx = float(xs[1] - xs[0]) if len(xs) > 1 else near
     dy = float(ys[1] - ys[0]) if len(ys) > 1 else near
     ix = np.floor((held.real - xs[0]) / dx + 0.5).astype(int)
