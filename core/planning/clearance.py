@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -104,14 +105,41 @@ def certify_lines(
     """
     a = np.asarray(starts, float)
     b = np.asarray(ends, float)
+    return certify_function(lambda k: model.body_clearance(k, center, radius),
+                            model.displacement_bound(b - a), a, b, required, samples, max_depth,
+                            slack)
+
+
+def certify_function(
+    evaluate: Callable[[Array], Array],
+    lam: Array,
+    starts: Array,
+    ends: Array,
+    required: float = 0.0,
+    samples: int = 8,
+    max_depth: int = 8,
+    slack: float = 0.005,
+) -> LineCertificate:
+    """Lower-bound any clearance along straight lines in kappa, given its Lipschitz rate.
+
+    Args:
+        evaluate: (..., N) configurations -> (...,) clearance (m), exact at each configuration.
+        lam: (n,) bound on how fast the clearance can change per unit tau along each line
+            (m), e.g. :meth:`ArmModel.displacement_bound`.
+        starts, ends, required, samples, max_depth, slack: as :func:`certify_lines`.
+
+    Returns:
+        :class:`LineCertificate`.
+    """
+    a = np.asarray(starts, float)
+    b = np.asarray(ends, float)
     n = a.shape[0]
-    lam = model.displacement_bound(b - a)                         # (n,) per unit tau
+    lam = np.asarray(lam, float)                                  # (n,) per unit tau
     # Enough samples that the Lipschitz slack Lambda / (2 S) stays below `slack`, so that
     # usually one batched evaluation settles every line and no bisection is needed.
     samples = int(min(max(samples, np.ceil(lam.max(initial=0.0) / (2.0 * slack))), 64))
     tau = _taus(samples)
-    clr = model.body_clearance(a[:, None, :] + tau[:, None] * (b - a)[:, None, :], center,
-                               radius)                            # (n, S+1)
+    clr = evaluate(a[:, None, :] + tau[:, None] * (b - a)[:, None, :])  # (n, S+1)
     evaluations = clr.size
     sampled_min = clr.min(axis=1)
     worst_tau = tau[clr.argmin(axis=1)]
@@ -129,7 +157,7 @@ def certify_lines(
             bound[line] = min(bound[line], lb[line][keep[line]].min(initial=np.inf))
         for depth in range(max_depth):
             tm = 0.5 * (t0 + t1)
-            cm = model.body_clearance(a[li] + tm[:, None] * (b - a)[li], center, radius)
+            cm = evaluate(a[li] + tm[:, None] * (b - a)[li])
             evaluations += cm.size
             for k in range(len(li)):
                 if cm[k] < sampled_min[li[k]]:

@@ -133,6 +133,12 @@ class GraspPlan:
         status: (n,) ``ok`` or a failure reason per waypoint.
         failures: Failed radii with reasons.
         total_ms: Wall time of the whole plan.
+        obstacles: The obstacles (``core.planning.obstacles.Obstacle``) planned around.
+        obstacle_margin: The clearance the arm and gripper keep from them (m).
+        obstacle_clearance: (n,) gap between the arm (gripper included) and the nearest
+            obstacle at each waypoint (m); None without obstacles.
+        obstacle_path_clearance: (n,) certified lower bound of that gap along the straight
+            line in kappa into each waypoint (m); None without obstacles.
     """
 
     center: Array
@@ -159,6 +165,10 @@ class GraspPlan:
     status: tuple[str, ...]
     failures: tuple[RadiusFailure, ...]
     total_ms: float
+    obstacles: tuple = ()
+    obstacle_margin: float = 0.0
+    obstacle_clearance: Array | None = None
+    obstacle_path_clearance: Array | None = None
 
     @property
     def n(self) -> int:
@@ -190,7 +200,7 @@ class GraspPlan:
             v = getattr(self, f.name)
             if isinstance(v, np.ndarray):
                 v = v.tolist()
-            elif f.name == "failures":
+            elif f.name in ("failures", "obstacles"):
                 v = [dataclasses.asdict(x) for x in v]
             elif f.name == "status":
                 v = list(v)
