@@ -133,7 +133,6 @@ def certify_function(
     """
     a = np.asarray(starts, float)
     b = np.asarray(ends, float)
-    n = a.shape[0]
     lam = np.asarray(lam, float)                                  # (n,) per unit tau
     # Enough samples that the Lipschitz slack Lambda / (2 S) stays below `slack`, so that
     # usually one batched evaluation settles every line and no bisection is needed.

@@ -8,7 +8,8 @@ and then "palm point = c + r_a (cos phi, sin phi)" is the same as "the tip-frame
     min_kappa  sum_n R_n (kappa_n - kappa_off_n)^2
     s.t.       q(kappa) = c                       (2 equalities; q, c complex)
                lo <= kappa <= hi
-               dist(arc_j(kappa), c) >= rho       (optional: arm-body clearance, per segment)
+               h(kappa) >= 0                      (optional: arm-body clearance per segment,
+                                                   obstacle disks: Clearance, Constraints)
 
 with N = 6 variables. Each iteration forms the exact Lagrangian Hessian in closed form (see
 :mod:`core.planning.arm_model`), solves the QP by a primal-dual active-set method on one small

@@ -11,9 +11,11 @@ which obstacle is in the way and by how much.
    (:func:`core.planning.obstacles.certify_obstacle_lines`, arm body and gripper), it is the
    plan; an object the arm cannot grasp even without obstacles is refused as before.
 3. Otherwise the planner runs with the obstacles as constraints of every waypoint solve (padded
-   by the planner's waypoint margin), inserting waypoints where a line comes too close, first
-   with the operator's delta_d, then with more approach circles (delta_d / 2), then from other
-   first configurations around the object (table configurations clear of the obstacles).
+   by the planner's waypoint margin; restarts from table configurations clear of them),
+   inserting waypoints where a line comes too close and going past an approach circle on
+   which no clear shape is found: first with the operator's delta_d, then with more approach
+   circles (delta_d / 2), then from other first configurations around the object (table
+   configurations clear of the obstacles), for at most :data:`SEARCH_BUDGET_S`.
 4. When none succeeds the request is refused (``obstacle``), naming the obstacle the plain
    approach comes closest to, how close and how much clearance is missing.
 """
@@ -28,7 +30,6 @@ import time
 import numpy as np
 import numpy.typing as npt
 
-from core.planning import grasp_solver as gs
 from core.planning.feasibility import GraspRefused, seeds_near
 from core.planning.obstacles import (GripperShape, Obstacle, ObstacleSetup, check_clearance,
                                      check_obstacles)
@@ -37,7 +38,6 @@ from core.planning.plan_types import GraspPlan
 Array = npt.NDArray[np.float64]
 
 OTHER_STARTS = 2        # first configurations around the object tried after the warm starts
-FINAL_SHAPES = 3        # final configurations whose approach direction is planned backwards
 OBSTACLE_RESTARTS = 2   # restarts per radius while planning around obstacles
 SEARCH_BUDGET_S = 1.5   # no new approach is tried after this long (the refusal follows)
 
@@ -141,59 +141,6 @@ def _other_starts(planner, setup: ObstacleSetup, km, center, radius: float,
     return clear[np.argsort(cost)][:OTHER_STARTS]
 
 
-def _final_shapes(cp, c: complex, r_o: float, km: Array, w: Array) -> list[Array]:
-    """Distinct final configurations (palm on the last circle) clear of the object and the
-    obstacles, cheapest first: the ends of other approach directions."""
-    m, cfg, setup = cp.model, cp.config, cp.obstacles
-    off = cp._offset(r_o + cp.g_off)
-    seeds = setup.clear_seeds(m, seeds_near(m, c, off, 64, cfg.seed_table),
-                              cfg.clearance_margin)
-    rows = gs.joined(gs.Clearance(c, r_o + m.half_width + cfg.clearance_margin), setup.rows)
-    found: list[tuple[float, Array]] = []
-    for s in seeds[:2 * FINAL_SHAPES]:
-        res = gs.solve(m, c, off, s, km, w, clearance=rows, opts=cp.solver)
-        if res.ok and all(np.abs(res.kappa - k).max() > 1.0 for _, k in found):
-            found.append((res.cost, res.kappa))
-            if len(found) == FINAL_SHAPES:
-                break
-    return [k for _, k in sorted(found, key=lambda t: t[0])]
-
-
-def _plan_backwards(cp, km: Array, center, radius: float, dd: float, w: Array,
-                    final: Array) -> GraspPlan | None:
-    """Algorithm 1's circles solved from the last to the first, each warm-started from the
-    next one and the last from ``final``, so the waypoints follow the approach direction that
-    ``final`` grasps from; lines are then certified (and bridged) from kappa_meas on as in the
-    forward plan. None when the final circle cannot be planned from ``final``."""
-    t_start = time.perf_counter()
-    m = cp.model
-    ctr = np.asarray(center, float)
-    c, r_o = complex(ctr[0], ctr[1]), float(radius)
-    palm0, _ = m.point_py(km.tolist(), complex(cp.w_along, cp.g_off))
-    d1 = abs(c - palm0)
-    d2 = d1 - r_o - cp.g_off
-    num_moves = max(1, math.floor(d2 / dd))
-    radii = d1 - np.arange(1, num_moves + 1) * d2 / num_moves
-    final = np.asarray(final, float)
-    x, lam, wps = km, None, []
-    for i in range(1, num_moves + 1):
-        # The cost pulls towards ``final`` rather than kappa_meas (Algorithm 1's kappa_off),
-        # warm-started on the way from kappa_meas to it, so the chain stays on the side of
-        # the obstacles that ``final`` is on.
-        frac = i / num_moves
-        start = x + (frac - (i - 1) / num_moves) / (1.0 - (i - 1) / num_moves) * (final - x)
-        wp = cp._solve_radius(c, float(radii[i - 1]), start, lam, final, w, i, tangent=False,
-                              first_restart=x)
-        if wp.status != gs.OK:
-            if i == num_moves:
-                return None
-            continue            # no clear shape on this circle near the next one: go past it
-        wps.append(wp)
-        x, lam = wp.kappa, wp.lam
-    wps = cp._secure_clearance(wps, km, d1, c, r_o, w)
-    return cp._assemble(wps, km, ctr, r_o, d1, d2, num_moves, dd, w, t_start)
-
-
 def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float,
                 delta_d: float | None, weights: npt.ArrayLike | None,
                 obstacles: tuple[Obstacle, ...], clearance: float) -> GraspPlan:
@@ -216,19 +163,8 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
                                                                    OBSTACLE_RESTARTS))
     dd = cfg.delta_d if delta_d is None else float(delta_d)
     km = np.asarray(kappa_meas, float)
-    w = np.asarray(cfg.weights if weights is None else weights, float)
-    c = complex(*np.asarray(center, float))
-
-    def forward(**a):
-        return lambda: constrained._plan(km, center, radius, **dict(kw, **a))
-
-    def backward(final):
-        return lambda: _plan_backwards(constrained, km, center, radius, dd, w, final)
-
-    attempts = [forward()]
-    attempts += [backward(k) for k in _final_shapes(constrained, c, float(radius), km, w)]
-    attempts += [forward(delta_d=dd / 2.0)]
-    attempts += [forward(first_start=s)
+    attempts = [dict(kw), dict(kw, delta_d=dd / 2.0)]
+    attempts += [dict(kw, first_start=s)
                  for s in _other_starts(planner, setup, km, center, radius, dd)]
     first: GraspPlan | None = None
     tried = 0
@@ -238,10 +174,8 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
             break
         tried += 1
         try:
-            plan = attempt()
+            plan = constrained._plan(km, center, radius, **attempt)
         except GraspRefused:        # no final configuration clear of the obstacles
-            continue
-        if plan is None:
             continue
         first = first or plan
         if plan.success:
