@@ -86,10 +86,9 @@ class ObstacleEditor:
         if name is None:
             self._fields[id(event.target)] = event.target.value   # r of the next obstacle
             return
+        field = "x" if event.target is self.x else "y" if event.target is self.y else "r"
         try:
-            self.session.update_obstacle(name, x=float(self.x.value) / 1e3,
-                                         y=float(self.y.value) / 1e3,
-                                         r=float(self.r.value) / 1e3)
+            self.session.update_obstacle(name, **{field: float(event.target.value) / 1e3})
         except (TypeError, ValueError) as exc:
             self.panel._error(event, str(exc))
             self.restore(event.target)
