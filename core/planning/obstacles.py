@@ -35,6 +35,8 @@ Array = npt.NDArray[np.float64]
 
 MAX_RADIUS = 0.5        # m, an obstacle larger than this is not something on a table
 MAX_CLEARANCE = 0.2     # m, largest clearance the planner accepts
+_INACTIVE = 10.0        # m added to a row that another row already covers
+NEAR_TOL = 1e-5         # m: a solve this close to its constraints is taken (paper: 2e-3)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,7 +240,10 @@ class ObstacleConstraints:
                         sqrt((k * a) ** 2 + (1.0 - k * lft) ** 2) + 1.0)
                     if dc < d:
                         d, s = dc, s_star
-                h.append(d - rb)
+                # A closest point at a segment's start is the previous segment's end (or the
+                # fixed base), already a row: a duplicate (or zero) row makes the SQP's KKT
+                # system singular, so it is kept inactive.
+                h.append(d - rb if s > 0.0 else d - rb + _INACTIVE)
                 srow.append(s)
             sstar.append(srow)
             t = ((c - tip) * heading.conjugate()).real
@@ -323,3 +328,11 @@ class ObstacleSetup:
         if not len(seeds):
             return seeds
         return seeds[self.gaps(model, seeds).min(axis=1) >= self.clearance + pad]
+
+    def nearly_solved(self, model: ArmModel, res, rows) -> bool:
+        """Whether a solve that ran out of iterations is within :data:`NEAR_TOL` of the palm
+        equalities and of every inequality row ``rows`` (grasp_solver's protocol)."""
+        if not res.violation <= NEAR_TOL:
+            return False
+        return rows is None or float(rows.evaluate(model, res.kappa.tolist())[0].min()) >= \
+            -NEAR_TOL

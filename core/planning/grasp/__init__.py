@@ -160,6 +160,7 @@ class GraspPlanner:
         wps: list[_Waypoint] = []
         prev: _Waypoint | None = None
         witness: Array | None = None
+        witness_tried = False
         for i, ra in enumerate(radii.tolist(), start=1):
             if prev is None:
                 x, lam = km, None
@@ -176,12 +177,13 @@ class GraspPlanner:
             wp = self._solve_radius(c, ra, x0, lam0, km, w, i, first_restart=x,
                                     tangent=i < num_moves)
             if wp.status != gs.OK:
-                if witness is None:
-                    witness = self._witness(c, r_o, km, w)
-                prev_r = wps[-1].radius if wps else d1
-                frac = (prev_r - ra) / max(prev_r - radii[-1], 1e-9)
-                wp = self._solve_radius(c, ra, x, lam, km, w, i,
-                                        [x + frac * (witness - x), witness], wp)
+                if not witness_tried:
+                    witness, witness_tried = self._witness(c, r_o, km, w), True
+                if witness is not None:
+                    prev_r = wps[-1].radius if wps else d1
+                    frac = (prev_r - ra) / max(prev_r - radii[-1], 1e-9)
+                    wp = self._solve_radius(c, ra, x, lam, km, w, i,
+                                            [x + frac * (witness - x), witness], wp)
             if wp.status != gs.OK and self.obstacles is not None:
                 if i < num_moves:
                     continue    # no shape on this circle clears the obstacles: go past it
@@ -207,7 +209,7 @@ class GraspPlanner:
         t0 = time.perf_counter()
         off = self._offset(ra)
         if previous is None:
-            res = gs.solve(self.model, c, off, x0, km, w, lam0, self._rows(), opts=self.solver,
+            res = self._solve(self.model, c, off, x0, km, w, lam0, self._rows(), opts=self.solver,
                            tangent=tangent)
             wp = _Waypoint(ra, res.kappa, res.lam, res.status, res.iterations, 0, 0.0, index,
                            cost=res.cost, violation=res.violation, error=res.error,
@@ -221,7 +223,7 @@ class GraspPlanner:
         if wp.status != gs.OK:
             for s in seeds or []:
                 wp.restarts += 1
-                res = gs.solve(self.model, c, off, s, km, w, clearance=self._rows(),
+                res = self._solve(self.model, c, off, s, km, w, clearance=self._rows(),
                                opts=self.solver, tangent=True)
                 wp.iterations += res.iterations
                 if res.ok:
@@ -244,12 +246,17 @@ class GraspPlanner:
             self.model, seeds_near(self.model, c, off, 16 * n, self.config.seed_table),
             self.config.clearance_margin)[:n])
 
-    def _witness(self, c: complex, r_o: float, km: Array, w: Array) -> Array:
-        """A final configuration, or GraspRefused('out_of_reach') if none can be found."""
+    def _witness(self, c: complex, r_o: float, km: Array, w: Array) -> Array | None:
+        """A final configuration, or GraspRefused('out_of_reach') if none can be found (around
+        obstacles: None, and the planner goes on without one)."""
         cfg = self.config
-        kappa, _ = find_final_config(self.model, c, r_o, self._offset(r_o + self.g_off), km, w,
+        off = self._offset(r_o + self.g_off)
+        seeds = None if self.obstacles is None else self._table_seeds(c, off, 2 * cfg.max_restarts)
+        kappa, _ = find_final_config(self.model, c, r_o, off, km, w,
                                      cfg.clearance_margin, cfg.seed_table, cfg.max_restarts,
-                                     self._rows())
+                                     self._rows(), seeds)
+        if kappa is None and self.obstacles is not None:
+            return None
         if kappa is None:
             raise GraspRefused(
                 "out_of_reach",
@@ -259,6 +266,19 @@ class GraspPlanner:
         return kappa
 
     # ------------------------------------------------------------------ clearance
+
+    def _solve(self, *args, **kwargs) -> gs.SolveResult:
+        """:func:`grasp_solver.solve`; around obstacles a solve that ran out of iterations
+        within :data:`core.planning.obstacles.NEAR_TOL` of every constraint counts as solved
+        (the SQP's Hessian leaves out the distance rows' curvature, so it can creep along an
+        active obstacle row; the rows are padded by the waypoint margin, and lines are
+        certified anyway)."""
+        res = gs.solve(*args, **kwargs)
+        if res.status == gs.NO_CONVERGENCE and self.obstacles is not None:
+            rows = kwargs.get("clearance", args[7] if len(args) > 7 else None)
+            if self.obstacles.nearly_solved(self.model, res, rows):
+                res.status = gs.OK
+        return res
 
     def _rows(self):
         """Obstacle constraint rows for the solver (None without obstacles)."""
@@ -286,7 +306,7 @@ class GraspPlanner:
         t0 = time.perf_counter()
         clr = gs.Clearance(c, r_o + self.model.half_width + self.config.clearance_margin)
         for s in starts:
-            res = gs.solve(self.model, c, self._offset(wp.radius), s, km, w, wp.lam,
+            res = self._solve(self.model, c, self._offset(wp.radius), s, km, w, wp.lam,
                            gs.joined(clr, self._rows()), self.solver)
             wp.iterations += res.iterations
             if res.ok:
