@@ -55,14 +55,7 @@ class ObstacleLayer:
 
     def __init__(self, server) -> None:
         self.server = server
-        scene = server.scene
-        empty = np.zeros((1, 2, 3))
-        self.hatch = scene.add_line_segments("/grasp/obstacles/hatch", empty, HATCH_COLOR,
-                                             thickness=0.0025, visible=False)
-        self.rings = scene.add_line_segments("/grasp/obstacles/rings", empty, RING_COLOR,
-                                             thickness=0.003, visible=False)
-        self.ring_sel = scene.add_line_segments("/grasp/obstacles/ring_sel", empty, RING_COLOR,
-                                                thickness=0.007, visible=False)
+        self.hatch = self.rings = self.ring_sel = None   # line nodes, made by sync
         self.bodies: dict[str, tuple[Any, Obstacle]] = {}
         self._made = 0
 
@@ -86,13 +79,16 @@ class ObstacleLayer:
         sel = wanted.get(selected) if selected is not None else None
         ring_sel = (circle_segments((sel.x, sel.y), [sel.r + clearance], RING_Z + 0.0005)
                     if sel is not None else np.zeros((0, 2, 3)))
-        for handle, segs, color in ((self.hatch, g["hatch"], HATCH_COLOR),
-                                    (self.rings, g["rings"], RING_COLOR),
-                                    (self.ring_sel, ring_sel, RING_COLOR)):
-            if len(segs):
-                handle.points = segs
-                handle.colors = np.broadcast_to(np.array(color, np.uint8), segs.shape).copy()
-            handle.visible = len(segs) > 0
+        # Line nodes are made anew with their colours (a points update before its colours
+        # reach the browser drew the lines white, and these change rarely).
+        for attr, segs, color, width in (("hatch", g["hatch"], HATCH_COLOR, 0.0025),
+                                         ("rings", g["rings"], RING_COLOR, 0.003),
+                                         ("ring_sel", ring_sel, RING_COLOR, 0.007)):
+            old = getattr(self, attr)
+            if old is not None:
+                old.remove()
+            setattr(self, attr, None if not len(segs) else scene.add_line_segments(
+                f"/grasp/obstacles/{attr}", segs, color, thickness=width))
 
 
 def draw_recorded_obstacles(scene, data: dict[str, Any] | None, root: str) -> list[Any]:

@@ -86,14 +86,14 @@ def test_operator_places_an_obstacle_by_click_and_the_plan_keeps_the_clearance(g
     assert 'data-obstacle-mm="' in outcome_html(out)
     # Drawn: one obstacle body, hatching and a ring at r + clearance.
     layer = s.obstacle_layer
-    wait_for(lambda: len(layer.bodies) == 1 and layer.rings.visible)
+    wait_for(lambda: len(layer.bodies) == 1 and layer.rings is not None)
     ring = np.hypot(layer.rings.points[..., 0] - POST.x, layer.rings.points[..., 1] - POST.y)
     np.testing.assert_allclose(ring, 0.015 + 0.010, atol=1e-6)   # float32 in viser
     # A click on it selects it; the editor removes it.
     click_at(op, operator, POST.x + 0.005, POST.y)
     assert len(s.view().obstacles) == 1
     user(op.obstacles.remove_button, operator)
-    wait_for(lambda: not s.view().obstacles and not layer.bodies)
+    wait_for(lambda: not s.view().obstacles and not layer.bodies and layer.rings is None)
 
 
 def test_bad_obstacle_input_is_refused_with_a_message_and_changes_nothing(gated):
