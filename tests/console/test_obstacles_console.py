@@ -3,6 +3,7 @@ obstacle editor, the planner's clearance field, drawing, sharing rules, recordin
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from types import SimpleNamespace
@@ -185,3 +186,25 @@ def test_the_session_records_obstacles_and_a_replay_shows_them(gated, tmp_path):
     assert loaded.obstacles_until(last - 1e-6) is None          # not yet at that time
     shown = loaded.obstacles_until(last)
     assert shown["obstacles"][0]["x"] == POST.x and shown["clearance"] == pytest.approx(0.01)
+
+
+def test_execute_needs_the_plan_around_the_obstacles():
+    from console.panels.control_text import execute_target
+    from console.plan_view import Outcome, SessionView
+    from core.planning.grasp import plan_grasp
+
+    obj = TableObject("Object 1", CUP.x, CUP.y, CUP.r)
+    plain = plan_grasp(ROBOT, np.zeros(6), (obj.x, obj.y), obj.r)
+    view = SessionView((obj,), obj.name, Outcome(obj, plain, None, 1), 0, False, 1.0, False,
+                       None)
+    assert execute_target(view).plan is plain                      # no obstacles: as before
+    with_post = dataclasses.replace(view, obstacles=(POST,), clearance=0.01)
+    with pytest.raises(ValueError, match="Obstacles are on the table"):
+        execute_target(with_post)                                  # a plan that ignores POST
+    around = plan_grasp(ROBOT, np.zeros(6), (obj.x, obj.y), obj.r, obstacles=[POST],
+                        clearance=0.01)
+    ok = dataclasses.replace(with_post, outcome=Outcome(obj, around, None, 2))
+    assert execute_target(ok).plan is around
+    refused = dataclasses.replace(with_post, outcome=Outcome(obj, None, "Post is in the way", 3))
+    with pytest.raises(ValueError, match="Post is in the way"):
+        execute_target(refused)
