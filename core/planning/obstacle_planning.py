@@ -39,7 +39,7 @@ Array = npt.NDArray[np.float64]
 
 OTHER_STARTS = 2        # first configurations around the object tried after the warm starts
 OBSTACLE_RESTARTS = 2   # restarts per radius while planning around obstacles
-SEARCH_BUDGET_S = 1.5   # no new approach is tried after this long (the refusal follows)
+SEARCH_BUDGET_S = 2.5   # no new approach is tried after this long (the refusal follows)
 
 
 class ObstacleRefused(GraspRefused):
@@ -188,6 +188,7 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
            f"{_mm(setup.clearance - gap)} inside the clearance")
     raise ObstacleRefused(
         f"{o.name} is in the way: no approach found keeps the arm and gripper "
-        f"{_mm(setup.clearance)} clear of it ({tried} approaches tried); the direct approach "
+        f"{_mm(setup.clearance)} clear of it ({tried} approach{'es' if tried > 1 else ''} "
+        f"tried); the direct approach "
         f"{how}. Move {o.name} or the object, or lower the clearance.",
         o.name, gap, setup.clearance)

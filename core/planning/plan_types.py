@@ -231,4 +231,10 @@ def format_plan(plan: GraspPlan) -> str:
             f"{fmt_mm(plan.path_clearance[k]):>9} {plan.iterations[k]:3d}  {plan.status[k]}")
     if plan.inserted.any():
         lines.append("+ inserted between Algorithm 1's radii to keep the swept path clear")
+    if plan.obstacles and plan.obstacle_path_clearance is not None:
+        names = ", ".join(o.name for o in plan.obstacles)
+        lines.append(f"Obstacles ({names}): the arm and gripper keep >= "
+                     f"{fmt_mm(float(np.min(plan.obstacle_path_clearance)))} mm from them "
+                     f"between waypoints (certified; clearance {fmt_mm(plan.obstacle_margin)} "
+                     f"mm)")
     return "\n".join(lines)

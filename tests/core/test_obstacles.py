@@ -162,3 +162,22 @@ def test_object_on_an_obstacle_and_arm_inside_the_clearance_are_refused():
     with pytest.raises(GraspRefused, match="too close to Post now: it is 8 mm") as info:
         plan_grasp(ARM, STRAIGHT, *OBJECT, obstacles=[near], clearance=CLEARANCE)
     assert info.value.obstacle == "Post"
+
+
+def test_command_line_plans_around_obstacles_and_refuses_naming_them():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    run = lambda *a: subprocess.run(  # noqa: E731
+        [sys.executable, "-m", "core.planning.grasp", "--object", "-0.2", "0.2", "0.0165", *a],
+        cwd=repo, capture_output=True, text=True, timeout=120)
+    ok = run("--obstacle", "-0.07", "0.21", "0.015", "--clearance", "0.01")
+    assert ok.returncode == 0, ok.stderr
+    import re
+    m = re.search(r"Obstacles \(Obstacle 1\): the arm and gripper keep >= ([\d.]+) mm", ok.stdout)
+    assert m and float(m.group(1)) >= 10.0, ok.stdout
+    bad = run("--obstacle", "0.3", "0.05", "0.02", "--obstacle", "-0.1", "0.3", "0.02")
+    assert bad.returncode == 2
+    assert bad.stderr.startswith("refused (obstacle): Obstacle 2 is in the way")

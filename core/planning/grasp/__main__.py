@@ -1,7 +1,7 @@
 """``python -m core.planning.grasp``: plan one grasp from the command line.
 
 ``python -m core.planning.grasp --object X Y R [--json] [--robot soft-arm] [--kappa K ...]
-[--delta-d D]`` prints the plan (:func:`core.planning.grasp.plan_grasp`); a refusal goes to
+[--delta-d D] [--obstacle X Y R ...] [--clearance C]`` prints the plan (:func:`core.planning.grasp.plan_grasp`); a refusal goes to
 stderr with exit code 2 (1 if planning failed).
 """
 
@@ -14,7 +14,7 @@ import sys
 import numpy as np
 
 from core.planning.feasibility import GraspRefused
-from core.planning.grasp import plan_grasp
+from core.planning.grasp import Obstacle, plan_grasp
 from core.planning.plan_types import format_plan
 
 
@@ -29,12 +29,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robot", default="soft-arm", help="robot name or TOML path")
     ap.add_argument("--kappa", nargs="+", type=float, help="measured curvatures (default 0)")
     ap.add_argument("--delta-d", type=float, help="allowable incremental distance (m)")
+    ap.add_argument("--obstacle", nargs=3, type=float, action="append", default=[],
+                    metavar=("X", "Y", "R"), help="an obstacle disk (m; repeat for more): the "
+                    "arm and gripper keep --clearance from it")
+    ap.add_argument("--clearance", type=float, default=0.01,
+                    help="clearance from obstacles (m, default 0.01)")
     ap.add_argument("--json", action="store_true", help="print the plan as JSON")
     args = ap.parse_args(argv)
     try:
         robot = robots.load(args.robot)
         km = np.zeros(robot.n_segments) if args.kappa is None else np.array(args.kappa)
-        plan = plan_grasp(robot, km, args.object[:2], args.object[2], delta_d=args.delta_d)
+        obstacles = [Obstacle(f"Obstacle {i + 1}", *o) for i, o in enumerate(args.obstacle)]
+        plan = plan_grasp(robot, km, args.object[:2], args.object[2], delta_d=args.delta_d,
+                          obstacles=obstacles, clearance=args.clearance)
     except GraspRefused as exc:
         print(f"refused ({exc.reason}): {exc}", file=sys.stderr)
         return 2
