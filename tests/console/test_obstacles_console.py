@@ -208,3 +208,26 @@ def test_execute_needs_the_plan_around_the_obstacles():
     refused = dataclasses.replace(with_post, outcome=Outcome(obj, None, "Post is in the way", 3))
     with pytest.raises(ValueError, match="Post is in the way"):
         execute_target(refused)
+
+
+def test_a_replay_draws_the_recorded_obstacles_and_skips_bad_entries():
+    import viser
+
+    from console.obstacle_view import draw_recorded_obstacles
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        record = {"obstacles": [{"name": "Post", "x": -0.07, "y": 0.21, "r": 0.015},
+                                {"name": "bad", "x": "?", "y": 0.0, "r": 0.02},
+                                {"name": "nan", "x": math.nan, "y": 0.0, "r": 0.02}],
+                  "clearance": 0.01}
+        nodes = draw_recorded_obstacles(server.scene, record, "/replay/obstacles")
+        assert len(nodes) == 2                               # body + hatch/ring of Post only
+        body, lines = nodes
+        np.testing.assert_allclose(body.position[:2], (-0.07, 0.21))
+        ring = lines.points[-72:]                            # the clearance ring comes last
+        np.testing.assert_allclose(np.hypot(ring[..., 0] + 0.07, ring[..., 1] - 0.21), 0.025,
+                                   atol=1e-6)
+        assert draw_recorded_obstacles(server.scene, None, "/replay/obstacles") == []
+    finally:
+        server.stop()
