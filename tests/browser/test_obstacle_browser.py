@@ -150,16 +150,16 @@ def run_the_test(page: Any, app: ConsoleApp, session: Any, artifacts_dir: Path) 
     box = page.locator("canvas").first.bounding_box()
     assert box is not None
     info = page.locator('[data-testid="obstacles-info"]')
-    for attempt in range(3):   # a busy software renderer can drop a canvas click
+    for attempt in range(5):   # a busy software renderer can drop a canvas click
         hold_control(app)
         clear_notices(page)
         px, py = project((*SPOT, 0.0), box["width"], box["height"])
         page.mouse.click(box["x"] + px, box["y"] + py)
         try:
-            wait_until("obstacle placed", lambda: session.view().obstacles, 8)
+            wait_until("obstacle placed", lambda: session.view().obstacles, 12)
             break
         except AssertionError:
-            if attempt == 2:
+            if attempt == 4:
                 page.screenshot(path=str(artifacts_dir / "browser_obstacle_click_failed.png"))
                 raise
     (obs,) = session.view().obstacles
