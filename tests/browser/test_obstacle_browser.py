@@ -83,7 +83,7 @@ def grasp_page(browser: Any, server: Any) -> Iterator[tuple[Any, ConsoleApp]]:
         page = context.new_page()
         page.set_default_timeout(60_000)
         page.goto(f"http://127.0.0.1:{server.get_port()}/")
-        open_tab(page, "Operate", 60_000)
+        open_tab(page, "Operate", 180_000)   # a machine loaded past its cores loads slowly
         page.locator('[data-testid="plan-summary"][data-state="ok"]').wait_for()
         yield page, app
     finally:
