@@ -1,6 +1,9 @@
 """The grasp session: the table objects, planner settings, newest plan and waypoint inspection that
 the Objects, Grasp planner and Waypoints panels share (one per console, ``session_for(app)``).
 
+The table also holds obstacles (``core.planning.obstacles.Obstacle``): every plan keeps the arm
+and gripper ``clearance`` (m) from them (drawn by :class:`console.obstacle_view.ObstacleLayer`).
+
 Callbacks only call :class:`GraspSession` methods, which take a lock, record the request and
 wake one worker thread. The worker plans the newest request with
 :class:`core.planning.sides.SidedPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
@@ -23,15 +26,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 import viser
 
+from console.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
 from console.lab_feed import feed_grasp
+from console.obstacle_view import ObstacleLayer
 from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableObject,
                                validate_object)
 from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
 from console.table_bin import BinView, TableBin
 from core.planning.feasibility import GraspRefused
-from core.planning.sides import SidedPlanner
+from core.planning.obstacles import Obstacle
 from core.planning.reachability import ReachMap
+from core.planning.sides import SidedPlanner
 
 if TYPE_CHECKING:
     from console.app import ConsoleApp
@@ -39,7 +45,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class GraspSession:
+class GraspSession(ObstacleEdits):
     """Shared grasp state of one console; see the module docstring for the threading rules."""
 
     compute_reach = True    # tests switch the (CPU-heavy) reachability map off
@@ -53,11 +59,16 @@ class GraspSession:
         self.scene = PlanScene(app.server, robot)
         self.bin_view = BinView(app.server.scene)
         self._bin: TableBin | None = None  # where "Clear table into bin" takes the objects
+        self.obstacle_layer = ObstacleLayer(app.server)
         self.default_radius = robot.capture.nominal_object_radius
         self._cond = threading.Condition()
         self._objects = [TableObject("Object 1", -0.20, 0.20, self.default_radius)]
         self._selected: str | None = "Object 1"
         self._count = 1
+        self._obstacles: list[Obstacle] = []
+        self._obstacle_selected: str | None = None
+        self._obstacle_count = 0
+        self.clearance = DEFAULT_CLEARANCE
         self.delta_d = float(robot.delta_d)
         self.weights = tuple(self.planner.config.weights)
         self.live = True
@@ -66,7 +77,7 @@ class GraspSession:
         self._outcome: Outcome | None = None
         self._index, self._playing, self._speed, self._trail = 0, False, 2.0, True
         self._trail_from = 0    # "Clear trails": no trail before this waypoint (until re-planned)
-        self._dirty = {"objects", "reach"}
+        self._dirty = {"objects", "obstacles", "reach"}
         self._reach: ReachMap | str | None = "computing"
         self._reach_note = ""
         self.table_extent = _table_extent(app)
@@ -86,7 +97,9 @@ class GraspSession:
         with self._cond:
             return SessionView(tuple(self._objects), self._selected, self._outcome, self._index,
                                self._playing, self._speed, self._trail, self._reach,
-                               self._reach_note, self._trail_from, self._bin)
+                               self._reach_note, self._trail_from, self._bin,
+                               tuple(self._obstacles), self._obstacle_selected,
+                               self.clearance)
 
     def add_listener(self, fn: Callable[[SessionView], None]) -> None:
         with self._cond:
@@ -306,7 +319,7 @@ class GraspSession:
                     self._playing = self._index < last
                     dirty.add("inspect")
                 objects, selected = list(self._objects), self._selected
-                settings = (self.delta_d, self.weights)
+                settings = (self.delta_d, self.weights, tuple(self._obstacles), self.clearance)
             if request is not None:
                 if request:
                     last_live = time.perf_counter()
@@ -330,7 +343,8 @@ class GraspSession:
         kappa = np.asarray(self.app.store.display.q, dtype=float)
         try:
             plan = self.planner.plan(kappa, (obj.x, obj.y), obj.r, delta_d=settings[0],
-                                     weights=settings[1])
+                                     weights=settings[1], obstacles=settings[2],
+                                     clearance=settings[3])
         except GraspRefused as exc:
             return Outcome(obj, None, str(exc), seq)
         except Exception as exc:  # a planner bug must not kill the worker
@@ -346,6 +360,9 @@ class GraspSession:
                     self.bin_view.draw(view.bin)
                 if "objects" in dirty:
                     self.scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
+                if "obstacles" in dirty:
+                    self.obstacle_layer.sync(view.obstacles, view.obstacle_selected,
+                                             view.clearance)
                 if dirty & {"plan", "inspect"}:
                     plan = view.outcome.plan if view.outcome else None
                     self.scene.draw_plan(plan, view.index, view.trail, view.trail_from)

@@ -8,7 +8,8 @@ operator actions; these feeds add the rest, called from the threads that already
   records it.
 * :class:`LinkFeed` -- link health (on change, else once a second); the Hardware panel's
   refresh (both robots) feeds it.
-* :func:`feed_grasp` -- the grasp session's worker after it redrew: objects and the newest plan
+* :func:`feed_grasp` -- the grasp session's worker after it redrew: objects (with the obstacles
+  and the clearance plans keep from them) and the newest plan
   (approach circles and waypoints) or the planner's refusal; :func:`path_plan_record` -- the
   Paths panel's planned tip path (extensible arm).
 """
@@ -95,10 +96,13 @@ def path_plan_record(req: Any, waypoints: Any, path: Any) -> dict[str, Any]:
 
 def feed_grasp(recorder: Any, view: Any, dirty: set[str]) -> None:
     """Record the grasp session's objects and plan when they changed (``dirty``)."""
-    if "objects" in dirty:
+    if dirty & {"objects", "obstacles"}:
         table_bin = getattr(view, "bin", None)
         recorder.log("objects", {"objects": [dataclasses.asdict(o) for o in view.objects],
                                  "selected": view.selected,
+                                 "obstacles": [dataclasses.asdict(o)
+                                               for o in getattr(view, "obstacles", ())],
+                                 "clearance": float(getattr(view, "clearance", 0.0)),
                                  **({} if table_bin is None else {"bin": table_bin.record()})})
     if "plan" in dirty and view.outcome is not None:
         recorder.log("plan", plan_record(view.outcome))

@@ -12,7 +12,9 @@ or the GIL; it is drawn smooth and clipped to the table (:mod:`console.reach_sha
 
 Geometry comes from pure functions (``plan_geometry``, ``ghost_segments``, ``object_mesh``,
 ``reach_mesh``, ``ray_to_table``), tested without a server. Scene JSON is
-``{"objects": [{"name", "x", "y", "r"}, ...]}`` in metres. :class:`Outcome` /
+``{"objects": [{"name", "x", "y", "r"}, ...], "obstacles": [{"name", "x", "y", "r"}, ...]}`` in
+metres (``obstacles`` is optional: older files without it load with none; obstacles are drawn
+by :mod:`console.obstacle_view`). :class:`Outcome` /
 :class:`SessionView` / :func:`outcome_html` are what the panels show.
 """
 
@@ -28,6 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core.kinematics import planar as pk
+from core.planning.arm_model import ArmModel
+from core.planning.obstacles import Obstacle, check_obstacles
 from core.planning.plan_types import GraspPlan
 from console.reach_shading import shading_meshes
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap
@@ -68,24 +72,51 @@ def validate_object(obj: TableObject, robot) -> TableObject:
     return obj
 
 
-def scene_to_json(objects: list[TableObject]) -> str:
-    """Scene JSON (objects in metres)."""
-    return json.dumps({"objects": [dataclasses.asdict(o) for o in objects]}, indent=1)
+def validate_obstacles(obstacles: list[Obstacle], robot) -> list[Obstacle]:
+    """Raise ValueError with an operator message for a bad obstacle (not finite, radius not
+    positive, on the arm's base, names not unique); else return them."""
+    return list(check_obstacles(obstacles, ArmModel.from_robot(robot),
+                                robot.planner.base_keepout))
 
 
-def scene_from_json(text: str, robot) -> list[TableObject]:
-    """Parse and validate scene JSON; ValueError (with the reason) changes nothing."""
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """What a scene file holds: the table objects and the obstacles."""
+
+    objects: list[TableObject]
+    obstacles: list[Obstacle]
+
+
+def scene_to_json(objects: list[TableObject], obstacles: list[Obstacle] = ()) -> str:
+    """Scene JSON (objects and obstacles in metres)."""
+    return json.dumps({"objects": [dataclasses.asdict(o) for o in objects],
+                       "obstacles": [dataclasses.asdict(o) for o in obstacles]}, indent=1)
+
+
+def _items(data, key: str, kind: type, label: str) -> list:
+    return [kind(str(o.get("name", f"{label} {i + 1}")), float(o["x"]), float(o["y"]),
+                 float(o["r"])) for i, o in enumerate(data[key])]
+
+
+def parse_scene(text: str, robot) -> Scene:
+    """Parse and validate scene JSON (objects and, if present, obstacles); ValueError (with
+    the reason) changes nothing."""
     try:
         data = json.loads(text)
-        items = data["objects"]
-        objs = [TableObject(str(o.get("name", f"Object {i + 1}")), float(o["x"]), float(o["y"]),
-                            float(o["r"])) for i, o in enumerate(items)]
+        objs = _items(data, "objects", TableObject, "Object")
+        obstacles = (_items(data, "obstacles", Obstacle, "Obstacle")
+                     if data.get("obstacles") is not None else [])
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"not a scene file ({type(exc).__name__}: {exc})") from None
     names = [o.name for o in objs]
     if len(set(names)) != len(names):
         raise ValueError("object names must be unique")
-    return [validate_object(o, robot) for o in objs]
+    return Scene([validate_object(o, robot) for o in objs], validate_obstacles(obstacles, robot))
+
+
+def scene_from_json(text: str, robot) -> list[TableObject]:
+    """The objects of scene JSON (:func:`parse_scene`); ValueError changes nothing."""
+    return parse_scene(text, robot).objects
 
 
 def ray_to_table(origin: npt.ArrayLike, direction: npt.ArrayLike) -> tuple[float, float] | None:
@@ -390,6 +421,9 @@ class SessionView:
     reach_note: str = ""
     trail_from: int = 0     # the trail shows no waypoint before this one ("Clear trails")
     bin: Any = None         # console.table_bin.TableBin: where a row takes the objects, or None
+    obstacles: tuple[Obstacle, ...] = ()
+    obstacle_selected: str | None = None
+    clearance: float = 0.0  # m, the planner keeps the arm this far from every obstacle
 
 
 def outcome_html(outcome: Outcome | None) -> str:
@@ -404,11 +438,18 @@ def outcome_html(outcome: Outcome | None) -> str:
         n, ms = str(plan.n), f"{plan.total_ms:.1f}"
         if plan.success:
             body, state = f"<b>{plan.n} waypoints, {plan.total_ms:.1f} ms</b>", "ok"
+            if plan.obstacles and plan.obstacle_path_clearance is not None:
+                gap = float(np.min(plan.obstacle_path_clearance))
+                body += (f"; the arm keeps ≥ {fmt_mm(gap, 0)} mm from the obstacles "
+                         f"(clearance {fmt_mm(plan.obstacle_margin, 0)} mm)")
         else:
             f = plan.failures[0]
             body = (f"<b style='color:#c92a2a'>Failed</b> at approach circle {f.index} "
                     f"(r_a = {f.radius * 1e3:.0f} mm, {f.reason.replace('_', ' ')}): "
                     f"{html.escape(f.detail)}. {plan.n} waypoints, {plan.total_ms:.1f} ms.")
             state = "failed"
+    plan = outcome.plan if outcome is not None else None
+    gap = ("" if plan is None or not plan.obstacles or plan.obstacle_path_clearance is None
+           else f"{float(np.min(plan.obstacle_path_clearance)) * 1e3:.2f}")
     return (f'<div data-testid="plan-summary" data-state="{state}" data-waypoints="{n}" '
-            f'data-ms="{ms}" style="font-size:0.85em">{body}</div>')
+            f'data-ms="{ms}" data-obstacle-mm="{gap}" style="font-size:0.85em">{body}</div>')

@@ -281,6 +281,17 @@ class Recording:
         i = bisect.bisect_right([e.t for e in self.events], t)
         return self.events[max(0, i - k):i]
 
+    def obstacles_until(self, t: float) -> dict[str, Any] | None:
+        """The newest ``objects`` record at or before ``t`` that lists obstacles (its data:
+        ``obstacles`` [{name, x, y, r}] and ``clearance``), or None before any."""
+        found = None
+        for e in self.events:
+            if e.t > t:
+                break
+            if e.kind == "objects" and isinstance(e.data, dict) and "obstacles" in e.data:
+                found = e.data
+        return found
+
     def overlays_until(self, t: float) -> dict[str, dict[str, Any]]:
         """Newest ``overlay`` record per name at or before ``t``."""
         out: dict[str, dict[str, Any]] = {}

@@ -20,6 +20,7 @@ from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load
 from console.arm_view import ArmView, make_arm_view
 from console.datadir import BadFileName
 from console.export import draw_overlay, recording_html
+from console.obstacle_view import draw_recorded_obstacles
 from console.recording import SUFFIXES, Recording, load_recording
 from console.replay_markers import (COLORS, Marker, current_marker, markers_of, next_marker,
                                     previous_marker)
@@ -46,6 +47,8 @@ class ReplaySession:
         self.playing = False
         self.speed = 1.0
         self.markers: list[Marker] = []
+        self._obstacles_shown: dict | None = None
+        self._obstacle_nodes: list = []
         self._lock = threading.Lock()
         gui = client.gui
         self.folder = gui.add_folder("Replay", order=order, expand_by_default=False)
@@ -201,6 +204,13 @@ class ReplaySession:
                 ghost.update(rec.q_at(pos))
                 for data in rec.overlays_until(pos).values():
                     draw_overlay(self.client.scene, data, root="/replay/overlays")
+                obstacles = rec.obstacles_until(pos)
+                if obstacles is not self._obstacles_shown:     # the recorded obstacles
+                    for node in self._obstacle_nodes:
+                        node.remove()
+                    self._obstacles_shown = obstacles
+                    self._obstacle_nodes = draw_recorded_obstacles(
+                        self.client.scene, obstacles, "/replay/obstacles")
                 if move_slider:
                     self.timeline.value = round(pos, 3)
                 lines = [f"{e.t:7.1f} s · {e.who}: {e.text}" for e in rec.events_until(pos)]

@@ -63,6 +63,14 @@ def execute_target(session_view: Any) -> ExecuteTarget:
     if (out is not None and out.obj == obj and out.plan is not None and out.plan.success
             and out.plan.n > 0):
         plan = out.plan
+    obstacles = tuple(getattr(session_view, "obstacles", ()))
+    if obstacles and (plan is None or tuple(plan.obstacles) != obstacles
+                      or plan.obstacle_margin != session_view.clearance):
+        # The controller's own planner knows no obstacles: only a plan around them may run.
+        why = (f" ({out.refusal})" if out is not None and out.obj == obj and out.refusal
+               else "")
+        raise ValueError(f"Obstacles are on the table: Execute needs the Grasp planner's plan "
+                         f"around them for {obj.name}; press Plan grasp first{why}.")
     return ExecuteTarget(obj.name, obj.x, obj.y, obj.r, plan)
 
 

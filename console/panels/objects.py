@@ -1,23 +1,27 @@
-"""Objects panel: place objects on the table by clicking, typing or dragging; save and load them.
+"""Objects panel: place objects and obstacles on the table by clicking, typing or dragging; save
+and load them.
 
-A click on the table (the click ray meets z = 0) selects the object under it or places a new
-one there; each object carries a transform gizmo in the 3D view to drag it in x and y (the
+"Table click places" says what a click on the table (the click ray meets z = 0) does: *Object*
+selects the object under it or places a new one there, *Obstacle* the same for obstacles (the
+panel's "Obstacles" folder, :mod:`console.panels.obstacle_editor`, lists and edits them), *Bin*
+places the bin that "Clear table into bin" (Control panel) takes every object to, *Nothing*
+leaves the table alone. Objects: each object carries a transform gizmo in the 3D view to drag it in x and y (the
 planner re-plans live while it moves, see ``console.panels.planner``). The number boxes show and
 edit the selected object, in mm (SI inside: the session keeps metres); "Add object" places one
-at the typed x, y, r. The scene is saved as a
-JSON download and loaded from an uploaded file (``console.plan_view.scene_from_json``; a bad
-file is refused with its reason and changes nothing).
+at the typed x, y, r. The scene (objects and obstacles) is saved as a JSON download and loaded
+from an uploaded file (``console.plan_view.parse_scene``; a bad file is refused with its reason
+and changes nothing; a file without obstacles loads with none).
 
 Sharing: the objects and the selection are the same for every browser and drive the plan, so
 every change -- a click on the table, a gizmo drag, typing x / y / r, selecting, adding,
-removing, loading, the click-placement toggle -- is :func:`~console.panels.base.operator_only`.
+removing, loading, the click-placement choice, and the same for obstacles -- is
+:func:`~console.panels.base.operator_only`.
 A viewer's edit snaps back (fields, selection, and a dragged object returns to its place);
 "Save scene" (a download that changes nothing) works for everyone.
 
-"Table click places" says what a click on free table puts there (:data:`CLICK_PLACES`): an
-object, or the bin that "Clear table into bin" (Control panel) takes every object to
-(``console.table_bin``: the arm must be able to hold an object over the point, else the click
-is refused with the reason). The bin is saved in the scene JSON (optional ``"bin"`` key).
+The bin (``console.table_bin``): the arm must be able to hold an object over the clicked point,
+else the click is refused with the reason; it is saved in the scene JSON (optional ``"bin"``
+key).
 """
 
 from __future__ import annotations
@@ -28,12 +32,15 @@ from typing import Any
 import viser
 
 from console.panels.base import Panel, operator_only
+from console.panels.obstacle_editor import ObstacleEditor
 from console.panels.planner import SessionView, session_for
-from console.plan_view import ray_to_table, scene_from_json, scene_to_json
+from console.plan_view import parse_scene, ray_to_table, scene_to_json
 from console.table_bin import (BinLocator, TableBin, bin_point_from_scene_json,
                                scene_json_with_bin)
 
-CLICK_PLACES = ("Object", "Bin")  # what a click on free table places (dropdown options)
+# What a click on free table places (dropdown options; a click on an object or obstacle
+# selects it).
+CLICK_MODES = ("Object", "Obstacle", "Bin", "Nothing")
 
 
 def mm(metres: float) -> float:
@@ -52,13 +59,11 @@ class ObjectsPanel(Panel):
         self.session = session_for(self.app)
         view = self.session.view()
         first = view.objects[0] if view.objects else None
-        self.click_place = self.gui.add_checkbox(
-            "Click on table places object", True,
-            hint="A click on free table places an object; a click on an object selects it.")
-        self.click_target = self.gui.add_dropdown(
-            "Table click places", CLICK_PLACES, initial_value=CLICK_PLACES[0],
-            hint="What a click on free table places: an object, or the bin that 'Clear table "
-                 "into bin' (Control panel) takes every object to.")
+        self.click_place = self.gui.add_dropdown(
+            "Table click places", CLICK_MODES, initial_value=CLICK_MODES[0],
+            hint="What a click on free table places: an object, an obstacle, or the bin that "
+                 "'Clear table into bin' (Control panel) takes every object to; a click on "
+                 "an object or obstacle selects it. Nothing: clicks leave the table alone.")
         self.bins = BinLocator(self.app.robot)
         self.selected = self.gui.add_dropdown(
             "Selected", [o.name for o in view.objects] or ["(none)"],
@@ -73,12 +78,11 @@ class ObjectsPanel(Panel):
         self.load_button = self.gui.add_upload_button("Load scene", mime_type="application/json",
                                                       hint="Upload a scene JSON file.")
         self.info = self.gui.add_html("")
+        self.obstacles = ObstacleEditor(self)
         self._mirror = False
-        self._click_mode = bool(self.click_place.value)
-        self._click_target = str(self.click_target.value)
+        self._click_mode = self.click_place.value
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
         self.click_place.on_update(self._on_click_mode)
-        self.click_target.on_update(self._on_click_target)
         self.selected.on_update(self._on_select)
         for handle in (self.x, self.y, self.r):
             handle.on_update(self._on_typed)
@@ -97,13 +101,16 @@ class ObjectsPanel(Panel):
             event.client.add_notification("Objects", message, color="red", auto_close_seconds=6)
 
     def _on_scene_click(self, event) -> None:
-        if not self.click_place.value:
+        mode = self.click_place.value
+        if mode not in ("Object", "Obstacle", "Bin"):
             return
         hit = ray_to_table(event.ray_origin, event.ray_direction)
         if hit is None:
             return
-        if self.click_target.value == "Bin":
+        if mode == "Bin":
             self._place_bin_at(event, hit)
+        elif mode == "Obstacle":
+            self.obstacles.place_at(event, hit)
         else:
             self._place_at(event, hit)
 
@@ -138,11 +145,10 @@ class ObjectsPanel(Panel):
 
     @operator_only(action="change how clicks on the table act")
     def _on_click_mode(self, event) -> None:
-        self._click_mode = bool(self.click_place.value)
-
-    @operator_only(action="change how clicks on the table act")
-    def _on_click_target(self, event) -> None:
-        self._click_target = str(self.click_target.value)
+        if self.click_place.value not in CLICK_MODES:
+            self.click_place.value = self._click_mode
+            return
+        self._click_mode = self.click_place.value
 
     @operator_only(action="select an object")
     def _on_select(self, event) -> None:
@@ -191,8 +197,8 @@ class ObjectsPanel(Panel):
             self.session.redraw_objects()  # the gizmo goes back to the object
         elif target is self.click_place:
             self.click_place.value = self._click_mode
-        elif target is self.click_target:
-            self.click_target.value = self._click_target
+        elif self.obstacles.owns(target):
+            self.obstacles.restore(target)
         elif target is self.selected:
             self.selected.value = self.session.view().selected or "(none)"
         elif target is not None and id(target) in self._fields:
@@ -201,7 +207,8 @@ class ObjectsPanel(Panel):
     def _on_save(self, event) -> None:
         if event.client is not None:
             view = self.session.view()
-            text = scene_json_with_bin(scene_to_json(list(view.objects)), view.bin)
+            text = scene_json_with_bin(scene_to_json(list(view.objects), list(view.obstacles)),
+                                       view.bin)
             event.client.send_file_download("grasp_scene.json", text.encode())
 
     @operator_only(action="load a scene")
@@ -209,18 +216,19 @@ class ObjectsPanel(Panel):
         upload = self.load_button.value
         try:
             text = upload.content.decode("utf-8")
-            objects = scene_from_json(text, self.app.robot)
+            scene = parse_scene(text, self.app.robot)
             bin_point = bin_point_from_scene_json(text)  # None in files without a bin
         except (ValueError, UnicodeDecodeError) as exc:
             self._error(event, f"Could not load {upload.name}: {exc}")
             return
-        self.session.set_objects(objects)
+        self.session.set_scene(scene.objects, scene.obstacles)
         self.session.set_bin(None)  # the file's bin once its pose is found (if it has one)
         if bin_point is not None:
             self._find_bin(event.client, bin_point)
 
     # -- display (grasp worker thread) -----------------------------------------------------
     def refresh(self, view: SessionView) -> None:
+        self.obstacles.refresh(view)
         names = [o.name for o in view.objects] or ["(none)"]
         self._mirror = True
         try:

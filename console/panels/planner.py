@@ -2,7 +2,8 @@
 
 The panel works on the console's :class:`console.grasp_session.GraspSession` (shared with the
 Objects and Waypoints panels; ``GraspSession``, ``session_for`` and ``SessionView`` are
-re-exported here): "Plan grasp", delta_d (mm; metres inside) and weight inputs, live re-plan
+re-exported here): "Plan grasp", delta_d (mm; metres inside) and weight inputs, the clearance (mm) every plan keeps
+between the arm (gripper included) and every obstacle, live re-plan
 and shading toggles, and the outcome ("5 waypoints, 1.3 ms", or why not). The panel shows the
 session's outcome from the start (a plan made before the panel existed is not hidden).
 
@@ -45,6 +46,10 @@ class PlannerPanel(Panel):
                                                 "approach circles.")
         self.weights = self.gui.add_text("Weights R", ", ".join(f"{w:g}" for w in s.weights),
                                          hint="Cost weights of the segments' curvature change.")
+        self.clearance = self.gui.add_number(
+            "Clearance (mm)", round(s.clearance * 1e3, 1), step=1.0,
+            hint="Every point of the arm and the gripper keeps this far from every obstacle, "
+                 "at and between waypoints.")
         self.live = self.gui.add_checkbox("Re-plan while dragging", s.live)
         self.reach = self.gui.add_checkbox("Reachability shading", s.show_reach,
                                            hint="Green: a grasp can be planned from the straight "
@@ -54,6 +59,7 @@ class PlannerPanel(Panel):
         self.plan_button.on_click(self.operator_only(lambda _: s.request_plan(), "plan a grasp"))
         self.delta_d.on_update(self._on_delta_d)
         self.weights.on_update(self._on_weights)
+        self.clearance.on_update(self._on_clearance)
         self.live.on_update(self.operator_only(
             lambda e: e.client and s.configure(live=self.live.value), "change the planner"))
         self.reach.on_update(self.operator_only(
@@ -93,6 +99,16 @@ class PlannerPanel(Panel):
             return
         self.session.configure(weights=w)
 
+    @operator_only(action="change the planner")
+    def _on_clearance(self, event) -> None:
+        if event.client is None:
+            return
+        try:
+            self.session.set_clearance(float(self.clearance.value) / 1e3)
+        except (TypeError, ValueError) as exc:
+            self._notify(event, f"Clearance: {exc}")
+            self.on_refused(event)
+
     def on_refused(self, event) -> None:
         """Put a refused (or bad) edit back to the session's setting, for everyone."""
         s, target = self.session, getattr(event, "target", None)
@@ -100,6 +116,8 @@ class PlannerPanel(Panel):
             self.delta_d.value = round(s.delta_d * 1e3, 1)
         elif target is self.weights:
             self.weights.value = ", ".join(f"{w:g}" for w in s.weights)
+        elif target is self.clearance:
+            self.clearance.value = round(s.clearance * 1e3, 1)
         elif target is self.live:
             self.live.value = s.live
         elif target is self.reach:

@@ -243,6 +243,7 @@ ARM_RGB, END_RGB, OBJECT_RGB, PLAN_RGB, WAYPOINT_RGB = ((38, 110, 150), (30, 30,
                                                         (60, 170, 90), (200, 40, 160),
                                                         (235, 130, 30))
 BOX_RGB = (225, 150, 40)
+OBSTACLE_RGB, RING_RGB = (70, 72, 78), (215, 40, 40)
 
 
 def _circle(x: float, y: float, r: float, z: float, n: int = 48) -> Array:
@@ -285,7 +286,19 @@ def _scene_for(kind: str, data: dict[str, Any], ns: int,
             cyls.append({"pose": _pose((o["x"], o["y"], 0.015)),
                          "size": {"x": d, "y": d, "z": 0.03}, "bottom_scale": 1.0,
                          "top_scale": 1.0, "color": _color(OBJECT_RGB, 0.9)})
-        return [(OBJECT_SCENE.topic, scene_update(ns, [entity(ns, "objects", cylinders=cyls)]))]
+        entities = [entity(ns, "objects", cylinders=cyls)]
+        # Obstacles: dark grey, taller than objects, with a red clearance ring (the entity is
+        # always sent, so removing the last obstacle clears it).
+        obstacles = data.get("obstacles") or []
+        clearance = float(data.get("clearance") or 0.0)
+        bodies = [{"pose": _pose((o["x"], o["y"], 0.03)),
+                   "size": {"x": 2 * float(o["r"]), "y": 2 * float(o["r"]), "z": 0.06},
+                   "bottom_scale": 1.0, "top_scale": 1.0, "color": _color(OBSTACLE_RGB, 1.0)}
+                  for o in obstacles]
+        rings = [line(_circle(o["x"], o["y"], float(o["r"]) + clearance, z), RING_RGB, 0.003,
+                      loop=True) for o in obstacles]
+        entities.append(entity(ns, "obstacles", cylinders=bodies, lines=rings))
+        return [(OBJECT_SCENE.topic, scene_update(ns, entities))]
     if kind == "plan":
         lines = [line(_circle(c["x"], c["y"], c["r"], z), PLAN_RGB, 0.002, loop=True)
                  for c in data.get("circles") or []]

@@ -107,11 +107,15 @@ CONFIGURATION: Schema = _object(
      "kind": {"type": "string", "enum": ["planar", "delta"]},
      "measured": _array(SEGMENT), "commanded": _array(SEGMENT)})
 OBJECTS: Schema = _object(
-    "softarm.Objects", "Objects on the table: cylinders, centre x, y and radius r in m",
+    "softarm.Objects", "Objects and obstacles on the table: cylinders, centre x, y and radius r "
+    "in m; clearance: the gap (m) grasp plans keep between the arm and every obstacle",
     {"timestamp": TIME, "who": WHO, "client": CLIENT,
      "objects": _array({"type": "object", "properties": {"name": TEXT, "x": NUMBER,
                                                          "y": NUMBER, "r": NUMBER}}),
-     "selected": {"type": ["string", "null"]}}, extra=True)
+     "selected": {"type": ["string", "null"]},
+     "obstacles": _array({"type": "object", "properties": {"name": TEXT, "x": NUMBER,
+                                                           "y": NUMBER, "r": NUMBER}}),
+     "clearance": NUMBER}, extra=True)
 PLAN: Schema = _object(
     "softarm.Plan",
     "A grasp plan (approach circles around the object, waypoints with curvatures and palm poses)"

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
@@ -97,8 +98,36 @@ def certify_lines(
     """
     a = np.asarray(starts, float)
     b = np.asarray(ends, float)
+    return certify_function(lambda k: model.body_clearance(k, center, radius),
+                            model.displacement_bound(b - a), a, b, required, samples, max_depth,
+                            slack)
+
+
+def certify_function(
+    evaluate: Callable[[Array], Array],
+    lam: Array,
+    starts: Array,
+    ends: Array,
+    required: float = 0.0,
+    samples: int = 8,
+    max_depth: int = 8,
+    slack: float = 0.005,
+) -> LineCertificate:
+    """Lower-bound any clearance along straight lines in kappa, given its Lipschitz rate.
+
+    Args:
+        evaluate: (..., N) configurations -> (...,) clearance (m), exact at each configuration.
+        lam: (n,) bound on how fast the clearance can change per unit tau along each line
+            (m), e.g. :meth:`ArmModel.displacement_bound`.
+        starts, ends, required, samples, max_depth, slack: as :func:`certify_lines`.
+
+    Returns:
+        :class:`LineCertificate`.
+    """
+    a = np.asarray(starts, float)
+    b = np.asarray(ends, float)
     span = b - a
-    lam = model.displacement_bound(span).tolist()                 # (n,) per unit tau
+    lam = np.asarray(lam, float).tolist()                          # (n,) per unit tau
     # Per line, enough intervals S that the Lipschitz slack Lambda / (2 S) stays below `slack`,
     # so that usually one batched evaluation (ends included) settles every line and no
     # bisection is needed. The bookkeeping is in Python lists: a few lines of a few dozen
@@ -110,8 +139,7 @@ def certify_lines(
         taus += [k / s_i for k in range(s_i + 1)]
         lines += [i] * (s_i + 1)
     li = np.array(lines, dtype=np.intp)
-    clr = model.body_clearance(a[li] + np.array(taus)[:, None] * span[li], center,
-                               radius).tolist()
+    clr = evaluate(a[li] + np.array(taus)[:, None] * span[li]).tolist()
     evaluations = len(clr)
     bound, sampled_min, worst_tau = [], [], []
     todo = []                       # (line, t0, t1, c0, c1) intervals to bisect
@@ -139,8 +167,7 @@ def certify_lines(
             break
         li = np.array([t[0] for t in todo], dtype=np.intp)
         tm = [0.5 * (t[1] + t[2]) for t in todo]
-        cm = model.body_clearance(a[li] + np.array(tm)[:, None] * span[li], center,
-                                  radius).tolist()
+        cm = evaluate(a[li] + np.array(tm)[:, None] * span[li]).tolist()
         evaluations += len(cm)
         nxt = []
         for (i, t0, t1, c0, c1), t_mid, c_mid in zip(todo, tm, cm):

@@ -150,22 +150,28 @@ def best_start(model: ArmModel, center: complex, offset: complex, kappa_off: Arr
 
 def find_final_config(model: ArmModel, center: complex, radius: float, offset: complex,
                       kappa_meas: Array, weights: Array, margin: float, table_size: int,
-                      tries: int) -> tuple[Array | None, int]:
-    """Any configuration with the palm on the final circle and the arm body clear of the object.
+                      tries: int, extra=None,
+                      seeds: list[Array] | None = None) -> tuple[Array | None, int]:
+    """Any configuration with the palm on the final circle and the arm body clear of the object
+    (and of ``extra``'s constraints, e.g. obstacles, when given; ``seeds`` then replace the
+    table configurations tried after kappa_meas and the straight arm).
 
     Returns:
         ``(kappa or None, solves)``: the first witness found and the number of solves run.
     """
     starts = [np.asarray(kappa_meas, float), np.zeros(model.n)]
-    starts += list(seeds_near(model, center, offset, tries, table_size))
+    if seeds is None:
+        starts += list(seeds_near(model, center, offset, tries, table_size))
+    else:
+        starts += list(seeds)
     rho = radius + model.half_width + margin
     solves = 0
-    for x0 in starts[:tries + 2]:
-        res = gs.solve(model, center, offset, x0, kappa_meas, weights)
+    for x0 in starts[:tries + 2 if seeds is None else len(starts)]:
+        res = gs.solve(model, center, offset, x0, kappa_meas, weights, clearance=extra)
         solves += 1
         if res.ok and model.clearance_py(res.kappa.tolist(), center, radius) < margin:
             res = gs.solve(model, center, offset, res.kappa, kappa_meas, weights, res.lam,
-                           gs.Clearance(center, rho))
+                           gs.joined(gs.Clearance(center, rho), extra))
             solves += 1
         if res.ok:
             return res.kappa, solves

@@ -8,7 +8,8 @@ and then "palm point = c + r_a (cos phi, sin phi)" is the same as "the tip-frame
     min_kappa  sum_n R_n (kappa_n - kappa_off_n)^2
     s.t.       q(kappa) = c                       (2 equalities; q, c complex)
                lo <= kappa <= hi
-               dist(arc_j(kappa), c) >= rho       (optional: arm-body clearance, per segment)
+               h(kappa) >= 0                      (optional: arm-body clearance per segment,
+                                                   obstacle disks: Clearance, Constraints)
 
 with N = 6 variables. Each iteration forms the exact Lagrangian Hessian in closed form (see
 :mod:`core.planning.arm_model`), solves the QP by a primal-dual active-set method on one small
@@ -75,10 +76,51 @@ class SolveResult:
 
 @dataclasses.dataclass(frozen=True)
 class Clearance:
-    """Arm-body clearance constraints: every segment's arc stays >= rho from ``center``."""
+    """Arm-body clearance constraints: every segment's arc stays >= rho from ``center``.
+
+    A constraint set gives the solver ``size(n)`` rows h(kappa) >= 0: ``evaluate`` returns
+    their values (array) and what ``jacobian`` needs again (the closest points' arc lengths);
+    ``jacobian`` returns the rows dh/dkappa as lists. :class:`Constraints` joins several sets.
+    """
 
     center: complex
     rho: float
+
+    def size(self, n: int) -> int:
+        return n
+
+    def evaluate(self, model: ArmModel, x: list[float]) -> tuple[Array, Array]:
+        dist, sstar = model.arc_distances(np.array(x)[None], self.center)
+        return dist[0] - self.rho, sstar
+
+    def jacobian(self, model: ArmModel, x: list[float], aux: Array) -> list[list[float]]:
+        pts, Jp = model.arc_points(np.array(x)[None], aux)
+        u = pts[0] - self.center
+        u = np.conj(u / np.maximum(np.abs(u), 1e-12))
+        return (u[:, None] * Jp[0]).real.tolist()
+
+
+@dataclasses.dataclass(frozen=True)
+class Constraints:
+    """Several constraint sets (e.g. object clearance and obstacles) as one."""
+
+    parts: tuple
+
+    def size(self, n: int) -> int:
+        return sum(p.size(n) for p in self.parts)
+
+    def evaluate(self, model: ArmModel, x: list[float]) -> tuple[Array, list]:
+        out = [p.evaluate(model, x) for p in self.parts]
+        return np.concatenate([h for h, _ in out]), [a for _, a in out]
+
+    def jacobian(self, model: ArmModel, x: list[float], aux: list) -> list[list[float]]:
+        return [row for p, a in zip(self.parts, aux) for row in p.jacobian(model, x, a)]
+
+
+def joined(*sets):
+    """The constraint sets that are not None, as one set (None when there are none)."""
+    parts = tuple(s for s in sets if s is not None)
+    return None if not parts else parts[0] if len(parts) == 1 else Constraints(parts)
 
 
 def _restore(kn: Kernel, p: PointEval, Jx: list[float], Jy: list[float],
@@ -130,7 +172,9 @@ def solve(
         kappa_off: (N,) curvatures the cost pulls towards (kappa_meas at the start).
         weights: (N,) cost weights R_n > 0.
         lam0: Multiplier guess for the two equalities (e.g. the previous waypoint's).
-        clearance: Optional arm-body clearance constraints.
+        clearance: Optional inequality constraints: :class:`Clearance` (arm body to the
+            object), obstacle disks (:mod:`core.planning.obstacles`) or both
+            (:func:`joined`).
         opts: Tolerances.
         tangent: Also return d kappa / d r_a at the solution (a predictor for the next radius).
 
@@ -140,7 +184,7 @@ def solve(
     kn = Kernel(model, center, offset, kappa_off, weights, clearance)
     n, lo, hi, w2, xo = kn.n, kn.lo, kn.hi, kn.w2, kn.xo
     wmax = max(w2)
-    nc = n if clearance is not None else 0
+    nc = clearance.size(n) if clearance is not None else 0
     nk = n + 2 + nc
     x = [min(max(v, a), b) for v, a, b in zip(np.asarray(kappa0, float).tolist(), lo, hi)]
     lam = (0.0, 0.0) if lam0 is None else (float(lam0[0]), float(lam0[1]))
@@ -184,11 +228,8 @@ def solve(
         if free:
             pass
         elif nc:
-            pts, Jp = model.arc_points(np.array(x)[None], p.sstar)
-            u = pts[0] - clearance.center
-            u = np.conj(u / np.maximum(np.abs(u), 1e-12))
-            G = (u[:, None] * Jp[0]).real.tolist()
-            hc = (p.dist - clearance.rho).tolist()
+            G = clearance.jacobian(model, x, p.aux)
+            hc = p.hc.tolist()
             for j in range(n):
                 W[j] += [-g[j] for g in G]
         for _ in range(0 if free else opts.max_qp_iter):
@@ -336,7 +377,7 @@ def solve(
         grad = [a * (b - c) for a, b, c in zip(w2, x, xo)]
         e = p.e
         if abs(e.real) <= opts.ctol and abs(e.imag) <= opts.ctol and (
-                not nc or float((p.dist - clearance.rho).min()) >= -opts.clearance_tol):
+                not nc or float(p.hc.min()) >= -opts.clearance_tol):
             # KKT test at the new point with the QP's multipliers (Newton-accurate): the
             # gradient of the Lagrangian must vanish on the free variables.
             scale = max(1.0, max(map(abs, grad)))

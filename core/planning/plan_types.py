@@ -136,6 +136,12 @@ class GraspPlan:
         total_ms: Wall time of the whole plan.
         side: The side of the arm the gripper closes toward: ``left`` (Algorithm 1 as in the
             paper) or ``right`` (the mirror image, :mod:`core.planning.sides`).
+        obstacles: The obstacles (``core.planning.obstacles.Obstacle``) planned around.
+        obstacle_margin: The clearance the arm and gripper keep from them (m).
+        obstacle_clearance: (n,) gap between the arm (gripper included) and the nearest
+            obstacle at each waypoint (m); None without obstacles.
+        obstacle_path_clearance: (n,) certified lower bound of that gap along the straight
+            line in kappa into each waypoint (m); None without obstacles.
     """
 
     center: Array
@@ -163,6 +169,10 @@ class GraspPlan:
     failures: tuple[RadiusFailure, ...]
     total_ms: float
     side: str = "left"
+    obstacles: tuple = ()
+    obstacle_margin: float = 0.0
+    obstacle_clearance: Array | None = None
+    obstacle_path_clearance: Array | None = None
 
     @property
     def n(self) -> int:
@@ -194,7 +204,7 @@ class GraspPlan:
             v = getattr(self, f.name)
             if isinstance(v, np.ndarray):
                 v = v.tolist()
-            elif f.name == "failures":
+            elif f.name in ("failures", "obstacles"):
                 v = [dataclasses.asdict(x) for x in v]
             elif f.name == "status":
                 v = list(v)
@@ -226,4 +236,10 @@ def format_plan(plan: GraspPlan) -> str:
             f"{fmt_mm(plan.path_clearance[k]):>9} {plan.iterations[k]:3d}  {plan.status[k]}")
     if plan.inserted.any():
         lines.append("+ inserted between Algorithm 1's radii to keep the swept path clear")
+    if plan.obstacles and plan.obstacle_path_clearance is not None:
+        names = ", ".join(o.name for o in plan.obstacles)
+        lines.append(f"Obstacles ({names}): the arm and gripper keep >= "
+                     f"{fmt_mm(float(np.min(plan.obstacle_path_clearance)))} mm from them "
+                     f"between waypoints (certified; clearance {fmt_mm(plan.obstacle_margin)} "
+                     f"mm)")
     return "\n".join(lines)

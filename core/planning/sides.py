@@ -50,6 +50,7 @@ import numpy.typing as npt
 from core.planning.arm_model import wrap
 from core.planning.feasibility import GraspRefused
 from core.planning.grasp import GraspPlanner
+from core.planning.obstacles import Obstacle
 from core.planning.plan_types import GraspPlan, PlannerConfig
 from core.robots import Side, SoftArm
 
@@ -92,7 +93,14 @@ def mirror_plan(robot: SoftArm, plan: GraspPlan) -> GraspPlan:
     return dataclasses.replace(
         plan, center=mirror_xy(robot, plan.center), kappa_meas=-plan.kappa_meas,
         kappas=-plan.kappas, palm_poses=poses, phis=mirror_heading(robot, plan.phis),
-        side="right" if plan.side == "left" else "left")
+        side="right" if plan.side == "left" else "left",
+        obstacles=tuple(mirror_obstacle(robot, o) for o in plan.obstacles))
+
+
+def mirror_obstacle(robot: SoftArm, obstacle: Obstacle) -> Obstacle:
+    """An obstacle disk reflected across the base's heading line (name and radius kept)."""
+    x, y = mirror_xy(robot, (obstacle.x, obstacle.y))
+    return dataclasses.replace(obstacle, x=float(x), y=float(y))
 
 
 class SidedPlanner:
@@ -116,7 +124,9 @@ class SidedPlanner:
 
     def plan(self, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
              side: Side | None = None, delta_d: float | None = None,
-             weights: npt.ArrayLike | None = None) -> GraspPlan:
+             weights: npt.ArrayLike | None = None,
+             obstacles: tuple[Obstacle, ...] | list[Obstacle] = (),
+             clearance: float = 0.0) -> GraspPlan:
         """Plan on ``side`` (default: the side the object lies on; see :meth:`side_for`).
 
         Raises:
@@ -130,13 +140,15 @@ class SidedPlanner:
             raise GraspRefused("wrong_side", "This gripper closes to its left only (robot file "
                                "[gripper] fingers = \"left\"): it cannot grasp on the right.")
         if side == "left":
-            return self.left.plan(kappa_meas, center, radius, delta_d=delta_d, weights=weights)
+            return self.left.plan(kappa_meas, center, radius, delta_d=delta_d, weights=weights,
+                                  obstacles=obstacles, clearance=clearance)
         km = np.asarray(kappa_meas, dtype=float)
         ctr = np.asarray(center, dtype=float)
         if ctr.shape != (2,):
             raise GraspRefused("bad_input", f"The object centre must be (x, y), got {ctr!r}.")
         plan = self.left.plan(-km, mirror_xy(self.robot, ctr), radius, delta_d=delta_d,
-                              weights=weights)
+                              weights=weights, clearance=clearance,
+                              obstacles=[mirror_obstacle(self.robot, o) for o in obstacles])
         return mirror_plan(self.robot, plan)
 
 
@@ -164,8 +176,10 @@ def _planner_for(robot: SoftArm) -> SidedPlanner:
 
 def plan_grasp_sided(robot: SoftArm, kappa_meas: npt.ArrayLike, center: npt.ArrayLike,
                      radius: float, *, side: Side | None = None, delta_d: float | None = None,
-                     weights: npt.ArrayLike | None = None) -> GraspPlan:
+                     weights: npt.ArrayLike | None = None,
+                     obstacles: tuple[Obstacle, ...] | list[Obstacle] = (),
+                     clearance: float = 0.0) -> GraspPlan:
     """:func:`core.planning.grasp.plan_grasp` on the object's side of the arm (a memoised
-    :class:`SidedPlanner` per robot)."""
+    :class:`SidedPlanner` per robot), around ``obstacles`` keeping ``clearance`` (m)."""
     return _planner_for(robot).plan(kappa_meas, center, radius, side=side, delta_d=delta_d,
-                                    weights=weights)
+                                    weights=weights, obstacles=obstacles, clearance=clearance)

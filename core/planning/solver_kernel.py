@@ -30,7 +30,7 @@ class PointEval:
     rotations.
     """
 
-    __slots__ = ("x", "e", "viol", "f", "J", "D1", "M", "T", "c2E", "dist", "sstar", "heading")
+    __slots__ = ("x", "e", "viol", "f", "J", "D1", "M", "T", "c2E", "hc", "aux", "heading")
 
     def __init__(self, k: "Kernel", x: list[float]):
         sin, cos = math.sin, math.cos
@@ -68,11 +68,12 @@ class PointEval:
         self.x, self.T, self.M, self.D1, self.c2E, self.f = x, T, M, D1, c2E, f
         e = self.e = q_rel + k.base_minus_center
         self.viol = abs(e.real) + abs(e.imag)
-        self.dist = None
+        self.hc = None
         if k.clearance is not None:
-            dist, sstar = k.model.arc_distances(np.array(x)[None], k.clearance.center)
-            self.dist, self.sstar = dist[0], sstar
-            self.viol += float(np.maximum(0.0, k.clearance.rho - self.dist).sum())
+            # Inequality constraints h(kappa) >= 0 (grasp_solver.Clearance and any other set
+            # with the same evaluate / jacobian protocol, e.g. obstacle disks).
+            self.hc, self.aux = k.clearance.evaluate(k.model, x)
+            self.viol += float(np.maximum(0.0, -self.hc).sum())
 
 
 class Kernel:

@@ -258,7 +258,7 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
     user(op.x, viewer, 50.0)  # mm (issue 18: units people read)
     user(op.r, viewer, 30.0)
     user(op.selected, viewer, "Object 2")
-    user(op.click_place, viewer, False)
+    user(op.click_place, viewer, "Nothing")   # #17.1: a dropdown (Object | Obstacle | Nothing)
     user(op.load_button, viewer, viser.UploadedFile("cup.json", scene))
     click_at(op, viewer, -0.1, 0.3)
     drag(s, "Object 1", viewer, 0.0, 0.35, phase="update")
@@ -282,7 +282,7 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
     assert app.store.command is command
     # What the viewer's browser showed everyone is put back.
     assert (op.x.value, op.r.value) == (round(obj.x * 1e3, 1), round(obj.r * 1e3, 1))  # mm
-    assert op.selected.value == "Object 1" and op.click_place.value is True
+    assert op.selected.value == "Object 1" and op.click_place.value == "Object"
     assert pp.delta_d.value == round(s.delta_d * 1e3, 1) and pp.live.value and pp.reach.value
     assert pp.weights.value == ", ".join(f"{w:g}" for w in s.weights)
     assert wp.slider.value == before.index + 1 and wp.speed.value == 2.0 and wp.trail.value

@@ -120,7 +120,7 @@ def place_scene(app, objects_panel, operator):
     for xy in OBJECTS[1:]:
         click_at(objects_panel, operator, *xy)
     wait_for(lambda: len(s.view().objects) == 3)
-    user(objects_panel.click_target, operator, "Bin")
+    user(objects_panel.click_place, operator, "Bin")
     click_at(objects_panel, operator, *BIN_XY)
     return wait_for(lambda: s.view().bin)
 
@@ -152,8 +152,8 @@ def test_a_click_places_the_bin_the_arm_can_hold_an_object_over(rig):
     time.sleep(0.2)
     assert app.grasp_session.view().bin == table_bin
     # A viewer may neither switch what clicks place nor place the bin.
-    user(objects_panel.click_target, viewer, "Object")
-    assert objects_panel.click_target.value == "Bin"
+    user(objects_panel.click_place, viewer, "Object")
+    assert objects_panel.click_place.value == "Bin"
     click_at(objects_panel, viewer, -0.1, 0.3)
     time.sleep(0.3)
     assert app.grasp_session.view().bin == table_bin

@@ -31,12 +31,13 @@ from core.planning.arm_model import ArmModel, wrap
 from core.planning.clearance import certify_lines
 from core.planning.feasibility import (GraspRefused, best_start, check_request, find_final_config,
                                       seeds_near)
+from core.planning.obstacles import Obstacle, ObstacleSetup
 from core.planning.plan_types import GraspPlan, PlannerConfig, RadiusFailure, format_plan
 
 Array = npt.NDArray[np.float64]
 
-__all__ = ["GraspPlan", "GraspPlanner", "GraspRefused", "PlannerConfig", "RadiusFailure",
-           "format_plan", "plan_grasp"]
+__all__ = ["GraspPlan", "GraspPlanner", "GraspRefused", "Obstacle", "PlannerConfig",
+           "RadiusFailure", "format_plan", "plan_grasp"]
 
 _REASONS = {
     gs.CURVATURE_LIMIT: ("curvature_limit", "the palm cannot lie tangent on this circle within "
@@ -63,20 +64,32 @@ class _Waypoint:
     cost: float = math.nan
     violation: float = math.nan
     error: complex = 0j         # object-centre point error q - c of the solution
+    obstacle_clearance: float = math.inf        # gap to the nearest obstacle here
+    obstacle_path_clearance: float = math.inf   # certified bound along the line into it
     detail: str = ""
     dk: Array | None = None     # d kappa / d r_a at the solution (predictor)
     dl: tuple[float, float] | None = None
 
 
-def _sweep_detail(path_clearance: float, from_start: bool) -> str:
+def _sweep_detail(p: _Waypoint, from_start: bool) -> str:
     where = ("the arm's current shape to the first waypoint" if from_start
              else "the previous waypoint")
-    return (f"the motion from {where} would sweep the arm {-path_clearance * 1e3:.1f} mm into "
-            f"the object")
+    if p.path_clearance < 0.0:
+        return (f"the motion from {where} would sweep the arm {-p.path_clearance * 1e3:.1f} mm "
+                f"into the object")
+    return (f"the motion from {where} would bring the arm within "
+            f"{max(p.obstacle_path_clearance, 0.0) * 1e3:.1f} mm of an obstacle")
 
 
 class GraspPlanner:
-    """Algorithm 1 for one robot; keeps the model and settings between plans."""
+    """Algorithm 1 for one robot; keeps the model and settings between plans.
+
+    With obstacles (``plan(..., obstacles=..., clearance=...)``) the plan is made by a shallow
+    copy whose ``obstacles`` is set (:mod:`core.planning.obstacle_planning`), so one planner
+    may serve several threads.
+    """
+
+    obstacles: ObstacleSetup | None = None  # set only on the per-plan copy
 
     def __init__(self, robot, config: PlannerConfig | None = None,
                  solver: gs.SolverOptions = gs.SolverOptions()):
@@ -92,12 +105,30 @@ class GraspPlanner:
         return complex(self.w_along, self.g_off + radius)
 
     def plan(self, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
-             delta_d: float | None = None, weights: npt.ArrayLike | None = None) -> GraspPlan:
+             delta_d: float | None = None, weights: npt.ArrayLike | None = None,
+             obstacles: tuple[Obstacle, ...] | list[Obstacle] = (),
+             clearance: float = 0.0) -> GraspPlan:
         """Plan the approach to a cylinder at ``center`` (x, y) of ``radius``; see the module doc.
 
+        Args:
+            obstacles: Disks the whole arm, gripper included, keeps ``clearance`` (m) from, at
+                and between waypoints (:func:`core.planning.obstacle_planning.plan_around`).
+
         Raises:
-            GraspRefused: the request cannot work; the message says why.
+            GraspRefused: the request cannot work; the message says why (with obstacles:
+                which obstacle is in the way and by how much).
         """
+        if obstacles:
+            from core.planning.obstacle_planning import plan_around
+            return plan_around(self, kappa_meas, center, radius, delta_d, weights,
+                               tuple(obstacles), clearance)
+        return self._plan(kappa_meas, center, radius, delta_d=delta_d, weights=weights)
+
+    def _plan(self, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
+              delta_d: float | None = None, weights: npt.ArrayLike | None = None,
+              first_start: Array | None = None) -> GraspPlan:
+        """:meth:`plan` without obstacle handling (``self.obstacles`` constrains it, if set);
+        ``first_start`` replaces the first waypoint's warm start."""
         t_start = time.perf_counter()
         cfg, m = self.config, self.model
         km = np.asarray(kappa_meas, dtype=float)
@@ -129,10 +160,13 @@ class GraspPlanner:
         wps: list[_Waypoint] = []
         prev: _Waypoint | None = None
         witness: Array | None = None
+        witness_tried = False
         for i, ra in enumerate(radii.tolist(), start=1):
             if prev is None:
                 x, lam = km, None
                 x0, lam0 = best_start(m, c, self._offset(ra), km, w, cfg.seed_table), None
+                if first_start is not None:
+                    x0 = first_start
             else:
                 x, lam = prev.kappa, prev.lam
                 x0, lam0 = x, lam
@@ -143,12 +177,18 @@ class GraspPlanner:
             wp = self._solve_radius(c, ra, x0, lam0, km, w, i, first_restart=x,
                                     tangent=i < num_moves)
             if wp.status != gs.OK:
-                if witness is None:
-                    witness = self._witness(c, r_o, km, w)
-                prev_r = wps[-1].radius if wps else d1
-                frac = (prev_r - ra) / max(prev_r - radii[-1], 1e-9)
-                wp = self._solve_radius(c, ra, x, lam, km, w, i,
-                                        [x + frac * (witness - x), witness], wp)
+                if not witness_tried:
+                    witness, witness_tried = self._witness(c, r_o, km, w), True
+                if witness is not None:
+                    prev_r = wps[-1].radius if wps else d1
+                    frac = (prev_r - ra) / max(prev_r - radii[-1], 1e-9)
+                    wp = self._solve_radius(c, ra, x, lam, km, w, i,
+                                            [x + frac * (witness - x), witness], wp)
+            if wp.status != gs.OK and self.obstacles is not None:
+                if i < num_moves:
+                    continue    # no shape on this circle clears the obstacles: go past it
+                wps.append(wp)
+                break
             wps.append(wp)
             if wp.status == gs.OK:
                 prev = wp
@@ -169,7 +209,7 @@ class GraspPlanner:
         t0 = time.perf_counter()
         off = self._offset(ra)
         if previous is None:
-            res = gs.solve(self.model, c, off, x0, km, w, lam0, opts=self.solver,
+            res = self._solve(self.model, c, off, x0, km, w, lam0, self._rows(), opts=self.solver,
                            tangent=tangent)
             wp = _Waypoint(ra, res.kappa, res.lam, res.status, res.iterations, 0, 0.0, index,
                            cost=res.cost, violation=res.violation, error=res.error,
@@ -177,14 +217,14 @@ class GraspPlanner:
             if not res.ok:
                 n = self.config.max_restarts
                 seeds = [] if first_restart is None or first_restart is km else [first_restart]
-                seeds = (seeds + [km] + list(seeds_near(self.model, c, off, n,
-                                                         self.config.seed_table)))[:n]
+                seeds = (seeds + [km] + self._table_seeds(c, off, n))[:n]
         else:
             wp = previous
         if wp.status != gs.OK:
             for s in seeds or []:
                 wp.restarts += 1
-                res = gs.solve(self.model, c, off, s, km, w, opts=self.solver, tangent=True)
+                res = self._solve(self.model, c, off, s, km, w, clearance=self._rows(),
+                               opts=self.solver, tangent=True)
                 wp.iterations += res.iterations
                 if res.ok:
                     wp.kappa, wp.lam, wp.status = res.kappa, res.lam, gs.OK
@@ -197,11 +237,26 @@ class GraspPlanner:
         wp.ms += (time.perf_counter() - t0) * 1e3
         return wp
 
-    def _witness(self, c: complex, r_o: float, km: Array, w: Array) -> Array:
-        """A final configuration, or GraspRefused('out_of_reach') if none can be found."""
+    def _table_seeds(self, c: complex, off: complex, n: int) -> list[Array]:
+        """Table configurations whose object-centre point is nearest ``c``; around obstacles
+        only those clear of them (other directions to approach from)."""
+        if self.obstacles is None:
+            return list(seeds_near(self.model, c, off, n, self.config.seed_table))
+        return list(self.obstacles.clear_seeds(
+            self.model, seeds_near(self.model, c, off, 16 * n, self.config.seed_table),
+            self.config.clearance_margin)[:n])
+
+    def _witness(self, c: complex, r_o: float, km: Array, w: Array) -> Array | None:
+        """A final configuration, or GraspRefused('out_of_reach') if none can be found (around
+        obstacles: None, and the planner goes on without one)."""
         cfg = self.config
-        kappa, _ = find_final_config(self.model, c, r_o, self._offset(r_o + self.g_off), km, w,
-                                     cfg.clearance_margin, cfg.seed_table, cfg.max_restarts)
+        off = self._offset(r_o + self.g_off)
+        seeds = None if self.obstacles is None else self._table_seeds(c, off, 2 * cfg.max_restarts)
+        kappa, _ = find_final_config(self.model, c, r_o, off, km, w,
+                                     cfg.clearance_margin, cfg.seed_table, cfg.max_restarts,
+                                     self._rows(), seeds)
+        if kappa is None and self.obstacles is not None:
+            return None
         if kappa is None:
             raise GraspRefused(
                 "out_of_reach",
@@ -212,14 +267,47 @@ class GraspPlanner:
 
     # ------------------------------------------------------------------ clearance
 
+    def _solve(self, *args, **kwargs) -> gs.SolveResult:
+        """:func:`grasp_solver.solve`; around obstacles a solve that ran out of iterations
+        within :data:`core.planning.obstacles.NEAR_TOL` of every constraint counts as solved
+        (the SQP's Hessian leaves out the distance rows' curvature, so it can creep along an
+        active obstacle row; the rows are padded by the waypoint margin, and lines are
+        certified anyway)."""
+        res = gs.solve(*args, **kwargs)
+        if res.status == gs.NO_CONVERGENCE and self.obstacles is not None:
+            rows = kwargs.get("clearance", args[7] if len(args) > 7 else None)
+            if self.obstacles.nearly_solved(self.model, res, rows):
+                res.status = gs.OK
+        return res
+
+    def _rows(self):
+        """Obstacle constraint rows for the solver (None without obstacles)."""
+        return None if self.obstacles is None else self.obstacles.rows
+
+    def _certify(self, starts: Array, ends: Array, c: complex, r_o: float) -> tuple[Array, Array]:
+        """Certified lower bounds along lines: (n,) to the object, (n,) to the nearest
+        obstacle (inf without obstacles)."""
+        cfg = self.config
+        cert = certify_lines(self.model, starts, ends, c, r_o, 0.0, cfg.line_samples)
+        if self.obstacles is None:
+            return cert.lower_bound, np.full(len(cert.lower_bound), math.inf)
+        return cert.lower_bound, self.obstacles.certify(self.model, starts, ends,
+                                                        cfg.line_samples)
+
+    def _line_bad(self, p: _Waypoint) -> bool:
+        """The line into ``p`` touches the object or comes closer than the set clearance to
+        an obstacle."""
+        need = -math.inf if self.obstacles is None else self.obstacles.clearance
+        return p.path_clearance < 0.0 or p.obstacle_path_clearance < need
+
     def _constrained(self, wp: _Waypoint, starts: list[Array], c: complex, r_o: float,
                      km: Array, w: Array) -> None:
         """Re-solve a waypoint with arm-body clearance constraints, in place."""
         t0 = time.perf_counter()
         clr = gs.Clearance(c, r_o + self.model.half_width + self.config.clearance_margin)
         for s in starts:
-            res = gs.solve(self.model, c, self._offset(wp.radius), s, km, w, wp.lam, clr,
-                           self.solver)
+            res = self._solve(self.model, c, self._offset(wp.radius), s, km, w, wp.lam,
+                           gs.joined(clr, self._rows()), self.solver)
             wp.iterations += res.iterations
             if res.ok:
                 wp.kappa, wp.lam, wp.cost, wp.violation = res.kappa, res.lam, res.cost, \
@@ -248,6 +336,8 @@ class GraspPlanner:
                 return wps
             chain = np.array([km] + [p.kappa for p in good])
             cert = certify_lines(m, chain[:-1], chain[1:], c, r_o, 0.0, cfg.line_samples)
+            obs_lb = (None if self.obstacles is None else
+                      self.obstacles.certify(m, chain[:-1], chain[1:], cfg.line_samples))
             changed = False
             prev_k = km
             for p, gap in zip(good, cert.end_clearance.tolist()):
@@ -265,8 +355,10 @@ class GraspPlanner:
         for p in wps:
             if p.status == gs.OK:
                 p.path_clearance = float(cert.lower_bound[k])
+                if obs_lb is not None:
+                    p.obstacle_path_clearance = float(obs_lb[k])
                 k += 1
-                if p.path_clearance < 0.0:
+                if self._line_bad(p):
                     out += self._bridge(prev_k, prev_r, p, 1, c, r_o, km, w)
                 prev_k, prev_r = p.kappa, p.radius
             out.append(p)
@@ -291,20 +383,21 @@ class GraspPlanner:
                 mid.clearance = m.clearance_py(mid.kappa.tolist(), c, r_o)
         if mid.status != gs.OK:
             p.status = gs.CLEARANCE
-            p.detail = _sweep_detail(p.path_clearance, ka is km) + (
+            p.detail = _sweep_detail(p, ka is km) + (
                 ", and no waypoint in between could be found")
             return []
-        cert = certify_lines(m, np.array([ka, mid.kappa]), np.array([mid.kappa, p.kappa]), c,
-                             r_o, 0.0, cfg.line_samples)
-        mid.path_clearance, p.path_clearance = (float(v) for v in cert.lower_bound)
+        obj_lb, obs_lb = self._certify(np.array([ka, mid.kappa]), np.array([mid.kappa, p.kappa]),
+                                       c, r_o)
+        mid.path_clearance, p.path_clearance = (float(v) for v in obj_lb)
+        mid.obstacle_path_clearance, p.obstacle_path_clearance = (float(v) for v in obs_lb)
         out: list[_Waypoint] = []
         for lo_k, lo_r, hi_wp in ((ka, ra, mid), (mid.kappa, mid.radius, p)):
-            if hi_wp.path_clearance < 0.0:
+            if self._line_bad(hi_wp):
                 if depth < cfg.max_insertions:
                     out += self._bridge(lo_k, lo_r, hi_wp, depth + 1, c, r_o, km, w)
                 else:
                     hi_wp.status = gs.CLEARANCE
-                    hi_wp.detail = _sweep_detail(hi_wp.path_clearance, lo_k is km)
+                    hi_wp.detail = _sweep_detail(hi_wp, lo_k is km)
             if hi_wp is mid:
                 out.append(mid)
         return out
@@ -327,6 +420,11 @@ class GraspPlanner:
                 failures.append(RadiusFailure(p.index, p.radius, name, p.detail))
         status = tuple("ok" if p.status == gs.OK else _REASONS[p.status][0] for p in wps)
         arr = lambda attr, dt=float: np.array([getattr(p, attr) for p in wps], dtype=dt)  # noqa
+        obs = self.obstacles
+        extra = {} if obs is None else dict(
+            obstacles=obs.obstacles, obstacle_margin=obs.clearance,
+            obstacle_clearance=obs.gaps(m, kappas).min(axis=1, initial=math.inf),
+            obstacle_path_clearance=arr("obstacle_path_clearance"))
         return GraspPlan(
             center=ctr.copy(), radius=r_o, kappa_meas=km.copy(), d1=d1, d2=d2,
             num_moves=num_moves, delta_d=dd, weights=w.copy(), radii=radii,
@@ -336,7 +434,7 @@ class GraspPlanner:
             inserted=arr("depth", int) > 0, clearance_constrained=arr("constrained", bool),
             iterations=arr("iterations", int), restarts=arr("restarts", int),
             solve_ms=arr("ms"), cost=arr("cost"), violation=arr("violation"), status=status,
-            failures=tuple(failures), total_ms=(time.perf_counter() - t_start) * 1e3)
+            failures=tuple(failures), total_ms=(time.perf_counter() - t_start) * 1e3, **extra)
 
 
 class _Identity:
@@ -358,7 +456,9 @@ def _planner_for(key: _Identity) -> GraspPlanner:
 
 
 def plan_grasp(robot, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
-               delta_d: float | None = None, weights: npt.ArrayLike | None = None) -> GraspPlan:
+               delta_d: float | None = None, weights: npt.ArrayLike | None = None,
+               obstacles: tuple[Obstacle, ...] | list[Obstacle] = (),
+               clearance: float = 0.0) -> GraspPlan:
     """Plan the approach to an object (Algorithm 1); see :class:`GraspPlanner`.
 
     Args:
@@ -368,9 +468,11 @@ def plan_grasp(robot, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: 
         radius: Object radius r_o in m.
         delta_d: Allowable incremental distance (default: the robot file's).
         weights: Cost weights R (N,) (default: the robot file's).
+        obstacles: :class:`Obstacle` disks the arm and gripper keep ``clearance`` (m) from.
 
     Raises:
         GraspRefused: (a ValueError) when the grasp cannot work; the message says why.
     """
     return _planner_for(_Identity(robot)).plan(kappa_meas, center, radius, delta_d=delta_d,
-                                               weights=weights)
+                                               weights=weights, obstacles=obstacles,
+                                               clearance=clearance)

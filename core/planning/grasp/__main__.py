@@ -1,8 +1,9 @@
 """``python -m core.planning.grasp``: plan one grasp from the command line.
 
 ``python -m core.planning.grasp --object X Y R [--json] [--robot soft-arm] [--kappa K ...]
-[--delta-d D]`` prints the plan (:func:`core.planning.sides.plan_grasp_sided`: Algorithm 1,
-for the right finger when the gripper has one and the object lies on the right); a refusal
+[--delta-d D] [--obstacle X Y R ...] [--clearance C]`` prints the plan
+(:func:`core.planning.sides.plan_grasp_sided`: Algorithm 1, for the right finger when the
+gripper has one and the object lies on the right; around the obstacles, if any); a refusal
 goes to stderr with exit code 2 (1 if planning failed).
 """
 
@@ -15,6 +16,7 @@ import sys
 import numpy as np
 
 from core.planning.feasibility import GraspRefused
+from core.planning.obstacles import Obstacle
 from core.planning.plan_types import format_plan
 from core.planning.sides import plan_grasp_sided
 
@@ -30,6 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--robot", default="soft-arm", help="robot name or TOML path")
     ap.add_argument("--kappa", nargs="+", type=float, help="measured curvatures (default 0)")
     ap.add_argument("--delta-d", type=float, help="allowable incremental distance (m)")
+    ap.add_argument("--obstacle", nargs=3, type=float, action="append", default=[],
+                    metavar=("X", "Y", "R"), help="an obstacle disk (m; repeat for more): the "
+                    "arm and gripper keep --clearance from it")
+    ap.add_argument("--clearance", type=float, default=0.01,
+                    help="clearance from obstacles (m, default 0.01)")
     ap.add_argument("--json", action="store_true", help="print the plan as JSON")
     args = ap.parse_args(argv)
     try:
@@ -37,8 +44,10 @@ def main(argv: list[str] | None = None) -> int:
         km = np.zeros(robot.n_segments) if args.kappa is None else np.array(args.kappa)
         if not isinstance(robot, robots.SoftArm):
             ap.error(f"{args.robot} is not a soft planar arm")
+        obstacles = [Obstacle(f"Obstacle {i + 1}", *o) for i, o in enumerate(args.obstacle)]
         plan = plan_grasp_sided(robot, km, args.object[:2], args.object[2],
-                                delta_d=args.delta_d)
+                                delta_d=args.delta_d, obstacles=obstacles,
+                                clearance=args.clearance)
     except GraspRefused as exc:
         print(f"refused ({exc.reason}): {exc}", file=sys.stderr)
         return 2
