@@ -214,6 +214,9 @@ TIMING_FILES = frozenset({
     "tests/hw_bridge/test_link_supervisor.py", "tests/hw_bridge/test_loop.py",
     "tests/hw_bridge/test_parent_watch.py", "tests/hw_bridge/test_realtime.py",
     "tests/hw_bridge/test_slip_emulator.py", "tests/hw_bridge/test_soft_arm_emulator.py",
+    "tests/hw_bridge/test_soft_arm_row.py", "tests/hw_bridge/test_extensible_streamer.py",
+    "tests/core/test_custom_robots.py", "tests/console/test_control_console.py",
+    "tests/console/test_hw_panel.py", "tests/console/test_recording_budget.py",
 })
 
 
@@ -231,6 +234,22 @@ def xdist_group_of(nodeid: str) -> str | None:
     if path.startswith("tests/browser/"):
         return "browser"
     return "timing" if path in TIMING_FILES else None
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """``SUITE_PART=parallel`` keeps only the tests without a group (:func:`xdist_group_of`),
+    ``SUITE_PART=serial`` only the browser and timing tests: scripts/test runs the first part on
+    two workers, then the second alone, so no wall-clock assertion shares the cores."""
+    part = os.environ.get("SUITE_PART", "")
+    if part not in ("parallel", "serial"):
+        return
+    keep, drop = [], []
+    for item in items:
+        grouped = xdist_group_of(item.nodeid) is not None
+        (keep if grouped == (part == "serial") else drop).append(item)
+    if drop:
+        config.hook.pytest_deselected(items=drop)
+        items[:] = keep
 
 
 @pytest.hookimpl(optionalhook=True)

@@ -258,7 +258,8 @@ def test_the_bin_in_scene_json_and_recordings_and_old_files_load():
                                bin=table_bin)
     feed_grasp(Recorder(), view, {"objects"})
     assert logged == [("objects", {"objects": [dataclasses.asdict(objects[0])],
-                                   "selected": "cup", "bin": table_bin.record()})]
+                                   "selected": "cup", "obstacles": [], "clearance": 0.0,
+                                   "bin": table_bin.record()})]
     feed_grasp(Recorder(), dataclasses.replace(view, bin=None), {"objects"})
     assert "bin" not in logged[-1][1]
     assert isinstance(table_bin, TableBin)
