@@ -117,9 +117,10 @@ def test_gripper_clearance_against_a_sampled_gripper():
 
 
 def test_line_certificate_is_a_true_lower_bound_and_not_vacuous():
+    rng = np.random.default_rng(20150615)  # its own data whatever ran before (xdist reorders)
     center, radius = -0.12 + 0.25j, 0.02
-    a = RNG.uniform(-10, 10, (30, 6))
-    b = np.clip(a + RNG.uniform(-6, 6, (30, 6)), -ARM.kappa_max, ARM.kappa_max)
+    a = rng.uniform(-10, 10, (30, 6))
+    b = np.clip(a + rng.uniform(-6, 6, (30, 6)), -ARM.kappa_max, ARM.kappa_max)
     cert = certify_lines(MODEL, a, b, center, radius, required=0.0, samples=8)
     tau = np.linspace(0, 1, 801)
     cfg = a[:, None, :] + tau[:, None] * (b - a)[:, None, :]
@@ -133,7 +134,11 @@ def test_line_certificate_is_a_true_lower_bound_and_not_vacuous():
     touching = dense < 0
     assert touching.any() and clear.any()
     assert np.all(cert.lower_bound[touching] < 0)
-    np.testing.assert_allclose(cert.sampled_min, np.minimum(cert.sampled_min, dense + 1e-3))
+    # The sampled minimum is a real sample (never below the truth, up to the dense reference's
+    # own sampling) and within the certificate's sampling slack (5 mm by default) above it: each
+    # line gets enough samples for its own Lipschitz rate, no more (the faster planner's choice).
+    assert np.all(cert.sampled_min >= dense - 1e-3)
+    assert np.all(cert.sampled_min <= dense + 0.005)
 
 
 def _paper_constraints(kappa, phi, center, ra):
