@@ -21,6 +21,7 @@ import pytest
 
 from browser_tabs import close_notices, open_tab
 from console.app import ConsoleApp
+from tests.ws_client import wait_for
 from console.panels.objects import ObjectsPanel
 from core.kinematics import planar
 from core.planning.grasp import plan_grasp
@@ -57,13 +58,7 @@ def swept(kappa_meas: np.ndarray, kappas: np.ndarray) -> np.ndarray:
 
 
 def wait_until(what: str, fn, timeout: float) -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = fn()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"{what}: not within {timeout:.0f} s")
+    return wait_for(fn, timeout, what)
 
 
 @pytest.fixture

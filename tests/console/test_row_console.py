@@ -27,6 +27,7 @@ from console.table_bin import (BIN_HEIGHT, TableBin, bin_point_from_scene_json, 
 from core.control.row import ObjectOutcome, RowObject, bin_at
 from core.control.row_stack import RowReport
 from core.robots import load
+from tests import ws_client
 from fakes import FakeClient, console_app
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST
 
@@ -37,13 +38,7 @@ R = 0.0165
 
 
 def wait_for(fn, timeout=20.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        value = fn()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError("condition not met in time")
+    return ws_client.wait_for(fn, timeout)
 
 
 class FakeRowControl:
