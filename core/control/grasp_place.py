@@ -374,7 +374,8 @@ class GraspAndPlace:
         self._grip_rel = rel
         self.times["grasp_end"] = t
         self._enter(Phase.MOVE_TO_BIN, t, "grasped")
-        return Decision(Phase.MOVE_TO_BIN, kappa_target=self.bin.kappa, gripper_closed=True)
+        return Decision(Phase.MOVE_TO_BIN, kappa_target=self.bin.kappa_for(self.closing_side),
+                        gripper_closed=True)
 
     def _on_move_to_bin(self, obs: Observation, t: float) -> Decision:
         if obs.object_xy is not None and self._grip_rel is not None:
@@ -382,7 +383,8 @@ class GraspAndPlace:
             if float(np.hypot(*(rel - self._grip_rel))) > self.p.capture_check_m:
                 self.gripper_closed = False
                 return self._replan(t, "object lost while moving to the bin", settle=True)
-        dist = float(np.hypot(*(self.palm(obs.kappa) - self.palm(self.bin.kappa))))
+        bin_kappa = self.bin.kappa_for(self.closing_side)
+        dist = float(np.hypot(*(self.palm(obs.kappa) - self.palm(bin_kappa))))
         if dist <= self.p.release_distance_m:
             self.gripper_closed = False
             self.times["release"] = t

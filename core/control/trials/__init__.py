@@ -105,7 +105,7 @@ def bin_drop_point(robot: SoftArm, radius: float, bin_params: BinParams | None =
     """Where the grasped object sits when the arm is at the bin configuration (the robot's
     ``[bin]`` unless ``bin_params`` is given), held by the finger closing toward ``side``."""
     b = BinParams.from_robot(robot) if bin_params is None else bin_params
-    tip = forward_kinematics(b.kappa, robot.lengths, robot.base_pose)[-1]
+    tip = forward_kinematics(b.kappa_for(side), robot.lengths, robot.base_pose)[-1]
     normal = 2 * robot.gripper.g_off + radius
     return point_in_frame(tip, (robot.gripper.w_off_along, -normal if side == "right" else normal))
 
@@ -323,7 +323,9 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     def in_bin(obj: RowObject) -> str | None:
         if sim.obj is None or sim.captured:
             return "object still in the gripper after release"
-        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params))))
+        # Held by the finger that closed on it: its drop point is on that side of the gripper.
+        side = stack.machine.closing_side
+        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params, side))))
         return None if d <= drop_radius else f"object released {d * 1000:.0f} mm from the bin drop point"
 
     wall = time.perf_counter()
