@@ -98,6 +98,11 @@ class ControlStack:
         self._require_armed("start")
         self.machine.start(t)
 
+    def set_obstacles(self, obstacles: Any = (), clearance: float = 0.0) -> None:
+        """Obstacles every plan of the task keeps ``clearance`` (m) from (first plan and
+        re-plans; :meth:`GraspAndPlace.set_obstacles`)."""
+        self.machine.set_obstacles(obstacles, clearance)
+
     def execute(self, plan: Any, center: npt.ArrayLike, t: float) -> None:
         """Execute a given grasp plan for the object at ``center``, then place it."""
         self._require_armed("execute")

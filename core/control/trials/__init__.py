@@ -27,7 +27,7 @@ import numpy as np
 
 from core.control.grasp_place import Phase, immediate
 from core.control.params import BinParams
-from core.control.planner_spec import DEFAULT_PLANNER, resolve
+from core.control.planner_spec import DEFAULT_PLANNER, plan_request, resolve
 from core.control.row import ObjectOutcome, ObjectRow, RowObject, bin_at, run_row
 from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
@@ -125,7 +125,7 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
     sim.place_object(x + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M),
                      y + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M), r)
     stack = ControlStack(robot, 0.01, immediate(
-        lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
+        lambda req: plan_request(plan_fn, robot, req)))
     loop = SimLoop(sim, stack, 0.01)
     wall = time.perf_counter()
     watch = (lambda c: bool(observe(c))) if observe else None
@@ -312,7 +312,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     if sim_overrides:
         sim.p = sim.p.replace(**sim_overrides)
     stack = ControlStack(robot, 0.01, immediate(
-        lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
+        lambda req: plan_request(plan_fn, robot, req)))
     loop = SimLoop(sim, stack, 0.01)
     drop_radius = BinParams.from_robot(robot).drop_radius_m
 
