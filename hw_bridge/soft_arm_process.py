@@ -360,7 +360,7 @@ class ControlProcess(LoopProcess):
         one after another, every plan ``clearance`` (m) from ``obstacles``; armed only.
         Its progress and outcomes are ``view.row`` (a :class:`core.control.row_stack.RowReport`
         with this ``row_id``)."""
-        flat = lambda k: tuple(float(v) for v in np.asarray(k, float).ravel())  # noqa: E731
+        flat = lambda k: tuple(float(v) for v in np.asarray(k, float).ravel())
         return self.send(RunRow(int(row_id), tuple(tuple(float(v) for v in o) for o in objects),
                                 (float(bin_xy[0]), float(bin_xy[1])), flat(bin_kappa),
                                 flat(bin_kappa_right), obstacle_rows(obstacles),

@@ -88,7 +88,7 @@ def test_tracking_lost_then_back_resumes_within_the_limit():
 
 def test_stop_then_tracking_resumes_within_the_limit():
     stack = _stack()
-    reading, meas = _armed_beyond(stack)
+    reading, _ = _armed_beyond(stack)
     stack.update(reading, 0.01)
     stack.stop(0.02)
     for k in range(20):
