@@ -9,7 +9,10 @@ the viewer's client bundle with the scene embedded as base64, opened straight fr
   ephemeral port, stopped again) draws the same scene and steps the arm through the recording's
   states with ``insert_sleep`` between frames, so the file plays back with viser's timeline.
   Its markers (phase changes, faults, STOP, operator actions: ``console.replay_markers``) are a
-  label in the scene that changes at each marker's time and a list in the page.
+  label in the scene that changes at each marker's time and a list in the page. The table as the
+  operator set it up -- objects, obstacles with their clearance rings and the bin, from the
+  recording's ``objects`` records (:func:`draw_recorded_table`) -- is drawn as it was at each
+  time, so the file shows what the operator saw.
 
 :func:`external_urls` lists the http(s) URLs in a file, to check it needs nothing online.
 """
@@ -55,6 +58,56 @@ def draw_overlay(scene: viser.SceneApi, data: dict[str, Any], root: str = "/over
     return scene.add_line_segments(f"{root}/{name}", segments, color, thickness=0.004)
 
 
+def draw_recorded_table(scene: viser.SceneApi, data: dict[str, Any] | None,
+                        root: str = "/recorded") -> list[Any]:
+    """Draw a recorded ``objects`` record's table under ``root``: the objects (cylinders in the
+    Objects panel's colours), the obstacles (``console.obstacle_view``'s look, clearance rings
+    included) and the bin (an open box with its label). Bad entries are skipped. Returns the
+    nodes (the caller removes them when the record changes)."""
+    from console.obstacle_view import draw_recorded_obstacles
+    from console.plan_view import OBJECT_COLOR, OBJECT_SEL_COLOR, object_mesh
+    from console.table_bin import BIN_COLOR, BIN_HEIGHT, open_box_mesh
+
+    if not data:
+        return []
+    nodes = draw_recorded_obstacles(scene, data, f"{root}/obstacles")
+    for i, o in enumerate(data.get("objects") or []):
+        try:
+            x, y, r = float(o["x"]), float(o["y"]), float(o["r"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if not (np.isfinite([x, y, r]).all() and 0.0 < r <= 1.0):
+            continue
+        v, f = object_mesh(r)
+        color = OBJECT_SEL_COLOR if o.get("name") == data.get("selected") else OBJECT_COLOR
+        nodes.append(scene.add_mesh_simple(f"{root}/objects/body_{i}", v, f, color=color,
+                                           position=(x, y, 0.0), cast_shadow=False))
+    b = data.get("bin")
+    try:
+        x, y, r = float(b["x"]), float(b["y"]), float(b["r"])  # type: ignore[index]
+    except (KeyError, TypeError, ValueError):
+        return nodes
+    if np.isfinite([x, y, r]).all() and 0.0 < r <= 1.0:
+        v, f = open_box_mesh(r)
+        nodes.append(scene.add_mesh_simple(f"{root}/bin/box", v, f, color=BIN_COLOR,
+                                           side="double", position=(x, y, 0.0),
+                                           cast_shadow=False))
+        nodes.append(scene.add_label(f"{root}/bin/label", "Bin",
+                                     position=(x, y, BIN_HEIGHT + 0.01), anchor="bottom-center"))
+    return nodes
+
+
+def recorded_table_until(rec: Recording, t: float) -> dict[str, Any] | None:
+    """The newest ``objects`` record (objects, obstacles, clearance, bin) at or before ``t``."""
+    found = None
+    for e in rec.events:
+        if e.t > t:
+            break
+        if e.kind == "objects" and isinstance(e.data, dict):
+            found = e.data
+    return found
+
+
 def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
                    max_frames: int = 900, dark_mode: bool = False) -> str:
     """A recorded run as a standalone, animated HTML document.
@@ -80,11 +133,15 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
         grid = np.arange(0.0, duration + 1e-9, 1.0 / rate) if duration > 0 else np.zeros(1)
         markers = markers_of(rec)
         grid = np.union1d(grid, [m.t for m in markers if 0.0 <= m.t <= duration])
+        grid = np.union1d(grid, [e.t for e in rec.events  # the table changes at its records
+                                 if e.kind == "objects" and 0.0 <= e.t <= duration])
         label = server.scene.add_label("/markers/label", "", position=(0.0, -0.06, 0.12),
                                        visible=False)
         shown = -1
         last_q: np.ndarray | None = None
         drawn: dict[str, int] = {}
+        table: dict[str, Any] | None = None
+        table_nodes: list[Any] = []
         pending = 0.0
         prev_t = 0.0
         for t in grid:
@@ -95,13 +152,19 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
             changed_overlays = {k: v for k, v in overlays.items() if drawn.get(k) != id(v)}
             found = current_marker(markers, float(t))
             new_marker = found is not None and found[0] != shown
+            recorded = recorded_table_until(rec, float(t))
+            new_table = recorded is not table
             if last_q is not None and np.array_equal(q, last_q) and not changed_overlays \
-                    and not new_marker:
+                    and not new_marker and not new_table:
                 continue
             if pending > 0:
                 serializer.insert_sleep(pending)
                 pending = 0.0
             with server.atomic():
+                if new_table:
+                    for node in table_nodes:
+                        node.remove()
+                    table, table_nodes = recorded, draw_recorded_table(server.scene, recorded)
                 app.view.update(q)
                 for name, data in changed_overlays.items():
                     draw_overlay(server.scene, data)

@@ -30,12 +30,14 @@ BIN_WALL = 0.004             # m
 
 @dataclasses.dataclass(frozen=True)
 class TableBin:
-    """A bin at ``(x, y)`` on the table (m); ``kappa`` (1/m) holds an object over it."""
+    """A bin at ``(x, y)`` on the table (m); ``kappa`` (1/m) holds an object over it,
+    ``kappa_right`` one the right finger holds (empty for a gripper with the left finger only)."""
 
     x: float
     y: float
     kappa: tuple[float, ...]
     drop_radius: float  # m: the robot file's [bin] drop radius (the box's half width)
+    kappa_right: tuple[float, ...] = ()
 
     def describe(self) -> str:
         return f"bin at ({self.x * 1e3:.0f}, {self.y * 1e3:.0f}) mm"
@@ -49,8 +51,9 @@ def locate_bin(robot: Any, x: float, y: float) -> TableBin:
     """The bin at ``(x, y)``; ValueError with the reason when the arm cannot hold an object
     over it (out of reach, on the arm, not a finite point)."""
     params = bin_at(robot, float(x), float(y))
+    right = () if params.kappa_right is None else tuple(float(k) for k in params.kappa_right)
     return TableBin(float(x), float(y), tuple(float(k) for k in params.kappa),
-                    float(params.drop_radius_m))
+                    float(params.drop_radius_m), right)
 
 
 def scene_json_with_bin(scene_text: str, table_bin: TableBin | None) -> str:

@@ -14,7 +14,7 @@ queue. Grouped by who understands them:
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING, Union
+from typing import TYPE_CHECKING, Any, Union
 
 if TYPE_CHECKING:
     from core.planning.paths import MotionPath
@@ -77,13 +77,22 @@ class PlaceObject:
     r: float
 
 
+ObstacleRow = tuple[str, float, float, float]  # an obstacle disk: name, x, y, r (m)
+
+
 @dataclasses.dataclass(frozen=True)
 class GraspAt:
-    """Place the object at ``(x, y)`` (radius ``r``), arm if needed and run the grasp task."""
+    """Place the object at ``(x, y)`` (radius ``r``), arm if needed and run the grasp task.
+
+    ``obstacles`` (name, x, y, r each) are what every plan of the task -- the first and every
+    re-plan -- keeps ``clearance`` (m) from (the Objects panel's; the same on the commands
+    below)."""
 
     x: float
     y: float
     r: float
+    obstacles: tuple[ObstacleRow, ...] = ()
+    clearance: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,6 +105,8 @@ class ExecutePlan:
     x: float
     y: float
     r: float
+    obstacles: tuple[ObstacleRow, ...] = ()  # the plan's: its re-plans keep clear of them too
+    clearance: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,14 +115,35 @@ class RunRow:
     after another (:class:`core.control.row_stack.RowControlStack`); the arm must be armed.
 
     ``bin_kappa`` is the configuration ``move_to_bin`` goes to for this row (the bin placed at
-    ``bin_xy`` on the table, :func:`core.control.row.bin_at`). ``row_id`` names the row in the
-    published reports.
+    ``bin_xy`` on the table, :func:`core.control.row.bin_at`), ``bin_kappa_right`` the one for
+    an object the right finger holds (empty: ``bin_kappa``). ``row_id`` names the row in the
+    published reports. Every object's plans keep ``clearance`` from ``obstacles``.
     """
 
     row_id: int
     objects: tuple[tuple[float, float, float], ...]
     bin_xy: tuple[float, float]
     bin_kappa: tuple[float, ...]
+    bin_kappa_right: tuple[float, ...] = ()
+    obstacles: tuple[ObstacleRow, ...] = ()
+    clearance: float = 0.0
+
+
+def obstacle_rows(obstacles: Any) -> tuple[ObstacleRow, ...]:
+    """``core.planning.obstacles.Obstacle`` disks (or (name, x, y, r) rows) as a command's
+    plain rows."""
+    out = []
+    for o in obstacles or ():
+        name, x, y, r = (o.name, o.x, o.y, o.r) if hasattr(o, "name") else o
+        out.append((str(name), float(x), float(y), float(r)))
+    return tuple(out)
+
+
+def obstacles_of(cmd: Any) -> list[Any]:
+    """The obstacles of a :class:`GraspAt`, :class:`ExecutePlan` or :class:`RunRow` as
+    ``core.planning.obstacles.Obstacle`` disks (the planner checks them and says what is wrong)."""
+    from core.planning.obstacles import Obstacle
+    return [Obstacle(*row) for row in cmd.obstacles]
 
 
 SoftArmCommand = Union[BridgeCommand, Goto, StopArm, StartGrasp, PlaceObject, GraspAt,

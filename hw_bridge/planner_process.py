@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from core.control.grasp_place import PlanRequest
-from core.control.planner_spec import DEFAULT_PLANNER, resolve
+from core.control.planner_spec import DEFAULT_PLANNER, plan_request, resolve
 from hw_bridge.parent_watch import pool_initializer  # a worker ends with its parent
 
 _WORKER_ROBOT: Any = None  # per worker process: the robot loaded once by the initializer
@@ -33,7 +33,7 @@ def _worker_init(robot_source: str, plan_spec: str, cpus: frozenset[int] | None 
 
 
 def _worker_plan(req: PlanRequest) -> Any:
-    return _WORKER_PLAN(_WORKER_ROBOT, req.kappa, req.center, req.radius)
+    return plan_request(_WORKER_PLAN, _WORKER_ROBOT, req)
 
 
 class ProcessPlanner:

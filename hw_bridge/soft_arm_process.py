@@ -40,7 +40,7 @@ import numpy as np
 
 from hw_bridge.commands import (BRIDGE_COMMANDS, SCENE_COMMANDS, Arm, Connect, Disarm, Disconnect,
                                ExecutePlan, Goto, GraspAt, PlaceObject, RunRow, SoftArmCommand,
-                               StartGrasp, StopArm)
+                               StartGrasp, StopArm, obstacle_rows, obstacles_of)
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
 from hw_bridge.loop_process import (LoopProcess, ProcessBridgeControls, reply_when_done,
@@ -150,12 +150,15 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         objects = [RowObject(*o) for o in cmd.objects]  # ValueError names a bad one
         if not objects:
             raise ValueError("no objects to take to the bin")
-        kappa = np.asarray(cmd.bin_kappa, float)
-        if kappa.shape != (robot.n_segments,) or not np.all(np.abs(kappa) <= robot.kappa_max):
+        kappas = [np.asarray(k, float) for k in (cmd.bin_kappa, cmd.bin_kappa_right) if k]
+        if not kappas or any(k.shape != (robot.n_segments,)
+                             or not np.all(np.abs(k) <= robot.kappa_max) for k in kappas):
             raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
                              f"±{robot.kappa_max:g} 1/m")
+        s.set_obstacles(obstacles_of(cmd), cmd.clearance)  # ValueError: nothing set, nothing runs
         place(objects[0].x, objects[0].y, objects[0].r)
-        s.start_row(cmd.row_id, objects, BinParams(kappa, robot.bin.drop_radius_m), t,
+        s.start_row(cmd.row_id, objects, BinParams(kappas[0], robot.bin.drop_radius_m,
+                                                   kappas[1] if len(kappas) > 1 else None), t,
                     place_row_object)
 
     def link(s: RowControlStack, cmd: Any) -> None:
@@ -182,6 +185,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         elif isinstance(cmd, (GraspAt, ExecutePlan)):
             if not s.armed:  # arming is the operator's own, visible act: never implied here
                 raise RuntimeError(ARM_FIRST)
+            s.set_obstacles(obstacles_of(cmd), cmd.clearance)  # first plan and re-plans
             place(cmd.x, cmd.y, cmd.r)
             if isinstance(cmd, GraspAt):
                 s.start(t)
@@ -332,23 +336,35 @@ class ControlProcess(LoopProcess):
     def place_object(self, x: float, y: float, r: float) -> cf.Future:
         return self.send(PlaceObject(float(x), float(y), float(r)))
 
-    def grasp_at(self, x: float, y: float, r: float) -> cf.Future:
-        return self.send(GraspAt(float(x), float(y), float(r)))
+    def grasp_at(self, x: float, y: float, r: float, obstacles: Any = (),
+                 clearance: float = 0.0) -> cf.Future:
+        """Place the object and run the grasp task; every plan keeps ``clearance`` (m) from
+        ``obstacles`` (``core.planning.obstacles.Obstacle``)."""
+        return self.send(GraspAt(float(x), float(y), float(r), obstacle_rows(obstacles),
+                                 float(clearance)))
 
     def execute(self, plan: Any, x: float, y: float, r: float) -> cf.Future:
-        """Place the object at (x, y) and run ``plan`` (a GraspPlan for it), then place it."""
+        """Place the object at (x, y) and run ``plan`` (a GraspPlan for it), then place it;
+        re-plans keep the plan's clearance from the plan's obstacles."""
         rows = lambda a: tuple(tuple(float(v) for v in row) for row in np.asarray(a, float))  # noqa: E731
         return self.send(ExecutePlan(rows(plan.kappas), rows(plan.palm_poses), float(x),
-                                     float(y), float(r)))
+                                     float(y), float(r),
+                                     obstacle_rows(getattr(plan, "obstacles", ())),
+                                     float(getattr(plan, "obstacle_margin", 0.0) or 0.0)))
 
-    def run_row(self, row_id: int, objects: Any, bin_xy: Any, bin_kappa: Any) -> cf.Future:
+    def run_row(self, row_id: int, objects: Any, bin_xy: Any, bin_kappa: Any,
+                bin_kappa_right: Any = (), obstacles: Any = (),
+                clearance: float = 0.0) -> cf.Future:
         """Take ``objects`` ((x, y, r) each, m) to the bin at ``bin_xy`` (``bin_kappa``: the
-        configuration over it, :func:`core.control.row.bin_at`) one after another; armed only.
+        configuration over it, ``bin_kappa_right`` the right finger's, :func:`core.control.row.bin_at`)
+        one after another, every plan ``clearance`` (m) from ``obstacles``; armed only.
         Its progress and outcomes are ``view.row`` (a :class:`core.control.row_stack.RowReport`
         with this ``row_id``)."""
+        flat = lambda k: tuple(float(v) for v in np.asarray(k, float).ravel())
         return self.send(RunRow(int(row_id), tuple(tuple(float(v) for v in o) for o in objects),
-                                (float(bin_xy[0]), float(bin_xy[1])),
-                                tuple(float(v) for v in np.asarray(bin_kappa).ravel())))
+                                (float(bin_xy[0]), float(bin_xy[1])), flat(bin_kappa),
+                                flat(bin_kappa_right), obstacle_rows(obstacles),
+                                float(clearance)))
 
     def connect_link(self, port: str, baud: int = 0) -> cf.Future:
         """Close the link and open ``port`` at ``baud`` (0: the robot file's); inactive."""

@@ -211,7 +211,11 @@ class ControlPanel(Panel):
         if target.plan is not None:
             fut = self.ctl.execute(target.plan, target.x, target.y, target.r)
         else:
-            fut = self.ctl.grasp_at(target.x, target.y, target.r)
+            session = self.app.grasp_session
+            view = None if session is None else session.view()
+            fut = self.ctl.grasp_at(target.x, target.y, target.r,
+                                    tuple(getattr(view, "obstacles", ())),
+                                    float(getattr(view, "clearance", 0.0)))
         fut.add_done_callback(lambda f: self._report(event, f))
         client = getattr(event, "client", None)
         if client is not None:

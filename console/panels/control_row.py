@@ -147,7 +147,9 @@ class RowControls:
         self.panel._stopped = False  # (as Execute: a new task after a STOP)
         self.panel.target = None
         fut = self.panel.ctl.run_row(sent.row_id, [(o.x, o.y, o.r) for o in view.objects],
-                                     (view.bin.x, view.bin.y), view.bin.kappa)
+                                     (view.bin.x, view.bin.y), view.bin.kappa,
+                                     view.bin.kappa_right, tuple(view.obstacles),
+                                     float(view.clearance))
         fut.add_done_callback(lambda f: self.panel._report(event, f))
         what = f"{len(sent.names)} object{'s' if len(sent.names) != 1 else ''} into the " \
                f"{sent.bin_text}"

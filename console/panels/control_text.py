@@ -66,7 +66,8 @@ def execute_target(session_view: Any) -> ExecuteTarget:
     obstacles = tuple(getattr(session_view, "obstacles", ()))
     if obstacles and (plan is None or tuple(plan.obstacles) != obstacles
                       or plan.obstacle_margin != session_view.clearance):
-        # The controller's own planner knows no obstacles: only a plan around them may run.
+        # Only a plan the operator saw go around them runs (the controller's re-plans then keep
+        # to the same obstacles and clearance: they travel with the plan).
         why = (f" ({out.refusal})" if out is not None and out.obj == obj and out.refusal
                else "")
         raise ValueError(f"Obstacles are on the table: Execute needs the Grasp planner's plan "

@@ -55,11 +55,14 @@ MOVING = (Phase.APPROACH, Phase.GRASP, Phase.MOVE_TO_BIN, Phase.RELEASE)
 
 @dataclasses.dataclass(frozen=True)
 class PlanRequest:
-    """What the planner needs: measured curvatures, object centre and radius."""
+    """What the planner needs: measured curvatures, object centre and radius, and the obstacles
+    (``core.planning.obstacles.Obstacle``) every plan keeps ``clearance`` (m) from."""
 
     kappa: Array
     center: Array
     radius: float
+    obstacles: tuple[Any, ...] = ()
+    clearance: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,6 +146,8 @@ class GraspAndPlace:
                  planner: Planner):
         self.robot, self.p, self.bin, self.planner = robot, params, bin_params, planner
         self._lengths = robot.lengths.tolist()
+        self.obstacles: tuple[Any, ...] = ()
+        self.clearance = 0.0
         self.reset()
 
     @classmethod
@@ -150,6 +155,21 @@ class GraspAndPlace:
         return cls(robot, StateMachineParams.from_robot(robot), BinParams.from_robot(robot), planner)
 
     # -- operator commands ---------------------------------------------------------------------
+    def set_obstacles(self, obstacles: Any = (), clearance: float = 0.0) -> None:
+        """The obstacles (``core.planning.obstacles.Obstacle``) every plan this machine asks for
+        -- the first and every re-plan -- keeps ``clearance`` (m) from; kept until set again.
+
+        Raises ValueError (nothing changes) for a clearance that is not a finite number >= 0.
+        """
+        clearance = float(clearance)
+        if not (math.isfinite(clearance) and clearance >= 0.0):
+            raise ValueError(f"clearance must be a finite distance >= 0 m, got {clearance!r}")
+        self.obstacles, self.clearance = tuple(obstacles), clearance
+
+    def _request(self, kappa: Array, center: Array, radius: float) -> PlanRequest:
+        return PlanRequest(kappa.copy(), center.copy(), float(radius), self.obstacles,
+                           self.clearance)
+
     def reset(self) -> None:
         """Back to idle; forget plan, counters and times."""
         self.phase = Phase.IDLE
@@ -296,7 +316,7 @@ class GraspAndPlace:
         center = self._anchor_sum / self._anchor_n
         self.plan_center = center
         self._enter(Phase.PLANNING, t, f"object settled at ({center[0]:.3f}, {center[1]:.3f})")
-        self._handle = self.planner(PlanRequest(obs.kappa.copy(), center.copy(), float(obs.object_radius)))
+        self._handle = self.planner(self._request(obs.kappa, center, float(obs.object_radius)))
         self.times.setdefault("start", t)
         return self._on_planning(obs, t)
 
@@ -304,8 +324,8 @@ class GraspAndPlace:
         if self._handle is None:  # re-plan without settling: ask now
             if self.plan_center is None or obs.object_radius is None:
                 return self._replan(t, "no object to plan for", settle=True)
-            self._handle = self.planner(PlanRequest(obs.kappa.copy(), self.plan_center.copy(),
-                                                    float(obs.object_radius)))
+            self._handle = self.planner(self._request(obs.kappa, self.plan_center,
+                                                      float(obs.object_radius)))
         if obs.object_xy is not None and self.plan_center is not None and \
                 np.hypot(*(obs.object_xy - self.plan_center)) > self.p.object_moved_m:
             self._handle = None
@@ -316,7 +336,8 @@ class GraspAndPlace:
         try:
             self.plan = handle.result()
         except Exception as exc:  # noqa: BLE001 - every planner failure becomes a stated reason
-            kind = "refused" if type(exc).__name__ == "GraspRefused" else "failed"
+            refused = any(c.__name__ == "GraspRefused" for c in type(exc).__mro__)
+            kind = "refused" if refused else "failed"
             return self._stop(t, f"planner {kind}: {exc}")
         return self._begin_approach(t)
 
@@ -374,7 +395,8 @@ class GraspAndPlace:
         self._grip_rel = rel
         self.times["grasp_end"] = t
         self._enter(Phase.MOVE_TO_BIN, t, "grasped")
-        return Decision(Phase.MOVE_TO_BIN, kappa_target=self.bin.kappa, gripper_closed=True)
+        return Decision(Phase.MOVE_TO_BIN, kappa_target=self.bin.kappa_for(self.closing_side),
+                        gripper_closed=True)
 
     def _on_move_to_bin(self, obs: Observation, t: float) -> Decision:
         if obs.object_xy is not None and self._grip_rel is not None:
@@ -382,7 +404,8 @@ class GraspAndPlace:
             if float(np.hypot(*(rel - self._grip_rel))) > self.p.capture_check_m:
                 self.gripper_closed = False
                 return self._replan(t, "object lost while moving to the bin", settle=True)
-        dist = float(np.hypot(*(self.palm(obs.kappa) - self.palm(self.bin.kappa))))
+        bin_kappa = self.bin.kappa_for(self.closing_side)
+        dist = float(np.hypot(*(self.palm(obs.kappa) - self.palm(bin_kappa))))
         if dist <= self.p.release_distance_m:
             self.gripper_closed = False
             self.times["release"] = t

@@ -148,10 +148,23 @@ class StateMachineParams:
 
 @dataclasses.dataclass(frozen=True)
 class BinParams:
-    """Where ``moveToBin`` goes (``[bin]``): the straight pose or configured curvatures."""
+    """Where ``moveToBin`` goes (``[bin]``): the straight pose or configured curvatures.
+
+    ``kappa`` holds the left finger's object over the bin. ``kappa_right`` (a bin placed on the
+    table for a gripper with fingers on both sides, :func:`core.control.row.bin_at`) holds the
+    right finger's object over the same point; None: the right finger goes to ``kappa`` too (the
+    robot file's bin, a configuration rather than a point).
+    """
 
     kappa: Array
     drop_radius_m: float
+    kappa_right: Array | None = None
+
+    def kappa_for(self, side: str) -> Array:
+        """The configuration ``moveToBin`` goes to with the object held by the ``side`` finger."""
+        if side == "right" and self.kappa_right is not None:
+            return self.kappa_right
+        return self.kappa
 
     @classmethod
     def read(cls, sec: Section, n: int, kappa_max: float) -> "BinParams":

@@ -211,12 +211,15 @@ def run_row(loop: Any, row: ObjectRow, place: Callable[[RowObject], None],
     return row
 
 
-def bin_drop_point(robot: SoftArm, kappa: Any, radius: float) -> np.ndarray:
-    """Where an object of ``radius`` held in the gripper sits with the arm at ``kappa`` (m)."""
+def bin_drop_point(robot: SoftArm, kappa: Any, radius: float,
+                   side: Literal["left", "right"] = "left") -> np.ndarray:
+    """Where an object of ``radius`` held in the gripper by the ``side`` finger sits with the
+    arm at ``kappa`` (m)."""
     from core.kinematics.planar import forward_kinematics, point_in_frame
     tip = forward_kinematics(np.asarray(kappa, dtype=float), robot.lengths, robot.base_pose)[-1]
+    normal = 2 * robot.gripper.g_off + radius
     return np.asarray(point_in_frame(tip, (robot.gripper.w_off_along,
-                                           2 * robot.gripper.g_off + radius)), dtype=float)
+                                           -normal if side == "right" else normal)), dtype=float)
 
 
 def bin_at(robot: SoftArm, x: float, y: float, radius: float | None = None) -> BinParams:
@@ -226,25 +229,39 @@ def bin_at(robot: SoftArm, x: float, y: float, radius: float | None = None) -> B
     the robot's nominal object) lying at the bin: with the arm there, the held object is over
     the bin point, so releasing it drops it there. Only the final pose is needed (the arm moves
     to the bin directly, not along an approach), so a plan whose approach failed still gives a
-    bin when its final pose was solved. Raises ValueError with the reason when no pose puts the
-    gripper over the point (out of reach, on the base, on the straight arm).
+    bin when its final pose was solved. A gripper with fingers on both sides gets one pose per
+    finger (``kappa_right``: the right finger's object over the point, planned by mirroring,
+    :mod:`core.planning.sides`), so an object grasped on either side drops at the bin. Raises
+    ValueError with the reason when no pose puts a finger over the point (out of reach, on the
+    base, on the straight arm).
     """
-    from core.planning.grasp import GraspRefused, plan_grasp
     r = robot.capture.nominal_object_radius if radius is None else float(radius)
     where = f"({x * 1000:.0f}, {y * 1000:.0f}) mm"
     if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r) and r > 0):
         raise ValueError(f"bin at {where}: need a finite point and an object radius > 0")
+    kappa = _bin_pose(robot, x, y, r, "left", where)
+    kappa_right = (_bin_pose(robot, x, y, r, "right", where)
+                   if "right" in robot.gripper.sides else None)
+    return BinParams(kappa, robot.bin.drop_radius_m, kappa_right)
+
+
+def _bin_pose(robot: SoftArm, x: float, y: float, r: float, side: Literal["left", "right"],
+              where: str) -> np.ndarray:
+    """The final pose of a ``side``-finger grasp of an object of radius ``r`` at ``(x, y)``."""
+    from core.planning.grasp import GraspRefused
+    from core.planning.sides import plan_grasp_sided
+    finger = "" if side == "left" or "left" not in robot.gripper.sides else "the right finger: "
     try:
-        plan = plan_grasp(robot, np.zeros(robot.n_segments), (x, y), r)
+        plan = plan_grasp_sided(robot, np.zeros(robot.n_segments), (x, y), r, side=side)
     except GraspRefused as exc:
-        raise ValueError(f"the bin at {where} cannot be reached: {exc}") from None
+        raise ValueError(f"the bin at {where} cannot be reached: {finger}{exc}") from None
     if len(plan.status) == 0 or plan.status[-1] != "ok":
-        raise ValueError(f"the bin at {where} cannot be reached: no arm shape puts the gripper "
-                         "over it")
+        raise ValueError(f"the bin at {where} cannot be reached: {finger}no arm shape puts the "
+                         "gripper over it")
     kappa = np.asarray(plan.kappas[-1], dtype=float)
-    miss = float(np.hypot(*(bin_drop_point(robot, kappa, r) - (x, y))))
+    miss = float(np.hypot(*(bin_drop_point(robot, kappa, r, side) - (x, y))))
     tol = StateMachineParams.from_robot(robot).release_distance_m
     if miss > tol:  # the solver's palm-point error is far below this
-        raise ValueError(f"the bin at {where} cannot be reached: the closest pose drops "
+        raise ValueError(f"the bin at {where} cannot be reached: {finger}the closest pose drops "
                          f"{miss * 1000:.0f} mm away")
-    return BinParams(kappa, robot.bin.drop_radius_m)
+    return kappa

@@ -83,7 +83,7 @@ class ControlStack:
         """Start commanding from the device's cylinder positions; root segments pre-pressurise."""
         self.controller.reset(cylinders)
         if self.kappa_meas is not None:
-            self.traj.reset(self.kappa_meas)
+            self._restart_from(self.kappa_meas)
         self.machine.reset()
         self._freeze = False
         self.armed = True
@@ -97,6 +97,11 @@ class ControlStack:
         """Full grasp-and-place (settle, plan, approach, grasp, place)."""
         self._require_armed("start")
         self.machine.start(t)
+
+    def set_obstacles(self, obstacles: Any = (), clearance: float = 0.0) -> None:
+        """Obstacles every plan of the task keeps ``clearance`` (m) from (first plan and
+        re-plans; :meth:`GraspAndPlace.set_obstacles`)."""
+        self.machine.set_obstacles(obstacles, clearance)
 
     def execute(self, plan: Any, center: npt.ArrayLike, t: float) -> None:
         """Execute a given grasp plan for the object at ``center``, then place it."""
@@ -141,6 +146,19 @@ class ControlStack:
         self._last = dataclasses.replace(self._last, armed=False, phase=m.phase.value,
                                          reason=m.reason, tracking_ok=False)
         return self._last
+
+    def _restart_from(self, kappa: Array, target: Array | None = None) -> None:
+        """Restart trajGen at the measured ``kappa`` toward ``target`` (default: ``kappa``),
+        the target clamped to the curvature limit +-kappa_max.
+
+        A measurement may lie beyond the limit (the arm bent past it by a load or by hand,
+        motion-capture noise at full bend) and a target kept from such a state (a freeze's
+        resume target) too; trajGen refuses targets beyond the limit, so the period would raise.
+        The reference starts where the arm is and moves back within the limit.
+        """
+        k_max = self.traj.kappa_max
+        self.traj.reset(kappa)
+        self.traj.set_target(np.clip(kappa if target is None else target, -k_max, k_max))
 
     def _require_armed(self, what: str) -> None:
         if not self.armed:
@@ -187,8 +205,7 @@ class ControlStack:
         elif self._freeze and kappa is not None:
             # Tracking is back: continue toward the same target from where the arm is.
             self._freeze = False
-            self.traj.reset(kappa)
-            self.traj.set_target(self._resume_target)
+            self._restart_from(kappa, self._resume_target)
         if d.hold_reference:
             self.traj.hold()
         if d.kappa_target is not None:

@@ -74,7 +74,12 @@ class TrajectoryGenerator:
 
     def reset(self, position: npt.ArrayLike, velocity: npt.ArrayLike | None = None,
               acceleration: npt.ArrayLike | None = None) -> None:
-        """Restart from a state (e.g. the measured curvature at rest) and hold it as the target."""
+        """Restart from a state (e.g. the measured curvature at rest) and hold it as the target.
+
+        A position beyond the curvature limit (a measured arm bent past it) is taken as it is,
+        but the target held is the position clamped to +-kappa_max: a target never lies beyond
+        the limit, so holding or resuming from such a state moves the reference back within it.
+        """
         pos = self._vec("position", position)
         vel = np.zeros(self.n) if velocity is None else self._vec("velocity", velocity)
         acc = np.zeros(self.n) if acceleration is None else self._vec("acceleration", acceleration)
@@ -82,10 +87,11 @@ class TrajectoryGenerator:
         self.inp.current_position = pos.tolist()
         self.inp.current_velocity = vel.tolist()
         self.inp.current_acceleration = acc.tolist()
-        self.inp.target_position = pos.tolist()
+        self.inp.target_position = np.clip(pos, -self.kappa_max, self.kappa_max).tolist()
         self.inp.target_velocity = [0.0] * self.n
         self.inp.target_acceleration = [0.0] * self.n
-        self._sample = TrajectorySample(pos, vel, acc, not np.any(vel) and not np.any(acc), 0.0, 0.0)
+        at_rest = not np.any(vel) and not np.any(acc) and np.all(np.abs(pos) <= self.kappa_max)
+        self._sample = TrajectorySample(pos, vel, acc, bool(at_rest), 0.0, 0.0)
         self.error = None
 
     @property

@@ -35,6 +35,9 @@ class GraspRefused(ValueError):
         super().__init__(message)
         self.reason = reason
 
+    def __reduce__(self):  # pickled as it was built: a refusal crosses the planning process
+        return (type(self), (self.reason, str(self)))
+
 
 def _cm(v: float) -> str:
     return f"{100.0 * v:.1f} cm"

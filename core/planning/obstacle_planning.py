@@ -55,6 +55,9 @@ class ObstacleRefused(GraspRefused):
         super().__init__("obstacle", message)
         self.obstacle, self.gap, self.clearance = obstacle, gap, clearance
 
+    def __reduce__(self):
+        return (type(self), (str(self), self.obstacle, self.gap, self.clearance))
+
 
 def _mm(v: float) -> str:
     return f"{v * 1e3:.0f} mm"

@@ -51,9 +51,12 @@ class FakeRowControl:
     def __init__(self):
         self.view = None
         self.sent: list[tuple] = []
+        self.scene: list[tuple] = []  # per row: the right finger's bin pose, obstacles, clearance
 
-    def run_row(self, row_id, objects, bin_xy, bin_kappa):
+    def run_row(self, row_id, objects, bin_xy, bin_kappa, bin_kappa_right=(), obstacles=(),
+                clearance=0.0):
         self.sent.append((row_id, [tuple(o) for o in objects], tuple(bin_xy), tuple(bin_kappa)))
+        self.scene.append((tuple(bin_kappa_right), tuple(obstacles), clearance))
         fut = cf.Future()
         fut.set_result(None)
         return fut
@@ -227,6 +230,24 @@ def test_the_row_is_sent_shown_and_released_objects_leave_the_table(rig):
     status = control.row.status.content
     assert "Row stopped (operator STOP)" in status
     assert "skipped (row stopped: operator STOP)" in status
+
+
+def test_the_row_takes_the_right_finger_bin_pose_and_the_obstacles_along(rig):
+    """The control process plans every object of the row itself (and re-plans): it gets the
+    Objects panel's obstacles with the clearance, and the bin's pose for the right finger."""
+    app, objects_panel, control, ctl, operator, _ = rig
+    table_bin = place_scene(app, objects_panel, operator)
+    expected = bin_at(SOFT, *BIN_XY)
+    np.testing.assert_allclose(table_bin.kappa_right, expected.kappa_right, atol=1e-9)
+    s = app.grasp_session
+    s.place_obstacle(-0.05, 0.40, 0.015)
+    s.set_clearance(0.012)
+    show(control, view_with(armed=True))
+    user(control.row.button, operator)
+    (right, obstacles, clearance), = ctl.scene
+    assert right == table_bin.kappa_right and len(right) == SOFT.n_segments
+    assert [(o.name, o.x, o.y, o.r) for o in obstacles] == [("Obstacle 1", -0.05, 0.40, 0.015)]
+    assert clearance == 0.012
 
 
 def test_the_bin_in_scene_json_and_recordings_and_old_files_load():

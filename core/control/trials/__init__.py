@@ -27,7 +27,7 @@ import numpy as np
 
 from core.control.grasp_place import Phase, immediate
 from core.control.params import BinParams
-from core.control.planner_spec import DEFAULT_PLANNER, resolve
+from core.control.planner_spec import DEFAULT_PLANNER, plan_request, resolve
 from core.control.row import ObjectOutcome, ObjectRow, RowObject, bin_at, run_row
 from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
@@ -105,7 +105,7 @@ def bin_drop_point(robot: SoftArm, radius: float, bin_params: BinParams | None =
     """Where the grasped object sits when the arm is at the bin configuration (the robot's
     ``[bin]`` unless ``bin_params`` is given), held by the finger closing toward ``side``."""
     b = BinParams.from_robot(robot) if bin_params is None else bin_params
-    tip = forward_kinematics(b.kappa, robot.lengths, robot.base_pose)[-1]
+    tip = forward_kinematics(b.kappa_for(side), robot.lengths, robot.base_pose)[-1]
     normal = 2 * robot.gripper.g_off + radius
     return point_in_frame(tip, (robot.gripper.w_off_along, -normal if side == "right" else normal))
 
@@ -125,7 +125,7 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
     sim.place_object(x + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M),
                      y + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M), r)
     stack = ControlStack(robot, 0.01, immediate(
-        lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
+        lambda req: plan_request(plan_fn, robot, req)))
     loop = SimLoop(sim, stack, 0.01)
     wall = time.perf_counter()
     watch = (lambda c: bool(observe(c))) if observe else None
@@ -312,7 +312,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     if sim_overrides:
         sim.p = sim.p.replace(**sim_overrides)
     stack = ControlStack(robot, 0.01, immediate(
-        lambda req: plan_fn(robot, req.kappa, req.center, req.radius)))
+        lambda req: plan_request(plan_fn, robot, req)))
     loop = SimLoop(sim, stack, 0.01)
     drop_radius = BinParams.from_robot(robot).drop_radius_m
 
@@ -323,7 +323,9 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     def in_bin(obj: RowObject) -> str | None:
         if sim.obj is None or sim.captured:
             return "object still in the gripper after release"
-        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params))))
+        # Held by the finger that closed on it: its drop point is on that side of the gripper.
+        side = stack.machine.closing_side
+        d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params, side))))
         return None if d <= drop_radius else f"object released {d * 1000:.0f} mm from the bin drop point"
 
     wall = time.perf_counter()
