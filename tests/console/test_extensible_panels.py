@@ -100,8 +100,8 @@ def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, m
     assert 'data-drawn="requested"' in panel.status.content
     tip = dk.tip_position(EXT, np.asarray(app.store.command.q))
     want = paths.build_path("linear", tip, 0.08, "xy")
-    np.testing.assert_allclose(panel.waypoints.points, want, atol=1e-6)
-    assert panel.trace.visible
+    np.testing.assert_allclose(panel.drawing.waypoints.points, want, atol=1e-6)
+    assert panel.drawing.trace.visible
     # The worker never answers: after the timeout the panel says so (the 2 Hz status loop).
     assert wait_for(lambda: status_of(panel.status.content) == "error")
     assert time.monotonic() - t0 < 1.0 + 2.0

@@ -11,7 +11,7 @@ import pytest
 
 from console import camera
 from console.measure import Measurement, NotOnTable, table_hit
-from console.panels.paths import trail_tail
+from console.panels.path_scene import trail_tail
 from console.plan_view import (GHOST_COLOR, TABLE_TINT, TRAIL_WAYPOINTS, plan_geometry,
                                plan_labels, trail_colors, trail_mask)
 from core.planning.grasp import plan_grasp
