@@ -40,7 +40,8 @@ import viser.uplot as uplot
 from console.header import Tone
 from console.lab_feed import path_plan_record
 from console.panels.base import Panel
-from console.panels.extensible_status import link_summary, runner_phase, worker_pool
+from console.panels.extensible_status import (extensible_runner, hardware_html, runner_phase,
+                                              worker_pool)
 from console.panels.obstacles_boxes import box_scene_of
 from console.panels.path_scene import PathScene, trail_tail
 from console.panels.plot_data import thin
@@ -69,16 +70,6 @@ class PathRequest:
     speed: float
     start: tuple[float, ...]  # flattened commanded posture the path starts from
     obstacles: int = 0  # version of the box obstacles it was planned around
-
-
-def extensible_runner(app: Any) -> ExtensibleProcess:
-    """``app.services.extensible_runner``, or a clear error when the console was built without
-    one (serve.py always builds it for the extensible arm)."""
-    runner = app.services.extensible_runner
-    if runner is None:
-        raise ValueError("the extensible arm's panels need its runner: build the console with "
-                         "services=ConsoleServices(extensible_runner=...) (serve.py does)")
-    return runner
 
 
 @dataclasses.dataclass
@@ -117,7 +108,7 @@ class PathsPanel(Panel):
         self.reconnect_btn = gui.add_button(
             "Reconnect hardware", icon=viser.Icon.PLUG_CONNECTED,
             hint="Connect (after a fault: reconnect) and arm the motors; the arm holds still.")
-        self.hardware = gui.add_html(self._hardware_html())
+        self.hardware = gui.add_html(hardware_html(self.app))
         self.progress = gui.add_progress_bar(0.0, color="blue")
         self.status = gui.add_html(self._status("Preview a path, then Execute.", "idle"))
         self.plot = gui.add_uplot(
@@ -224,14 +215,14 @@ class PathsPanel(Panel):
     def _reconnect(self) -> None:
         runner = self.runner
         future = runner.connect() if runner.started else runner.start().connecting
-        self.hardware.content = self._hardware_html("connecting…")
+        self.hardware.content = hardware_html(self.app, "connecting…")
 
         def show() -> None:
             try:
                 future.result(timeout=10.0)  # type: ignore[union-attr]
                 time.sleep(3 * runner.period_s)  # the snapshot trails by a tick
             finally:
-                self.hardware.content = self._hardware_html()
+                self.hardware.content = hardware_html(self.app)
         threading.Thread(target=show, daemon=True, name="hw-connect").start()
 
     # -- workers ---------------------------------------------------------------------------
@@ -301,7 +292,7 @@ class PathsPanel(Panel):
             return
         self._job = job = runner.execute(path, "path")
         self._stopped = False
-        self.hardware.content = self._hardware_html()
+        self.hardware.content = hardware_html(self.app)
         self._set_status(f"Executing ({path.duration:.1f} s)…", "running")
         # Frames come while the arm moves; this shows the end even if nothing is redrawn then.
         threading.Thread(target=self._watch, args=(runner, job), daemon=True,
@@ -330,18 +321,6 @@ class PathsPanel(Panel):
     def clear_trails(self) -> None:
         """Hide the measured tip trace of the last run (the View panel's "Clear trails")."""
         self.drawing.clear_trails()
-
-    def _hardware_html(self, text: str | None = None) -> str:
-        """The link as the Hardware panel and the header's Link field show it (the link
-        supervisor's health), and the runner's state once it runs."""
-        if text is None:
-            text = link_summary(self.app)
-            runner = self.app.services.extensible_runner
-            if runner is not None and runner.started:
-                snap = runner.snapshot
-                text += f" · runner {snap.state}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
-        return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
-                f"Hardware: {html.escape(text)}</div>")
 
     def _set_status(self, text: str, state: str, drawn: str = "") -> None:
         self.status.content = self._status(text, state, drawn)
@@ -377,7 +356,7 @@ class PathsPanel(Panel):
                 if planning is not None:
                     self._show_planning(planning)
                 self.show_phase()
-                page = self._hardware_html()
+                page = hardware_html(self.app)
                 if page != shown:
                     shown = self.hardware.content = page
             except Exception:  # noqa: BLE001 - a display hiccup must not end the thread
@@ -419,7 +398,7 @@ class PathsPanel(Panel):
         if result is None:
             return
         self._job = 0
-        self.hardware.content = self._hardware_html()
+        self.hardware.content = hardware_html(self.app)
         self.show_phase()
         if result.ok:
             self._set_status(f"Done: final tip {fmt_mm(result.error or 0.0, 2)} mm from the "
