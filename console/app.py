@@ -52,8 +52,8 @@ import viser
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
 from console.client_guard import ClientGuard
-from console.client_guard import install as _install_client_guard
 from console.datadir import DataDir
+from console.guarded_receive import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
