@@ -45,11 +45,11 @@ from __future__ import annotations
 import collections
 import dataclasses
 import logging
-import math
 import time
 from typing import Any, Callable
 
-from console.client_values import GuardLimits, OutOfBounds, Refused, short, validate_value
+from console.client_values import (GuardLimits, OutOfBounds, Refused, check_fields, short,
+                                   validate_value)
 
 log = logging.getLogger(__name__)
 
@@ -175,9 +175,9 @@ class ClientGuard:
             self._drop(client_id, state, "type", f"{kind} is not accepted from browsers")
             return None
         try:
-            self._sane(getattr(message, "__dict__", {}), depth=0,
-                       skip_bytes=kind == "FileTransferPart",
-                       text_limit=lim.max_string)
+            check_fields(getattr(message, "__dict__", {}), lim, depth=0,
+                         skip_bytes=kind == "FileTransferPart",
+                         text_limit=lim.max_string)
             check = getattr(self, f"_check_{kind}", None)
             ok = True if check is None else check(client_id, state, message)
         except Refused as exc:
@@ -221,36 +221,6 @@ class ClientGuard:
         more = f" (+{entry[1] - 1} more since the last line)" if entry[1] > 1 else ""
         log.warning("client %s: %s%s", client_id, short(detail, 200), more)
         entry[0], entry[1] = now, 0
-
-    def _sane(self, value: Any, depth: int, skip_bytes: bool, text_limit: int) -> None:
-        """Every number finite and moderate, strings / containers bounded, nesting shallow."""
-        lim = self.limits
-        if depth > 6:
-            raise Refused("nested too deep")
-        if isinstance(value, bool) or value is None:
-            return
-        if isinstance(value, float) or isinstance(value, int):
-            if abs(value) > lim.max_abs or not math.isfinite(value):  # (abs first: big ints)
-                raise Refused(f"number out of range: {short(value)}")
-        elif isinstance(value, str):
-            if len(value) > text_limit:
-                raise Refused(f"string of {len(value)} characters")
-        elif isinstance(value, (bytes, bytearray)):
-            if not skip_bytes:
-                raise Refused("unexpected bytes")
-        elif isinstance(value, dict):
-            if len(value) > lim.max_items:
-                raise Refused(f"{len(value)} items")
-            for k, v in value.items():
-                self._sane(k, depth + 1, skip_bytes, lim.max_string)
-                self._sane(v, depth + 1, skip_bytes, text_limit)
-        elif isinstance(value, (list, tuple)):
-            if len(value) > lim.max_items:
-                raise Refused(f"{len(value)} items")
-            for v in value:
-                self._sane(v, depth + 1, skip_bytes, text_limit)
-        else:
-            raise Refused(f"unexpected {type(value).__name__}")
 
     # -- per message type (True: pass on; False: handled here; Refused: invalid) --------------
 
