@@ -145,7 +145,7 @@ class RowControls:
                        view.bin.describe())
         self.sent = sent
         self.panel._stopped = False  # (as Execute: a new task after a STOP)
-        self.panel.target = None
+        self.panel.execute.target = None
         fut = self.panel.ctl.run_row(sent.row_id, [(o.x, o.y, o.r) for o in view.objects],
                                      (view.bin.x, view.bin.y), view.bin.kappa)
         fut.add_done_callback(lambda f: self.panel._report(event, f))

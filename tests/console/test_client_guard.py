@@ -287,7 +287,7 @@ def test_a_viewer_cannot_tick_click_to_grasp(console: tuple, trio: tuple) -> Non
     if app.robot.kind != "planar":
         pytest.skip("the Control panel is the soft arm's")
     op, viewer, watcher = trio
-    box = app.panel(ControlPanel).click_mode
+    box = app.panel(ControlPanel).execute.click_mode
     viewer.update(box._impl.uuid, value=True)
     wait_for(lambda: viewer.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid),
              what="the viewer's box unticked again")
@@ -329,7 +329,7 @@ def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) ->
             with session._cond:  # past the session's own checks, as a bug might
                 session._objects[0] = dataclasses.replace(first, r=r)
                 session._selected = first.name
-            panel._execute(event)
+            panel.execute._execute(event)
         assert sent == []
         assert len(client.notes) == 3 and all(t == "Refused" for t, _ in client.notes)
         assert "radius" in client.notes[0][1] or "finite" in client.notes[0][1]
