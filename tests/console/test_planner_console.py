@@ -102,17 +102,17 @@ def console():
     from console.app import ConsoleApp
     from console.panels import planner
 
-    planner.GraspSession.compute_reach = False
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
-    app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels()).start()
-    yield app
-    app.grasp_session.close()
-    app.stop()
-    server.stop()
-    planner.GraspSession.compute_reach = True
+    with pytest.MonkeyPatch.context() as patch:  # (module scope: no monkeypatch fixture)
+        patch.setattr(planner.GraspSession, "compute_reach", False)
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+        app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels()).start()
+        yield app
+        app.grasp_session.close()
+        app.stop()
+        server.stop()
 
 
 def wait_for(fn, timeout=10.0):
@@ -210,7 +210,7 @@ def drag(session, name: str, client, x: float, y: float, phase: str = "end") -> 
 
 
 @pytest.fixture
-def gated():
+def gated(monkeypatch):
     """A console with the grasp panels, an operator token and its own session."""
     import viser
 
@@ -218,7 +218,7 @@ def gated():
     from console.app import ConsoleApp
     from console.panels import planner
 
-    planner.GraspSession.compute_reach = False
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels(), access=AccessControl("tok"))
     try:
@@ -227,7 +227,6 @@ def gated():
         app.grasp_session.close()
         app.grasp_session._thread.join(5)  # no drawing into a stopped server
         server.stop()
-        planner.GraspSession.compute_reach = True
 
 
 def test_a_viewer_changes_nothing_and_edits_snap_back(gated):

@@ -86,8 +86,8 @@ def view_with(armed=True, phase="idle", row=None, waypoint=0, n_waypoints=0):
 
 
 @pytest.fixture
-def rig():
-    planner.GraspSession.compute_reach = False
+def rig(monkeypatch):
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     ctl = FakeRowControl()
     app = console_app(SOFT, srv, panels=(ObjectsPanel,), soft_control=ctl,
@@ -104,7 +104,6 @@ def rig():
         app.grasp_session.close()
         app.grasp_session._thread.join(5)
         srv.stop()
-        planner.GraspSession.compute_reach = True
 
 
 def place_scene(app, objects_panel, operator):

@@ -198,19 +198,18 @@ def click(server, client, ray_origin, ray_direction) -> None:
 
 
 @pytest.fixture
-def planar_console(server):
+def planar_console(server, monkeypatch):
     from console.panels import planner
     from console.panels.view import ViewPanel
     from tests.fakes import console_app
 
-    planner.GraspSession.compute_reach = False
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     app = console_app(SOFT, server, panels=(*planner.grasp_panels(), ViewPanel))
     try:
         yield app
     finally:
         app.grasp_session.close()
         app.grasp_session._thread.join(5)
-        planner.GraspSession.compute_reach = True
 
 
 def wait_for(fn, timeout=10.0):
