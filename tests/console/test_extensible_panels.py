@@ -16,7 +16,8 @@ import numpy as np
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
-from hw_bridge.extensible_jobs import RunnerSnapshot
+from fakes import FakeRunner
+from ws_client import wait_for
 
 EXT = load("extensible")
 
@@ -37,17 +38,6 @@ class FakeControls:
 
     def health(self) -> FakeHealth | None:
         return self.h
-
-
-class FakeRunner:
-    """Not started (the in-process mock before the first Execute): what the panels read."""
-
-    started = False
-    period_s = 0.01
-    snapshot = RunnerSnapshot("disconnected")
-
-    def stop(self) -> None:
-        pass
 
 
 @dataclasses.dataclass
@@ -71,15 +61,6 @@ class NeverAnswers:
 
 def status_of(html: str) -> str:
     return re.search(r'data-state="(\w+)"', html).group(1)
-
-
-def wait_for(fn, timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
-    return True
 
 
 def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, monkeypatch):

@@ -16,19 +16,9 @@ from core.kinematics import box_clearance as bc
 from core.kinematics import delta as dk
 from core.planning.box_scene import BoxScene, scene_from_json, scene_to_json
 from core.robots import load
+from fakes import FakeRunner, user
 
 EXT = load("extensible")
-
-
-def user(handle, client, value=None):
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    import viser
-
-    if value is not None:
-        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
-            handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
 
 
 def type_box(panel, client, name, centre_mm, size_mm):
@@ -51,17 +41,6 @@ class SyncPool:
         return fut
 
     def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
-        pass
-
-
-class FakeRunner:
-    from hw_bridge.extensible_jobs import RunnerSnapshot
-
-    started = False
-    period_s = 0.01
-    snapshot = RunnerSnapshot("disconnected")
-
-    def stop(self) -> None:
         pass
 
 

@@ -19,7 +19,8 @@ from core.kinematics import planar as pk
 from core.planning.sides import plan_grasp_sided
 from core.planning.reachability import PLANNABLE, from_json, reachability_map, to_json
 from core.robots import load
-from fakes import FakeClient
+from fakes import FakeClient, click_at, user
+from ws_client import wait_for
 
 ROBOT = load("soft-arm")
 
@@ -115,16 +116,6 @@ def console():
         server.stop()
 
 
-def wait_for(fn, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = fn()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError("condition not met in time")
-
-
 def test_session_plans_refuses_inspects_and_plays(console):
     from console.panels.planner import PlannerPanel, outcome_html
     from console.panels.waypoints import WaypointsPanel
@@ -180,25 +171,6 @@ def test_live_replanning_is_throttled_to_the_newest_position(console):
 
 
 # -- sharing: only the operator changes the objects, the plan and the inspected waypoint ------
-
-def user(handle, client, value=None):
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    import viser
-
-    if value is not None:
-        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
-            handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
-
-
-def click_at(panel, client, x: float, y: float) -> None:
-    """A click on the table at (x, y), seen from straight above."""
-    import viser
-
-    panel._on_scene_click(viser.SceneClickEvent(client, client.client_id, (x, y, 1.0),
-                                                (0.0, 0.0, -1.0), (0.5, 0.5), None))
-
 
 def drag(session, name: str, client, x: float, y: float, phase: str = "end") -> None:
     """What viser does with a browser's gizmo drag: store the pose, then call back."""

@@ -28,7 +28,7 @@ from core.control.row import ObjectOutcome, RowObject, bin_at
 from core.control.row_stack import RowReport
 from core.robots import load
 from tests import ws_client
-from fakes import FakeClient, console_app
+from fakes import FakeClient, click_at, console_app, user
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST
 
 SOFT = load("soft-arm")
@@ -63,19 +63,6 @@ class FakeRowControl:
 
     def close(self):
         pass
-
-
-def user(handle, client, value=None):
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    if value is not None:
-        handle._impl.value = type(handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
-
-
-def click_at(panel, client, x, y):
-    panel._on_scene_click(viser.SceneClickEvent(client, client.client_id, (x, y, 1.0),
-                                                (0.0, 0.0, -1.0), (0.5, 0.5), None))
 
 
 def view_with(armed=True, phase="idle", row=None, waypoint=0, n_waypoints=0):

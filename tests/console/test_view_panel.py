@@ -17,6 +17,7 @@ from console.plan_view import (GHOST_COLOR, TABLE_TINT, TRAIL_WAYPOINTS, plan_ge
 from core.planning.grasp import plan_grasp
 from core.robots import load
 from tests.fakes import FakeClient
+from tests.ws_client import wait_for
 
 SOFT, EXT = load("soft-arm"), load("extensible")
 
@@ -210,15 +211,6 @@ def planar_console(server, monkeypatch):
     finally:
         app.grasp_session.close()
         app.grasp_session._thread.join(5)
-
-
-def wait_for(fn, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if fn():
-            return True
-        time.sleep(0.02)
-    raise AssertionError("condition not met in time")
 
 
 def test_measuring_clicks_measure_and_place_nothing_other_browsers_still_place(planar_console):
