@@ -15,10 +15,10 @@ trip p99, lost demands), measured vs target kappa per segment in numbers, and th
 header's (any client; it runs ``app.stop_motion``, whose hook freezes the arm).
 
 What Execute and *Click to grasp* act on (the Objects panel's selected object, the Grasp
-planner's plan for it) is :mod:`console.panels.control_execute`. While armed
-the 3D view shows the measured arm; jog commands from other panels are forwarded as moves when
-no task runs. The render thread only runs on new arm states (none while disarmed), so the pump
-refreshes the text itself when ``on_state`` has been quiet.
+planner's plan for it) is :mod:`console.panels.control_execute`. While armed the 3D view shows
+the measured arm; jog commands from other panels are forwarded as moves when no task runs. The
+render thread only runs on new arm states (none while disarmed), so the pump refreshes the text
+itself when ``on_state`` has been quiet.
 """
 
 from __future__ import annotations
