@@ -64,37 +64,26 @@ def binary_bytes(value: Any, lengths: list[int]) -> int:
 def counting_client(server: Any) -> Any:
     """A ``ws_client.RawClient`` that keeps each message's size: msgpack plus binary buffers,
     and its share of the compressed websocket frame it came in."""
-    import zstandard
-    from websockets.exceptions import ConnectionClosed
-    from ws_client import RawClient
+    from ws_client import RawClient, decode_payload
 
     class CountingClient(RawClient):
-        def _receive(self) -> None:
+        def __init__(self, server: Any) -> None:
             self.sized: list[tuple[dict[str, Any], int, float]] = []
             self.wire = 0
-            while True:
-                try:
-                    frame = self.ws.recv(timeout=0.2)
-                except TimeoutError:
-                    continue
-                except ConnectionClosed as exc:
-                    self.closed = exc
-                    return
-                n = int.from_bytes(frame[:8], "little")
-                c = int.from_bytes(frame[8:16], "little")
-                inner = msgspec.msgpack.decode(zstandard.ZstdDecompressor().decompress(
-                    frame[16:16 + c], max_output_size=n))
-                lengths = list(inner["binaryBufferLengths"])
-                messages = list(inner["messages"])
-                raw = [len(msgspec.msgpack.encode(m)) + binary_bytes(m, lengths)
-                       for m in messages]
-                with self._lock:
-                    self.frames += 1
-                    self.wire += len(frame)
-                    self.messages.extend(messages)
-                    total = max(sum(raw), 1)
-                    self.sized.extend((m, r, len(frame) * r / total)
-                                      for m, r in zip(messages, raw))
+            super().__init__(server)  # (starts the receive thread)
+
+        def on_frame(self, frame: bytes) -> None:
+            inner = decode_payload(frame)
+            lengths = list(inner["binaryBufferLengths"])
+            messages = list(inner["messages"])
+            raw = [len(msgspec.msgpack.encode(m)) + binary_bytes(m, lengths) for m in messages]
+            with self._lock:
+                self.frames += 1
+                self.wire += len(frame)
+                self.messages.extend(messages)
+                total = max(sum(raw), 1)
+                self.sized.extend((m, r, len(frame) * r / total)
+                                  for m, r in zip(messages, raw))
 
         def clear(self) -> None:
             with self._lock:

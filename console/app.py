@@ -1,9 +1,9 @@
 """The operator console: one viser server, one arm, composable panels and a single render thread.
 
-``ConsoleApp(robot, server)`` sets up the theme (colours and label from ``static/theme.toml``;
-share button off), the table (z = 0 plane with a subtle grid), the arm view and the camera,
-then composes its panels. ``start()`` launches the render thread; ``stop()`` ends it (the app is
-also a context manager).
+``ConsoleApp(robot, server)`` sets up the stage (``console.stage``: the theme from
+``static/theme.toml`` with the share tunnel closed, the table, lights), the arm view and the
+camera, then composes its panels. ``start()`` launches the render thread; ``stop()`` ends it
+(the app is also a context manager).
 
 Data flow (see ``console.state``)::
 
@@ -51,11 +51,9 @@ import viser
 
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
-from console.camera import apply as apply_camera
-from console.camera import presets as camera_presets
 from console.client_guard import ClientGuard
-from console.client_guard import install as _install_client_guard
 from console.datadir import DataDir
+from console.guarded_receive import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
@@ -65,9 +63,9 @@ from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel
 from console.recording import Recorder
 from console.services import ConsoleServices
+from console.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.state import ArmState, StateStore
 from console.tabs import ConsoleTabs
-from console.theme import load_theme
 from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
 
@@ -152,13 +150,14 @@ class ConsoleApp:
             self.add_stop_hook(self.services.demo.stop)
         server.on_client_connect(self.access.grant_if_free)
 
-        self._setup_theme(status)
+        self.theme = setup_theme(server, robot.name)  # (console.stage) no share tunnel either
+        self.status = server.gui.add_markdown(f"<small>{status}</small>", order=0.3)
         self.header = ConsoleHeader(self)  # STOP, control, phase, link: above every tab
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
-        self._setup_table()
-        self._setup_lights()
+        self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
+        add_lights(server.scene, self.theme)
         self.view: ArmView = make_arm_view(server.scene, self.model)
-        self._setup_camera()
+        self.camera_presets = setup_camera(server, robot, self.model.kind)
         for panel_cls in DEFAULT_PANELS if panels is None else panels:
             self.add_panel(panel_cls)
 
@@ -353,71 +352,13 @@ class ConsoleApp:
             # render takes (5-25 ms on a busy machine) came on top and 30 Hz became ~20 Hz.
             next_frame = started + self.render_period
 
-    # -- scene setup -------------------------------------------------------------------------
-
-    def _disable_share_tunnel(self) -> None:
-        # Hiding the share button is not enough: any websocket client can still send viser's
-        # ShareUrlRequest, which would open a public tunnel to the internet. Drop the handlers
-        # and make the method a no-op on this server (viser 1.1.1 internals, checked by tests).
-        from viser import _messages
-
-        handlers = getattr(self.server._websock_server, "_incoming_handlers", {})
-        for cls in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
-            handlers.pop(cls, None)
-        self.server.request_share_url = lambda *a, **k: None  # type: ignore[method-assign]
-
-    def _setup_theme(self, status: str) -> None:
-        gui = self.server.gui
-        self._disable_share_tunnel()
-        self.theme = theme = load_theme()  # static/theme.toml: colours and the panel label
-        gui.configure_theme(show_share_button=False, show_logo=False,
-                            brand_color=theme.brand_color, control_width=theme.control_width)
-        gui.set_panel_label(theme.label_for(self.robot.name))
-        self.status = gui.add_markdown(f"<small>{status}</small>", order=0.3)
+    # -- the stage (console.stage) ----------------------------------------------------------
 
     def _span(self) -> float:
-        """Largest distance of any arm point from the base (straight, fully extended)."""
-        r = self.robot
-        if self.model.kind == "planar":
-            return r.n_segments * r.segment_length + r.gripper.length  # type: ignore[union-attr]
-        return r.n_segments * r.rack_max  # type: ignore[union-attr]
+        """Largest distance of any arm point from the base (:func:`console.stage.arm_span`)."""
+        return arm_span(self.robot, self.model.kind)
 
     def _table_extent(self) -> tuple[float, float, float, float]:
-        """Table rectangle (x0, x1, y0, y1) around the arm's workspace."""
-        span = self._span()
-        if self.model.kind == "planar":
-            return -1.0 * span, 1.0 * span, -0.4 * span, 1.15 * span
-        return -0.75 * span, 0.75 * span, -0.75 * span, 0.75 * span
-
-    def _setup_table(self) -> None:
-        x0, x1, y0, y1 = self._table_extent()
-        w, h = x1 - x0, y1 - y0
-        centre = ((x0 + x1) / 2, (y0 + y1) / 2)
-        thickness = 0.02
-        scene, theme = self.server.scene, self.theme
-        self.table = scene.add_box("/table/top", color=theme.table_color,
-                                   dimensions=(w, h, thickness),
-                                   position=(centre[0], centre[1], -thickness / 2),
-                                   cast_shadow=False, receive_shadow=True)
-        self.grid = scene.add_grid("/table/grid", width=w, height=h, plane="xy",
-                                   cell_size=0.05, cell_color=theme.grid_cell_color,
-                                   section_size=0.25, section_color=theme.grid_section_color,
-                                   position=(centre[0], centre[1], 0.0005), shadow_opacity=0.15)
-        scene.world_axes.visible = False
-
-    def _setup_lights(self) -> None:
-        # Cheap lighting for software-rendered WebGL (lab PCs without a GPU, CI). Measured here
-        # in headless Chromium/SwiftShader: with viser's HDR environment map and shadow maps a
-        # slider step took ~0.4-0.6 s to process, without them ~0.1-0.2 s. A hemisphere light
-        # plus shadowless default lights looks much the same.
-        scene = self.server.scene
-        scene.configure_environment_map(None)
-        scene.configure_default_lights(enabled=True, cast_shadow=False)
-        scene.add_light_hemisphere("/lights/hemisphere", sky_color=self.theme.sky_color,
-                                   ground_color=self.theme.ground_color, intensity=1.3)
-
-    def _setup_camera(self) -> None:
-        # The first of the robot's camera presets (console.camera, also the View panel's
-        # "Reset view"): framed for a wide window with the control panel docked on the right.
-        self.camera_presets = camera_presets(self.model.kind, self._span(), self._table_extent())
-        apply_camera(self.server.initial_camera, self.camera_presets[0])
+        """Table rectangle (x0, x1, y0, y1) around the arm's workspace
+        (:func:`console.stage.table_extent`)."""
+        return table_extent(self.robot, self.model.kind)

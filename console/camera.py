@@ -3,7 +3,7 @@
 A :class:`CameraPose` is where a camera stands, what it looks at and its field of view.
 :func:`presets` gives each robot kind's named poses (planar arm: *Perspective* and *Top-down*;
 extensible arm: *Perspective*, *Front* and *Side*); the first one is the console's initial
-camera (``ConsoleApp._setup_camera``) and *Reset view* goes back to it. Poses are computed from
+camera (``console.stage.setup_camera``) and *Reset view* goes back to it. Poses are computed from
 the robot's reach (``span``, m) and the table rectangle, for a canvas of a given aspect ratio,
 with the look-at point shifted right so the framed region sits in the part of the canvas the
 control panel (docked on the right, about a quarter of a wide window) leaves free.

@@ -17,8 +17,7 @@ What upstream viser 1.1.1 does with a client's message (checked by ``tests/test_
 * Messages up to 50 MB are accepted; a frame that does not decode closes only its own connection.
 
 The fix sits at the one place every client frame passes before viser decodes and dispatches it:
-``viser.infra._infra._message_consumer``, which :func:`install` replaces by
-:func:`_guarded_consumer`
+``viser.infra._infra._message_consumer``, which ``console.guarded_receive.install`` replaces
 (a module-level function looked up per connection, so one patch covers every server). A server
 with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each frame checked by
 :meth:`ClientGuard.admit`; servers without one behave as upstream. Rules, in order:
@@ -43,16 +42,14 @@ The guard runs on viser's event loop; it only reads GUI state and queues message
 
 from __future__ import annotations
 
-import asyncio
 import collections
 import dataclasses
-import functools
 import logging
-import math
 import time
 from typing import Any, Callable
 
-from console.client_values import GuardLimits, OutOfBounds, Refused, short, validate_value
+from console.client_values import (GuardLimits, OutOfBounds, Refused, check_fields, short,
+                                   validate_value)
 
 log = logging.getLogger(__name__)
 
@@ -178,9 +175,9 @@ class ClientGuard:
             self._drop(client_id, state, "type", f"{kind} is not accepted from browsers")
             return None
         try:
-            self._sane(getattr(message, "__dict__", {}), depth=0,
-                       skip_bytes=kind == "FileTransferPart",
-                       text_limit=lim.max_string)
+            check_fields(getattr(message, "__dict__", {}), lim, depth=0,
+                         skip_bytes=kind == "FileTransferPart",
+                         text_limit=lim.max_string)
             check = getattr(self, f"_check_{kind}", None)
             ok = True if check is None else check(client_id, state, message)
         except Refused as exc:
@@ -224,36 +221,6 @@ class ClientGuard:
         more = f" (+{entry[1] - 1} more since the last line)" if entry[1] > 1 else ""
         log.warning("client %s: %s%s", client_id, short(detail, 200), more)
         entry[0], entry[1] = now, 0
-
-    def _sane(self, value: Any, depth: int, skip_bytes: bool, text_limit: int) -> None:
-        """Every number finite and moderate, strings / containers bounded, nesting shallow."""
-        lim = self.limits
-        if depth > 6:
-            raise Refused("nested too deep")
-        if isinstance(value, bool) or value is None:
-            return
-        if isinstance(value, float) or isinstance(value, int):
-            if abs(value) > lim.max_abs or not math.isfinite(value):  # (abs first: big ints)
-                raise Refused(f"number out of range: {short(value)}")
-        elif isinstance(value, str):
-            if len(value) > text_limit:
-                raise Refused(f"string of {len(value)} characters")
-        elif isinstance(value, (bytes, bytearray)):
-            if not skip_bytes:
-                raise Refused("unexpected bytes")
-        elif isinstance(value, dict):
-            if len(value) > lim.max_items:
-                raise Refused(f"{len(value)} items")
-            for k, v in value.items():
-                self._sane(k, depth + 1, skip_bytes, lim.max_string)
-                self._sane(v, depth + 1, skip_bytes, text_limit)
-        elif isinstance(value, (list, tuple)):
-            if len(value) > lim.max_items:
-                raise Refused(f"{len(value)} items")
-            for v in value:
-                self._sane(v, depth + 1, skip_bytes, text_limit)
-        else:
-            raise Refused(f"unexpected {type(value).__name__}")
 
     # -- per message type (True: pass on; False: handled here; Refused: invalid) --------------
 
@@ -436,68 +403,3 @@ def _action_of(handle: Any) -> str | None:
         if what:
             return str(what)
     return None
-
-
-async def _guarded_consumer(websocket: Any, handle_message: Callable[[Any], None],
-                            message_class: Any) -> None:
-    """viser's receive loop (``_message_consumer``) with :meth:`ClientGuard.admit` in front."""
-    import websockets.exceptions
-
-    guard, client_id = _guard_of(handle_message)
-    if guard is None:
-        await _ORIGINAL[0](websocket, handle_message, message_class)
-        return
-    protocol = getattr(websocket, "protocol", None)
-    if protocol is not None and hasattr(protocol, "max_message_size"):
-        protocol.max_message_size = guard.limits.max_message_bytes  # bigger frames: 1009
-    while True:
-        try:
-            raw = await websocket.recv()
-        except websockets.exceptions.ConnectionClosed as exc:
-            code = getattr(exc.rcvd or exc.sent, "code", None)
-            if code == 1009:
-                log.warning("client %s disconnected: sent a message over %d bytes", client_id,
-                            guard.limits.max_message_bytes)
-            raise
-        try:
-            message = guard.admit(client_id, raw, message_class)
-        except _Disconnect as exc:
-            log.warning("client %s disconnected: %s", client_id, short(exc.reason, 200))
-            guard.counts["disconnected"] += 1
-            await websocket.close(exc.code, exc.reason[:120])
-            await websocket.recv()  # raises ConnectionClosed: viser's handler tears down
-            return
-        if message is not None:
-            handle_message(message)
-        await asyncio.sleep(0)  # one client's backlog never holds the loop
-
-
-def _guard_of(handle_message: Callable[..., Any]) -> tuple[ClientGuard | None, int]:
-    """The guard of the server this connection belongs to, and the client id, from viser's
-    per-connection ``handle_incoming`` closure (``self`` is the WebsockServer)."""
-    try:
-        cells = dict(zip(handle_message.__code__.co_freevars,
-                         (c.cell_contents for c in handle_message.__closure__ or ())))
-        return getattr(cells["self"], "_client_guard", None), int(cells["client_id"])
-    except (AttributeError, KeyError, ValueError, TypeError):
-        return None, -1
-
-
-_ORIGINAL: list[Any] = []  # viser's own consumer, kept for servers without a guard
-
-
-def install() -> bool:
-    """Route every viser connection's receive loop through :func:`_guarded_consumer`.
-
-    Returns:
-        True if it patched now, False if it was already installed.
-    """
-    from viser.infra import _infra
-
-    if getattr(_infra._message_consumer, "_client_guard", False):
-        return False
-    _ORIGINAL[:] = [_infra._message_consumer]
-    consumer = functools.wraps(_infra._message_consumer)(_guarded_consumer)
-    consumer._client_guard = True  # type: ignore[attr-defined]
-    _infra._message_consumer = consumer
-    return True

@@ -1,8 +1,9 @@
 """What a browser may store in a widget: the right type, finite, within the widget's bounds.
 
 :func:`validate_value` is the value check of ``console.client_guard`` (see there for where it
-sits and why), kept apart so it can be read and tested on its own. :class:`GuardLimits` holds
-every limit the guard applies to one browser.
+sits and why), kept apart so it can be read and tested on its own; :func:`check_fields` is the
+guard's first look at any message's fields (numbers finite, sizes and nesting bounded).
+:class:`GuardLimits` holds every limit the guard applies to one browser.
 """
 
 from __future__ import annotations
@@ -84,6 +85,43 @@ def _bounded(value: float, lo: Any, hi: Any, integer: bool) -> float | int:
             raise Refused(f"{value:g} is not a whole number")
         return int(value)
     return value
+
+
+def check_fields(value: Any, limits: GuardLimits, depth: int, skip_bytes: bool,
+                 text_limit: int) -> None:
+    """Every number finite and moderate, strings / containers bounded, nesting shallow (any
+    message's fields, before its type's own check).
+
+    Raises:
+        Refused: what is wrong, for the log.
+    """
+    lim = limits
+    if depth > 6:
+        raise Refused("nested too deep")
+    if isinstance(value, bool) or value is None:
+        return
+    if isinstance(value, float) or isinstance(value, int):
+        if abs(value) > lim.max_abs or not math.isfinite(value):  # (abs first: big ints)
+            raise Refused(f"number out of range: {short(value)}")
+    elif isinstance(value, str):
+        if len(value) > text_limit:
+            raise Refused(f"string of {len(value)} characters")
+    elif isinstance(value, (bytes, bytearray)):
+        if not skip_bytes:
+            raise Refused("unexpected bytes")
+    elif isinstance(value, dict):
+        if len(value) > lim.max_items:
+            raise Refused(f"{len(value)} items")
+        for k, v in value.items():
+            check_fields(k, lim, depth + 1, skip_bytes, lim.max_string)
+            check_fields(v, lim, depth + 1, skip_bytes, text_limit)
+    elif isinstance(value, (list, tuple)):
+        if len(value) > lim.max_items:
+            raise Refused(f"{len(value)} items")
+        for v in value:
+            check_fields(v, lim, depth + 1, skip_bytes, text_limit)
+    else:
+        raise Refused(f"unexpected {type(value).__name__}")
 
 
 def validate_value(handle: Any, value: Any, limits: GuardLimits) -> Any:

@@ -12,7 +12,8 @@ from typing import Any
 
 import viser
 
-from console.access import AccessControl, LeaseStatus
+from console.access import AccessControl
+from console.lease_limits import LeaseStatus
 
 log = logging.getLogger(__name__)
 

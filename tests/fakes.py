@@ -34,6 +34,43 @@ class ScopedClient(FakeClient):
         self.downloads.append((name, content))
 
 
+def user(handle: Any, client: FakeClient, value: Any = None) -> None:
+    """What viser does with a browser's click / edit: store the value, then call back."""
+    import viser
+
+    if value is not None:
+        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
+            handle._impl.value)(value)
+    for cb in list(handle._impl.update_cb):
+        cb(viser.GuiEvent(client=client, client_id=client.client_id,  # type: ignore[arg-type]
+                          target=handle))
+
+
+def click_at(panel: Any, client: FakeClient, x: float, y: float) -> None:
+    """A click on the table at (x, y), seen from straight above, to ``panel``'s scene click
+    callback."""
+    import viser
+
+    panel._on_scene_click(viser.SceneClickEvent(client, client.client_id,  # type: ignore[arg-type]
+                                                (x, y, 1.0), (0.0, 0.0, -1.0), (0.5, 0.5), None))
+
+
+class FakeRunner:
+    """The extensible arm's runner not started (the in-process mock before the first Execute):
+    what the panels read."""
+
+    started = False
+    period_s = 0.01
+
+    def __init__(self) -> None:
+        from hw_bridge.extensible_jobs import RunnerSnapshot
+
+        self.snapshot = RunnerSnapshot("disconnected")
+
+    def stop(self) -> None:
+        pass
+
+
 class FakeClock:
     """A clock the test moves by hand (``clock.t += dt``); call it for the time."""
 

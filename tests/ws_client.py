@@ -30,12 +30,18 @@ def encode(message: Any) -> bytes:
     return msgspec.msgpack.encode(message.as_serializable_dict())
 
 
-def decode_frame(frame: bytes) -> list[dict[str, Any]]:
-    """The messages in one server frame (binary buffers are left out)."""
+def decode_payload(frame: bytes) -> dict[str, Any]:
+    """One server frame's msgpack payload: ``messages`` and ``binaryBufferLengths`` (the
+    binary buffers themselves follow the compressed part and are left out)."""
     size = int.from_bytes(frame[:8], "little")
     csize = int.from_bytes(frame[8:16], "little")
     inner = zstandard.ZstdDecompressor().decompress(frame[16:16 + csize], max_output_size=size)
-    return list(msgspec.msgpack.decode(inner)["messages"])
+    return msgspec.msgpack.decode(inner)
+
+
+def decode_frame(frame: bytes) -> list[dict[str, Any]]:
+    """The messages in one server frame (binary buffers are left out)."""
+    return list(decode_payload(frame)["messages"])
 
 
 class RawClient:
@@ -79,15 +85,20 @@ class RawClient:
                 self.closed = exc
                 return
             assert isinstance(frame, bytes)
-            messages = decode_frame(frame)
-            with self._lock:
-                self.frames += 1
-                self.messages.extend(messages)
-            if self.answer_probes:
-                for m in messages:
-                    if m.get("type") == "LocalStorageGetItemRequestMessage":
-                        self.send(_messages.LocalStorageGetItemResponseMessage(
-                            None, None, m["request_uuid"]))
+            self.on_frame(frame)
+
+    def on_frame(self, frame: bytes) -> None:
+        """Keep one frame's messages (and answer lease probes); a subclass that accounts for
+        frames differently overrides this, the receive loop stays the one above."""
+        messages = decode_frame(frame)
+        with self._lock:
+            self.frames += 1
+            self.messages.extend(messages)
+        if self.answer_probes:
+            for m in messages:
+                if m.get("type") == "LocalStorageGetItemRequestMessage":
+                    self.send(_messages.LocalStorageGetItemResponseMessage(
+                        None, None, m["request_uuid"]))
 
     def send(self, message: Any) -> bool:
         """Send one message (object, dict or raw bytes / str); False if the socket is closed."""

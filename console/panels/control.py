@@ -14,20 +14,15 @@ trip p99, lost demands), measured vs target kappa per segment in numbers, and th
 :mod:`console.panels.control_plots` (tracking error per segment, loop timing). STOP is the
 header's (any client; it runs ``app.stop_motion``, whose hook freezes the arm).
 
-One object model (issue 19.1 / 18): the objects are the Objects panel's (the grasp session's).
-Execute acts on its selected object, with the Grasp planner's plan for exactly that object when
-there is one (else the controller plans the approach), and says which; the state line names it
-and counts waypoints as the planner does. *Click to grasp* places (or selects) an object in the
-Objects panel where the click ray meets the table and executes it. Only Arm arms (issue 19.3):
-Execute or a click while disarmed is refused with "Arm first (press Arm)". While armed
-the 3D view shows the measured arm; jog commands from other panels are forwarded as moves when
-no task runs. The render thread only runs on new arm states (none while disarmed), so the pump
-refreshes the text itself when ``on_state`` has been quiet.
+What Execute and *Click to grasp* act on (the Objects panel's selected object, the Grasp
+planner's plan for it) is :mod:`console.panels.control_execute`. While armed the 3D view shows
+the measured arm; jog commands from other panels are forwarded as moves when no task runs. The
+render thread only runs on new arm states (none while disarmed), so the pump refreshes the text
+itself when ``on_state`` has been quiet.
 """
 
 from __future__ import annotations
 
-import html
 import threading
 import time
 from typing import Any
@@ -37,15 +32,22 @@ import viser
 
 from console.lab_feed import ControlFeed
 from console.panels.base import Panel, operator_only
+from console.panels.control_execute import ExecuteControls
 from console.panels.control_plots import ControlPlots
 from console.panels.control_row import RowControls
-from console.panels.control_text import (IDLE_PHASES, ExecuteTarget, execute_target,
-                                         fault_markdown, header_link, header_phase, kappa_html,
-                                         link_line, state_html, table_point)
-from console.plan_view import validate_object
-from hw_bridge.link_supervisor import DISCONNECTED
-from hw_bridge.soft_arm_process import ARM_FIRST, ControlProcess, ControlView
+from console.panels.control_text import (
+    IDLE_PHASES,
+    fault_markdown,
+    header_link,
+    header_phase,
+    kappa_html,
+    link_line,
+    state_html,
+    table_point,
+)
 from console.state import ArmState
+from hw_bridge.link_supervisor import DISCONNECTED
+from hw_bridge.soft_arm_process import ControlProcess, ControlView
 
 OBJECT_COLOR = (60, 170, 90)
 FINGER_COLOR = (235, 130, 30)
@@ -67,12 +69,6 @@ def kappa_html_key(c: Any) -> tuple[Any, ...]:
     """What of a telemetry sample the κ table shows at once: the targets (as printed) and
     whether a measurement exists."""
     return (tuple(f"{v:+.2f}" for v in c.kappa_ref), c.kappa_meas is None)
-
-
-def target_object(target: ExecuteTarget) -> Any:
-    """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
-    from console.plan_view import TableObject
-    return TableObject(target.name, target.x, target.y, target.r)
 
 
 def control_for(app: Any) -> ControlProcess:
@@ -101,15 +97,7 @@ class ControlPanel(Panel):
         self.link_md = gui.add_markdown("<small>link: –</small>")
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
-        self.target_md = gui.add_html(self._target_html())
-        self.execute_btn = gui.add_button(
-            "Execute grasp-and-place", icon=viser.Icon.PLAYER_PLAY,
-            hint="the Objects panel's selected object, with the Grasp planner's plan for it "
-                 "when there is one; arm first")
-        self.click_mode = gui.add_checkbox("Click to grasp", False,
-                                           hint="one click on the table places (or selects) an "
-                                                "object there in the Objects panel and runs the "
-                                                "whole grasp-and-place; arm first")
+        self.execute = ExecuteControls(self)  # what Execute acts on, Execute, Click to grasp
         self.row = RowControls(self)  # "Clear table into bin" and the row's status
         self.kappa_md = gui.add_markdown("")
         self.loop_md = gui.add_markdown("<small>loop: –</small>")
@@ -125,13 +113,7 @@ class ControlPanel(Panel):
                                             action="arm the arm"))
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
                                                action="disarm the arm"))
-        self.execute_btn.on_click(operator_only(lambda e: self._execute(e), panel=self,
-                                                action="run grasp-and-place"))
-        scene.on_click()(self._on_scene_click)
         self.app.add_stop_hook(self._stop_hook)
-        self.target: ExecuteTarget | None = None  # what the last Execute acts on
-        if self.app.grasp_session is not None:
-            self.app.grasp_session.add_listener(lambda _view: self._show_target())
 
         self._plot_at = 0.0
         self._table_at = 0.0
@@ -171,93 +153,9 @@ class ControlPanel(Panel):
         c = None if view is None else view.snapshot.control
         return c is None or not c.armed
 
-    def _target_html(self) -> str:
-        """Which object Execute would act on now (the Objects panel's selection)."""
-        session = self.app.grasp_session
-        try:
-            if session is None:
-                raise ValueError("No Objects panel: no object to grasp.")
-            text = "Execute acts on " + html.escape(execute_target(session.view()).describe())
-        except ValueError as exc:
-            text = html.escape(str(exc))
-        return f'<small data-testid="control-target">{text}</small>'
-
-    def _show_target(self) -> None:
-        text = self._target_html()
-        if text != self.target_md.content:
-            self.target_md.content = text
-
-    def _target(self, event: Any) -> ExecuteTarget | None:
-        """The selected object (and its plan) Execute acts on, or None after telling the
-        operator why (nothing is sent: a radius of 1e308 must not reach the arm)."""
-        if self._disarmed():  # arming is the operator's own act (issue 19.3)
-            self._refuse(event, "Arm first", ARM_FIRST)
-            return None
-        session = self.app.grasp_session
-        try:
-            if session is None:
-                raise ValueError("No Objects panel: no object to grasp.")
-            target = execute_target(session.view())
-            validate_object(target_object(target), self.app.robot)
-        except ValueError as exc:
-            self._refuse(event, "Refused", str(exc))
-            return None
-        return target
-
-    def _run(self, event: Any, target: ExecuteTarget) -> None:
-        """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
-        self._stopped = False
-        self.target = target
-        if target.plan is not None:
-            fut = self.ctl.execute(target.plan, target.x, target.y, target.r)
-        else:
-            session = self.app.grasp_session
-            view = None if session is None else session.view()
-            fut = self.ctl.grasp_at(target.x, target.y, target.r,
-                                    tuple(getattr(view, "obstacles", ())),
-                                    float(getattr(view, "clearance", 0.0)))
-        fut.add_done_callback(lambda f: self._report(event, f))
-        client = getattr(event, "client", None)
-        if client is not None:
-            client.add_notification("Grasp-and-place", target.describe(), color="blue",
-                                    auto_close_seconds=6.0)
-        self.app.recorder.action(f"execute grasp-and-place: {target.describe()}", None)
-
-    def _execute(self, event: Any) -> None:
-        target = self._target(event)
-        if target is not None:
-            self._run(event, target)
-
     def _stop_hook(self, reason: str) -> None:
         self._stopped = True  # no forwarded jog may undo a STOP (race with the view)
         self.ctl.stop_arm(reason)
-
-    def _on_scene_click(self, event: Any) -> None:
-        if not self.click_mode.value:
-            return
-        try:
-            self.app.access.check(event.client, "click to grasp")
-        except Exception as exc:  # NotOperator: tell this viewer only
-            self.app.refuse(event.client, str(exc), "click to grasp")
-            return
-        p = table_point(event.ray_origin, event.ray_direction)
-        if p is None:
-            return
-        if self._disarmed():
-            self._refuse(event, "Arm first", ARM_FIRST)
-            return
-        session = self.app.grasp_session
-        if session is None:
-            self._refuse(event, "Refused", "No Objects panel: no object to grasp.")
-            return
-        try:  # the Objects panel's object there (selected), or a new one
-            session.place(p[0], p[1])
-        except ValueError as exc:
-            self._refuse(event, "Refused", str(exc))
-            return
-        target = self._target(event)
-        if target is not None:
-            self._run(event, target)
 
     @staticmethod
     def _report(event: Any, fut: Any) -> None:
@@ -361,7 +259,7 @@ class ControlPanel(Panel):
         if died:
             self.state_md.content = (f"**Control process died:** {died}. The arm is not "
                                      "commanded; restart the console.")
-            for btn in (self.arm_btn, self.disarm_btn, self.execute_btn, self.row.button):
+            for btn in (self.arm_btn, self.disarm_btn, self.execute.execute_btn, self.row.button):
                 btn.disabled = True
             return
         if view is None:
@@ -370,13 +268,14 @@ class ControlPanel(Panel):
                                      else f"**Control process failed:** {failure}")
             return
         c = view.snapshot.control
-        self.state_md.content = state_html(view, self.target)
-        self.app.header.show("phase", *(self.row.header(view) or header_phase(view, self.target)))
+        self.state_md.content = state_html(view, self.execute.target)
+        target = self.execute.target
+        self.app.header.show("phase", *(self.row.header(view) or header_phase(view, target)))
         self.row.show(view)
         self.app.header.show("link", *header_link(view))
         if c is not None:
             busy = c.phase not in IDLE_PHASES + ("settling",)
-            self.execute_btn.disabled = busy
+            self.execute.execute_btn.disabled = busy
             # Arm while armed would only restart the stack; after a fault it is the way back.
             self.arm_btn.disabled = c.armed and not view.fault
             self.disarm_btn.disabled = not c.armed

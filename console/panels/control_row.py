@@ -96,7 +96,8 @@ def row_html(view: ControlView | None, sent: SentRow | None) -> str:
 
 class RowControls:
     """The Control panel's "Clear table into bin" button and row status (see the module
-    docstring). ``panel`` is the Control panel (its ``ctl``, ``app`` and ``_disarmed``)."""
+    docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``_disarmed``, ``_refuse``
+    and ``_report``)."""
 
     def __init__(self, panel: Any) -> None:
         self.panel, self.app = panel, panel.app
@@ -115,37 +116,32 @@ class RowControls:
         self._recorded_end: int | None = None  # the row whose end went into the recording
 
     # -- the button (operator only) ------------------------------------------------------------
-    def _refuse(self, event: Any, title: str, message: str) -> None:
-        client = getattr(event, "client", None)
-        if client is not None:
-            client.add_notification(title, message, color="red", auto_close_seconds=8.0)
-
     def _clear(self, event: Any) -> None:
         if self.panel._disarmed():  # arming is the operator's own act (issue 19.3)
-            self._refuse(event, "Arm first", ROW_ARM_FIRST)
+            self.panel._refuse(event, "Arm first", ROW_ARM_FIRST)
             return
         session = self.app.grasp_session
         if session is None:
-            self._refuse(event, "Refused", "No Objects panel: no objects and no bin.")
+            self.panel._refuse(event, "Refused", "No Objects panel: no objects and no bin.")
             return
         view = session.view()
         if view.bin is None:
-            self._refuse(event, "Place a bin first", NO_BIN)
+            self.panel._refuse(event, "Place a bin first", NO_BIN)
             return
         if not view.objects:
-            self._refuse(event, "Nothing to clear", NO_OBJECTS)
+            self.panel._refuse(event, "Nothing to clear", NO_OBJECTS)
             return
         try:
             for o in view.objects:
                 validate_object(o, self.app.robot)
         except ValueError as exc:
-            self._refuse(event, "Refused", str(exc))
+            self.panel._refuse(event, "Refused", str(exc))
             return
         sent = SentRow(next(self._ids), tuple(o.name for o in view.objects),
                        view.bin.describe())
         self.sent = sent
         self.panel._stopped = False  # (as Execute: a new task after a STOP)
-        self.panel.target = None
+        self.panel.execute.target = None
         fut = self.panel.ctl.run_row(sent.row_id, [(o.x, o.y, o.r) for o in view.objects],
                                      (view.bin.x, view.bin.y), view.bin.kappa,
                                      view.bin.kappa_right, tuple(view.obstacles),

@@ -3,13 +3,16 @@
 :func:`link_summary` words the link supervisor's health as the Hardware panel and the header's
 Link field do (``console.panels.hardware.header_link``); :func:`runner_phase` is the header's
 Phase field (idle, moving to target, running path t/T s, holding after STOP, fault), pushed by
-the Paths panel; :func:`worker_pool` is the spawned worker process the Paths and Tip target
-panels plan and solve in, off the console's GIL.
+the Paths panel; :func:`hardware_html` is the Paths panel's "Hardware:" line (that link and
+the runner's state); :func:`worker_pool` is the spawned worker process the Paths and Tip target
+panels plan and solve in, off the console's GIL; :func:`extensible_runner` is the runner the
+Paths and Repeatability panels drive.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import html
 import multiprocessing
 import os
 from typing import Any
@@ -17,7 +20,18 @@ from typing import Any
 from console.header import Tone
 from console.panels.hardware import extensible_link_health, header_link
 from hw_bridge.extensible_jobs import RunnerSnapshot
+from hw_bridge.extensible_process import ExtensibleProcess
 from hw_bridge.parent_watch import watch_parent
+
+
+def extensible_runner(app: Any) -> ExtensibleProcess:
+    """``app.services.extensible_runner``, or a clear error when the console was built without
+    one (serve.py always builds it for the extensible arm)."""
+    runner = app.services.extensible_runner
+    if runner is None:
+        raise ValueError("the extensible arm's panels need its runner: build the console with "
+                         "services=ConsoleServices(extensible_runner=...) (serve.py does)")
+    return runner
 
 
 def worker_pool() -> cf.ProcessPoolExecutor:
@@ -41,6 +55,19 @@ def link_summary(app: Any) -> str:
     if health is None and kind == "mock":
         text += " (the in-process mock starts on the first Execute or Reconnect)"
     return text
+
+
+def hardware_html(app: Any, text: str | None = None) -> str:
+    """The link as the Hardware panel and the header's Link field show it (the link
+    supervisor's health), and the runner's state once it runs."""
+    if text is None:
+        text = link_summary(app)
+        runner = app.services.extensible_runner
+        if runner is not None and runner.started:
+            snap = runner.snapshot
+            text += f" · runner {snap.state}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
+    return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
+            f"Hardware: {html.escape(text)}</div>")
 
 
 def runner_phase(snap: RunnerSnapshot | None, period_s: float, job: int, moving: bool,

@@ -4,8 +4,8 @@ The path (linear / diagonal traverse, four corners; size, plane, tip speed <= th
 ``tip_speed``) is centred on the arm's current tip and planned from the commanded posture by
 ``core.planning.paths.plan_path`` in a worker *process* (planning takes seconds of CPU; in this
 process it would hold the GIL against the 100 Hz loop). The preview draws the planned tip trace
-and a few translucent ghost arms. Execute streams the path through the
-:class:`~hw_bridge.extensible_process.ExtensibleProcess` (``app.services.extensible_runner``,
+and a few translucent ghost arms (``console.panels.path_scene``). Execute streams the path
+through the :class:`~hw_bridge.extensible_process.ExtensibleProcess` (``app.services.extensible_runner``,
 started on first use; it first joins the path from where the motors are). While it runs the
 panel shows the progress, the measured tip trace and a plot of the commanded and the measured
 tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
@@ -37,12 +37,13 @@ import numpy.typing as npt
 import viser
 import viser.uplot as uplot
 
-from console.arm_view import DeltaArmView
 from console.header import Tone
 from console.lab_feed import path_plan_record
 from console.panels.base import Panel
-from console.panels.extensible_status import link_summary, runner_phase, worker_pool
+from console.panels.extensible_status import (extensible_runner, hardware_html, runner_phase,
+                                              worker_pool)
 from console.panels.obstacles_boxes import box_scene_of
+from console.panels.path_scene import PathScene, trail_tail
 from console.panels.plot_data import thin
 from console.state import ArmState
 from core.units import fmt_mm
@@ -52,13 +53,8 @@ from hw_bridge.extensible_jobs import JobResult
 from hw_bridge.extensible_process import ExtensibleProcess
 
 Array = npt.NDArray[np.float64]
-N_GHOSTS = 5
 MAX_EXECUTE_ERROR = 0.002  # m: refuse a path whose planned tip leaves its target by more
 PLOT_HZ = 5.0
-TRACE_COLOR = (150, 60, 200)
-WAYPOINT_COLOR = (150, 60, 200)
-MEASURED_COLOR = (235, 130, 30)
-GHOST_COLOR = (90, 140, 220)
 PLAN_TIMEOUT_S = 30.0  # s: a Fig. 9 path plans in 2-5 s unloaded, 10-25 s on a busy 2-core box
 STATUS_HZ = 2.0  # planning seconds, Hardware line and the header's Phase field
 TRAIL_S = 30.0  # the measured tip trace shows at most the run's last this many seconds
@@ -76,16 +72,6 @@ class PathRequest:
     obstacles: int = 0  # version of the box obstacles it was planned around
 
 
-def extensible_runner(app: Any) -> ExtensibleProcess:
-    """``app.services.extensible_runner``, or a clear error when the console was built without
-    one (serve.py always builds it for the extensible arm)."""
-    runner = app.services.extensible_runner
-    if runner is None:
-        raise ValueError("the extensible arm's panels need its runner: build the console with "
-                         "services=ConsoleServices(extensible_runner=...) (serve.py does)")
-    return runner
-
-
 @dataclasses.dataclass
 class _Planning:
     """A plan in the worker: what was asked, since when (perf_counter s)."""
@@ -94,27 +80,6 @@ class _Planning:
     waypoints: Array
     future: cf.Future
     started: float
-
-
-def trail_tail(times: Array, points: Array, seconds: float) -> Array:
-    """The points of a trace sampled no more than ``seconds`` before its newest sample."""
-    if len(times) == 0:
-        return points[:0]
-    return points[np.asarray(times) >= times[-1] - seconds]
-
-
-def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:
-    """One mesh (vertices, faces) of backbone, racks and platforms at ``q`` for a ghost arm."""
-    g = view.geometry(q)
-    parts = [(g["backbone"], view.backbone_topology.faces)]
-    parts += [(r, view.rack_topology.faces) for r in g["racks"]]
-    parts.append((g["platforms"], view.platform_topology.faces))
-    verts, faces, offset = [], [], 0
-    for v, f in parts:
-        verts.append(v)
-        faces.append(f + offset)
-        offset += len(v)
-    return np.vstack(verts), np.vstack(faces).astype(np.uint32)
 
 
 class PathsPanel(Panel):
@@ -143,7 +108,7 @@ class PathsPanel(Panel):
         self.reconnect_btn = gui.add_button(
             "Reconnect hardware", icon=viser.Icon.PLUG_CONNECTED,
             hint="Connect (after a fault: reconnect) and arm the motors; the arm holds still.")
-        self.hardware = gui.add_html(self._hardware_html())
+        self.hardware = gui.add_html(hardware_html(self.app))
         self.progress = gui.add_progress_bar(0.0, color="blue")
         self.status = gui.add_html(self._status("Preview a path, then Execute.", "idle"))
         self.plot = gui.add_uplot(
@@ -154,16 +119,7 @@ class PathsPanel(Panel):
             scales={"x": uplot.Scale(time=False)},
             axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="mm")),
             title="Tip distance to the path target", aspect=1.6)
-        scene = self.app.server.scene
-        self.trace = scene.add_line_segments("/path/trace", np.zeros((1, 2, 3)), TRACE_COLOR,
-                                             thickness=5.0, thickness_units="screen", visible=False)
-        self.measured = scene.add_line_segments("/path/measured", np.zeros((1, 2, 3)),
-                                                MEASURED_COLOR, thickness=3.0,
-                                                thickness_units="screen", visible=False)
-        self.waypoints = scene.add_point_cloud("/path/waypoints", np.zeros((1, 3)), WAYPOINT_COLOR,
-                                               point_size=0.014, point_shape="circle",
-                                               precision="float32", visible=False)
-        self.ghosts: list[viser.MeshHandle] = []
+        self.drawing = PathScene(self.app.server.scene)  # trace, waypoints, ghosts, measured
         self._lock = threading.Lock()
         self._pool: cf.ProcessPoolExecutor | None = None
         self._planned: tuple[PathRequest, MotionPath] | None = None
@@ -217,7 +173,7 @@ class PathsPanel(Panel):
             self._execute_after_plan = execute
             if self._planning is not None and self._planning.req == req:
                 return  # already planning this one (its status counts the seconds)
-        self._draw_requested(waypoints)
+        self.drawing.draw_requested(waypoints)
         pool = self._plan_pool()
         scene, _ = box_scene_of(self.app)
         try:
@@ -259,14 +215,14 @@ class PathsPanel(Panel):
     def _reconnect(self) -> None:
         runner = self.runner
         future = runner.connect() if runner.started else runner.start().connecting
-        self.hardware.content = self._hardware_html("connecting…")
+        self.hardware.content = hardware_html(self.app, "connecting…")
 
         def show() -> None:
             try:
                 future.result(timeout=10.0)  # type: ignore[union-attr]
                 time.sleep(3 * runner.period_s)  # the snapshot trails by a tick
             finally:
-                self.hardware.content = self._hardware_html()
+                self.hardware.content = hardware_html(self.app)
         threading.Thread(target=show, daemon=True, name="hw-connect").start()
 
     # -- workers ---------------------------------------------------------------------------
@@ -311,7 +267,7 @@ class PathsPanel(Panel):
             return
         self._planned = (req, path)
         self.app.recorder.log("plan", path_plan_record(req, waypoints, path))  # lab data
-        self._draw_preview(path, waypoints)
+        self.drawing.draw_preview(path, waypoints, self.app.view)
         ok = path.max_error <= MAX_EXECUTE_ERROR
         summary = (f"{req.kind} {fmt_mm(req.size, 0)} mm in {req.plane} at "
                    f"{fmt_mm(req.speed, 0)} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
@@ -336,25 +292,13 @@ class PathsPanel(Panel):
             return
         self._job = job = runner.execute(path, "path")
         self._stopped = False
-        self.hardware.content = self._hardware_html()
+        self.hardware.content = hardware_html(self.app)
         self._set_status(f"Executing ({path.duration:.1f} s)…", "running")
         # Frames come while the arm moves; this shows the end even if nothing is redrawn then.
         threading.Thread(target=self._watch, args=(runner, job), daemon=True,
                          name="path-watch").start()
 
     # -- display ---------------------------------------------------------------------------
-    def _draw_requested(self, waypoints: Array) -> None:
-        """At once on Preview: the requested tip path (the plan replaces it), no ghost arms."""
-        w = np.asarray(waypoints, dtype=float)
-        self.waypoints.points = w.astype(np.float32)
-        self.waypoints.visible = True
-        self.trace.points = np.stack([w[:-1], w[1:]], axis=1) if len(w) > 1 \
-            else np.stack([w, w], axis=1)
-        self.trace.visible = True
-        self.measured.visible = False
-        for ghost in self.ghosts:
-            ghost.visible = False
-
     def _show_planning(self, planning: _Planning) -> None:
         """Planning status with its seconds; past ``PLAN_TIMEOUT_S`` say so and give up."""
         waited = time.perf_counter() - planning.started
@@ -374,43 +318,9 @@ class PathsPanel(Panel):
         self._set_status(f"Planning… {waited:.0f} s (the requested tip path is drawn; the "
                          "arm's motion follows when planned)", "planning", drawn="requested")
 
-    def _draw_preview(self, path: MotionPath, waypoints: Array) -> None:
-        self.waypoints.points = np.asarray(waypoints, dtype=np.float32)
-        self.waypoints.visible = True
-        tips = path.tips
-        self.trace.points = np.stack([tips[:-1], tips[1:]], axis=1) if len(tips) > 1 \
-            else np.stack([tips, tips], axis=1)
-        self.trace.visible = True
-        self.measured.visible = False
-        view = self.app.view
-        if not isinstance(view, DeltaArmView):
-            return
-        picks = np.linspace(0, len(path.times) - 1, N_GHOSTS).round().astype(int)
-        for i, k in enumerate(picks):
-            verts, faces = ghost_vertices(view, path.deltas[k])
-            if i < len(self.ghosts):
-                self.ghosts[i].vertices = verts
-                self.ghosts[i].visible = True
-            else:
-                self.ghosts.append(self.app.server.scene.add_mesh_simple(
-                    f"/path/ghost_{i}", verts, faces, color=GHOST_COLOR, opacity=0.22,
-                    cast_shadow=False, receive_shadow=False))
-
     def clear_trails(self) -> None:
         """Hide the measured tip trace of the last run (the View panel's "Clear trails")."""
-        self.measured.visible = False
-
-    def _hardware_html(self, text: str | None = None) -> str:
-        """The link as the Hardware panel and the header's Link field show it (the link
-        supervisor's health), and the runner's state once it runs."""
-        if text is None:
-            text = link_summary(self.app)
-            runner = self.app.services.extensible_runner
-            if runner is not None and runner.started:
-                snap = runner.snapshot
-                text += f" · runner {snap.state}" + (f" · ⚠ {snap.fault}" if snap.fault else "")
-        return (f'<div data-testid="path-hardware" style="font-size:0.8em;opacity:.8">'
-                f"Hardware: {html.escape(text)}</div>")
+        self.drawing.clear_trails()
 
     def _set_status(self, text: str, state: str, drawn: str = "") -> None:
         self.status.content = self._status(text, state, drawn)
@@ -446,7 +356,7 @@ class PathsPanel(Panel):
                 if planning is not None:
                     self._show_planning(planning)
                 self.show_phase()
-                page = self._hardware_html()
+                page = hardware_html(self.app)
                 if page != shown:
                     shown = self.hardware.content = page
             except Exception:  # noqa: BLE001 - a display hiccup must not end the thread
@@ -484,12 +394,11 @@ class PathsPanel(Panel):
                                        np.linalg.norm(trace.measured[:n] - target, axis=1) * 1e3))
                 m = trail_tail(trace.times[:n], trace.measured[:n], TRAIL_S)
                 if len(m) >= 2:
-                    self.measured.points = np.stack([m[:-1], m[1:]], axis=1)
-                    self.measured.visible = True
+                    self.drawing.draw_measured(m)
         if result is None:
             return
         self._job = 0
-        self.hardware.content = self._hardware_html()
+        self.hardware.content = hardware_html(self.app)
         self.show_phase()
         if result.ok:
             self._set_status(f"Done: final tip {fmt_mm(result.error or 0.0, 2)} mm from the "

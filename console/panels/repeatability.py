@@ -36,7 +36,7 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel
-from console.panels.paths import extensible_runner
+from console.panels.extensible_status import extensible_runner
 from console.panels.repeatability_view import (Comparison, RepeatabilityResult, comparison_html,
                                                error_plot_svg, sensor_note)
 from console.state import ArmState

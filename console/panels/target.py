@@ -246,16 +246,22 @@ class TargetPanel(Panel):
                 return
         self._route_len = len(legs)
         self._publish(target, result, None)
+        if self._start_leg(client_id, legs, "Not moved: you no longer hold control."):
+            self._show()
+
+    def _start_leg(self, client_id: int, legs: list[Array], refused: str) -> bool:
+        """Move to the first of ``legs`` (the rest follow on arrival, :meth:`check_arrival`);
+        False after reporting ``refused`` when ``client_id`` no longer holds control."""
         # Set before the move starts: a frame of the move ("jog") must not read as someone
         # else's command, which would put the target back on the tip and clear this status.
         self._legs = (client_id, legs[1:])
         self._moving_to = legs[0]
-        if not self.app.hold.move_to(client_id, legs[0]):
-            self._moving_to = None
-            self._legs = (0, [])
-            self.report_error("Not moved: you no longer hold control.")
-        else:
-            self._show()
+        if self.app.hold.move_to(client_id, legs[0]):
+            return True
+        self._moving_to = None
+        self._legs = (0, [])
+        self.report_error(refused)
+        return False
 
     def _ik_pool(self) -> cf.ProcessPoolExecutor:
         with self._pool_lock:
@@ -313,12 +319,7 @@ class TargetPanel(Panel):
         if arrived and rest and not self._measured_at(goal):
             return  # the motors lag the command: the next leg starts from the corner
         if arrived and rest:  # a route past the boxes: on to its next posture
-            self._legs = (client_id, rest[1:])
-            self._moving_to = rest[0]
-            if not self.app.hold.move_to(client_id, rest[0]):
-                self._moving_to = None
-                self._legs = (0, [])
-                self.report_error("Stopped on the way: you no longer hold control.")
+            self._start_leg(client_id, rest, "Stopped on the way: you no longer hold control.")
             return
         self._legs = (0, [])
         if arrived:

@@ -74,8 +74,8 @@ def _legend(kind: str) -> tuple[LegendEntry, ...]:
             LegendEntry((BIN_COLOR,), "ring", "Bin: where 'Clear table into bin' takes them"),
             LegendEntry((MEASURE_COLOR,), "line", "Measurement (View → Measure distance)"),
         )
-    from console.panels.paths import GHOST_COLOR as PATH_GHOST_COLOR
-    from console.panels.paths import MEASURED_COLOR, TRACE_COLOR
+    from console.panels.path_scene import GHOST_COLOR as PATH_GHOST_COLOR
+    from console.panels.path_scene import MEASURED_COLOR, TRACE_COLOR
     from console.panels.target import MISS_COLOR, TARGET_COLOR
     return (
         LegendEntry((BACKBONE_COLOR, PLATFORM_COLOR), "fill", "Backbone and platforms"),

@@ -69,29 +69,16 @@ class LineCertificate:
     evaluations: int
 
 
-def certify_lines(
-    model: ArmModel,
-    starts: Array,
-    ends: Array,
-    center: complex,
-    radius: float,
-    required: float = 0.0,
-    samples: int = 8,
-    max_depth: int = 8,
-    slack: float = 0.005,
-) -> LineCertificate:
-    """Lower-bound the body clearance along straight lines in kappa.
+def certify_lines(model: ArmModel, starts: Array, ends: Array, center: complex, radius: float,
+                  required: float = 0.0, samples: int = 8) -> LineCertificate:
+    """Lower-bound the body clearance to the object disk (``center``, ``radius``) along straight
+    lines in kappa: :func:`certify_function` with :meth:`ArmModel.body_clearance` and its rate
+    :meth:`ArmModel.displacement_bound` (its ``max_depth`` and ``slack`` defaults).
 
     Args:
         model: Arm model.
-        starts, ends: (n, N) line end configurations.
+        starts, ends, required, samples: as :func:`certify_function`.
         center, radius: Object disk.
-        required: Clearance the caller needs; intervals whose bound is already >= this are
-            not refined further.
-        samples: Least initial number of intervals per line.
-        max_depth: Maximum number of bisection rounds.
-        slack: Target Lipschitz slack of the initial sampling (m); more samples are taken (up
-            to 64) on lines whose configurations move a lot.
 
     Returns:
         :class:`LineCertificate`.
@@ -99,27 +86,25 @@ def certify_lines(
     a = np.asarray(starts, float)
     b = np.asarray(ends, float)
     return certify_function(lambda k: model.body_clearance(k, center, radius),
-                            model.displacement_bound(b - a), a, b, required, samples, max_depth,
-                            slack)
+                            model.displacement_bound(b - a), a, b, required, samples)
 
 
-def certify_function(
-    evaluate: Callable[[Array], Array],
-    lam: Array,
-    starts: Array,
-    ends: Array,
-    required: float = 0.0,
-    samples: int = 8,
-    max_depth: int = 8,
-    slack: float = 0.005,
-) -> LineCertificate:
+def certify_function(evaluate: Callable[[Array], Array], lam: Array, starts: Array, ends: Array,
+                     required: float = 0.0, samples: int = 8, max_depth: int = 8,
+                     slack: float = 0.005) -> LineCertificate:
     """Lower-bound any clearance along straight lines in kappa, given its Lipschitz rate.
 
     Args:
         evaluate: (..., N) configurations -> (...,) clearance (m), exact at each configuration.
         lam: (n,) bound on how fast the clearance can change per unit tau along each line
             (m), e.g. :meth:`ArmModel.displacement_bound`.
-        starts, ends, required, samples, max_depth, slack: as :func:`certify_lines`.
+        starts, ends: (n, N) line end configurations.
+        required: Clearance the caller needs; intervals whose bound is already >= this are
+            not refined further.
+        samples: Least initial number of intervals per line.
+        max_depth: Maximum number of bisection rounds.
+        slack: Target Lipschitz slack of the initial sampling (m); more samples are taken (up
+            to 64) on lines whose configurations move a lot.
 
     Returns:
         :class:`LineCertificate`.

@@ -287,7 +287,7 @@ def test_a_viewer_cannot_tick_click_to_grasp(console: tuple, trio: tuple) -> Non
     if app.robot.kind != "planar":
         pytest.skip("the Control panel is the soft arm's")
     op, viewer, watcher = trio
-    box = app.panel(ControlPanel).click_mode
+    box = app.panel(ControlPanel).execute.click_mode
     viewer.update(box._impl.uuid, value=True)
     wait_for(lambda: viewer.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid),
              what="the viewer's box unticked again")
@@ -329,7 +329,7 @@ def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) ->
             with session._cond:  # past the session's own checks, as a bug might
                 session._objects[0] = dataclasses.replace(first, r=r)
                 session._selected = first.name
-            panel._execute(event)
+            panel.execute._execute(event)
         assert sent == []
         assert len(client.notes) == 3 and all(t == "Refused" for t, _ in client.notes)
         assert "radius" in client.notes[0][1] or "finite" in client.notes[0][1]
@@ -431,3 +431,26 @@ def test_validate_value_by_widget_kind() -> None:
             validate_value(g.add_upload_button("u"), True, lim)
     finally:
         server.stop()
+
+
+def test_check_fields_bounds_every_field_of_any_message() -> None:
+    """The shape check on its own: finite moderate numbers, bounded strings and containers,
+    shallow nesting, bytes only where an upload part carries them."""
+    from console.client_values import Refused, check_fields
+
+    lim = GuardLimits()
+    fields = {"uuid": "abc", "value": [1, 2.5, None, True, {"k": "v"}], "size": lim.max_abs}
+    check_fields(fields, lim, depth=0, skip_bytes=False, text_limit=lim.max_string)
+    check_fields({"content": b"\x00" * 10}, lim, depth=0, skip_bytes=True,
+                 text_limit=lim.max_string)
+    deep: object = 1
+    for _ in range(6):
+        deep = [deep]
+    check_fields(deep, lim, depth=0, skip_bytes=False, text_limit=lim.max_string)  # a leaf at 6
+    for bad in ({"v": math.nan}, {"v": -math.inf}, {"v": lim.max_abs * 10}, {"v": 10 ** 400},
+                {"v": "x" * (lim.max_string + 1)}, {"x" * (lim.max_string + 1): 1},
+                {"v": list(range(lim.max_items + 1))}, {"v": b"x"}, {"v": object()}, [deep]):
+        with pytest.raises(Refused):
+            check_fields(bad, lim, depth=0, skip_bytes=False, text_limit=lim.max_string)
+    with pytest.raises(Refused):  # a text field's own, shorter limit
+        check_fields({"v": "x" * 300}, lim, depth=0, skip_bytes=False, text_limit=256)

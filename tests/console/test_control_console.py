@@ -21,17 +21,14 @@ from core.control.trials import TrialResult
 from core.robots import load
 from hw_bridge.interface import LinkHealth
 from hw_bridge.loop import LoopSnapshot, LoopStats
+import ws_client
 from fakes import FakeClient, console_app
 
 SOFT = load("soft-arm")
 
 
 def wait_for(pred, timeout=30.0):
-    end = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > end:
-            raise AssertionError("condition not reached")
-        time.sleep(0.02)
+    ws_client.wait_for(pred, timeout)
 
 
 @pytest.fixture

@@ -16,7 +16,8 @@ import numpy as np
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
-from hw_bridge.extensible_jobs import RunnerSnapshot
+from fakes import FakeRunner
+from ws_client import wait_for
 
 EXT = load("extensible")
 
@@ -37,17 +38,6 @@ class FakeControls:
 
     def health(self) -> FakeHealth | None:
         return self.h
-
-
-class FakeRunner:
-    """Not started (the in-process mock before the first Execute): what the panels read."""
-
-    started = False
-    period_s = 0.01
-    snapshot = RunnerSnapshot("disconnected")
-
-    def stop(self) -> None:
-        pass
 
 
 @dataclasses.dataclass
@@ -73,15 +63,6 @@ def status_of(html: str) -> str:
     return re.search(r'data-state="(\w+)"', html).group(1)
 
 
-def wait_for(fn, timeout: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
-    return True
-
-
 def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, monkeypatch):
     from fakes import console_app
 
@@ -100,8 +81,8 @@ def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, m
     assert 'data-drawn="requested"' in panel.status.content
     tip = dk.tip_position(EXT, np.asarray(app.store.command.q))
     want = paths.build_path("linear", tip, 0.08, "xy")
-    np.testing.assert_allclose(panel.waypoints.points, want, atol=1e-6)
-    assert panel.trace.visible
+    np.testing.assert_allclose(panel.drawing.waypoints.points, want, atol=1e-6)
+    assert panel.drawing.trace.visible
     # The worker never answers: after the timeout the panel says so (the 2 Hz status loop).
     assert wait_for(lambda: status_of(panel.status.content) == "error")
     assert time.monotonic() - t0 < 1.0 + 2.0

@@ -22,7 +22,7 @@ from hw_bridge.controls import QueuedBridgeControls
 from hw_bridge.interface import LifecycleState, LinkHealth
 from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor
 from hw_bridge.mock import MockHardware
-from fakes import FakeClient, console_app
+from fakes import FakeClient, console_app, user
 
 ROBOT = load("extensible")
 SOFT = load("soft-arm")
@@ -135,15 +135,6 @@ class FakeControls:
 
     def health(self) -> LinkHealth | None:
         return self.h
-
-
-def user(handle: Any, client: FakeClient, value: Any = None) -> None:
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    if value is not None:
-        handle._impl.value = type(handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))  # type: ignore[arg-type]
-
 
 
 def make_panel(server: viser.ViserServer, controls: Any, kind: str | None = "emulator",

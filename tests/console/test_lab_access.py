@@ -307,34 +307,31 @@ def test_share_tunnel_request_from_the_wire_is_ignored(monkeypatch, server) -> N
         guarded.stop()
 
 
-def test_every_callback_of_the_shared_scene_panels_is_operator_only(server) -> None:
+def test_every_callback_of_the_shared_scene_panels_is_operator_only(server, monkeypatch) -> None:
     """Objects, Grasp planner, Waypoints and Hardware: every widget callback that changes what
     everyone sees or drives the hardware is gated (only "Save scene", a download, is not)."""
     from console.panels import planner
     from console.panels.hardware import HardwarePanel
 
-    planner.GraspSession.compute_reach = False
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
+    app = ConsoleApp(SOFT, server, panels=(*planner.grasp_panels(), HardwarePanel),
+                     access=AccessControl("tok"))
     try:
-        app = ConsoleApp(SOFT, server, panels=(*planner.grasp_panels(), HardwarePanel),
-                         access=AccessControl("tok"))
-        try:
-            objects = app.panels[0]
-            allowed = {id(objects.save_button)}
-            checked = 0
-            for panel in app.panels:
-                for handle in vars(panel).values():
-                    callbacks = getattr(getattr(handle, "_impl", None), "update_cb", None)
-                    if not callbacks or id(handle) in allowed:
-                        continue
-                    for cb in callbacks:
-                        assert getattr(cb, "operator_only", None), (type(panel).__name__, handle)
-                        checked += 1
-            assert checked >= 25
-            session = app.grasp_session  # type: ignore[attr-defined]
-            assert session.gizmo_handler.operator_only == "move an object"
-            assert objects._place_at.operator_only == "place or select an object"
-        finally:
-            app.panel(HardwarePanel).close()
-            app.grasp_session.close()  # type: ignore[attr-defined]
+        objects = app.panels[0]
+        allowed = {id(objects.save_button)}
+        checked = 0
+        for panel in app.panels:
+            for handle in vars(panel).values():
+                callbacks = getattr(getattr(handle, "_impl", None), "update_cb", None)
+                if not callbacks or id(handle) in allowed:
+                    continue
+                for cb in callbacks:
+                    assert getattr(cb, "operator_only", None), (type(panel).__name__, handle)
+                    checked += 1
+        assert checked >= 25
+        session = app.grasp_session  # type: ignore[attr-defined]
+        assert session.gizmo_handler.operator_only == "move an object"
+        assert objects._place_at.operator_only == "place or select an object"
     finally:
-        planner.GraspSession.compute_reach = True
+        app.panel(HardwarePanel).close()
+        app.grasp_session.close()  # type: ignore[attr-defined]

@@ -9,8 +9,9 @@ from typing import Any
 import pytest
 from fakes import FakeClock, console_app
 
-from console.access import FIRST_ANSWER_S, LEASE_S, WARN_S, AccessControl
+from console.access import AccessControl
 from console.lease import LeaseMonitor
+from console.lease_limits import FIRST_ANSWER_S, LEASE_S, WARN_S
 from core.robots import load
 
 

@@ -263,7 +263,7 @@ def test_control_panel_shows_a_dead_control_process_and_tells_every_browser_once
             panel._pump_once()
         assert panel.state_md.content.startswith("**Control process died:** the control "
                                                  "process was killed (SIGKILL)")
-        assert panel.arm_btn.disabled and panel.execute_btn.disabled
+        assert panel.arm_btn.disabled and panel.execute.execute_btn.disabled
         for c in clients.values():
             assert [(t, col) for (t, _), col in zip(c.notes, c.colors)] == [
                 ("Control process died", "red")]

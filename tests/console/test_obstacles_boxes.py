@@ -16,19 +16,9 @@ from core.kinematics import box_clearance as bc
 from core.kinematics import delta as dk
 from core.planning.box_scene import BoxScene, scene_from_json, scene_to_json
 from core.robots import load
+from fakes import FakeRunner, user
 
 EXT = load("extensible")
-
-
-def user(handle, client, value=None):
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    import viser
-
-    if value is not None:
-        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
-            handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
 
 
 def type_box(panel, client, name, centre_mm, size_mm):
@@ -51,17 +41,6 @@ class SyncPool:
         return fut
 
     def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
-        pass
-
-
-class FakeRunner:
-    from hw_bridge.extensible_jobs import RunnerSnapshot
-
-    started = False
-    period_s = 0.01
-    snapshot = RunnerSnapshot("disconnected")
-
-    def stop(self) -> None:
         pass
 
 
@@ -227,6 +206,30 @@ def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated,
     assert state_of(paths.status.content) == "blocked", paths.status.content
     assert "box &#x27;Post&#x27;" in paths.status.content
     assert paths._current_request().obstacles == obstacles.current()[1]
+
+
+def test_a_route_leg_starts_only_for_the_operator_and_a_refusal_moves_nothing(gated):
+    from fakes import FakeClient
+
+    from console.panels.target import TargetPanel
+
+    app = gated
+    target = app.panel(TargetPanel)
+    op = FakeClient(1)
+    q = np.zeros((EXT.n_segments, 3))
+    first, second = q + [0, 0, 0.01], q + [0, 0, 0.02]
+    said = "Stopped on the way: you no longer hold control."
+    assert not target._start_leg(op.client_id, [first, second], said)  # nobody holds control
+    assert target._legs == (0, []) and target._moving_to is None
+    assert app.hold.target() is None and said in target.status.content
+    app.access.take(op.client_id, "tok", name="Alice")
+    assert target._start_leg(op.client_id, [first, second], said)
+    client_id, rest = target._legs
+    assert client_id == op.client_id and len(rest) == 1 and np.array_equal(rest[0], second)
+    np.testing.assert_allclose(app.hold.target(), first)
+    np.testing.assert_allclose(target._moving_to, first)
+    app.hold.cancel()
+    target._on_stop("test")
 
 
 def test_boxes_are_recorded_and_read_back_with_the_mcap_reader(gated, tmp_path):

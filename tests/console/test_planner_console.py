@@ -19,7 +19,8 @@ from core.kinematics import planar as pk
 from core.planning.sides import plan_grasp_sided
 from core.planning.reachability import PLANNABLE, from_json, reachability_map, to_json
 from core.robots import load
-from fakes import FakeClient
+from fakes import FakeClient, click_at, user
+from ws_client import wait_for
 
 ROBOT = load("soft-arm")
 
@@ -102,27 +103,17 @@ def console():
     from console.app import ConsoleApp
     from console.panels import planner
 
-    planner.GraspSession.compute_reach = False
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
-    app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels()).start()
-    yield app
-    app.grasp_session.close()
-    app.stop()
-    server.stop()
-    planner.GraspSession.compute_reach = True
-
-
-def wait_for(fn, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = fn()
-        if value:
-            return value
-        time.sleep(0.02)
-    raise AssertionError("condition not met in time")
+    with pytest.MonkeyPatch.context() as patch:  # (module scope: no monkeypatch fixture)
+        patch.setattr(planner.GraspSession, "compute_reach", False)
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
+        app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels()).start()
+        yield app
+        app.grasp_session.close()
+        app.stop()
+        server.stop()
 
 
 def test_session_plans_refuses_inspects_and_plays(console):
@@ -181,25 +172,6 @@ def test_live_replanning_is_throttled_to_the_newest_position(console):
 
 # -- sharing: only the operator changes the objects, the plan and the inspected waypoint ------
 
-def user(handle, client, value=None):
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    import viser
-
-    if value is not None:
-        handle._impl.value = value if isinstance(value, viser.UploadedFile) else type(
-            handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
-
-
-def click_at(panel, client, x: float, y: float) -> None:
-    """A click on the table at (x, y), seen from straight above."""
-    import viser
-
-    panel._on_scene_click(viser.SceneClickEvent(client, client.client_id, (x, y, 1.0),
-                                                (0.0, 0.0, -1.0), (0.5, 0.5), None))
-
-
 def drag(session, name: str, client, x: float, y: float, phase: str = "end") -> None:
     """What viser does with a browser's gizmo drag: store the pose, then call back."""
     import viser
@@ -210,7 +182,7 @@ def drag(session, name: str, client, x: float, y: float, phase: str = "end") -> 
 
 
 @pytest.fixture
-def gated():
+def gated(monkeypatch):
     """A console with the grasp panels, an operator token and its own session."""
     import viser
 
@@ -218,7 +190,7 @@ def gated():
     from console.app import ConsoleApp
     from console.panels import planner
 
-    planner.GraspSession.compute_reach = False
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels(), access=AccessControl("tok"))
     try:
@@ -227,7 +199,6 @@ def gated():
         app.grasp_session.close()
         app.grasp_session._thread.join(5)  # no drawing into a stopped server
         server.stop()
-        planner.GraspSession.compute_reach = True
 
 
 def test_a_viewer_changes_nothing_and_edits_snap_back(gated):

@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import viser
 
 from console.access import AccessControl
 from console.panels.repeatability import TIP_SAMPLES, RepeatabilityPanel, run_comparison
@@ -20,7 +19,8 @@ from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 from hw_bridge.extensible_jobs import JobResult
-from fakes import FakeClient, console_app
+import ws_client
+from fakes import FakeClient, console_app, user
 
 EXT = load("extensible")
 HOME = dk.robot_rack_lengths(EXT, np.zeros((EXT.n_segments, 3)))
@@ -88,12 +88,6 @@ class SlippingRunner:
         return np.array([[t for r, t in self.measured if r == rep][-1] for rep in reps])
 
 
-def user(handle: Any, client: FakeClient) -> None:
-    """What viser does with a browser's click."""
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))  # type: ignore[arg-type]
-
-
 def cell(content: str, testid: str) -> float:
     m = re.search(rf'data-testid="{testid}" data-mm="([-0-9.]+)"', content)
     assert m, (testid, content)
@@ -111,10 +105,7 @@ def panel_with(server: Any, fake: SlippingRunner, sensor: bool = True) -> Repeat
 
 
 def wait_for(fn: Any, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.02)
+    ws_client.wait_for(fn, timeout)
 
 
 def test_one_click_fills_both_rows_from_the_runners_measured_tips(server) -> None:

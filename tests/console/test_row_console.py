@@ -28,7 +28,7 @@ from core.control.row import ObjectOutcome, RowObject, bin_at
 from core.control.row_stack import RowReport
 from core.robots import load
 from tests import ws_client
-from fakes import FakeClient, console_app
+from fakes import FakeClient, click_at, console_app, user
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST
 
 SOFT = load("soft-arm")
@@ -68,19 +68,6 @@ class FakeRowControl:
         pass
 
 
-def user(handle, client, value=None):
-    """What viser does with a browser's click / edit: store the value, then call back."""
-    if value is not None:
-        handle._impl.value = type(handle._impl.value)(value)
-    for cb in list(handle._impl.update_cb):
-        cb(viser.GuiEvent(client=client, client_id=client.client_id, target=handle))
-
-
-def click_at(panel, client, x, y):
-    panel._on_scene_click(viser.SceneClickEvent(client, client.client_id, (x, y, 1.0),
-                                                (0.0, 0.0, -1.0), (0.5, 0.5), None))
-
-
 def view_with(armed=True, phase="idle", row=None, waypoint=0, n_waypoints=0):
     from test_control_console import fake_view
     v = fake_view(armed=armed, phase=phase, device="sim", link=False)
@@ -89,8 +76,8 @@ def view_with(armed=True, phase="idle", row=None, waypoint=0, n_waypoints=0):
 
 
 @pytest.fixture
-def rig():
-    planner.GraspSession.compute_reach = False
+def rig(monkeypatch):
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     ctl = FakeRowControl()
     app = console_app(SOFT, srv, panels=(ObjectsPanel,), soft_control=ctl,
@@ -107,7 +94,6 @@ def rig():
         app.grasp_session.close()
         app.grasp_session._thread.join(5)
         srv.stop()
-        planner.GraspSession.compute_reach = True
 
 
 def place_scene(app, objects_panel, operator):

@@ -11,12 +11,13 @@ import pytest
 
 from console import camera
 from console.measure import Measurement, NotOnTable, table_hit
-from console.panels.paths import trail_tail
+from console.panels.path_scene import trail_tail
 from console.plan_view import (GHOST_COLOR, TABLE_TINT, TRAIL_WAYPOINTS, plan_geometry,
                                plan_labels, trail_colors, trail_mask)
 from core.planning.grasp import plan_grasp
 from core.robots import load
 from tests.fakes import FakeClient
+from tests.ws_client import wait_for
 
 SOFT, EXT = load("soft-arm"), load("extensible")
 
@@ -198,28 +199,18 @@ def click(server, client, ray_origin, ray_direction) -> None:
 
 
 @pytest.fixture
-def planar_console(server):
+def planar_console(server, monkeypatch):
     from console.panels import planner
     from console.panels.view import ViewPanel
     from tests.fakes import console_app
 
-    planner.GraspSession.compute_reach = False
+    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     app = console_app(SOFT, server, panels=(*planner.grasp_panels(), ViewPanel))
     try:
         yield app
     finally:
         app.grasp_session.close()
         app.grasp_session._thread.join(5)
-        planner.GraspSession.compute_reach = True
-
-
-def wait_for(fn, timeout=10.0):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if fn():
-            return True
-        time.sleep(0.02)
-    raise AssertionError("condition not met in time")
 
 
 def test_measuring_clicks_measure_and_place_nothing_other_browsers_still_place(planar_console):

@@ -26,9 +26,10 @@ def arm():
     return robots.load("soft-arm")
 
 
-def _armed_loop(arm, seed=1):
+def _armed_loop(arm, seed=1, stack_type=ControlStack):
+    """The simulated arm and an armed ``stack_type`` (planning at once) on a SimLoop."""
     sim = SoftArmSim(arm, seed=seed)
-    stack = ControlStack(arm, 0.01, immediate(
+    stack = stack_type(arm, 0.01, immediate(
         lambda req: plan_grasp(arm, req.kappa, req.center, req.radius)))
     loop = SimLoop(sim, stack, 0.01)
     loop.run(0.05)

@@ -5,17 +5,13 @@ other task starts mid-row; a disarmed stack refuses the row."""
 
 import numpy as np
 import pytest
+from test_control_row import B, D, E, R, _armed_loop
 
 from core import robots
 from core.control.grasp_place import Phase, immediate
-from core.control.row import RowObject, bin_at, bin_drop_point
+from core.control.row import bin_at, bin_drop_point
 from core.control.row_stack import RowControlStack
-from core.control.sim import SoftArmSim
-from core.control.sim_loop import SimLoop
-from core.planning.grasp import plan_grasp
 
-R = 0.0165
-B, D, E = RowObject(-0.22, 0.20, R), RowObject(-0.16, 0.28, R), RowObject(-0.08, 0.33, R)
 BIN_XY = (0.15, 0.25)
 
 
@@ -30,14 +26,8 @@ def bin_params(arm):
 
 
 def _armed(arm, seed=1):
-    sim = SoftArmSim(arm, seed=seed)
-    stack = RowControlStack(arm, 0.01, immediate(
-        lambda req: plan_grasp(arm, req.kappa, req.center, req.radius)))
-    loop = SimLoop(sim, stack, 0.01)
-    loop.run(0.05)
-    loop.arm()
-    loop.run(0.5)
-    return sim, stack, loop
+    sim, loop = _armed_loop(arm, seed, RowControlStack)
+    return sim, loop.stack, loop
 
 
 def test_the_loop_takes_three_objects_to_the_placed_bin_by_update_alone(arm, bin_params):

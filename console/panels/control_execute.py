@@ -1,0 +1,140 @@
+"""Control panel (soft arm): Execute and Click to grasp act on the Objects panel's selected object.
+
+One object model (issue 19.1 / 18): the objects are the Objects panel's (the grasp session's).
+Execute acts on its selected object, with the Grasp planner's plan for exactly that object when
+there is one (else the controller plans the approach), and says which; the state line names it
+and counts waypoints as the planner does. *Click to grasp* places (or selects) an object in the
+Objects panel where the click ray meets the table and executes it. Only Arm arms (issue 19.3):
+Execute or a click while disarmed is refused with "Arm first (press Arm)".
+
+:class:`ExecuteControls` is built by the Control panel inside its folder (the target line,
+*Execute grasp-and-place*, *Click to grasp*); the panel's state line and header fields name
+:attr:`ExecuteControls.target`, what the last Execute acts on.
+"""
+
+from __future__ import annotations
+
+import html
+from typing import Any
+
+import viser
+
+from console.panels.base import operator_only
+from console.panels.control_text import ExecuteTarget, execute_target, table_point
+from console.plan_view import validate_object
+from hw_bridge.soft_arm_process import ARM_FIRST
+
+
+def target_object(target: ExecuteTarget) -> Any:
+    """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
+    from console.plan_view import TableObject
+    return TableObject(target.name, target.x, target.y, target.r)
+
+
+class ExecuteControls:
+    """The Control panel's target line, Execute button and Click to grasp (see the module
+    docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``_disarmed``,
+    ``_refuse``, ``_report`` and ``_stopped``)."""
+
+    def __init__(self, panel: Any) -> None:
+        self.panel, self.app = panel, panel.app
+        gui = panel.gui
+        self.target_md = gui.add_html(self._target_html())
+        self.execute_btn = gui.add_button(
+            "Execute grasp-and-place", icon=viser.Icon.PLAYER_PLAY,
+            hint="the Objects panel's selected object, with the Grasp planner's plan for it "
+                 "when there is one; arm first")
+        self.click_mode = gui.add_checkbox("Click to grasp", False,
+                                           hint="one click on the table places (or selects) an "
+                                                "object there in the Objects panel and runs the "
+                                                "whole grasp-and-place; arm first")
+        self.execute_btn.on_click(operator_only(lambda e: self._execute(e), panel=panel,
+                                                action="run grasp-and-place"))
+        panel.app.server.scene.on_click()(self._on_scene_click)
+        self.target: ExecuteTarget | None = None  # what the last Execute acts on
+        if self.app.grasp_session is not None:
+            self.app.grasp_session.add_listener(lambda _view: self._show_target())
+
+    def _target_html(self) -> str:
+        """Which object Execute would act on now (the Objects panel's selection)."""
+        session = self.app.grasp_session
+        try:
+            if session is None:
+                raise ValueError("No Objects panel: no object to grasp.")
+            text = "Execute acts on " + html.escape(execute_target(session.view()).describe())
+        except ValueError as exc:
+            text = html.escape(str(exc))
+        return f'<small data-testid="control-target">{text}</small>'
+
+    def _show_target(self) -> None:
+        text = self._target_html()
+        if text != self.target_md.content:
+            self.target_md.content = text
+
+    def _target(self, event: Any) -> ExecuteTarget | None:
+        """The selected object (and its plan) Execute acts on, or None after telling the
+        operator why (nothing is sent: a radius of 1e308 must not reach the arm)."""
+        if self.panel._disarmed():  # arming is the operator's own act (issue 19.3)
+            self.panel._refuse(event, "Arm first", ARM_FIRST)
+            return None
+        session = self.app.grasp_session
+        try:
+            if session is None:
+                raise ValueError("No Objects panel: no object to grasp.")
+            target = execute_target(session.view())
+            validate_object(target_object(target), self.app.robot)
+        except ValueError as exc:
+            self.panel._refuse(event, "Refused", str(exc))
+            return None
+        return target
+
+    def _run(self, event: Any, target: ExecuteTarget) -> None:
+        """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
+        self.panel._stopped = False
+        self.target = target
+        if target.plan is not None:
+            fut = self.panel.ctl.execute(target.plan, target.x, target.y, target.r)
+        else:
+            session = self.app.grasp_session
+            view = None if session is None else session.view()
+            fut = self.panel.ctl.grasp_at(target.x, target.y, target.r,
+                                          tuple(getattr(view, "obstacles", ())),
+                                          float(getattr(view, "clearance", 0.0)))
+        fut.add_done_callback(lambda f: self.panel._report(event, f))
+        client = getattr(event, "client", None)
+        if client is not None:
+            client.add_notification("Grasp-and-place", target.describe(), color="blue",
+                                    auto_close_seconds=6.0)
+        self.app.recorder.action(f"execute grasp-and-place: {target.describe()}", None)
+
+    def _execute(self, event: Any) -> None:
+        target = self._target(event)
+        if target is not None:
+            self._run(event, target)
+
+    def _on_scene_click(self, event: Any) -> None:
+        if not self.click_mode.value:
+            return
+        try:
+            self.app.access.check(event.client, "click to grasp")
+        except Exception as exc:  # NotOperator: tell this viewer only
+            self.app.refuse(event.client, str(exc), "click to grasp")
+            return
+        p = table_point(event.ray_origin, event.ray_direction)
+        if p is None:
+            return
+        if self.panel._disarmed():
+            self.panel._refuse(event, "Arm first", ARM_FIRST)
+            return
+        session = self.app.grasp_session
+        if session is None:
+            self.panel._refuse(event, "Refused", "No Objects panel: no object to grasp.")
+            return
+        try:  # the Objects panel's object there (selected), or a new one
+            session.place(p[0], p[1])
+        except ValueError as exc:
+            self.panel._refuse(event, "Refused", str(exc))
+            return
+        target = self._target(event)
+        if target is not None:
+            self._run(event, target)
