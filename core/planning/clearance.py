@@ -44,7 +44,7 @@ def gripper_clearance(model: ArmModel, kappa: Array, center: complex, radius: fl
                       length: float, half_width: float) -> float:
     """Distance from a straight gripper of the given length and half-width to the disk edge."""
     root, th = model.point_py(np.asarray(kappa, float).tolist())
-    heading = complex(np.cos(th), np.sin(th))
+    heading = complex(math.cos(th), math.sin(th))
     along = ((center - root) * heading.conjugate()).real
     closest = root + heading * min(max(along, 0.0), length)
     return float(abs(center - closest) - half_width - radius)
