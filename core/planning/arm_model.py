@@ -95,6 +95,9 @@ class ArmModel:
             n, L.tolist(), (0.5 * L * L).tolist(), (0.25 * L**3).tolist(), (1j * L).tolist(),
             (0.25 * L * L).tolist(), np.multiply.outer(L, L).tolist(), self.lo.tolist(),
             self.hi.tolist()))
+        # The same constants as arrays, for the compiled solver (core.planning.solver_jit).
+        set_(self, "jit_consts", (L.copy(), 0.5 * L * L, 0.25 * L**3, np.multiply.outer(L, L),
+                                  0.25 * L * L, self.lo.astype(float), self.hi.astype(float)))
         # Arc length from the start of segment k to the end of the arm (Lipschitz bounds).
         set_(self, "_downstream", np.cumsum(L[::-1])[::-1].copy())
 
