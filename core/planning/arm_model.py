@@ -96,8 +96,10 @@ class ArmModel:
             (0.25 * L * L).tolist(), np.multiply.outer(L, L).tolist(), self.lo.tolist(),
             self.hi.tolist()))
         # The same constants as arrays, for the compiled solver (core.planning.solver_jit).
-        set_(self, "jit_consts", (L.copy(), 0.5 * L * L, 0.25 * L**3, np.multiply.outer(L, L),
-                                  0.25 * L * L, self.lo.astype(float), self.hi.astype(float)))
+        set_(self, "jit_consts", (L.astype(float), 0.5 * L * L, 0.25 * L**3,
+                                  np.multiply.outer(L, L), 0.25 * L * L, self.lo.astype(float),
+                                  self.hi.astype(float),
+                                  complex(math.cos(self.theta0), math.sin(self.theta0))))
         # Arc length from the start of segment k to the end of the arm (Lipschitz bounds).
         set_(self, "_downstream", np.cumsum(L[::-1])[::-1].copy())
 

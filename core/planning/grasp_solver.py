@@ -210,32 +210,37 @@ def solve(
     Returns:
         :class:`SolveResult`.
     """
+    mc = model.py
+    x = [min(max(v, a), b) for v, a, b in zip(np.asarray(kappa0, float).tolist(), mc.lo, mc.hi)]
+    lam = (0.0, 0.0) if lam0 is None else (float(lam0[0]), float(lam0[1]))
+    act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, mc.lo, mc.hi)]
+    mu = 0.0
+    it0 = 0
+    fast = compiled_kernel() if clearance is None and not any(act) else None
+    if fast is not None:
+        # The plain Newton-KKT iterations, compiled (core.planning.solver_jit); it hands back
+        # at the first iteration that needs the active-set loop below. Every argument has the
+        # one type the kernel was compiled for (another would compile a second version).
+        w_a = np.ascontiguousarray(weights, dtype=float)
+        code, it0, xa, l0, l1, mu, ok, e, f, dk, dl0, dl1, has_t = fast(
+            np.array(x), lam[0], lam[1], *model.jit_consts,
+            np.ascontiguousarray(kappa_off, dtype=float), w_a, 2.0 * w_a,
+            complex(offset), complex(model.base - center), int(opts.max_iter),
+            float(opts.ctol), float(opts.xtol), float(opts.gtol), float(opts.max_step),
+            float(opts.armijo), bool(tangent))
+        if code == 0:
+            result = SolveResult(xa, (l0, l1), OK if ok else NO_CONVERGENCE, it0,
+                                 max(abs(e.real), abs(e.imag)), f, (0,) * mc.n, e)
+            if has_t:
+                result.dkappa_dr, result.dlam_dr = dk, (dl0, dl1)
+            return result
+        x, lam = xa.tolist(), (l0, l1)
     kn = Kernel(model, center, offset, kappa_off, weights, clearance)
     n, lo, hi, w2, xo = kn.n, kn.lo, kn.hi, kn.w2, kn.xo
     wmax = max(w2)
     nc = clearance.size(n) if clearance is not None else 0
     nk = n + 2 + nc
-    x = [min(max(v, a), b) for v, a, b in zip(np.asarray(kappa0, float).tolist(), lo, hi)]
-    lam = (0.0, 0.0) if lam0 is None else (float(lam0[0]), float(lam0[1]))
-    act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, lo, hi)]
     cact = [False] * nc
-    mu = 0.0
-    it0 = 0
-    fast = compiled_kernel() if not nc and not any(act) else None
-    if fast is not None:
-        # The plain Newton-KKT iterations, compiled (core.planning.solver_jit); it hands back
-        # at the first iteration that needs the active-set loop below.
-        code, it0, xa, l0, l1, mu, ok, e, f, dk, dl0, dl1, has_t = fast(
-            np.array(x), lam[0], lam[1], *model.jit_consts, np.array(xo), np.array(kn.w),
-            np.array(w2), kn.E0, offset, kn.base_minus_center, opts.max_iter, opts.ctol,
-            opts.xtol, opts.gtol, opts.max_step, opts.armijo, tangent)
-        if code == 0:
-            result = SolveResult(xa, (l0, l1), OK if ok else NO_CONVERGENCE, it0,
-                                 max(abs(e.real), abs(e.imag)), f, (0,) * n, e)
-            if has_t:
-                result.dkappa_dr, result.dlam_dr = dk, (dl0, dl1)
-            return result
-        x, lam = xa.tolist(), (l0, l1)
     status = NO_CONVERGENCE
     p = PointEval(kn, x)
     it = it0

@@ -130,10 +130,11 @@ def _lu_solve(A, rhs, out):
 
 
 @_jit
-def newton_free(x0, lam0, lam1, L, c1, c2, LL, L2q, lo, hi, xo, w, w2, E0, offset, bmc,
+def newton_free(x0, lam0, lam1, L, c1, c2, LL, L2q, lo, hi, E0, xo, w, w2, offset, bmc,
                 max_iter, ctol, xtol, gtol, max_step, armijo, tangent):
     """The plain Newton-KKT iterations of ``grasp_solver.solve`` from ``x0`` (inside the bounds,
-    no clearance rows).
+    no clearance rows). ``L`` .. ``E0`` are the model's ``jit_consts``; ``xo``, ``w``, ``w2``
+    kappa_off, the weights and twice the weights; ``bmc`` base minus object centre.
 
     Returns:
         ``(code, it, x, lam0, lam1, mu, status_ok, e, f, dk, dl0, dl1, has_tangent)``: with
