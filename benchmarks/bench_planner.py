@@ -30,6 +30,10 @@ separately), success rates, whether the final configurations agree with CasADi's
 < 1e-3), and the goals: >= 2x CasADi sqpmethod by median on every set at 100 % success, and
 >= 10x the literal port on every fixed-grid object.
 
+With numba installed this planner's plain Newton iterations run compiled
+(:mod:`core.planning.solver_jit`; compiled in the untimed warm-up if needed);
+``GRASP_SOLVER_JIT=0`` times the pure-Python path.
+
 Usage: python benchmarks/bench_planner.py [--repeats 5] [--quick] [--random 30] [--seed S]
        [--clock cpu|wall] [--right-start straight|curled] [--no-ipopt]
 """
@@ -38,6 +42,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import sys
 import time
 from pathlib import Path
@@ -50,6 +55,11 @@ from core import robots  # noqa: E402
 from core.planning.arm_model import ArmModel  # noqa: E402
 from core.planning.grasp import GraspPlanner, GraspRefused  # noqa: E402
 from planner_baselines import CasadiPlanner, literal_port  # noqa: E402
+
+# The planner's compiled Newton kernel (core.planning.solver_jit) when numba is installed:
+# compiled here during the untimed warm-up if it is not in numba's disk cache yet.
+# GRASP_SOLVER_JIT=0 times the pure-Python path.
+os.environ.setdefault("GRASP_SOLVER_JIT", "1")
 
 GOAL_VS_CASADI = 2.0
 GOAL_VS_LITERAL = 10.0
@@ -281,6 +291,10 @@ def main() -> int:
         sets.append(random_set(f"random right quadrant ({args.right_start} start)", ours, cas,
                                right, 1.0, args.random, rng))
 
+    from core.planning.grasp_solver import compiled_kernel
+    print("this planner's Newton iterations: " + (
+        "compiled (numba, core.planning.solver_jit)" if compiled_kernel() is not None else
+        "pure Python (numba not installed, or GRASP_SOLVER_JIT=0)"))
     print(f"Grasp planner benchmark (Algorithm 1), one run; delta_d = {robot.delta_d} m; per "
           f"object the best of {args.repeats} runs ({max(1, args.repeats // 2)} for IPOPT, 2 for "
           f"the literal port), {args.clock} time; this planner and CasADi sqpmethod alternate "

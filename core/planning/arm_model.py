@@ -95,6 +95,11 @@ class ArmModel:
             n, L.tolist(), (0.5 * L * L).tolist(), (0.25 * L**3).tolist(), (1j * L).tolist(),
             (0.25 * L * L).tolist(), np.multiply.outer(L, L).tolist(), self.lo.tolist(),
             self.hi.tolist()))
+        # The same constants as arrays, for the compiled solver (core.planning.solver_jit).
+        set_(self, "jit_consts", (L.astype(float), 0.5 * L * L, 0.25 * L**3,
+                                  np.multiply.outer(L, L), 0.25 * L * L, self.lo.astype(float),
+                                  self.hi.astype(float),
+                                  complex(math.cos(self.theta0), math.sin(self.theta0))))
         # Arc length from the start of segment k to the end of the arm (Lipschitz bounds).
         set_(self, "_downstream", np.cumsum(L[::-1])[::-1].copy())
 
@@ -267,13 +272,18 @@ class ArmModel:
         rel_end = (center - self.base) - np.cumsum(chord, axis=-1)     # c - segment ends
         rel = (rel_end + chord) * np.conj(e_start)                      # c - start, start frame
         a = rel.real
-        lft = np.where(kappa < 0.0, -rel.imag, rel.imag)
-        k = np.abs(kappa) + 1e-12
+        lft = rel.imag
+        # Signed curvature instead of mirroring each arc to turn left: with ks = kappa +-
+        # 1e-12 (away from 0) and k = |ks|, the mirrored formulas read k a, ks lft and
+        # |ks a^2 + lft (ks lft - 2)| (the same values, fewer array passes).
+        ks = kappa + np.copysign(1e-12, kappa)
+        k = np.abs(ks)
         ka = k * a
-        one_kl = 1.0 - k * lft
+        kl = ks * lft
+        one_kl = 1.0 - kl
         s_star = np.arctan2(ka, one_kl)
         inside = (s_star >= 0.0) & (s_star <= k * self.lengths)
-        d_circle = np.abs(ka * a + lft * (k * lft - 2.0)) / (np.hypot(ka, one_kl) + 1.0)
+        d_circle = np.abs(ks * (a * a) + lft * (kl - 2.0)) / (np.hypot(ka, one_kl) + 1.0)
         d = np.minimum(np.where(inside, d_circle, np.inf).min(axis=-1),
                        np.abs(rel_end).min(axis=-1))
         return np.minimum(d, abs(center - self.base)) - (self.half_width + radius)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
+from operator import add
 
 import numpy as np
 import numpy.typing as npt
@@ -44,7 +45,7 @@ def gripper_clearance(model: ArmModel, kappa: Array, center: complex, radius: fl
                       length: float, half_width: float) -> float:
     """Distance from a straight gripper of the given length and half-width to the disk edge."""
     root, th = model.point_py(np.asarray(kappa, float).tolist())
-    heading = complex(np.cos(th), np.sin(th))
+    heading = complex(math.cos(th), math.sin(th))
     along = ((center - root) * heading.conjugate()).real
     closest = root + heading * min(max(along, 0.0), length)
     return float(abs(center - closest) - half_width - radius)
@@ -134,10 +135,17 @@ def certify_function(evaluate: Callable[[Array], Array], lam: Array, starts: Arr
         vals = clr[pos:pos + s_i + 1]
         pos += s_i + 1
         end_clearance.append(vals[-1])
-        k_min = min(range(s_i + 1), key=vals.__getitem__)
-        sampled_min.append(vals[k_min])
-        worst_tau.append(k_min / s_i)
+        v_min = min(vals)
+        sampled_min.append(v_min)
+        worst_tau.append(vals.index(v_min) / s_i)
         half = 0.5 * lam[i] / s_i
+        # The bound is monotone in c0 + c1, so the smallest pair sum gives the line's bound
+        # (the same rounding as interval by interval); only a line whose bound falls short
+        # of `required` is gone through interval by interval for bisection.
+        best = 0.5 * min(map(add, vals, vals[1:])) - half
+        if best >= required:
+            bound.append(best)
+            continue
         best = math.inf
         for k in range(s_i):
             c0, c1 = vals[k], vals[k + 1]

@@ -19,13 +19,20 @@ curvature along a step is removed by a diagonal shift and a re-solve.
 
 Speed: the kinematics, Jacobian and Hessian come from the scalar kernel in
 :mod:`core.planning.solver_kernel` (with N = 6, Python complex scalars beat 1-D numpy calls by
-about 3x) and only the KKT solve goes to LAPACK.
+about 3x) and only the KKT solve goes to LAPACK. With numba installed, the plain Newton-KKT
+iterations (no bound or clearance row active, full steps accepted: most waypoint solves) run
+compiled in :mod:`core.planning.solver_jit` (see :func:`compiled_kernel`), which hands back to
+the loop here at the first iteration that needs more.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import os
+import sys
 from operator import add, mul, sub
+from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -150,6 +157,28 @@ def _restore(kn: Kernel, p: PointEval, Jx: list[float], Jy: list[float],
     return None
 
 
+@functools.lru_cache(maxsize=1)
+def compiled_kernel():
+    """:func:`core.planning.solver_jit.newton_free` when numba is installed and the kernel is
+    compiled on disk or ``GRASP_SOLVER_JIT=1`` asks for it (``0``: never), else None (the
+    pure-Python path)."""
+    want = os.environ.get("GRASP_SOLVER_JIT", "")
+    if want == "0":
+        return None
+    if want != "1":
+        # Without numba's cache files next to the kernel there is nothing to load: say so
+        # without importing numba (about a second).
+        cache = Path(__file__).with_name("__pycache__")
+        tag = f"py{sys.version_info[0]}{sys.version_info[1]}"
+        if not any(cache.glob(f"solver_jit.newton_free-*.{tag}.nbi")):
+            return None
+    try:
+        from core.planning.solver_jit import compiled_on_disk, newton_free
+    except ImportError:
+        return None
+    return newton_free if want == "1" or compiled_on_disk() else None
+
+
 def solve(
     model: ArmModel,
     center: complex,
@@ -181,19 +210,40 @@ def solve(
     Returns:
         :class:`SolveResult`.
     """
+    mc = model.py
+    x = [min(max(v, a), b) for v, a, b in zip(np.asarray(kappa0, float).tolist(), mc.lo, mc.hi)]
+    lam = (0.0, 0.0) if lam0 is None else (float(lam0[0]), float(lam0[1]))
+    act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, mc.lo, mc.hi)]
+    mu = 0.0
+    it0 = 0
+    fast = compiled_kernel() if clearance is None and not any(act) else None
+    if fast is not None:
+        # The plain Newton-KKT iterations, compiled (core.planning.solver_jit); it hands back
+        # at the first iteration that needs the active-set loop below. Every argument has the
+        # one type the kernel was compiled for (another would compile a second version).
+        w_a = np.ascontiguousarray(weights, dtype=float)
+        code, it0, xa, l0, l1, mu, ok, e, f, dk, dl0, dl1, has_t = fast(
+            np.array(x), lam[0], lam[1], *model.jit_consts,
+            np.ascontiguousarray(kappa_off, dtype=float), w_a, 2.0 * w_a,
+            complex(offset), complex(model.base - center), int(opts.max_iter),
+            float(opts.ctol), float(opts.xtol), float(opts.gtol), float(opts.max_step),
+            float(opts.armijo), bool(tangent))
+        if code == 0:
+            result = SolveResult(xa, (l0, l1), OK if ok else NO_CONVERGENCE, it0,
+                                 max(abs(e.real), abs(e.imag)), f, (0,) * mc.n, e)
+            if has_t:
+                result.dkappa_dr, result.dlam_dr = dk, (dl0, dl1)
+            return result
+        x, lam = xa.tolist(), (l0, l1)
     kn = Kernel(model, center, offset, kappa_off, weights, clearance)
     n, lo, hi, w2, xo = kn.n, kn.lo, kn.hi, kn.w2, kn.xo
     wmax = max(w2)
     nc = clearance.size(n) if clearance is not None else 0
     nk = n + 2 + nc
-    x = [min(max(v, a), b) for v, a, b in zip(np.asarray(kappa0, float).tolist(), lo, hi)]
-    lam = (0.0, 0.0) if lam0 is None else (float(lam0[0]), float(lam0[1]))
-    act = [-1 if v <= a else (1 if v >= b else 0) for v, a, b in zip(x, lo, hi)]
     cact = [False] * nc
-    mu = 0.0
     status = NO_CONVERGENCE
     p = PointEval(kn, x)
-    it = 0
+    it = it0
     unit = unit_rows(nk)
     reg_x = [-1e-13, 0.0] + [0.0] * nc
     reg_y = [0.0, -1e-13] + [0.0] * nc
@@ -201,7 +251,7 @@ def solve(
     G = hc = nu = None
     W = []
     grad = None
-    for it in range(1, opts.max_iter + 1):
+    for it in range(it0 + 1, opts.max_iter + 1):
         J = p.J
         Jx = [v.real for v in J]
         Jy = [v.imag for v in J]

@@ -18,6 +18,7 @@ Command line: ``python -m core.planning.grasp --object X Y R [--json]``
 
 from __future__ import annotations
 
+import cmath
 import dataclasses
 import functools
 import math
@@ -131,8 +132,10 @@ class GraspPlanner:
         ``first_start`` replaces the first waypoint's warm start."""
         t_start = time.perf_counter()
         cfg, m = self.config, self.model
+        # Checks on Python lists: with N = 6 each numpy call costs more than the arithmetic.
         km = np.asarray(kappa_meas, dtype=float)
-        if km.shape != (m.n,) or not np.isfinite(km).all():
+        km_l = km.tolist()
+        if km.shape != (m.n,) or not all(map(math.isfinite, km_l)):
             raise GraspRefused("bad_input", f"kappa_meas must be {m.n} finite curvatures, "
                                f"got shape {km.shape}.")
         ctr = np.asarray(center, dtype=float)
@@ -142,17 +145,19 @@ class GraspPlanner:
         if not (math.isfinite(dd) and dd > 0):
             raise GraspRefused("bad_input", f"delta_d must be a positive distance, got {dd!r}.")
         w = np.asarray(cfg.weights if weights is None else weights, dtype=float)
-        if w.shape != (m.n,) or not (np.isfinite(w).all() and (w > 0).all()):
+        w_l = w.tolist()
+        if w.shape != (m.n,) or not all(math.isfinite(v) and v > 0 for v in w_l):
             raise GraspRefused("bad_input", f"weights must be {m.n} positive numbers.")
-        c, r_o = complex(ctr[0], ctr[1]), float(radius)
+        cx, cy = ctr.tolist()
+        c, r_o = complex(cx, cy), float(radius)
         check_request(self.robot, m, km, c, r_o, cfg.base_keepout)
 
         # Algorithm 1: radii of the approach circles.
-        palm0, _ = m.point_py(km.tolist(), complex(self.w_along, self.g_off))
+        palm0, _ = m.point_py(km_l, complex(self.w_along, self.g_off))
         d1 = abs(c - palm0)
         d2 = d1 - r_o - self.g_off
         num_moves = max(1, math.floor(d2 / dd))
-        radii = d1 - np.arange(1, num_moves + 1) * d2 / num_moves
+        radii = [d1 - i * d2 / num_moves for i in range(1, num_moves + 1)]
 
         # Warm starts: the first radius from the best table configuration (or kappa_meas);
         # later radii from the previous waypoint moved along its sensitivity d kappa / d r_a
@@ -161,7 +166,7 @@ class GraspPlanner:
         prev: _Waypoint | None = None
         witness: Array | None = None
         witness_tried = False
-        for i, ra in enumerate(radii.tolist(), start=1):
+        for i, ra in enumerate(radii, start=1):
             if prev is None:
                 x, lam = km, None
                 x0, lam0 = best_start(m, c, self._offset(ra), km, w, cfg.seed_table), None
@@ -172,7 +177,8 @@ class GraspPlanner:
                 x0, lam0 = x, lam
                 if prev.dk is not None:
                     dr = ra - prev.radius
-                    x0 = np.minimum(np.maximum(x + dr * prev.dk, m.lo), m.hi)
+                    x0 = [min(max(a + dr * b, lo_j), hi_j) for a, b, lo_j, hi_j in
+                          zip(x.tolist(), prev.dk.tolist(), m.py.lo, m.py.hi)]
                     lam0 = (lam[0] + dr * prev.dl[0], lam[1] + dr * prev.dl[1])
             wp = self._solve_radius(c, ra, x0, lam0, km, w, i, first_restart=x,
                                     tangent=i < num_moves)
@@ -407,34 +413,42 @@ class GraspPlanner:
     def _assemble(self, wps: list[_Waypoint], km: Array, ctr: Array, r_o: float, d1: float,
                   d2: float, num_moves: int, dd: float, w: Array, t_start: float) -> GraspPlan:
         m = self.model
-        kappas = np.array([p.kappa for p in wps]).reshape(len(wps), m.n)
-        radii = np.array([p.radius for p in wps])
+        n_wp = len(wps)
+        kappas = np.array([p.kappa for p in wps]).reshape(n_wp, m.n)
+        th = (kappas @ m.lengths + m.theta0).tolist()
         # Palm point = object-centre point - r_a * (left normal): q_palm = c + (q - c) - i r e^{i th}.
-        th = kappas @ m.lengths + m.theta0
-        q = complex(ctr[0], ctr[1]) + np.array([p.error for p in wps]) - 1j * radii * np.exp(
-            1j * th)
-        failures = []
-        for p in wps:
+        # Per-waypoint numbers are gathered in Python and turned into arrays in two calls (a
+        # handful of waypoints: each numpy call would cost more than its arithmetic).
+        c = complex(ctr[0], ctr[1])
+        floats, ints, failures, status = [], [], [], []
+        for p, t in zip(wps, th):
+            q = c + p.error - 1j * p.radius * cmath.exp(1j * t)
+            floats.append((p.radius, wrap(t - 0.5 * math.pi), q.real, q.imag, t, p.clearance,
+                           p.path_clearance, p.ms, p.cost, p.violation,
+                           p.obstacle_path_clearance))
+            ints.append((p.depth > 0, p.constrained, p.iterations, p.restarts))
             if p.status != gs.OK:
                 name = _REASONS[p.status][0]
                 failures.append(RadiusFailure(p.index, p.radius, name, p.detail))
-        status = tuple("ok" if p.status == gs.OK else _REASONS[p.status][0] for p in wps)
-        arr = lambda attr, dt=float: np.array([getattr(p, attr) for p in wps], dtype=dt)  # noqa
+                status.append(name)
+            else:
+                status.append("ok")
+        fl = np.array(floats, float).reshape(n_wp, 11).T.copy()
+        it = np.array(ints, np.int64).reshape(n_wp, 4).T.copy()
         obs = self.obstacles
         extra = {} if obs is None else dict(
             obstacles=obs.obstacles, obstacle_margin=obs.clearance,
             obstacle_clearance=obs.gaps(m, kappas).min(axis=1, initial=math.inf),
-            obstacle_path_clearance=arr("obstacle_path_clearance"))
+            obstacle_path_clearance=fl[10])
         return GraspPlan(
             center=ctr.copy(), radius=r_o, kappa_meas=km.copy(), d1=d1, d2=d2,
-            num_moves=num_moves, delta_d=dd, weights=w.copy(), radii=radii,
-            phis=np.asarray(wrap(th - 0.5 * np.pi), float), kappas=kappas,
-            palm_poses=np.column_stack([q.real, q.imag, th]),
-            clearance=arr("clearance"), path_clearance=arr("path_clearance"),
-            inserted=arr("depth", int) > 0, clearance_constrained=arr("constrained", bool),
-            iterations=arr("iterations", int), restarts=arr("restarts", int),
-            solve_ms=arr("ms"), cost=arr("cost"), violation=arr("violation"), status=status,
-            failures=tuple(failures), total_ms=(time.perf_counter() - t_start) * 1e3, **extra)
+            num_moves=num_moves, delta_d=dd, weights=w.copy(), radii=fl[0], phis=fl[1],
+            kappas=kappas, palm_poses=np.ascontiguousarray(fl[2:5].T), clearance=fl[5],
+            path_clearance=fl[6],
+            inserted=it[0].astype(bool), clearance_constrained=it[1].astype(bool),
+            iterations=it[2], restarts=it[3], solve_ms=fl[7], cost=fl[8], violation=fl[9],
+            status=tuple(status), failures=tuple(failures),
+            total_ms=(time.perf_counter() - t_start) * 1e3, **extra)
 
 
 class _Identity:
