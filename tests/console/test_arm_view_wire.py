@@ -261,3 +261,39 @@ def test_a_frame_in_an_atomic_block_wakes_the_viewers_once_at_its_end(server) ->
     finally:
         for c in clients:
             c.close()
+
+
+def test_a_broadcast_window_is_collected_once_for_every_client() -> None:
+    """Clients at the same cursor get the same window object with what viser's own per-client
+    walk takes: culled ids skipped, at most a window's size; a range holding a message that
+    skips one client is that client's own."""
+    import asyncio
+
+    from viser.infra._async_message_buffer import AsyncMessageBuffer
+
+    from console.viser_windows import shared_window
+
+    loop = asyncio.new_event_loop()
+    try:
+        buffer = AsyncMessageBuffer(loop, persistent_messages=True)
+        buffer.max_window_size = 4
+        for i in range(6):
+            buffer.push(_messages.SetBonePositionMessage("/arm/body", i % 3, (0.0, 0.01 * i, 0.0)))
+        # Bones 0-2 were set twice: ids 0-2 were culled, 3-5 remain.
+        assert sorted(buffer.message_from_id) == [3, 4, 5]
+        a, cursor_a = shared_window(buffer, -1, 5, client_id=1)
+        b, cursor_b = shared_window(buffer, -1, 5, client_id=2)
+        assert a is b and cursor_a == cursor_b == 5
+        assert [m.position[1] for m in a] == [0.03, 0.04, 0.05]
+        for i in range(6, 12):
+            buffer.push(_messages.SetBonePositionMessage("/arm/body", i, (0.0, 0.0, 0.0)))
+        c, cursor = shared_window(buffer, 5, 11, client_id=1)
+        assert [m.bone_index for m in c] == [6, 7, 8, 9] and cursor == 9  # the window's size
+        echo = _messages.SetBonePositionMessage("/arm/body", 20, (1.0, 0.0, 0.0))
+        echo.excluded_self_client = 2
+        buffer.push(echo)
+        own, _ = shared_window(buffer, 11, 12, client_id=2)
+        other, _ = shared_window(buffer, 11, 12, client_id=1)
+        assert own == [] and other == [echo]
+    finally:
+        loop.close()
