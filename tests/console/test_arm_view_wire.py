@@ -161,6 +161,30 @@ def test_set_bone_poses_queues_what_the_bone_setters_queue(server) -> None:
         set_bone_poses(view_b.body, wxyz[:-1], xyz)
 
 
+def test_bone_poses_go_on_the_wire_as_viser_writes_them(server) -> None:
+    """set_bone_poses gives each message its wire dict directly: viser's own walk of the type
+    hints gives the same keys, order and values (the same bytes once encoded)."""
+    import msgspec
+
+    from console.viser_fixes import set_bone_poses
+
+    install()
+    view = make_arm_view(server.scene, model_for(SOFT), root="/w", dead_band=None)
+    sent: list[object] = []
+    original = server.scene._queue_scene_message
+    server.scene._queue_scene_message = lambda m: (sent.append(m), original(m))[1]
+    n = view.skin.n_bones
+    rng = np.random.default_rng(5)
+    wxyz = rng.standard_normal((n, 4))
+    wxyz /= np.linalg.norm(wxyz, axis=1, keepdims=True)
+    assert set_bone_poses(view.body, wxyz, rng.uniform(-0.3, 0.3, (n, 3))) == 2 * n
+    viser_walk = infra_messages.Message.as_serializable_dict.__wrapped__
+    for m in sent:
+        fast, slow = m.as_serializable_dict([]), viser_walk(m, [])
+        assert list(fast) == list(slow) and fast == slow and fast["owner"] == m.owner
+        assert msgspec.msgpack.encode(fast) == msgspec.msgpack.encode(slow)
+
+
 def test_loop_safe_event_schedules_one_set_for_a_burst_of_messages() -> None:
     """A frame's ~100 pushes from the render thread wake the loop once, not once each."""
     import asyncio
