@@ -173,40 +173,51 @@ class TubeSkin:
         return out
 
     def bone_poses_segments(self, frames: npt.ArrayLike, n_segments: int) -> Array:
-        """Bone poses of :meth:`bind_segments` / :meth:`bind_each`: one set per piece."""
+        """Bone poses of :meth:`bind_segments` / :meth:`bind_each`: one set per piece.
+
+        ``frames`` (..., n_segments (n_samples - 1) + 1, 4, 4): leading dimensions are tubes
+        posed together (one vectorised call); returns (..., n_segments n_bones, 4, 4).
+        """
         f = np.asarray(frames, dtype=float)
         per = self.n_samples - 1
-        return np.concatenate([self.bone_poses(f[k * per:(k + 1) * per + 1])
-                               for k in range(n_segments)])
+        pieces = np.stack([f[..., k * per:(k + 1) * per + 1, :, :] for k in range(n_segments)],
+                          axis=-4)  # (..., n_segments, n_samples, 4, 4)
+        poses = self.bone_poses(pieces)
+        return poses.reshape(*f.shape[:-3], n_segments * self.n_bones, 4, 4)
 
     def bone_poses(self, frames: npt.ArrayLike, iterations: int = 3) -> Array:
-        """(B, 4, 4) bone poses whose skinned centre line passes through the knot frames.
+        """(..., B, 4, 4) bone poses whose skinned centre line passes through the knot frames.
 
         Args:
-            frames: (n_samples, 4, 4) backbone frames (columns: normal, binormal, tangent,
-                centre), sampled evenly in arc length.
+            frames: (..., n_samples, 4, 4) backbone frames (columns: normal, binormal, tangent,
+                centre), sampled evenly in arc length; leading dimensions are independent
+                tubes, posed in one vectorised step.
             iterations: Fixed-point steps moving each bone by the residual at its knot.
         """
         f = np.asarray(frames, dtype=float)
-        if f.shape != (self.n_samples, 4, 4):
-            raise ValueError(f"frames must have shape ({self.n_samples}, 4, 4), got {f.shape}")
-        knots = f[:: self.stride]
+        if f.shape[-3:] != (self.n_samples, 4, 4):
+            raise ValueError(f"frames must have shape (..., {self.n_samples}, 4, 4), got "
+                             f"{f.shape}")
+        knots = f[..., :: self.stride, :, :]
         # Phantoms continue the tube with its end bends: T_-1 = T_0 T_1^-1 T_0 (and at the tip).
-        before = knots[0] @ np.linalg.inv(knots[1]) @ knots[0]
-        after = knots[-1] @ np.linalg.inv(knots[-2]) @ knots[-1]
-        poses = np.concatenate([before[None], knots, after[None]])
-        target = knots[:, :3, 3]
+        k0, k1, kl, km = (knots[..., i, :, :] for i in (0, 1, -1, -2))
+        before = k0 @ _rigid_inverse(k1) @ k0
+        after = kl @ _rigid_inverse(km) @ kl
+        poses = np.concatenate([before[..., None, :, :], knots, after[..., None, :, :]], axis=-3)
+        target = knots[..., :3, 3]
         h = self.spacing
+        n = self.n_knots
         # On knot k the blend uses bones k, k+1, k+2 at bind offsets +h, 0, -h along z.
-        offsets = np.array([h, 0.0, -h])
+        offsets = (h, 0.0, -h)
         for _ in range(iterations):
-            p, t = poses[:, :3, 3], poses[:, :3, 2]
-            centre = sum(_ON_KNOT[i] * (p[i:i + self.n_knots] + offsets[i] * t[i:i + self.n_knots])
-                         for i in range(3))
+            p, t = poses[..., :3, 3], poses[..., :3, 2]
+            centre = (_ON_KNOT[0] * (p[..., 0:n, :] + offsets[0] * t[..., 0:n, :])
+                      + _ON_KNOT[1] * (p[..., 1:n + 1, :] + offsets[1] * t[..., 1:n + 1, :])
+                      + _ON_KNOT[2] * (p[..., 2:n + 2, :] + offsets[2] * t[..., 2:n + 2, :]))
             err = centre - target
-            poses[1:-1, :3, 3] -= err
-            poses[0, :3, 3] -= err[0]
-            poses[-1, :3, 3] -= err[-1]
+            poses[..., 1:-1, :3, 3] -= err
+            poses[..., 0, :3, 3] -= err[..., 0, :]
+            poses[..., -1, :3, 3] -= err[..., -1, :]
         return poses
 
     @staticmethod
@@ -218,6 +229,16 @@ class TubeSkin:
         m = np.asarray(poses, dtype=float) @ np.linalg.inv(np.asarray(bind, dtype=float))
         per_bone = np.einsum("bij,vj->vbi", m[:, :3, :3], v) + m[None, :, :3, 3]  # (V, B, 3)
         return np.einsum("vb,vbi->vi", w, per_bone)
+
+
+def _rigid_inverse(m: Array) -> Array:
+    """Inverse of rigid (..., 4, 4) transforms: [R^T, -R^T p] (no general inverse needed)."""
+    out = np.zeros_like(m)
+    rt = np.swapaxes(m[..., :3, :3], -1, -2)
+    out[..., :3, :3] = rt
+    out[..., :3, 3] = -(rt @ m[..., :3, 3:4])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
 
 
 def planar_matrices(poses: npt.ArrayLike, z: float) -> Array:

@@ -249,18 +249,19 @@ class LoopRunner:
             control = self.stack.device_fault(t, f"device: {self.fault}") or control
         end = timer()
         i = self.ticks % _STATS_WINDOW
+        # Python floats (not numpy scalars read back from the buffer): the snapshot and the slow
+        # ticks are pickled for the console 30 times a second, and a numpy scalar pickles ~50x
+        # slower (64 slow ticks took ~0.5 ms, holding the GIL the loop wakes up to).
         period = 0.0 if self._last_start is None else (start - self._last_start) / 1e6
-        b = self._buf
-        b[0, i] = 0.0 if self._last_start is None else period - periods * self.period_ns / 1e6
-        b[1, i] = (start - deadline) / 1e6
-        b[2, i] = (t_upd - t_read) / 1e6
-        b[3, i] = (t_write - t_upd) / 1e6
-        b[4, i] = (end - t_write) / 1e6
-        b[5, i] = (end - w0) / 1e6
+        err = 0.0 if self._last_start is None else period - periods * self.period_ns / 1e6
+        late, read_ms = (start - deadline) / 1e6, (t_upd - t_read) / 1e6
+        update_ms, write_ms = (t_write - t_upd) / 1e6, (end - t_write) / 1e6
+        work_ms = (end - w0) / 1e6
+        self._buf[:, i] = (err, late, read_ms, update_ms, write_ms, work_ms)
         self._last_start = start
         self.ticks += 1
-        self.snapshot = LoopSnapshot(self.ticks, t, control, period, b[5, i], b[2, i], b[3, i],
-                                     b[4, i], self.overruns, self.fault)
+        self.snapshot = LoopSnapshot(self.ticks, t, control, period, work_ms, read_ms, update_ms,
+                                     write_ms, self.overruns, self.fault)
         # Next deadline; deadlines already passed are overruns, skipped rather than caught up.
         self._k += 1
         next_deadline = self._t0 + self._k * self.period_ns
@@ -271,9 +272,9 @@ class LoopRunner:
             self.overruns += missed
             self._skipped = missed
             self._k += missed
-        if missed or b[1, i] > _SLOW_MS or b[5, i] > _SLOW_MS:
-            self.slow_ticks.append(SlowTick(self.ticks, t, b[1, i], (t_read - w0) / 1e6,
-                                            b[2, i], b[3, i], b[4, i], missed))
+        if missed or late > _SLOW_MS or work_ms > _SLOW_MS:
+            self.slow_ticks.append(SlowTick(self.ticks, t, late, (t_read - w0) / 1e6,
+                                            read_ms, update_ms, write_ms, missed))
 
     def next_deadline_ns(self) -> int:
         t0 = self.clock_ns() if self._t0 is None else self._t0
@@ -352,16 +353,28 @@ class LoopRunner:
         n = min(self.ticks, _STATS_WINDOW)
         if last is not None and last < n:
             end = self.ticks % _STATS_WINDOW
-            idx = (np.arange(end - last, end)) % _STATS_WINDOW
-            b = self._buf[:, idx]
+            b = (self._buf[:, end - last:end] if end >= last else
+                 self._buf[:, (np.arange(end - last, end)) % _STATS_WINDOW])
             n = last
         else:
             b = self._buf[:, :n].copy()
         if n == 0:
             return LoopStats(0, 0, 0, 0, *([0.0] * 9))
         err = np.abs(b[0, 1:]) if n > 1 else np.zeros(1)
-        pct = lambda a, q: float(np.percentile(a, q))  # noqa: E731
+        (e50, e99), (p50, p99) = _percentiles(err[None], (50, 99)), _percentiles(b[1:], (50, 99))
         return LoopStats(self.ticks, self.overruns, self.read_failures, self.write_failures,
-                         pct(err, 50), pct(err, 99), float(err.max()), pct(b[1], 99),
-                         pct(b[5], 50), pct(b[5], 99), pct(b[2], 99), pct(b[3], 99), pct(b[4], 99))
+                         float(e50[0]), float(e99[0]), float(err.max()), float(p99[0]),
+                         float(p50[4]), float(p99[4]), float(p99[1]), float(p99[2]),
+                         float(p99[3]))
+
+
+def _percentiles(rows: Array, qs: tuple[float, ...]) -> list[Array]:
+    """``np.percentile(rows, q, axis=1)`` (linear interpolation) for each ``q``, with one
+    partial sort for all of them: a fifth of the cost for the publisher's 30 calls a second."""
+    n = rows.shape[1]
+    pos = [q / 100.0 * (n - 1) for q in qs]
+    lo = [int(p) for p in pos]
+    hi = [min(i + 1, n - 1) for i in lo]
+    part = np.partition(rows, sorted(set(lo + hi)), axis=1)
+    return [part[:, i] + (p - i) * (part[:, j] - part[:, i]) for p, i, j in zip(pos, lo, hi)]
 

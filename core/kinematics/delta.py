@@ -73,18 +73,18 @@ def segment_transform(delta: npt.ArrayLike, L0: float, d: float) -> Array:
     Returns:
         (..., 4, 4) transforms.
     """
-    return segment_transform_and_jacobian(delta, L0, d)[0]
+    return _transform(_checked(delta, d), L0, d)[0]  # (without the unused derivative)
 
 
-def segment_transform_and_jacobian(delta: npt.ArrayLike, L0: float, d: float) -> tuple[Array, Array]:
-    """Segment transform and its analytic derivative.
-
-    Returns:
-        ``(T, dT)`` with T (..., 4, 4) and dT (..., 3, 4, 4) = dT / d(dx, dy, dL).
-    """
+def _checked(delta: npt.ArrayLike, d: float) -> Array:
     delta = _check_delta(delta)
     if d <= 0:
         raise ValueError(f"d must be > 0, got {d}")
+    return delta
+
+
+def _transform(delta: Array, L0: float, d: float) -> tuple[Array, tuple[Array, ...]]:
+    """T (..., 4, 4) and the terms its derivative reuses (length, a, b, da, db, omega, k, k2)."""
     dx, dy, dl = delta[..., 0], delta[..., 1], delta[..., 2]
     length = L0 + dl
     s = (dx**2 + dy**2) / d**2
@@ -99,6 +99,18 @@ def segment_transform_and_jacobian(delta: npt.ArrayLike, L0: float, d: float) ->
     T[..., 1, 3] = length * b * dy / d
     T[..., 2, 3] = length * a
     T[..., 3, 3] = 1.0
+    return T, (length, a, b, da, db, omega, k, k2)
+
+
+def segment_transform_and_jacobian(delta: npt.ArrayLike, L0: float, d: float) -> tuple[Array, Array]:
+    """Segment transform and its analytic derivative.
+
+    Returns:
+        ``(T, dT)`` with T (..., 4, 4) and dT (..., 3, 4, 4) = dT / d(dx, dy, dL).
+    """
+    delta = _checked(delta, d)
+    dx, dy = delta[..., 0], delta[..., 1]
+    T, (length, a, b, da, db, omega, k, k2) = _transform(delta, L0, d)
 
     dT = np.zeros(delta.shape[:-1] + (3, 4, 4))
     ds = np.stack([2 * dx / d**2, 2 * dy / d**2], axis=-1)

@@ -244,6 +244,23 @@ def test_console_renders_the_skinned_arm_by_moving_the_same_bones(server) -> Non
     np.testing.assert_allclose(view.tip.position, view.geometry(q)["tip_position"], atol=1e-9)
 
 
+def test_tubes_posed_together_get_each_tube_s_own_bone_poses(server) -> None:
+    """The extensible view poses its backbone and racks in one vectorised call: every tube's
+    bones are those it gets alone, and the racks' handles hold them after a frame."""
+    view = make_arm_view(server.scene, model_for(EXT), dead_band=None)
+    q = np.array([[0.03, -0.01, 0.12], [-0.02, 0.025, 0.08]])
+    frames = view.frames(q)
+    tubes = np.stack([frames, *(view.rack_frames(frames, j) for j in range(3))])
+    together = view.skin.bone_poses_segments(tubes, EXT.n_segments)
+    alone = [view.skin.bone_poses_segments(t, EXT.n_segments) for t in tubes]
+    np.testing.assert_allclose(together, np.stack(alone), atol=1e-12)
+    view.update(q)
+    for j, handle in enumerate(view.racks):
+        got = np.array([b.position for b in handle.bones])
+        np.testing.assert_allclose(got, view.rack_bone_poses(frames, j)[:, :3, 3],
+                                   atol=2.0**-16)
+
+
 def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_idle(
         server) -> None:
     from console.app import ConsoleApp

@@ -161,6 +161,30 @@ def test_set_bone_poses_queues_what_the_bone_setters_queue(server) -> None:
         set_bone_poses(view_b.body, wxyz[:-1], xyz)
 
 
+def test_bone_poses_go_on_the_wire_as_viser_writes_them(server) -> None:
+    """set_bone_poses gives each message its wire dict directly: viser's own walk of the type
+    hints gives the same keys, order and values (the same bytes once encoded)."""
+    import msgspec
+
+    from console.viser_fixes import set_bone_poses
+
+    install()
+    view = make_arm_view(server.scene, model_for(SOFT), root="/w", dead_band=None)
+    sent: list[object] = []
+    original = server.scene._queue_scene_message
+    server.scene._queue_scene_message = lambda m: (sent.append(m), original(m))[1]
+    n = view.skin.n_bones
+    rng = np.random.default_rng(5)
+    wxyz = rng.standard_normal((n, 4))
+    wxyz /= np.linalg.norm(wxyz, axis=1, keepdims=True)
+    assert set_bone_poses(view.body, wxyz, rng.uniform(-0.3, 0.3, (n, 3))) == 2 * n
+    viser_walk = infra_messages.Message.as_serializable_dict.__wrapped__
+    for m in sent:
+        fast, slow = m.as_serializable_dict([]), viser_walk(m, [])
+        assert list(fast) == list(slow) and fast == slow and fast["owner"] == m.owner
+        assert msgspec.msgpack.encode(fast) == msgspec.msgpack.encode(slow)
+
+
 def test_loop_safe_event_schedules_one_set_for_a_burst_of_messages() -> None:
     """A frame's ~100 pushes from the render thread wake the loop once, not once each."""
     import asyncio
@@ -261,3 +285,39 @@ def test_a_frame_in_an_atomic_block_wakes_the_viewers_once_at_its_end(server) ->
     finally:
         for c in clients:
             c.close()
+
+
+def test_a_broadcast_window_is_collected_once_for_every_client() -> None:
+    """Clients at the same cursor get the same window object with what viser's own per-client
+    walk takes: culled ids skipped, at most a window's size; a range holding a message that
+    skips one client is that client's own."""
+    import asyncio
+
+    from viser.infra._async_message_buffer import AsyncMessageBuffer
+
+    from console.viser_windows import shared_window
+
+    loop = asyncio.new_event_loop()
+    try:
+        buffer = AsyncMessageBuffer(loop, persistent_messages=True)
+        buffer.max_window_size = 4
+        for i in range(6):
+            buffer.push(_messages.SetBonePositionMessage("/arm/body", i % 3, (0.0, 0.01 * i, 0.0)))
+        # Bones 0-2 were set twice: ids 0-2 were culled, 3-5 remain.
+        assert sorted(buffer.message_from_id) == [3, 4, 5]
+        a, cursor_a = shared_window(buffer, -1, 5, client_id=1)
+        b, cursor_b = shared_window(buffer, -1, 5, client_id=2)
+        assert a is b and cursor_a == cursor_b == 5
+        assert [m.position[1] for m in a] == [0.03, 0.04, 0.05]
+        for i in range(6, 12):
+            buffer.push(_messages.SetBonePositionMessage("/arm/body", i, (0.0, 0.0, 0.0)))
+        c, cursor = shared_window(buffer, 5, 11, client_id=1)
+        assert [m.bone_index for m in c] == [6, 7, 8, 9] and cursor == 9  # the window's size
+        echo = _messages.SetBonePositionMessage("/arm/body", 20, (1.0, 0.0, 0.0))
+        echo.excluded_self_client = 2
+        buffer.push(echo)
+        own, _ = shared_window(buffer, 11, 12, client_id=2)
+        other, _ = shared_window(buffer, 11, 12, client_id=1)
+        assert own == [] and other == [echo]
+    finally:
+        loop.close()

@@ -148,6 +148,59 @@ def test_a_late_wake_up_is_kept_as_a_slow_tick():
     assert runner.overruns == 0
 
 
+class TimedReads:
+    """A device whose reads take ``work_ms[n]`` on the injected clock (n: the read's index)."""
+
+    def __init__(self, clock, work_ms):
+        self.clock, self.work, self.n = clock, work_ms, 0
+
+    def read(self, t):
+        self.clock.now_ns += round(self.work[self.n] * MS)
+        self.n += 1
+        return object()
+
+    def write(self, commands, t):
+        return True
+
+    def cylinders(self):
+        return None
+
+
+def test_stats_are_the_percentiles_of_the_kept_ticks(monkeypatch):
+    import hw_bridge.loop as loop_module
+    monkeypatch.setattr(loop_module, "_STATS_WINDOW", 64)  # 150 ticks wrap the window twice
+    work = np.random.default_rng(3).uniform(0.1, 4.0, 150)  # (the clock counts whole ns)
+    clock = SimClock()
+    runner = LoopRunner(TimedReads(clock, work), StubStack(), 0.01, clock_ns=clock,
+                        sleep_until=clock.sleep_until, timer_ns=clock)
+    assert runner.run_sim(1.5) == 150
+    for last, kept in ((40, work[-40:]), (10, work[-10:]), (None, work[-64:])):
+        st = runner.stats(last=last)
+        assert st.work_ms_p50 == pytest.approx(np.percentile(kept, 50), abs=1e-5)
+        assert st.work_ms_p99 == pytest.approx(np.percentile(kept, 99), abs=1e-5)
+        assert st.read_ms_p99 == pytest.approx(np.percentile(kept, 99), abs=1e-5)
+        assert st.update_ms_p99 == st.write_ms_p99 == 0.0
+        assert st.period_error_ms_p99 == pytest.approx(0.0, abs=1e-9)  # every tick on time
+
+
+def test_what_the_console_is_sent_holds_plain_numbers():
+    """The snapshot and the slow ticks are pickled for the console 30 times a second: plain
+    Python numbers (a numpy scalar pickles some 50 times slower, holding the loop's GIL)."""
+    import dataclasses
+    import pickle
+    clock = SimClock()
+    runner = LoopRunner(TimedReads(clock, [1.5] * 20), StubStack(), 0.01, clock_ns=clock,
+                        sleep_until=clock.sleep_until, timer_ns=clock)
+    runner.run_sim(0.2)
+    assert len(runner.slow_ticks) == 20  # every read took 1.5 ms: all kept
+    values = [v for s in runner.slow_ticks for v in dataclasses.astuple(s)]
+    values += [getattr(runner.snapshot, f.name) for f in dataclasses.fields(runner.snapshot)
+               if f.name not in ("control", "fault")]
+    assert {type(v) for v in values} <= {int, float}
+    assert runner.slow_ticks[-1].read_ms == pytest.approx(1.5)
+    assert len(pickle.dumps(tuple(runner.slow_ticks))) < 20 * 100
+
+
 def test_commands_from_another_thread_are_applied_by_the_loop(arm):
     runner, sim, stack = sim_runner(arm)
     runner.run_sim(0.05)
