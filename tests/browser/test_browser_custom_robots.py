@@ -51,7 +51,8 @@ def test_four_segment_soft_arm_grasps_and_places_from_the_browser(
 
 def test_three_segment_extensible_arm_reaches_a_typed_target(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    from test_browser_extensible import open_extensible, readout_tip, type_target, wait_until
+    from browser_tabs import wait_until
+    from test_browser_extensible import open_extensible, readout_tip, type_target
 
     robot_file = DATA / "extensible-3seg.toml"
     arm = load(robot_file)

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
 
-from browser_tabs import close_notices, open_tab
+from browser_tabs import close_notices, open_tab, wait_until
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 
@@ -44,15 +43,6 @@ def field(page, label: str):
     uid = page.locator("label", has_text=label).first.get_attribute("for")
     assert uid, f"no input labelled {label!r}"
     return page.locator(f'[id="{uid}"]')
-
-
-def wait_until(what: str, fn: Callable[[], bool], timeout: float,
-               show: Callable[[], str] = lambda: "") -> None:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}: {show()}")
-        time.sleep(0.2)
 
 
 def link_text(page) -> str:
