@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_tabs import close_notices, open_tab, wait_until
+from browser_tabs import open_console, wait_until
 
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -81,11 +81,8 @@ def backbone_distance_mm(delta: np.ndarray) -> float:
 
 def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    page.goto(console_server("extensible"))
-    page.get_by_text("Obstacles (boxes)", exact=True).wait_for(timeout=180_000)  # loaded box
-    page.locator('[data-testid="tip-readout"]').wait_for(timeout=120_000)
-    open_tab(page, "Operate")
-    close_notices(page)
+    open_console(page, console_server("extensible"), "Obstacles (boxes)",
+                 '[data-testid="tip-readout"]', timeout_ms=180_000)  # (a loaded box)
     # Without the shelf the plain IK's arc would pass through it (so this is a real detour).
     plain = solve_tip_ik(ROBOT, TARGET_MM / 1e3)
     assert plain.reachable and backbone_distance_mm(plain.delta) < 0

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from browser_tabs import close_notices, open_tab, wait_until
+from browser_tabs import close_notices, open_console, open_tab, wait_until
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 
@@ -69,9 +69,7 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
                          "--data-dir", str(tmp_path / "runs"))
     page.set_default_timeout(90_000)  # clicks on a loaded 2-core box (software WebGL)
     page.set_viewport_size({"width": 1000, "height": 900})  # less canvas to render in software
-    page.goto(url)
-    page.get_by_text("Tip target", exact=True).wait_for(timeout=120_000)  # a loaded 2-core box
-    close_notices(page)
+    open_console(page, url, "Tip target", timeout_ms=120_000)  # (a loaded 2-core box)
     # serve.py connects and arms the emulator at start; a CPU stall while it built the GUI can
     # trip the link before the page opens (nothing re-arms by itself): then the operator
     # connects and arms it again in the Hardware panel.

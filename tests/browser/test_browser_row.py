@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from browser_tabs import close_notices, close_notices_until_none, open_tab
+from browser_tabs import close_notices, close_notices_until_none, open_console
 from lab_rig import wait_for
 from robot_files import QUICK_MOTION, robot_copy
 from test_planner_browser import project
@@ -102,9 +102,7 @@ def test_three_objects_are_cleared_into_a_clicked_bin(page, row_console,
     try:
         page.set_viewport_size({"width": 1280, "height": 900})
         page.set_default_timeout(120_000)  # a starved software renderer acts slowly
-        page.goto(url)
-        open_tab(page, "Operate", timeout_ms=90_000)
-        page.locator('[data-testid="control-state"]').wait_for(timeout=60_000)
+        open_console(page, url, "Control", '[data-testid="control-state"]', timeout_ms=90_000)
         wait_for(lambda: app.access.holder is not None, timeout=30.0)  # desk mode: this tab
         state = page.locator('[data-testid="control-state"]')
         row = page.locator('[data-testid="row-status"]')
