@@ -138,8 +138,10 @@ class RawClient:
         self._thread.join(5.0)
 
 
-def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition"
-             ) -> Any:
+def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition",
+             interval: float = 0.02) -> Any:
+    """Call ``predicate`` every ``interval`` s until it returns a true value (returned); fail
+    after ``timeout`` s naming ``what``."""
     deadline = time.monotonic() + timeout
     while True:
         value = predicate()
@@ -147,5 +149,5 @@ def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "c
             return value
         if time.monotonic() > deadline:
             raise AssertionError(f"{what} not reached in {timeout} s")
-        time.sleep(0.02)
+        time.sleep(interval)
 

@@ -1,13 +1,30 @@
 """Browser-test helpers: the console's panels live in tabs (``console.tabs``), and a widget is in
-the page only while its tab is open; notifications can cover widgets."""
+the page only while its tab is open; notifications can cover widgets. :func:`wait_until` is
+tests/ws_client.wait_for for pages."""
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
+
+from tests.ws_client import wait_for
 
 ARTIFACTS = Path(__file__).resolve().parents[2] / "artifacts"
+
+
+def wait_until(what: str, fn: Callable[[], Any], timeout: float = 10.0,
+               show: Callable[[], str] | None = None) -> Any:
+    """Poll ``fn`` (page reads) every 0.05 s until it returns a true value (returned); after
+    ``timeout`` s fail naming ``what`` and, when given, ``show()`` (what the page says then).
+    (Each read is a round trip to Chromium, which a loaded machine's software renderer
+    answers slowly: not polled as often as ws_client's server-side reads.)"""
+    try:
+        return wait_for(fn, timeout, what, interval=0.05)
+    except AssertionError as exc:
+        if show is None:
+            raise
+        raise AssertionError(f"{exc}: {show()}") from None
 
 
 def open_tab(page: Any, name: str, timeout_ms: float = 60_000) -> None:

@@ -9,8 +9,9 @@ from typing import Any, Callable, Iterator
 
 import pytest
 
-from core.robots import load
 from browser_tabs import open_tab
+from core.robots import load
+from tests import ws_client
 
 SOFT = load("soft-arm")
 
@@ -54,14 +55,8 @@ class Lab:
 
 
 def wait_for(predicate: Callable[[], Any], timeout: float = 5.0) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError("condition not reached")
-        time.sleep(0.02)
+    """tests/ws_client.wait_for with the lab tests' default of 5 s."""
+    return ws_client.wait_for(predicate, timeout)
 
 
 def field(page: Any, label: str) -> Any:

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_tabs import close_notices, open_tab
+from browser_tabs import open_console, wait_until
 
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -44,15 +44,6 @@ def fill(page, label: str, value: str) -> None:
     box = field(page, label)
     box.fill(value, timeout=120_000)
     box.press("Tab", timeout=60_000)
-
-
-def wait_until(what: str, fn: Callable[[], bool], timeout: float = 30.0,
-               show: Callable[[], str] = lambda: "") -> None:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what} {show()}")
-        time.sleep(0.1)
 
 
 def readout_tip(page) -> np.ndarray:
@@ -90,11 +81,8 @@ def backbone_distance_mm(delta: np.ndarray) -> float:
 
 def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    page.goto(console_server("extensible"))
-    page.get_by_text("Obstacles (boxes)", exact=True).wait_for(timeout=180_000)  # loaded box
-    page.locator('[data-testid="tip-readout"]').wait_for(timeout=120_000)
-    open_tab(page, "Operate")
-    close_notices(page)
+    open_console(page, console_server("extensible"), "Obstacles (boxes)",
+                 '[data-testid="tip-readout"]', timeout_ms=180_000)  # (a loaded box)
     # Without the shelf the plain IK's arc would pass through it (so this is a real detour).
     plain = solve_tip_ik(ROBOT, TARGET_MM / 1e3)
     assert plain.reachable and backbone_distance_mm(plain.delta) < 0
@@ -105,7 +93,7 @@ def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
         fill(page, f"Size {axis} (mm)", f"{s:g}")
     page.get_by_role("button", name="Add box").click(timeout=120_000)
     wait_until("the shelf in the server's scene", lambda: info.get_attribute("data-count") == "1",
-               show=info.inner_text)
+               timeout=30, show=info.inner_text)
     assert info.get_attribute("data-names") == "Shelf"
     assert float(info.get_attribute("data-clearance-mm")) == CLEARANCE_MM
 

@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 import pytest
-from browser_tabs import open_console
+from browser_tabs import open_console, wait_until
 
 from console.model import DeltaModel
 from core.kinematics import delta as dk
@@ -49,14 +49,11 @@ def read(page, testid: str) -> float:
 
 def wait_for_readout(page, expected: dict[str, float], timeout: float = 5.0) -> None:
     """Poll the readout cells until each is within READOUT_TOL of ``expected``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        actual = {k: read(page, k) for k in expected}
-        if all(abs(actual[k] - v) <= READOUT_TOL for k, v in expected.items()):
-            return
-        if time.monotonic() > deadline:
-            raise AssertionError(f"readout {actual} != expected {expected}")
-        time.sleep(0.05)
+    def actual() -> dict[str, float]:
+        return {k: read(page, k) for k in expected}
+    wait_until("the readout", lambda: all(abs(v - expected[k]) <= READOUT_TOL
+                                          for k, v in actual().items()), timeout,
+               show=lambda: f"{actual()} != expected {expected}")
 
 
 def wrap_deg(theta: float) -> float:

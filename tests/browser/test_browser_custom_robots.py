@@ -5,6 +5,8 @@ grasp-and-place from the Control panel to ``released``; ``serve.py --robot
 tests/data/robots/extensible-3seg.toml`` (three tri-rack segments) moves its tip to a typed target
 that the IK reaches. Expectations come from the robot files (the object position scales with the
 arm; the tip target is checked with the test's own call of the IK and forward kinematics).
+The four-segment arm moves as tests/robot_files.py QUICK_MOTION says (a test copy of its file):
+what is tested is that the runtime takes its counts from the file, not the shipped timing.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from typing import Callable
 
 import numpy as np
 import pytest
+from robot_files import QUICK_MOTION, robot_copy
 
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -26,11 +29,11 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
 
 
 def test_four_segment_soft_arm_grasps_and_places_from_the_browser(
-        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
+        page, console_server: Callable[..., str], tmp_path: Path, artifacts_dir: Path) -> None:
     from test_browser_control import (close_notices, kappa_measured, open_control, start_grasp,
                                       wait_phase)
 
-    robot_file = DATA / "soft-4x80mm.toml"
+    robot_file = robot_copy(DATA / "soft-4x80mm.toml", tmp_path, QUICK_MOTION)
     arm = load(robot_file)
     assert arm.n_segments == 4
     total = arm.n_segments * arm.segment_length
@@ -51,7 +54,8 @@ def test_four_segment_soft_arm_grasps_and_places_from_the_browser(
 
 def test_three_segment_extensible_arm_reaches_a_typed_target(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
-    from test_browser_extensible import open_extensible, readout_tip, type_target, wait_until
+    from browser_tabs import wait_until
+    from test_browser_extensible import open_extensible, readout_tip, type_target
 
     robot_file = DATA / "extensible-3seg.toml"
     arm = load(robot_file)

@@ -26,7 +26,7 @@ from typing import Any, Callable, Iterator
 import numpy as np
 import pytest
 
-from browser_tabs import open_console, open_tab
+from browser_tabs import open_console, open_tab, wait_until
 from console.model import DeltaModel
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -67,15 +67,6 @@ def type_target(page, xyz_mm) -> None:
 def readout_tip(page) -> np.ndarray:
     return np.array([float(page.locator(f'[data-testid="tip-{k}"]').inner_text())
                      for k in range(3)])
-
-
-def wait_until(what: str, fn: Callable[[], bool], timeout: float = 10.0,
-               show: Callable[[], str] = lambda: "") -> None:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what} {show()}")
-        time.sleep(0.1)
 
 
 def jog_posture(page) -> np.ndarray:

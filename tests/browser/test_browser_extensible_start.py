@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from browser_tabs import open_console
+from browser_tabs import open_console, wait_until
 from lab_rig import jog_button
 
 from console.model import DeltaModel
@@ -30,17 +30,6 @@ from core.robots import load
 pytestmark = pytest.mark.browser
 ROBOT = load("extensible")
 NEGATIVE_ZERO = re.compile(r"(?<![\d.])[-−]0(?:\.0+)?(?![\d.])")
-
-
-def wait_until(what: str, fn: Callable[[], bool], timeout: float,
-               show: Callable[[], str] = lambda: "") -> float:
-    """Seconds it took; fails after ``timeout``."""
-    t0 = time.monotonic()
-    while not fn():
-        if time.monotonic() - t0 > timeout:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what} {show()}")
-        time.sleep(0.05)
-    return time.monotonic() - t0
 
 
 def field(page, label: str):

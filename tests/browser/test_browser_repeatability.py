@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
 
-from browser_tabs import close_notices, open_tab
+from browser_tabs import close_notices, open_console, open_tab, wait_until
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 
@@ -46,15 +45,6 @@ def field(page, label: str):
     return page.locator(f'[id="{uid}"]')
 
 
-def wait_until(what: str, fn: Callable[[], bool], timeout: float,
-               show: Callable[[], str] = lambda: "") -> None:
-    deadline = time.monotonic() + timeout
-    while not fn():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}: {show()}")
-        time.sleep(0.2)
-
-
 def link_text(page) -> str:
     link = page.get_by_text("Link:")
     return link.last.locator("xpath=..").inner_text() if link.count() else "no link line"
@@ -79,9 +69,7 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
                          "--data-dir", str(tmp_path / "runs"))
     page.set_default_timeout(90_000)  # clicks on a loaded 2-core box (software WebGL)
     page.set_viewport_size({"width": 1000, "height": 900})  # less canvas to render in software
-    page.goto(url)
-    page.get_by_text("Tip target", exact=True).wait_for(timeout=120_000)  # a loaded 2-core box
-    close_notices(page)
+    open_console(page, url, "Tip target", timeout_ms=120_000)  # (a loaded 2-core box)
     # serve.py connects and arms the emulator at start; a CPU stall while it built the GUI can
     # trip the link before the page opens (nothing re-arms by itself): then the operator
     # connects and arms it again in the Hardware panel.

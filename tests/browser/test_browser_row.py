@@ -7,6 +7,9 @@ into bin*. Checked in the page: the header's phase and the Control panel say "ob
 while the row runs (a screenshot is taken mid-row, ``artifacts/browser_row_mid.png``), and the
 panel lists three released objects at the end; on the server: the control process's report says
 3 released and the released objects left the Objects panel's table.
+
+The arm is a test copy of the soft arm that moves three times faster with shorter waits
+(tests/robot_files.py QUICK_MOTION): the test is about the console's row, not the shipped timing.
 """
 
 from __future__ import annotations
@@ -17,8 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from browser_tabs import close_notices, close_notices_until_none, open_tab
-from lab_rig import SOFT, wait_for
+from browser_tabs import close_notices, close_notices_until_none, open_console
+from lab_rig import wait_for
+from robot_files import QUICK_MOTION, robot_copy
 from test_planner_browser import project
 
 pytestmark = pytest.mark.browser
@@ -32,20 +36,23 @@ def notes(page: Any) -> list[str]:
 
 
 @pytest.fixture
-def row_console() -> Iterator[tuple[Any, str]]:
-    """The console: Objects + Control panels, the control process, desk mode with a long lease
-    (a loaded machine's software renderer may stall the tab; a lost lease would STOP the row)."""
+def row_console(tmp_path: Path) -> Iterator[tuple[Any, str]]:
+    """The console: Objects + Control panels, the control process on the quick soft arm, desk
+    mode with a long lease (a loaded machine's software renderer may stall the tab; a lost
+    lease would STOP the row)."""
     import viser
 
     from console.access import AccessControl
     from console.panels import planner
     from console.panels.control import ControlPanel
     from console.panels.objects import ObjectsPanel
+    from core.robots import load
     from fakes import console_app
 
+    robot = load(robot_copy("soft-arm", tmp_path, QUICK_MOTION))
     planner.GraspSession.compute_reach = False  # (the shading plays no part here)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    app = console_app(SOFT, server, panels=(ObjectsPanel, ControlPanel), soft_control="process",
+    app = console_app(robot, server, panels=(ObjectsPanel, ControlPanel), soft_control="process",
                       access=AccessControl(None, first_client_takes_control=True, lease_s=60.0,
                                            first_answer_s=120.0))
     app.start()
@@ -95,9 +102,7 @@ def test_three_objects_are_cleared_into_a_clicked_bin(page, row_console,
     try:
         page.set_viewport_size({"width": 1280, "height": 900})
         page.set_default_timeout(120_000)  # a starved software renderer acts slowly
-        page.goto(url)
-        open_tab(page, "Operate", timeout_ms=90_000)
-        page.locator('[data-testid="control-state"]').wait_for(timeout=60_000)
+        open_console(page, url, "Control", '[data-testid="control-state"]', timeout_ms=90_000)
         wait_for(lambda: app.access.holder is not None, timeout=30.0)  # desk mode: this tab
         state = page.locator('[data-testid="control-state"]')
         row = page.locator('[data-testid="row-status"]')

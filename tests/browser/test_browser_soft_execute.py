@@ -27,6 +27,7 @@ from browser_tabs import (
     close_notices_until_none,
     open_console,
     open_tab,
+    wait_until,
 )
 
 pytestmark = pytest.mark.browser
@@ -40,16 +41,9 @@ def notes(page: Any) -> list[str]:
     return page.locator(".mantine-Notification-root").all_inner_texts()
 
 
-def wait_until(what: str, fn: Callable[[], Any], timeout: float, page: Any) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = fn()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            state = page.locator('[data-testid="control-state"]').all_inner_texts()
-            raise AssertionError(f"{what}: state {state}; notifications {notes(page)}")
-        time.sleep(0.05)
+def told(page: Any) -> Callable[[], str]:
+    """What the page says (for a failed wait): the Control panel's state and the notices."""
+    return lambda: f"state {state(page).all_inner_texts()}; notifications {notes(page)}"
 
 
 def open_operate(page: Any, url: str) -> None:
@@ -73,7 +67,8 @@ def hold_control(page: Any) -> None:
         return
     show_tab(page, "Session")
     page.get_by_role("button", name="Take control").click(force=True)
-    wait_until("take control", lambda: "nobody" not in holder.inner_text(), 20.0, page)
+    wait_until("take control", lambda: "nobody" not in holder.inner_text(), 20.0,
+               show=told(page))
     close_notices(page)
     show_tab(page, "Operate")
 
@@ -136,14 +131,14 @@ def run_to_grasp(page: Any, n: int, palms: list) -> set[str] | None:
     hold_control(page)
     if "ARMED" not in state(page).inner_text():
         page.get_by_role("button", name="Arm", exact=True).click()
-        wait_until("armed", lambda: "ARMED" in state(page).inner_text(), 20.0, page)
+        wait_until("armed", lambda: "ARMED" in state(page).inner_text(), 20.0, show=told(page))
     close_notices(page)
     page.get_by_role("button", name="Execute grasp-and-place").click()
     wait_until("told which object", lambda: any("Object 2" in t for t in notes(page)), 10.0,
-               page)
+               show=told(page))
     lost = lambda: "went silent" in state(page).inner_text()  # a stalled tab lost its lease
     wait_until("running", lambda: state(page).get_attribute("data-phase") in RUNNING or lost(),
-               20.0, page)
+               20.0, show=told(page))
     if lost():
         return None
     counted: set[str] = set()
@@ -182,7 +177,8 @@ def test_clean_start_shows_no_fault_and_execute_does_not_arm(
         wp = page.locator('[data-testid="waypoint-info"]')
         n = summary.get_attribute("data-waypoints")
         assert n and int(n) >= 2 and "Place an object" not in summary.inner_text()
-        wait_until("waypoints agree", lambda: wp.get_attribute("data-count") == n, 10.0, page)
+        wait_until("waypoints agree", lambda: wp.get_attribute("data-count") == n, 10.0,
+                   show=told(page))
         assert f"Waypoint 1 of {n}" in wp.inner_text()
         # A clean start: no fault in the header nor in the Control panel, for 5 s.
         header = page.locator('[data-testid="header-link"]')
@@ -201,7 +197,7 @@ def test_clean_start_shows_no_fault_and_execute_does_not_arm(
         hold_control(page)
         page.get_by_role("button", name="Execute grasp-and-place").click()
         wait_until("told to arm first",
-                   lambda: any("Arm first" in t for t in notes(page)), 10.0, page)
+                   lambda: any("Arm first" in t for t in notes(page)), 10.0, show=told(page))
         time.sleep(2.0)
         assert "disarmed" in state(page).inner_text() and "ARMED" not in state(page).inner_text()
         # (idle, or stopped if a loaded machine's slow tab lost its lease, which STOPs)
@@ -227,18 +223,21 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         assert info.get_attribute("data-selected") == "Object 3"
         click_table(page, OBJECT_2, 3)  # a click on an object selects it
         wait_until("Object 2 selected",
-                   lambda: info.get_attribute("data-selected") == "Object 2", 10.0, page)
+                   lambda: info.get_attribute("data-selected") == "Object 2", 10.0,
+                   show=told(page))
         summary = page.locator('[data-testid="plan-summary"]')
         hold_control(page)
         page.get_by_role("button", name="Plan grasp").click()
         planned = page.locator('[data-testid="plan-summary"][data-state="ok"]')
-        wait_until("planned", lambda: planned.count() == 1, 20.0, page)
+        wait_until("planned", lambda: planned.count() == 1, 20.0, show=told(page))
         n = int(summary.get_attribute("data-waypoints") or 0)
         assert n >= 2
         wait_until("Waypoints panel shows the plan", lambda: page.locator(
-            '[data-testid="waypoint-info"]').get_attribute("data-count") == str(n), 10.0, page)
+            '[data-testid="waypoint-info"]').get_attribute("data-count") == str(n), 10.0,
+            show=told(page))
         target = page.locator('[data-testid="control-target"]')
-        wait_until("Execute's target", lambda: "Object 2" in target.inner_text(), 10.0, page)
+        wait_until("Execute's target", lambda: "Object 2" in target.inner_text(), 10.0,
+                   show=told(page))
         assert f"{n}-waypoint plan" in target.inner_text()
 
         for attempt in range(3):  # only a lost lease (a stalled tab) may start it again

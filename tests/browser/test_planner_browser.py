@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import math
 import re
-import time
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import pytest
-from browser_tabs import click_scene, open_console
+from browser_tabs import click_scene, open_console, wait_until
 
 from core.planning.grasp import plan_grasp
 from core.robots import load
@@ -51,14 +50,11 @@ def summary(page):
 
 
 def wait_state(page, states: tuple[str, ...], timeout: float = 15.0) -> str:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        state = summary(page).get_attribute("data-state")
-        if state in states:
-            return state
-        time.sleep(0.05)
-    raise AssertionError(f"summary state {summary(page).get_attribute('data-state')!r} "
-                         f"not in {states}: {summary(page).inner_text()}")
+    def state() -> str | None:
+        now = summary(page).get_attribute("data-state")
+        return now if now in states else None
+    return wait_until(f"summary state in {states}", state, timeout, show=lambda: (
+        f"{summary(page).get_attribute('data-state')!r}: {summary(page).inner_text()}"))
 
 
 def number(page, label: str):

@@ -22,6 +22,7 @@ import viser.transforms as vtf
 from browser_tabs import close_notices, open_tab
 
 from core.robots import load
+from tests.ws_client import wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -48,16 +49,6 @@ def soft_console(serve_module: Any, tmp_path: Path) -> Iterator[tuple[Any, Any, 
             step[1]()
         if app.grasp_session is not None:
             app.grasp_session.close()
-
-
-def wait(fn, timeout: float = 30.0, what: str = "condition") -> Any:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = fn()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError(f"{what} not met within {timeout} s")
 
 
 def the_client(server: Any) -> Any:
@@ -92,8 +83,9 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
     page.goto(url)
     open_tab(page, "Operate", timeout_ms=60_000)
     page.locator('[data-testid="plan-summary"][data-state="ok"]').wait_for(timeout=60_000)
-    client = wait(lambda: len(server.get_clients()) == 1 and the_client(server), what="client")
-    wait(lambda: client.camera._state.update_timestamp != 0.0, what="camera reported")
+    client = wait_for(lambda: len(server.get_clients()) == 1 and the_client(server), 30,
+                      "client")
+    wait_for(lambda: client.camera._state.update_timestamp != 0.0, 30, "camera reported")
     close_notices(page)
     page.set_default_timeout(90_000)                                # a loaded CI machine
     page.get_by_text("View", exact=True).click()                    # the folder opens
@@ -103,7 +95,7 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
         cam = client.camera
         f = np.subtract(cam.look_at, cam.position)
         return f[2] / np.linalg.norm(f) < -0.99
-    wait(looks_down, what="the browser's camera looking straight down")
+    wait_for(looks_down, 30, "the browser's camera looking straight down")
     expected = view.pose_for(client, "Top-down")
     np.testing.assert_allclose(client.camera.look_at[:2], expected.look_at[:2], atol=0.01)
 
@@ -125,7 +117,7 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
     except Exception:
         page.screenshot(path=str(artifacts_dir / "view-measure-button.png"))
         raise
-    wait(lambda: view.claims.claimed(client.client_id), what="measuring armed")
+    wait_for(lambda: view.claims.claimed(client.client_id), 30, "measuring armed")
     status = page.locator('[data-testid="measure-status"]')
     # A software-rendered page busy drawing sometimes drops a canvas click: click again (at most
     # twice more), as a person would.
@@ -133,8 +125,8 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
         for attempt in range(3):
             page.mouse.click(box["x"] + px, box["y"] + py)
             try:
-                wait(lambda s=want_state: status.get_attribute("data-state") == s, timeout=8,
-                     what=f"measure state {want_state}")
+                wait_for(lambda s=want_state: status.get_attribute("data-state") == s, 8,
+                         f"measure state {want_state}", interval=0.05)
                 break
             except AssertionError:
                 if attempt == 2:
@@ -152,7 +144,7 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
 
     page.get_by_role("button", name="Reset view").click()
     first = app.camera_presets[0]
-    wait(lambda: np.allclose(client.camera.position, first.position, atol=0.01),
-         what="the camera back where the console opened")
+    wait_for(lambda: np.allclose(client.camera.position, first.position, atol=0.01), 30,
+             "the camera back where the console opened")
     page.get_by_role("button", name="Clear measurement").click()
-    wait(lambda: not view.line.visible and not view.label.visible, what="measurement cleared")
+    wait_for(lambda: not view.line.visible and not view.label.visible, 30, "measurement cleared")
