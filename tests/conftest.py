@@ -215,6 +215,7 @@ TIMING_FILES = frozenset({
     "tests/hw_bridge/test_parent_watch.py", "tests/hw_bridge/test_realtime.py",
     "tests/hw_bridge/test_slip_emulator.py", "tests/hw_bridge/test_soft_arm_emulator.py",
     "tests/hw_bridge/test_soft_arm_row.py", "tests/hw_bridge/test_extensible_streamer.py",
+    "tests/hw_bridge/test_soft_arm_obstacles.py",
     "tests/core/test_custom_robots.py", "tests/console/test_control_console.py",
     "tests/console/test_hw_panel.py", "tests/console/test_recording_budget.py",
 })
