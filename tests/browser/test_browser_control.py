@@ -36,12 +36,14 @@ SPOT = "E"  # (-0.08, 0.33): the quickest of the five (about 9 s approach, 9 s r
 # more than 0.3 1/m behind may stick for up to 1 s and then slip (soft-arm.toml [sim]); in sim
 # the tip carried on by 2-3.5 mm (at most 5.8 mm) and was within 0.3 mm of its end within 1.2 s.
 # So: wait (at most SETTLE_S) until two successive windows agree within TIP_TOL_MM, then the
-# tip must stay there over HOLD_S, and it may have carried on toward the object by at most
-# CARRY_MM plus what it covered at its measured speed before STOP was shown.
+# tip must stay there over HOLD_S, and it may be at most CARRY_MM (plus what it covers at its
+# pre-STOP speed in READOUT_LAG_S, the readout's lag) from where the readout showed it when the
+# panel first said "stopped".
 KAPPA_TOL = 1.5  # 1/m
 TIP_TOL_MM = 2.5
-TIP_MOVING_MM = 2.0  # per WINDOW_S before STOP (measured: 3-17 mm/s early in the approach)
+TIP_MOVING_MM = 2.0  # per WINDOW_S before STOP (measured: 3-21 mm/s early in the approach)
 CARRY_MM = 6.0
+READOUT_LAG_S = 0.5  # view published at 30 Hz, readout at most 10 Hz, websocket, this page
 WINDOW_S = 1.0
 SETTLE_S = 8.0
 HOLD_S = 3.0
@@ -206,7 +208,6 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
         time.sleep(0.3)  # into the approach
         _, tip0, _ = window(page)
         _, tip1, _ = window(page)
-        t1 = time.monotonic() - WINDOW_S / 2  # (about) when the arm was where tip1 says
         if phase(page) in RUNNING or LEASE_LOST not in state_text(page) or attempt == 2:
             break
     assert phase(page) in RUNNING, state_text(page)
@@ -216,15 +217,16 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
     assert moved / WINDOW_S * HOLD_S > 2 * TIP_TOL_MM
     page.get_by_role("button", name="STOP (Esc)").click()
     wait_phase(page, ("stopped",), timeout=5.0)
-    t_stop = time.monotonic()  # the loop stopped the arm before the panel showed it
+    tip_stop = tip_mm(page)  # the loop stopped the arm before the panel showed it
     assert "STOP pressed by" in state_text(page)  # the header's STOP, naming who pressed it
-    hold_after_stop(page, tip0, tip1, t1, t_stop)
+    hold_after_stop(page, moved / WINDOW_S, tip_stop)
 
 
-def hold_after_stop(page: Any, tip0: np.ndarray, tip1: np.ndarray, t1: float,
-                    t_stop: float) -> None:
+def hold_after_stop(page: Any, speed: float, tip_stop: np.ndarray) -> None:
     """After STOP: the readout settles within SETTLE_S, then holds over HOLD_S, and the tip
-    did not carry on toward its target beyond the plant's lag (see the constants above)."""
+    did not go on (toward its target or anywhere) beyond the plant's carry from ``tip_stop``,
+    where the readout showed it when the panel said "stopped" (see the constants above);
+    ``speed``: the tip's speed before STOP (mm/s)."""
     _, tip_prev, ref_prev = window(page)
     refs = [ref_prev]
     tips = [tip_prev]
@@ -250,17 +252,15 @@ def hold_after_stop(page: Any, tip0: np.ndarray, tip1: np.ndarray, t1: float,
     drift = np.linalg.norm(tip_end - tip_set)
     assert drift <= TIP_TOL_MM, (f"the held tip moved by {drift:.2f} mm over "
                                  f"{time.monotonic() - t_set:.1f} s: {tip_set} -> {tip_end}")
-    # Not on toward the object: progress along the pre-STOP motion, from where the arm was
-    # (tip1) to where it holds, is what it covered until STOP showed plus the plant's carry; an
-    # arm that went on would also have covered the settle and hold windows (>= 5 s at over
-    # TIP_MOVING_MM per second: more than CARRY_MM).
-    direction = (tip1 - tip0) / np.linalg.norm(tip1 - tip0)
-    speed = np.linalg.norm(tip1 - tip0) / WINDOW_S
-    progress = float(np.dot(tip_end - tip1, direction))
-    allowed = speed * (t_stop - t1) + CARRY_MM
-    assert progress <= allowed, (
-        f"the tip went on toward its target after STOP: {progress:.1f} mm along its path "
-        f"(allowed {allowed:.1f} mm; {speed:.1f} mm/s before STOP): {tip1} -> {tip_end}")
+    # Not on toward the object (nor anywhere else): from where it was when STOP showed, the arm
+    # moved only as far as the segments catching up with the held cylinder volumes take it. An
+    # arm that went on for the settle and hold windows (>= 5 s at over TIP_MOVING_MM per second)
+    # would be further.
+    carry = float(np.linalg.norm(tip_end - tip_stop))
+    allowed = CARRY_MM + speed * READOUT_LAG_S
+    assert carry <= allowed, (
+        f"the tip went on after STOP: {carry:.1f} mm from where it was when STOP showed "
+        f"(allowed {allowed:.1f} mm; {speed:.1f} mm/s before STOP): {tip_stop} -> {tip_end}")
 
 
 def test_click_to_grasp_on_the_default_emulator_console(
