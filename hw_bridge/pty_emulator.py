@@ -16,15 +16,14 @@ Command line, stdout protocol and scene channel: ``python -m hw_bridge.emulator`
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 import math
 import os
-import queue
 import random
 import select
 import socket
-import threading
 import time
 import tty
 from typing import Any, Callable
@@ -61,29 +60,6 @@ class EmulatorOptions:
     slip_jitter: float = 0.015
     tip_noise: float = 0.002
     tip_port: int | None = None
-
-
-class _Writer(threading.Thread):
-    """TX line: one frame at a time, each taking len*10/baud seconds before it reaches the host."""
-
-    def __init__(self, fd: int, baud: int, connected: Callable[[], bool]):
-        super().__init__(daemon=True, name="emulator-tx")
-        self.fd, self.baud, self.connected = fd, baud, connected
-        self.q: queue.Queue[bytes | None] = queue.Queue()
-        self.dropped_overflow = 0
-
-    def run(self) -> None:
-        while (data := self.q.get()) is not None:
-            if self.baud:
-                time.sleep(len(data) * 10 / self.baud)
-            if not self.connected():
-                continue  # nobody has the port open: the bytes go nowhere
-            try:
-                os.write(self.fd, data)
-            except BlockingIOError:
-                self.dropped_overflow += 1  # nobody reads the pty: drop, like a UART
-            except OSError:
-                return
 
 
 class Emulator:
@@ -136,9 +112,13 @@ class Emulator:
         self.tip_seq = 0
         if options.slip is not None or options.tip_port is not None:
             self._slip_setup(robot, options)
-        self.writer = _Writer(self.master, self.baud, lambda: self.host_present)
         self.rx_pending: list[tuple[float, bytes]] = []
         self.rx_busy_until = now
+        # TX line: frames leave one after another, each ``len * 10 / baud`` s on the wire, and
+        # are written to the pty by this loop when their last byte is due (no writer thread).
+        self.tx_pending: collections.deque[tuple[float, bytes]] = collections.deque()
+        self.tx_busy_until = now
+        self.dropped_overflow = 0  # frames a full pty buffer refused (nobody reads): dropped
         self.stop = False
         self.stalled = False
         self.cut = False
@@ -204,6 +184,7 @@ class Emulator:
         if present != self.host_present:
             self.host_present = present
             self.rx_pending.clear()
+            self.tx_pending.clear()
             self.emit("host_connected" if present else "host_disconnected")
 
     def _check_host(self) -> None:
@@ -214,15 +195,39 @@ class Emulator:
         while self.rx_pending and self.rx_pending[0][0] <= now:
             _, data = self.rx_pending.pop(0)
             self.core.receive(data, now)
-        self._flush_output()
+        self._flush_output(now)
 
-    def _flush_output(self) -> None:
+    def _flush_output(self, now: float) -> None:
+        """Put the device's new frames on the TX line (see :meth:`_send_due`)."""
         for frame in self.core.take_output():
             if self.cut or self.stalled or not self.host_present:
                 continue
             frame = self._fault(frame)
-            if frame is not None:
-                self.writer.q.put(frame)
+            if frame is None:
+                continue
+            start = max(now, self.tx_busy_until)
+            self.tx_busy_until = start + (len(frame) * 10 / self.baud if self.baud else 0.0)
+            self.tx_pending.append((self.tx_busy_until, frame))
+        self._send_due(now)
+
+    def _send_due(self, now: float) -> None:
+        """Write the frames whose last byte is due by ``now`` to the pty.
+
+        Written by the device loop itself, not by a writer thread: a second thread at the same
+        real-time priority waited for the loop's plant step and for the GIL before each frame,
+        and on a loaded 2-core machine STATE frames reached the pty 17-23 ms after the device
+        made them (the host calls the link lost after 40 ms of silence).
+        """
+        while self.tx_pending and self.tx_pending[0][0] <= now:
+            _, frame = self.tx_pending.popleft()
+            if not self.host_present or self.cut or self.stalled:
+                continue  # nobody has the port open, or the wire is down: the bytes go nowhere
+            try:
+                os.write(self.master, frame)
+            except BlockingIOError:
+                self.dropped_overflow += 1  # nobody reads the pty: drop, like a UART
+            except OSError:
+                self._check_host()  # EIO: the host closed the port meanwhile
 
     # -- timer --------------------------------------------------------------------------------
     def _tick(self, now: float) -> None:
@@ -241,6 +246,8 @@ class Emulator:
                 self.rx_pending.clear()
                 self.emit("link_cut" if cut else "link_restored")
         self.core.tick(now)
+        self._flush_output(now)  # the STATE is due a wire time after the tick, not after the
+        # plant step below (up to a few ms): it goes out as soon as that step is done
         ev = self.core.take_events()
         pos = [int(c) for c in self.core.motors.encoders]
         if ev.watchdog_tripped:
@@ -260,7 +267,7 @@ class Emulator:
                 pass
         if self.racks is not None:
             self._step_racks(now)
-        self._flush_output()
+        self._flush_output(now)
 
     # -- scene channel (soft arm) --------------------------------------------------------------
     def _serve_control(self) -> None:
@@ -307,7 +314,7 @@ class Emulator:
         self.emit("status", armed=self.core.armed, tripped=self.core.tripped, estop=self.core.estop,
               positions=[int(c) for c in self.core.motors.encoders],
               rx_bad_frames=self.core.decoder.stats.bad_frames,
-              tx_overflow=self.writer.dropped_overflow, path=self.path)
+              tx_overflow=self.dropped_overflow, path=self.path)
 
     def _serve_requests(self, now: float) -> None:
         requests, self.requests = self.requests, set()
@@ -318,7 +325,6 @@ class Emulator:
             self.emit("estop", pressed=self.core.estop)
 
     def run(self) -> None:
-        self.writer.start()
         priority = self.options.sched_priority
         keeper = None
         cpus = self.options.cpus
@@ -338,7 +344,6 @@ class Emulator:
         finally:  # hand the kernel workers back even if serving failed
             if keeper is not None:
                 keeper.stop()
-        self.writer.q.put(None)
         self.emit("exit")
         try:
             os.close(self.master)
@@ -355,7 +360,8 @@ class Emulator:
         watch = self.host_watch
         while not self.stop and not (watch is not None and watch.poll(time.monotonic(), self.core)):
             now = time.monotonic()
-            wake = next_tick if not self.rx_pending else min(next_tick, self.rx_pending[0][0])
+            wake = min(next_tick, self.rx_pending[0][0] if self.rx_pending else next_tick,
+                       self.tx_pending[0][0] if self.tx_pending else next_tick)
             if self.host_present:
                 ready, _, _ = select.select([self.master], [], [], max(0.0, wake - now))
             else:  # a hung-up master is always readable: sleep, then look again
@@ -366,7 +372,7 @@ class Emulator:
             if ready:
                 self._on_readable(now)
             if not self.stalled:
-                self._deliver(now)
+                self._deliver(now)  # (and writes the frames due by now)
             if self.requests:
                 self._serve_requests(now)
             if self.control is not None:

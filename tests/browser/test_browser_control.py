@@ -3,9 +3,10 @@
 Chromium places an object at one of the paper's spots (core.control.trials.paper_locations),
 presses *Execute grasp-and-place* and reads the state machine's phase from the Control panel
 until it shows "released". Then it starts the grasp again, presses *STOP* while the arm is
-on its way, and reads the panel: the phase must become "stopped" and the measured curvatures
-(the panel's numbers) and the tip readout must stop changing, while over the same time before
-STOP they changed (so the hold check can fail). A screenshot of the Control panel mid-run goes to
+on its way, and reads the panel: the phase must become "stopped", the tip readout must settle
+(bounded) and then hold, having carried on toward the object by no more than the soft segments
+catching up with the held cylinder volumes, while over the same time before STOP it moved (so
+the hold check can fail). A screenshot of the Control panel mid-run goes to
 ``artifacts/browser_control_panel.png``.
 """
 
@@ -24,17 +25,28 @@ from core.control.trials import paper_locations
 
 pytestmark = pytest.mark.browser
 SPOT = "E"  # (-0.08, 0.33): the quickest of the five (about 9 s approach, 9 s return in sim)
-# The held arm is measured through 0.2 mm marker noise (soft-arm.toml): the fitted curvature
-# of a perfectly still arm scatters with sigma 0.04 (segment 1) to 0.34 1/m (segment 6, the
-# chain accumulates heading noise), while the tip (the last marker) scatters by ~0.2 mm. So
-# the hold is judged on means of several readings per window: kappa within KAPPA_TOL (over 3
-# sigma of a difference of means), the tip within TIP_TOL_MM; the target row must not change
-# at all. Before STOP the same windows must show the tip moving by more than TIP_MOVING_MM
-# (measured: 4-17 mm per second early in the approach; held: ~0.2 mm).
-KAPPA_TOL = 0.8  # 1/m
-TIP_TOL_MM = 1.0
-TIP_MOVING_MM = 2.0
+# What the test reads after STOP is the drawn arm: the readout and the kappa table show the
+# frame the 3D view last sent, and the view sends a held arm's frame only when the drawn frames,
+# averaged over up to 2 s, leave a 0.5 mm band (console.dead_band). So a held arm's readout
+# stays on one frame for seconds, then jumps to a newer single frame, each carrying the
+# measurement's noise (0.2 mm marker noise -> fitted tip ~0.5 mm per axis, kappa 0.04 (segment
+# 1) to 0.34 1/m (segment 6) per frame): two windows on either side of such a jump differ by
+# up to ~3 sigma of a difference of two frames, 2.5 mm and 1.5 1/m. And the arm itself settles
+# after STOP: the segments lag the held cylinder volumes (tau 0.125-0.25 s) and a segment still
+# more than 0.3 1/m behind may stick for up to 1 s and then slip (soft-arm.toml [sim]); in sim
+# the tip carried on by 2-3.5 mm (at most 5.8 mm) and was within 0.3 mm of its end within 1.2 s.
+# So: wait (at most SETTLE_S) until two successive windows agree within TIP_TOL_MM, then the
+# tip must stay there over HOLD_S, and it may be at most CARRY_MM (plus what it covers at its
+# pre-STOP speed in READOUT_LAG_S, the readout's lag) from where the readout showed it when the
+# panel first said "stopped".
+KAPPA_TOL = 1.5  # 1/m
+TIP_TOL_MM = 2.5
+TIP_MOVING_MM = 2.0  # per WINDOW_S before STOP (measured: 3-21 mm/s early in the approach)
+CARRY_MM = 6.0
+READOUT_LAG_S = 0.5  # view published at 30 Hz, readout at most 10 Hz, websocket, this page
 WINDOW_S = 1.0
+SETTLE_S = 8.0
+HOLD_S = 3.0
 LEASE_LOST = "went silent"  # the reason the console gives when a silent tab loses control
 RUNNING = ("settling", "planning", "approach", "grasp", "move_to_bin", "release")
 
@@ -201,18 +213,54 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
     assert phase(page) in RUNNING, state_text(page)
     moved = np.linalg.norm(tip1 - tip0)
     assert moved > TIP_MOVING_MM, f"the tip barely moved before STOP ({moved:.1f} mm)"
+    # A tip that went on at that speed would leave the tolerance within HOLD_S: the check can fail.
+    assert moved / WINDOW_S * HOLD_S > 2 * TIP_TOL_MM
     page.get_by_role("button", name="STOP (Esc)").click()
     wait_phase(page, ("stopped",), timeout=5.0)
+    tip_stop = tip_mm(page)  # the loop stopped the arm before the panel showed it
     assert "STOP pressed by" in state_text(page)  # the header's STOP, naming who pressed it
-    time.sleep(0.5)  # the soft segments settle on their held cylinder volumes (tau 0.25 s)
-    k1, tip1, ref1 = window(page)
-    k2, tip2, ref2 = window(page)
+    hold_after_stop(page, moved / WINDOW_S, tip_stop)
+
+
+def hold_after_stop(page: Any, speed: float, tip_stop: np.ndarray) -> None:
+    """After STOP: the readout settles within SETTLE_S, then holds over HOLD_S, and the tip
+    did not go on (toward its target or anywhere) beyond the plant's carry from ``tip_stop``,
+    where the readout showed it when the panel said "stopped" (see the constants above);
+    ``speed``: the tip's speed before STOP (mm/s)."""
+    _, tip_prev, ref_prev = window(page)
+    refs = [ref_prev]
+    tips = [tip_prev]
+    deadline = time.monotonic() + SETTLE_S
+    while True:  # settle: two successive windows agree
+        k_set, tip_set, ref = window(page)
+        refs.append(ref)
+        tips.append(tip_set)
+        if np.linalg.norm(tip_set - tip_prev) <= TIP_TOL_MM:
+            break
+        assert time.monotonic() < deadline, (
+            f"the tip did not settle within {SETTLE_S:.0f} s of STOP: windows "
+            f"{np.round(tips, 1).tolist()} mm")
+        tip_prev = tip_set
+    t_set = time.monotonic() - WINDOW_S / 2
+    time.sleep(max(0.0, HOLD_S - WINDOW_S))
+    k_end, tip_end, ref_end = window(page)
+    refs.append(ref_end)
     assert phase(page) == "stopped"
-    assert np.all(np.vstack([ref1, ref2]) == ref1[0]), "the target moved after STOP"
-    held = np.max(np.abs(k2 - k1))
-    assert held <= KAPPA_TOL, f"mean measured kappa moved by {held:.2f} 1/m: {k1} -> {k2}"
-    drift = np.linalg.norm(tip2 - tip1)
-    assert drift <= TIP_TOL_MM, f"the held tip moved by {drift:.2f} mm: {tip1} -> {tip2}"
+    assert np.all(np.vstack(refs) == refs[0][0]), "the target moved after STOP"
+    held = np.max(np.abs(k_end - k_set))
+    assert held <= KAPPA_TOL, f"mean measured kappa moved by {held:.2f} 1/m: {k_set} -> {k_end}"
+    drift = np.linalg.norm(tip_end - tip_set)
+    assert drift <= TIP_TOL_MM, (f"the held tip moved by {drift:.2f} mm over "
+                                 f"{time.monotonic() - t_set:.1f} s: {tip_set} -> {tip_end}")
+    # Not on toward the object (nor anywhere else): from where it was when STOP showed, the arm
+    # moved only as far as the segments catching up with the held cylinder volumes take it. An
+    # arm that went on for the settle and hold windows (>= 5 s at over TIP_MOVING_MM per second)
+    # would be further.
+    carry = float(np.linalg.norm(tip_end - tip_stop))
+    allowed = CARRY_MM + speed * READOUT_LAG_S
+    assert carry <= allowed, (
+        f"the tip went on after STOP: {carry:.1f} mm from where it was when STOP showed "
+        f"(allowed {allowed:.1f} mm; {speed:.1f} mm/s before STOP): {tip_stop} -> {tip_end}")
 
 
 def test_click_to_grasp_on_the_default_emulator_console(
