@@ -5,6 +5,9 @@
   (SQP, no user gradients) would run it; each radius starts from the previous solution.
 * :class:`CasadiPlanner` - the same problem in CasADi with exact automatic-differentiation
   derivatives, solved by ``sqpmethod`` (or ``ipopt``); the NLP is built once and reused.
+* :class:`SidedCasadiPlanner` - :class:`CasadiPlanner` on the side of the arm the object lies
+  on, exactly as the console plans (:class:`core.planning.sides.SidedPlanner`): a right-side
+  object is the mirrored request solved on the same left-finger NLP, its plan mirrored back.
 
 Both return a :class:`BaselinePlan`; a plan counts as a success when every waypoint meets the
 paper's acceptance (constraint violation <= 2e-3, curvatures within the limits), whatever the
@@ -21,6 +24,7 @@ import numpy.typing as npt
 from scipy.optimize import minimize
 
 from core.kinematics import planar
+from core.planning.sides import mirror_heading, mirror_xy, object_side
 
 Array = npt.NDArray[np.float64]
 
@@ -143,3 +147,25 @@ class CasadiPlanner:
             kappas.append(z[:-1].copy())
             phis.append(z[-1])
         return BaselinePlan(radii, np.array(kappas), np.array(phis), ok)
+
+
+class SidedCasadiPlanner:
+    """:class:`CasadiPlanner` for the finger on the object's side, as the console plans.
+
+    A robot with the stacked pair (``[gripper] fingers = "both"``) grasps a right-side object
+    with the right finger, the mirror image of the left one about the base's heading line
+    (:mod:`core.planning.sides`). So, like :class:`core.planning.sides.SidedPlanner`, a
+    right-side request is mirrored (start curvatures negated, object reflected), solved on the
+    left-finger NLP with the same tolerances, and the plan mirrored back (curvatures negated,
+    approach angles reflected): the NLP this planner solves for that object, in CasADi.
+    """
+
+    def __init__(self, robot, left: CasadiPlanner):
+        self.robot, self.left = robot, left
+
+    def plan(self, kappa_meas, center, radius, delta_d=None) -> BaselinePlan:
+        if "right" not in self.robot.gripper.sides or object_side(self.robot, center) == "left":
+            return self.left.plan(kappa_meas, center, radius, delta_d)
+        p = self.left.plan(-np.asarray(kappa_meas, float), mirror_xy(self.robot, center),
+                           radius, delta_d)
+        return BaselinePlan(p.radii, -p.kappas, mirror_heading(self.robot, p.phis), p.success)
