@@ -172,3 +172,31 @@ def test_console_execute_path_grasps_on_the_right_without_a_side_field():
     assert stack.machine.phase is Phase.RELEASED, stack.machine.reason
     assert stack.machine.closing_side == "right" and any(captured)
     assert not sim.captured and sim.obj.xy[0] > 0  # put down, on the right finger's side
+
+
+# A right-quadrant object whose last waypoint has the first segment at its curvature limit
+# with a nearly singular palm-point Jacobian (multipliers ~4e5): CasADi sqpmethod finds that
+# waypoint on the same mirrored NLP (violation 3e-15, kappa_1 at the bound); the planner used to
+# refuse it with curvature_limit (bench_planner seed 1589684527).
+STRETCHED = ((0.36003311831463847, 0.19432585300297986), 0.016324507696845292)
+
+
+@pytest.mark.parametrize("mirror", [1.0, -1.0], ids=["right", "left"])
+def test_object_with_the_first_segment_at_its_limit_is_planned_on_both_sides(mirror):
+    (x, y), r = STRETCHED
+    plan = SidedPlanner(ARM).plan(np.zeros(6), (mirror * x, y), r)
+    assert plan.side == ("right" if mirror > 0 else "left")
+    assert plan.success, plan.failures
+    g = ARM.gripper
+    for k, kappa in enumerate(plan.kappas):
+        assert np.all(np.abs(kappa) <= ARM.kappa_max + 1e-9)
+        tip = forward_kinematics(kappa, ARM.lengths, ARM.base_pose)[-1]
+        rel = in_tip_frame(tip, (mirror * x, y))
+        assert rel[0] == pytest.approx(g.w_off_along, abs=2e-3)
+        assert rel[1] == pytest.approx(mirror * -(g.g_off + plan.radii[k]), abs=2e-3)
+    # The last waypoint is CasADi's: the object centre exactly in the finger (the solver's
+    # tolerance, far inside the paper's 2 mm) with kappa_1 at the limit, curling toward it.
+    tip = forward_kinematics(plan.kappas[-1], ARM.lengths, ARM.base_pose)[-1]
+    rel = in_tip_frame(tip, (mirror * x, y))
+    assert np.hypot(rel[0] - g.w_off_along, rel[1] + mirror * (2 * g.g_off + r)) < 1e-7
+    assert plan.kappas[-1][0] == pytest.approx(-mirror * ARM.kappa_max, abs=1e-6)
