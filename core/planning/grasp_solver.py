@@ -157,6 +157,30 @@ def _restore(kn: Kernel, p: PointEval, Jx: list[float], Jy: list[float],
     return None
 
 
+KKT_REG = 1e-13  # regularisation of the two equality rows of the KKT matrix (see _refine)
+
+
+def _refine(rows: list, sol: list[float], n: int, viol: float, opts: SolverOptions
+            ) -> list[float]:
+    """``sol`` with the regularisation's error taken out (one step of iterative refinement).
+
+    The equality rows carry ``-KKT_REG`` on the diagonal so the KKT matrix stays invertible
+    when the palm-point Jacobian is (nearly) rank-deficient; the step then meets the linearised
+    equalities only up to ``KKT_REG * lam``. With huge multipliers (a nearly singular Jacobian:
+    e.g. the arm stretched with a curvature at its limit) that error exceeds the solver's
+    tolerance and, divided by the small singular value, becomes a spurious step that no line
+    search accepts from a feasible point (the waypoint was then refused with curvature_limit
+    although it had been found). Re-solving for the residual removes it; it is skipped while
+    that error is small next to the violation ``viol`` the step has to remove.
+    """
+    l0, l1 = sol[n], sol[n + 1]
+    if KKT_REG * max(abs(l0), abs(l1)) <= 1e-3 * max(viol, opts.ctol):
+        return sol
+    r = [0.0] * len(rows)
+    r[n], r[n + 1] = -KKT_REG * l0, -KKT_REG * l1
+    return list(map(add, sol, kkt_solve(rows, r)))
+
+
 @functools.lru_cache(maxsize=1)
 def compiled_kernel():
     """:func:`core.planning.solver_jit.newton_free` when numba is installed and the kernel is
@@ -245,8 +269,8 @@ def solve(
     p = PointEval(kn, x)
     it = it0
     unit = unit_rows(nk)
-    reg_x = [-1e-13, 0.0] + [0.0] * nc
-    reg_y = [0.0, -1e-13] + [0.0] * nc
+    reg_x = [-KKT_REG, 0.0] + [0.0] * nc
+    reg_y = [0.0, -KKT_REG] + [0.0] * nc
     zeros_c = [0.0] * (2 + nc)
     G = hc = nu = None
     W = []
@@ -265,7 +289,9 @@ def solve(
             # Common case first: no bound active and no clearance rows. Accept the plain
             # Newton-KKT step when it has positive curvature and stays in the bounds; anything
             # else goes through the active-set loop below (which re-solves from scratch).
-            sol = kkt_solve(W + [Jx + reg_x, Jy + reg_y], [-g for g in grad] + [-ex, -ey])
+            rows = W + [Jx + reg_x, Jy + reg_y]
+            sol = _refine(rows, kkt_solve(rows, [-g for g in grad] + [-ex, -ey]), n, p.viol,
+                          opts)
             d = sol[:n]
             l0, l1 = sol[n], sol[n + 1]
             gd = sum(map(mul, grad, d))
@@ -310,7 +336,7 @@ def solve(
                 else:
                     rows.append(unit[n + 2 + i])
                     rhs.append(0.0)
-            sol = kkt_solve(rows, rhs)
+            sol = _refine(rows, kkt_solve(rows, rhs), n, p.viol, opts)
             d = sol[:n]
             l0, l1 = sol[n], sol[n + 1]
             if not (nc or shift or any(act)):

@@ -65,6 +65,50 @@ def _axis(robot: SoftArm) -> tuple[Array, Array, float]:
     return b[:2], np.array([math.cos(b[2]), math.sin(b[2])]), float(b[2])
 
 
+@dataclasses.dataclass(frozen=True)
+class MirrorLine:
+    """The reflection across the base's heading line as one affine map, computed once.
+
+    A point p goes to ``A p + t`` with ``A = [[cos 2h, sin 2h], [sin 2h, -cos 2h]]`` (h the
+    base heading, ``t = b - A b`` for the base point b) and a heading theta to
+    ``2 h - theta``; ``pose_map`` and ``pose_shift`` do both to (n, 3) poses in one product.
+    """
+
+    bx: float          # base point and heading h
+    by: float
+    h: float
+    c2: float          # cos 2h, sin 2h
+    s2: float
+    tx: float
+    ty: float
+    pose_map: Array    # (3, 3): poses @ pose_map + pose_shift, before wrapping the heading
+    pose_shift: Array  # (3,)
+
+    @classmethod
+    def of(cls, robot: SoftArm) -> MirrorLine:
+        bx, by, h = (float(v) for v in robot.base_pose)
+        c2, s2 = math.cos(2.0 * h), math.sin(2.0 * h)
+        tx, ty = bx - (c2 * bx + s2 * by), by - (s2 * bx - c2 * by)
+        pose_map = np.array([[c2, s2, 0.0], [s2, -c2, 0.0], [0.0, 0.0, -1.0]])
+        return cls(bx, by, h, c2, s2, tx, ty, pose_map, np.array([tx, ty, 2.0 * h]))
+
+    def point(self, x: float, y: float) -> tuple[float, float]:
+        """One point reflected (plain floats)."""
+        return (self.c2 * x + self.s2 * y + self.tx, self.s2 * x - self.c2 * y + self.ty)
+
+    def side_of(self, x: float, y: float) -> Side:
+        """As :func:`object_side`, on plain floats."""
+        cross = math.cos(self.h) * (y - self.by) - math.sin(self.h) * (x - self.bx)
+        return "right" if cross < 0.0 else "left"
+
+
+def _wrap_in_place(a: Array) -> Array:
+    """:func:`core.planning.arm_model.wrap` of a float array, in place (three ufunc calls)."""
+    np.subtract(math.pi, a, out=a)
+    np.mod(a, 2.0 * math.pi, out=a)
+    return np.subtract(math.pi, a, out=a)
+
+
 def mirror_xy(robot: SoftArm, xy: npt.ArrayLike) -> Array:
     """Points (..., 2) reflected across the base's heading line."""
     b, u, _ = _axis(robot)
@@ -85,22 +129,36 @@ def object_side(robot: SoftArm, xy: npt.ArrayLike) -> Side:
     return "right" if u[0] * d[1] - u[1] * d[0] < 0.0 else "left"
 
 
-def mirror_plan(robot: SoftArm, plan: GraspPlan) -> GraspPlan:
+def mirror_plan(robot: SoftArm, plan: GraspPlan, line: MirrorLine | None = None) -> GraspPlan:
     """The plan of the mirrored request: curvatures negated, points and headings reflected,
-    the side swapped; radii, clearances and solver figures are unchanged by a reflection."""
-    poses = np.column_stack([mirror_xy(robot, plan.palm_poses[:, :2]),
-                             mirror_heading(robot, plan.palm_poses[:, 2])])
-    return dataclasses.replace(
-        plan, center=mirror_xy(robot, plan.center), kappa_meas=-plan.kappa_meas,
-        kappas=-plan.kappas, palm_poses=poses, phis=mirror_heading(robot, plan.phis),
-        side="right" if plan.side == "left" else "left",
-        obstacles=tuple(mirror_obstacle(robot, o) for o in plan.obstacles))
+    the side swapped; radii, clearances and solver figures are unchanged by a reflection.
+
+    Runs once per right-side plan, so it is a handful of array operations on the whole plan
+    (``line``: the robot's :class:`MirrorLine`, when the caller keeps it) and a field copy of
+    the frozen plan rather than :func:`dataclasses.replace`, which re-runs ``__init__`` over
+    every field.
+    """
+    m = MirrorLine.of(robot) if line is None else line
+    poses = plan.palm_poses @ m.pose_map + m.pose_shift
+    _wrap_in_place(poses[:, 2])
+    cx, cy = plan.center.tolist()
+    out = object.__new__(GraspPlan)
+    fields = out.__dict__
+    fields.update(plan.__dict__)
+    fields.update(
+        center=np.array(m.point(cx, cy)), kappa_meas=-plan.kappa_meas, kappas=-plan.kappas,
+        palm_poses=poses, phis=_wrap_in_place(2.0 * m.h - plan.phis),
+        side="right" if plan.side == "left" else "left")
+    if plan.obstacles:
+        fields["obstacles"] = tuple(mirror_obstacle(robot, o, m) for o in plan.obstacles)
+    return out
 
 
-def mirror_obstacle(robot: SoftArm, obstacle: Obstacle) -> Obstacle:
+def mirror_obstacle(robot: SoftArm, obstacle: Obstacle, line: MirrorLine | None = None
+                    ) -> Obstacle:
     """An obstacle disk reflected across the base's heading line (name and radius kept)."""
-    x, y = mirror_xy(robot, (obstacle.x, obstacle.y))
-    return dataclasses.replace(obstacle, x=float(x), y=float(y))
+    x, y = (MirrorLine.of(robot) if line is None else line).point(obstacle.x, obstacle.y)
+    return dataclasses.replace(obstacle, x=x, y=y)
 
 
 class SidedPlanner:
@@ -115,12 +173,14 @@ class SidedPlanner:
         self.left = GraspPlanner(robot, config)
         self.model = self.left.model
         self.config = self.left.config
+        self.mirror = MirrorLine.of(robot)
 
     def side_for(self, center: npt.ArrayLike) -> Side:
         """The side a grasp of an object at ``center`` is planned on."""
         if "right" not in self.robot.gripper.sides:
             return "left"
-        return object_side(self.robot, center)
+        x, y = np.asarray(center, dtype=float).tolist()
+        return self.mirror.side_of(x, y)
 
     def plan(self, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float, *,
              side: Side | None = None, delta_d: float | None = None,
@@ -133,23 +193,24 @@ class SidedPlanner:
             GraspRefused: as :meth:`GraspPlanner.plan`, or ``side`` is one the gripper cannot
                 close toward.
         """
-        side = self.side_for(center) if side is None else side
+        ctr = np.asarray(center, dtype=float)
+        if ctr.shape != (2,):
+            raise GraspRefused("bad_input", f"The object centre must be (x, y), got {ctr!r}.")
+        side = self.side_for(ctr) if side is None else side
         if side not in SIDES:
             raise GraspRefused("bad_input", f"side must be 'left' or 'right', got {side!r}.")
         if side not in self.robot.gripper.sides:
             raise GraspRefused("wrong_side", "This gripper closes to its left only (robot file "
                                "[gripper] fingers = \"left\"): it cannot grasp on the right.")
         if side == "left":
-            return self.left.plan(kappa_meas, center, radius, delta_d=delta_d, weights=weights,
+            return self.left.plan(kappa_meas, ctr, radius, delta_d=delta_d, weights=weights,
                                   obstacles=obstacles, clearance=clearance)
         km = np.asarray(kappa_meas, dtype=float)
-        ctr = np.asarray(center, dtype=float)
-        if ctr.shape != (2,):
-            raise GraspRefused("bad_input", f"The object centre must be (x, y), got {ctr!r}.")
-        plan = self.left.plan(-km, mirror_xy(self.robot, ctr), radius, delta_d=delta_d,
+        m = self.mirror
+        plan = self.left.plan(-km, m.point(*ctr.tolist()), radius, delta_d=delta_d,
                               weights=weights, clearance=clearance,
-                              obstacles=[mirror_obstacle(self.robot, o) for o in obstacles])
-        return mirror_plan(self.robot, plan)
+                              obstacles=[mirror_obstacle(self.robot, o, m) for o in obstacles])
+        return mirror_plan(self.robot, plan, m)
 
 
 class _ByIdentity:

@@ -21,7 +21,14 @@ from core.control.trials.__main__ import main as trials_main
 from core.kinematics.planar import forward_kinematics, sample_backbone
 from core.planning.feasibility import GraspRefused
 from core.planning.reachability import PLANNABLE, reachability_map
-from core.planning.sides import SidedPlanner, object_side, plan_grasp_sided
+from core.planning.sides import (
+    SidedPlanner,
+    mirror_heading,
+    mirror_plan,
+    mirror_xy,
+    object_side,
+    plan_grasp_sided,
+)
 from core.robot_schema import tomllib
 
 ARM = robots.load("soft-arm")
@@ -172,3 +179,67 @@ def test_console_execute_path_grasps_on_the_right_without_a_side_field():
     assert stack.machine.phase is Phase.RELEASED, stack.machine.reason
     assert stack.machine.closing_side == "right" and any(captured)
     assert not sim.captured and sim.obj.xy[0] > 0  # put down, on the right finger's side
+
+
+# A right-quadrant object whose last waypoint has the first segment at its curvature limit
+# with a nearly singular palm-point Jacobian (multipliers ~4e5): CasADi sqpmethod finds that
+# waypoint on the same mirrored NLP (violation 3e-15, kappa_1 at the bound); the planner used to
+# refuse it with curvature_limit (bench_planner seed 1589684527).
+STRETCHED = ((0.36003311831463847, 0.19432585300297986), 0.016324507696845292)
+
+
+@pytest.mark.parametrize("mirror", [1.0, -1.0], ids=["right", "left"])
+def test_object_with_the_first_segment_at_its_limit_is_planned_on_both_sides(mirror):
+    (x, y), r = STRETCHED
+    plan = SidedPlanner(ARM).plan(np.zeros(6), (mirror * x, y), r)
+    assert plan.side == ("right" if mirror > 0 else "left")
+    assert plan.success, plan.failures
+    g = ARM.gripper
+    for k, kappa in enumerate(plan.kappas):
+        assert np.all(np.abs(kappa) <= ARM.kappa_max + 1e-9)
+        tip = forward_kinematics(kappa, ARM.lengths, ARM.base_pose)[-1]
+        rel = in_tip_frame(tip, (mirror * x, y))
+        assert rel[0] == pytest.approx(g.w_off_along, abs=2e-3)
+        assert rel[1] == pytest.approx(mirror * -(g.g_off + plan.radii[k]), abs=2e-3)
+    # The last waypoint is CasADi's: the object centre exactly in the finger (the solver's
+    # tolerance, far inside the paper's 2 mm) with kappa_1 at the limit, curling toward it.
+    tip = forward_kinematics(plan.kappas[-1], ARM.lengths, ARM.base_pose)[-1]
+    rel = in_tip_frame(tip, (mirror * x, y))
+    assert np.hypot(rel[0] - g.w_off_along, rel[1] + mirror * (2 * g.g_off + r)) < 1e-7
+    assert plan.kappas[-1][0] == pytest.approx(-mirror * ARM.kappa_max, abs=1e-6)
+
+
+TILTED = robots.parse({**_TABLE, "base": {**_TABLE["base"], "pose": [0.05, -0.02, 1.2]}},
+                      ARM.source)
+
+
+@pytest.mark.parametrize("robot", [ARM, TILTED], ids=["paper_base", "tilted_base"])
+def test_mirror_plan_reflects_every_point_and_heading_and_undoes_itself(robot):
+    # A right plan is the mirror of the left plan of the mirrored request: against the
+    # point-by-point reflection (b + 2 ((p - b) . u) u - (p - b)) and the heading rule 2 h - th.
+    planner = SidedPlanner(robot)
+    mx, my = mirror_xy(robot, (0.2, 0.25))
+    left = planner.left.plan(np.zeros(6), (mx, my), 0.0165)
+    right = mirror_plan(robot, left)
+    assert right.side == "right" and left.side == "left" and right.success
+    np.testing.assert_allclose(right.center, (0.2, 0.25), atol=1e-12)
+    np.testing.assert_allclose(right.kappas, -left.kappas)
+    np.testing.assert_allclose(right.kappa_meas, -left.kappa_meas)
+    np.testing.assert_allclose(right.palm_poses[:, :2], mirror_xy(robot, left.palm_poses[:, :2]),
+                               atol=1e-12)
+    turn = np.angle(np.exp(1j * (right.palm_poses[:, 2] -
+                                 mirror_heading(robot, left.palm_poses[:, 2]))))
+    assert np.abs(turn).max() < 1e-12
+    assert np.all(np.abs(right.palm_poses[:, 2]) <= math.pi)
+    np.testing.assert_allclose(right.phis, mirror_heading(robot, left.phis), atol=1e-12)
+    # Reflection leaves the radii and diagnostics alone and the left plan untouched.
+    np.testing.assert_array_equal(right.radii, left.radii)
+    assert right.status == left.status and right.total_ms == left.total_ms
+    back = mirror_plan(robot, right)
+    for name in ("center", "kappas", "palm_poses", "phis"):
+        np.testing.assert_allclose(getattr(back, name), getattr(left, name), atol=1e-12)
+    assert back.side == "left"
+    # The right-finger plan the planner returns is this one, for the object on the right.
+    direct = planner.plan(np.zeros(6), (0.2, 0.25), 0.0165)
+    np.testing.assert_allclose(direct.kappas, right.kappas, atol=1e-12)
+    np.testing.assert_allclose(direct.palm_poses, right.palm_poses, atol=1e-12)
