@@ -76,7 +76,8 @@ def _clip(poly: list[Array], which: int, level: float) -> list[Array]:
 def region_mesh(xs: Array, ys: Array, fields: list[Array], z: float) -> Mesh | None:
     """Triangles of the region where every field is >= LEVEL (marching triangles), each wound
     counter-clockwise seen from above, so the shading can be drawn one-sided (its front faces
-    up): a transparent double-sided mesh costs three.js two passes over the table."""
+    up): three.js draws a transparent double-sided mesh twice a frame (back faces, then
+    front), and a software renderer pays for the vertices of both draws."""
     ny, nx = fields[0].shape
     if nx < 2 or ny < 2:
         return None

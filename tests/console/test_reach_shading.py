@@ -102,9 +102,9 @@ def signed_areas(mesh):
 
 @pytest.mark.parametrize("flip", [False, True])
 def test_every_face_faces_up_so_one_side_is_enough(flip):
-    # The console draws the shading one-sided (a transparent double-sided mesh costs a second
-    # pass over the table): every triangle must be counter-clockwise seen from above (+z),
-    # also for a map whose grid runs from +x to -x (its cells' corners come clockwise).
+    # The console draws the shading one-sided (three.js draws a transparent double-sided mesh
+    # twice a frame): every triangle must be counter-clockwise seen from above (+z), also for
+    # a map whose grid runs from +x to -x (its cells' corners come clockwise).
     m = disc_map()
     if flip:
         m = ReachMap(m.xs[::-1].copy(), m.ys, m.status[:, ::-1].copy(), m.radius)
