@@ -1,15 +1,16 @@
 """How busy a still console keeps a browser without a GPU: CPU, frames drawn and messages received.
 
-``python benchmarks/page_busy.py [--robot soft-arm extensible] [--settle 8] [--seconds 10]``
+``python benchmarks/page_busy.py [--robot soft-arm extensible] [--repo CHECKOUT ...]``
 
-Starts ``serve.py --robot NAME --hardware mock --no-token`` on a free port, opens it in headless
-Chromium (/usr/bin/chromium, the browser tests' flags: ``--disable-gpu``, so WebGL is drawn in
-software, and ``?fixedDpr=0.5``), lets the page settle, then over ``--seconds`` counts what the
-still page costs: the CPU seconds of every Chromium process (renderer and the software-GL GPU
-process, from /proc), the renderer's task and script time (CDP ``Performance.getMetrics``), the WebGL
-frames drawn (animation frames with a draw call, counted by a wrapper on the WebGL context) and
-the server's messages the page received, by type. Robots run one after the other, so run both in one call to compare them
-under the same load.
+Starts ``serve.py --robot NAME --hardware mock --no-token`` of each ``--repo`` checkout (default
+this one) on a free port, opens it in headless Chromium (/usr/bin/chromium with the browser
+tests' flags: ``--disable-gpu``, so WebGL is drawn in software, and ``?fixedDpr=0.5``) as its
+operator, lets the page settle, then over ``--seconds`` counts what the still page costs: the
+CPU seconds of every Chromium process (renderer and the software-GL GPU process, from /proc),
+the renderer's task and script time (CDP ``Performance.getMetrics``), the 3D frames drawn
+(animation frames with a WebGL draw call, counted by a wrapper on the context) and the server's
+messages the page received, by type. Everything runs one after the other: give both robots and
+two checkouts (``--repo /path/to/main .``) in one call to compare them under the same load.
 """
 
 from __future__ import annotations
