@@ -141,7 +141,7 @@ class ConsoleApp:
         self.access = access if access is not None else AccessControl()
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
-        self.lease = LeaseMonitor(server, self.access)
+        self.lease = LeaseMonitor(server, self.access, busy=lambda: self.hold.active)
         self.hold = HoldToRun(self.store, allowed=self.access.is_operator,
                               heard=self.access.last_heard)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)

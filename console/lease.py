@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Any
+import time
+from typing import Any, Callable
 
 import viser
 
@@ -95,13 +96,18 @@ class SilenceWarning:
 class LeaseMonitor:
     """Keeps the operator's lease alive by probing their tab; revokes it on silence or close.
 
-    A thread probes the holder's tab every ``probe_period`` s with a localStorage read (a
-    JavaScript round trip) bounded so that the lease expires at most ``lease_s`` after the last
-    answer, and from ``warn_s`` of silence on shows the operator a :class:`SilenceWarning`
-    (an unanswered probe is re-sent at that moment; answers come in order, so nothing is
-    lost); the answers are also the heartbeats that keep a set-point jog moving (it holds when
-    the last one is over 300 ms old, see ``console.hold_to_run``), hence the 0.1 s default; a
-    closed tab is also caught at once by ``server.on_client_disconnect``. On a desk console
+    A thread probes the holder's tab with a localStorage read (a JavaScript round trip)
+    bounded so that the lease expires at most ``lease_s`` after the last answer, and from
+    ``warn_s`` of silence on shows the operator a :class:`SilenceWarning` (an unanswered probe
+    is re-sent at that moment; answers come in order, so nothing is lost); the answers are also
+    the heartbeats that keep a set-point jog moving (it holds when the last one is over 300 ms
+    old, see ``console.hold_to_run``), so while ``busy()`` (a jog is running) the tab is probed
+    every ``probe_period`` s (0.1), otherwise every ``idle_period`` s (1.0): each probe makes
+    viser's client draw the 3D scene for a quarter of a second (a message that is not GUI-only
+    opens its render window, and the answer is sent from the next frame), so probing a still
+    console ten times a second kept its page drawing without pause, which a browser without a
+    GPU pays with a whole core; a closed tab is also caught at once by
+    ``server.on_client_disconnect``. On a desk console
     (``first_client_takes_control``) a tab whose lease lapsed by silence -- a software-rendered
     page busy for seconds -- is probed too and gets control back when it answers (the arm
     stopped when the lease lapsed and stays stopped); so is, in any mode, a tab whose lease
@@ -109,10 +115,15 @@ class LeaseMonitor:
     """
 
     def __init__(self, server: viser.ViserServer, access: AccessControl,
-                 probe_period: float = 0.1) -> None:
+                 probe_period: float = 0.1, idle_period: float = 1.0,
+                 busy: Callable[[], bool] = lambda: True) -> None:
+        if not 0 < probe_period <= idle_period:
+            raise ValueError("need 0 < probe_period <= idle_period (s)")
         self.server = server
         self.access = access
         self.probe_period = probe_period
+        self.idle_period = idle_period
+        self.busy = busy
         self.probes = 0
         self.warning = SilenceWarning()
         self._stop = threading.Event()
@@ -139,8 +150,17 @@ class LeaseMonitor:
             self._thread = None
 
     def _run(self) -> None:
+        last = float("-inf")
         while not self._stop.wait(self.probe_period):
-            self.step()
+            now = time.monotonic()
+            if self.due(now - last):
+                last = now
+                self.step()
+
+    def due(self, since_last: float) -> bool:
+        """Whether to probe now, ``since_last`` s after the last probe was sent: every
+        ``probe_period`` while ``busy()``, else every ``idle_period``."""
+        return since_last >= (self.probe_period if self.busy() else self.idle_period)
 
     def step(self) -> None:
         """One probe of the holder's tab (or of a lapsed tab that may get control back)."""

@@ -358,7 +358,7 @@ class PlanScene:
                 if mesh is not None:
                     self.reach.append(self.server.scene.add_mesh_simple(
                         f"/grasp/reach/{status}", mesh[0], mesh[1], color=color, opacity=0.28,
-                        cast_shadow=False, receive_shadow=False, side="double"))
+                        cast_shadow=False, receive_shadow=False, side="front"))
         for h in self.reach:
             h.visible = visible
 

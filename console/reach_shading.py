@@ -74,7 +74,10 @@ def _clip(poly: list[Array], which: int, level: float) -> list[Array]:
 
 
 def region_mesh(xs: Array, ys: Array, fields: list[Array], z: float) -> Mesh | None:
-    """Triangles of the region where every field is >= LEVEL (marching triangles)."""
+    """Triangles of the region where every field is >= LEVEL (marching triangles), each wound
+    counter-clockwise seen from above, so the shading can be drawn one-sided (its front faces
+    up): three.js draws a transparent double-sided mesh twice a frame (back faces, then
+    front), and a software renderer pays for the vertices of both draws."""
     ny, nx = fields[0].shape
     if nx < 2 or ny < 2:
         return None
@@ -112,7 +115,9 @@ def region_mesh(xs: Array, ys: Array, fields: list[Array], z: float) -> Mesh | N
     f = np.concatenate(faces).astype(np.uint32)
     p, q, r = v2[f[:, 0]], v2[f[:, 1]], v2[f[:, 2]]
     twice_area = (q - p)[:, 0] * (r - p)[:, 1] - (q - p)[:, 1] * (r - p)[:, 0]
-    f = f[np.abs(twice_area) > 1e-14]
+    keep = np.abs(twice_area) > 1e-14
+    f, up = f[keep], twice_area[keep] > 0
+    f = np.where(up[:, None], f, f[:, ::-1])  # every face counter-clockwise: it faces up (+z)
     if len(f) == 0:
         return None
     return np.c_[v2, np.full(len(v2), z)], f

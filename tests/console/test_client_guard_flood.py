@@ -35,6 +35,7 @@ def lab(tmp_path: Any) -> Iterator[tuple[viser.ViserServer, ConsoleApp, str]]:
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = ConsoleApp(SOFT, server, panels=(*DEFAULT_PANELS, SessionPanel),
                      access=AccessControl(token), data_dir=tmp_path / "runs")
+    app.lease.busy = lambda: True  # probed every 0.1 s, as while jogging: a flood must not starve it
     app.start()
     try:
         yield server, app, token

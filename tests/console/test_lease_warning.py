@@ -208,3 +208,30 @@ def test_a_lapse_stops_the_consoles_arm(server) -> None:
     settle(monitor, clock, 3.5)
     assert hooks == ["Ann's tab went silent for 3 s"] and app.stops == 1
     assert tab.notes[0].removed  # the warning made way for the app's notice
+
+
+def test_a_still_console_is_probed_once_a_second_a_jog_ten_times_a_second() -> None:
+    """Each probe makes viser's client draw the 3D scene for a quarter of a second; probing a
+    still console every 0.1 s kept a software-rendered page drawing without pause. Only a
+    running jog needs the 0.1 s heartbeat (it holds 300 ms after the last answer)."""
+    jogging = [False]
+    monitor = LeaseMonitor(FakeServer(), AccessControl(None),  # type: ignore[arg-type]
+                           busy=lambda: jogging[0])
+    assert (monitor.probe_period, monitor.idle_period) == (0.1, 1.0)
+    assert not monitor.due(0.5) and monitor.due(1.0)
+    jogging[0] = True
+    assert monitor.due(0.1) and not monitor.due(0.05)
+    # The slowest gap a still console adds (one idle period) stays below the warning.
+    assert monitor.idle_period + 0.1 < WARN_S
+    with pytest.raises(ValueError, match="probe_period"):
+        LeaseMonitor(FakeServer(), AccessControl(None), probe_period=2.0)  # type: ignore[arg-type]
+
+
+def test_the_consoles_lease_probes_fast_only_while_a_jog_runs(server) -> None:
+    app = console_app(load("soft-arm"), server, panels=())
+    app.access.take(1, name="Ann")
+    assert not app.lease.busy()
+    assert app.hold.move_to(1, app.store.command.q * 0.5 + 0.5)  # somewhere else (clamped)
+    assert app.lease.busy()  # the set-point move steps only on fresh answers
+    app.hold.cancel()
+    assert not app.lease.busy()

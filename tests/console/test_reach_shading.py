@@ -92,3 +92,23 @@ def test_small_enough_to_send():
     meshes = shading_meshes(disc_map(step=0.02), None)
     size = sum(v.size * 4 + f.size * 4 for v, f in meshes.values())   # float32 / uint32
     assert size < 300_000
+
+
+def signed_areas(mesh):
+    v, f = mesh
+    a, b, c = v[f[:, 0], :2], v[f[:, 1], :2], v[f[:, 2], :2]
+    return ((b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]) / 2
+
+
+@pytest.mark.parametrize("flip", [False, True])
+def test_every_face_faces_up_so_one_side_is_enough(flip):
+    # The console draws the shading one-sided (three.js draws a transparent double-sided mesh
+    # twice a frame): every triangle must be counter-clockwise seen from above (+z), also for
+    # a map whose grid runs from +x to -x (its cells' corners come clockwise).
+    m = disc_map()
+    if flip:
+        m = ReachMap(m.xs[::-1].copy(), m.ys, m.status[:, ::-1].copy(), m.radius)
+    for mesh in shading_meshes(m, None).values():
+        s = signed_areas(mesh)
+        assert (s > 0).all(), f"{(s <= 0).sum()} of {len(s)} faces face down"
+        assert s.sum() == pytest.approx(area(mesh))
