@@ -50,6 +50,9 @@ def start_trials(app: Any, robot: Any, stop: threading.Event) -> tuple[Any, Tria
             x, y = spots[i % len(spots)]
             i += 1
             try:
+                c = phase()
+                if c is None or not c.armed:  # after a fault: arm again, as an operator would
+                    ctl.arm().result(30)
                 ctl.grasp_at(x, y, r0).result(30)
             except Exception as exc:  # noqa: BLE001 - a refused trial: note it, go on
                 tally.refused += 1
