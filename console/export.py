@@ -64,7 +64,7 @@ def draw_recorded_table(scene: viser.SceneApi, data: dict[str, Any] | None,
     Objects panel's colours), the obstacles (``console.obstacle_view``'s look, clearance rings
     included) and the bin (an open box with its label). Bad entries are skipped. Returns the
     nodes (the caller removes them when the record changes)."""
-    from console.obstacle_view import draw_recorded_obstacles
+    from console.obstacle_view import draw_recorded_obstacles, recorded_disk
     from console.plan_view import OBJECT_COLOR, OBJECT_SEL_COLOR, object_mesh
     from console.table_bin import BIN_COLOR, BIN_HEIGHT, open_box_mesh
 
@@ -72,22 +72,17 @@ def draw_recorded_table(scene: viser.SceneApi, data: dict[str, Any] | None,
         return []
     nodes = draw_recorded_obstacles(scene, data, f"{root}/obstacles")
     for i, o in enumerate(data.get("objects") or []):
-        try:
-            x, y, r = float(o["x"]), float(o["y"]), float(o["r"])
-        except (KeyError, TypeError, ValueError):
+        disk = recorded_disk(o)
+        if disk is None:
             continue
-        if not (np.isfinite([x, y, r]).all() and 0.0 < r <= 1.0):
-            continue
+        x, y, r = disk
         v, f = object_mesh(r)
         color = OBJECT_SEL_COLOR if o.get("name") == data.get("selected") else OBJECT_COLOR
         nodes.append(scene.add_mesh_simple(f"{root}/objects/body_{i}", v, f, color=color,
                                            position=(x, y, 0.0), cast_shadow=False))
-    b = data.get("bin")
-    try:
-        x, y, r = float(b["x"]), float(b["y"]), float(b["r"])  # type: ignore[index]
-    except (KeyError, TypeError, ValueError):
-        return nodes
-    if np.isfinite([x, y, r]).all() and 0.0 < r <= 1.0:
+    disk = recorded_disk(data.get("bin"))
+    if disk is not None:
+        x, y, r = disk
         v, f = open_box_mesh(r)
         nodes.append(scene.add_mesh_simple(f"{root}/bin/box", v, f, color=BIN_COLOR,
                                            side="double", position=(x, y, 0.0),

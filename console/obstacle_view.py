@@ -91,6 +91,18 @@ class ObstacleLayer:
                 f"/grasp/obstacles/{attr}", segs, color, thickness=width))
 
 
+def recorded_disk(entry: Any) -> tuple[float, float, float] | None:
+    """``(x, y, r)`` of a recorded disk (an object, obstacle or bin: m), or None when the entry
+    is malformed, not finite or its radius is outside (0, 1] m (replays skip such entries)."""
+    try:
+        x, y, r = float(entry["x"]), float(entry["y"]), float(entry["r"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (np.isfinite([x, y, r]).all() and 0.0 < r <= 1.0):
+        return None
+    return x, y, r
+
+
 def draw_recorded_obstacles(scene, data: dict[str, Any] | None, root: str) -> list[Any]:
     """Draw the obstacles of a recorded ``objects`` record (replay, export) under ``root``;
     bad entries are skipped. Returns the nodes (the caller removes them when they change)."""
@@ -102,12 +114,10 @@ def draw_recorded_obstacles(scene, data: dict[str, Any] | None, root: str) -> li
     except (TypeError, ValueError):
         clearance = 0.0
     for i, o in enumerate(data.get("obstacles") or []):
-        try:
-            x, y, r = float(o["x"]), float(o["y"]), float(o["r"])
-        except (KeyError, TypeError, ValueError):
+        disk = recorded_disk(o)
+        if disk is None:
             continue
-        if not (np.isfinite([x, y, r]).all() and 0.0 < r <= 1.0):
-            continue
+        x, y, r = disk
         v, f = object_mesh(r, OBSTACLE_HEIGHT)
         nodes.append(scene.add_mesh_simple(f"{root}/body_{i}", v, f, color=OBSTACLE_COLOR,
                                            position=(x, y, 0.0), cast_shadow=False))
