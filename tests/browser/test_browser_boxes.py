@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from browser_tabs import open_console, wait_until
+from test_browser_extensible import jog_posture, readout_tip
 
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -44,21 +45,6 @@ def fill(page, label: str, value: str) -> None:
     box = field(page, label)
     box.fill(value, timeout=120_000)
     box.press("Tab", timeout=60_000)
-
-
-def readout_tip(page) -> np.ndarray:
-    return np.array([float(page.locator(f'[data-testid="tip-{k}"]').inner_text())
-                     for k in range(3)])
-
-
-def jog_posture(page) -> np.ndarray:
-    labels = [f"{c}{s} (mm)" for s in "₁₂" for c in ("Δx", "Δy", "δL")]
-    values = []
-    for label in labels:
-        uid = page.locator("label", has_text=label).first.get_attribute("for")
-        thumb = page.locator(f'[id="{uid}"]').get_by_role("slider")
-        values.append(float(thumb.get_attribute("aria-valuenow")))
-    return np.array(values).reshape(ROBOT.n_segments, 3) / 1e3
 
 
 def backbone_distance_mm(delta: np.ndarray) -> float:
