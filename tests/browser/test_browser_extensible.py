@@ -25,8 +25,9 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 import pytest
-
 from browser_tabs import open_console, open_tab, wait_until
+from robot_files import robot_copy
+
 from console.model import DeltaModel
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
@@ -145,12 +146,9 @@ def emulator_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[str]:
     watchdog (like tests/hw_bridge/test_extensible_runner.py): the loop shares its process with the GUI
     and this 2-core box with other jobs, so the shipped 40 / 50 ms would turn a CPU stall into
     a (correct) link-loss stop; this test is about motion, not timing."""
-    text = (REPO / "data" / "robots" / "extensible.toml").read_text()
-    for key, value in (("watchdog_ms", 500), ("link_timeout_ms", 500)):
-        line = next(ln for ln in text.splitlines() if ln.startswith(f"{key} ="))
-        text = text.replace(line, f"{key} = {value}")
-    robot_file = tmp_path / "extensible.toml"
-    robot_file.write_text(text)
+    robot_file = robot_copy("extensible", tmp_path,
+                            {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500},
+                            name="extensible")
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]

@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from browser_tabs import close_notices, open_console, open_tab, wait_until
+from robot_files import robot_copy
+
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 
 pytestmark = pytest.mark.browser
-REPO = Path(__file__).resolve().parents[2]
 ROBOT = load("extensible")
 # A point with both segments bent (core.control.repeatability.sample_targets, seed 1, #17):
 # about 3 s of motor travel from retracted, so 2 + 2 moves take well under a minute.
@@ -30,13 +30,8 @@ MOVES = 2
 def patient_robot(tmp_path: Path) -> Path:
     """The shipped extensible arm with a 0.5 s link timeout and watchdog (as the emulator test in
     test_browser_extensible.py): this test is about positioning, not a loaded box's timing."""
-    text = (REPO / "data" / "robots" / "extensible.toml").read_text()
-    for key, value in (("watchdog_ms", 500), ("link_timeout_ms", 500)):
-        line = next(ln for ln in text.splitlines() if ln.startswith(f"{key} ="))
-        text = text.replace(line, f"{key} = {value}")
-    path = tmp_path / "extensible.toml"
-    path.write_text(text)
-    return path
+    return robot_copy("extensible", tmp_path,
+                      {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500}, name="extensible")
 
 
 def field(page, label: str):
