@@ -137,6 +137,11 @@ class ExtensibleArm:
     count is 1 / counts_per_metre m) <= motor_speed (m/s); tip speed <= tip_speed (m/s).
     ``n_motors`` = 3N (one per rack). The file's other sections: ``bridge`` / ``emulator`` and
     the optional ``ik`` / ``paths`` (:mod:`core.robot_sections`).
+
+    ``half_width`` is the platform radius the console draws; ``body_radius`` (m, default
+    ``half_width``, at least ``rack_radius``) is the arm's body for box clearance: every point
+    within it of the backbone (racks and platforms) counts as the arm
+    (:mod:`core.kinematics.box_clearance`).
     """
 
     name: str
@@ -148,6 +153,7 @@ class ExtensibleArm:
     rack_max: float
     theta_max: float
     half_width: float
+    body_radius: float
     tip_speed: float
     rack_speed: float
     motor_speed: float
@@ -262,16 +268,23 @@ def _extensible(top: Section, source: Path) -> ExtensibleArm:
             f"{top.file}: emulator.motor_speed_counts: must be >= limits.motor_speed * "
             f"motors.counts_per_metre ({need:g} counts/s) or the emulated motors lag every "
             f"planned path, got {emulator.motor_speed_counts:g}")
+    rack_radius = seg.num("rack_radius", lo=0, hi=10.0, strict_lo=True)
+    half_width = seg.num("half_width", lo=0, hi=10.0, strict_lo=True)
+    body_radius = seg.num("body_radius", lo=0, hi=10.0, default=half_width)
+    if body_radius < rack_radius:
+        raise seg.error("body_radius", f"must be >= segments.rack_radius ({rack_radius:g} m): "
+                                       f"the racks run at that radius, got {body_radius:g}")
     arm = ExtensibleArm(
         name=top.text("name"),
         n_segments=n,
-        rack_radius=seg.num("rack_radius", lo=0, hi=10.0, strict_lo=True),
+        rack_radius=rack_radius,
         phi=seg.num("phi", lo=-2 * math.pi, hi=2 * math.pi),
         L0=seg.num("L0", lo=0, hi=10.0),
         rack_min=rack_min,
         rack_max=rack_max,
         theta_max=seg.num("theta_max", lo=0, hi=2 * math.pi, strict_lo=True),
-        half_width=seg.num("half_width", lo=0, hi=10.0, strict_lo=True),
+        half_width=half_width,
+        body_radius=body_radius,
         tip_speed=lim.num("tip_speed", lo=0, hi=100.0, strict_lo=True),
         rack_speed=lim.num("rack_speed", lo=0, hi=100.0, strict_lo=True),
         motor_speed=motor_speed,

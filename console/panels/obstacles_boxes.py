@@ -2,16 +2,16 @@
 
 The operator places axis-aligned boxes -- typed centre x, y, z and size in mm, or a click on the
 table that drops a box of the typed size there (standing on the table) -- selects, updates and
-removes them, sets the clearance the arm's backbone keeps from every box, and saves / loads
+removes them, sets the clearance the arm's surface keeps from every box, and saves / loads
 them as a scene file (:mod:`core.planning.box_scene`). The boxes are drawn semi-transparent in
 the 3D view (the selected one stronger). The tip target (``console.panels.target``) and the
 paths (``console.panels.paths``) read them through :func:`box_scene_of`: the IK and the path
-planner keep every backbone point the clearance away from every box, and refuse with the
-reason when they cannot. Every change is recorded (record kind ``boxes``, channel
+planner keep the arm's body (the robot file's ``body_radius`` around the backbone: racks and
+platforms) the clearance away from every box, and refuse with the reason when they cannot. Every change is recorded (record kind ``boxes``, channel
 ``/console/boxes``; the whole scene again when a recording starts).
 
-Bad input (NaN, a size <= 0, a box that contains the arm's base or leaves it less than the
-clearance, a name in use, a bad file) is refused with a message and changes nothing.
+Bad input (NaN, a size <= 0, a box that contains the arm's base or leaves the body there less
+than the clearance, a name in use, a bad file) is refused with a message and changes nothing.
 
 Sharing: the boxes drive every plan, so every change -- add, update, remove, select, the
 clearance, a table click, the click toggle, loading a file -- is
@@ -66,7 +66,7 @@ class BoxObstaclesPanel(Panel):
     def build(self) -> None:
         gui = self.gui
         self._lock = threading.Lock()
-        self._scene = BoxScene()
+        self._scene = BoxScene(body_radius=self.app.robot.body_radius)
         self._version = 0
         self._selected: str | None = None
         self.selected = gui.add_dropdown("Box", [NONE], initial_value=NONE,
@@ -83,8 +83,8 @@ class BoxObstaclesPanel(Panel):
         self.remove_button = gui.add_button("Remove box", color="red")
         self.clearance = gui.add_number(
             "Clearance (mm)", mm_value(self._scene.clearance), min=0.0, max=1000.0, step=1.0,
-            hint="Every point of the arm's backbone keeps this far from every box; to keep the "
-                 "racks and platforms clear too, use at least the platform radius plus a margin.")
+            hint="The arm's surface (racks and platforms: the robot file's body radius around "
+                 "the backbone) keeps this far from every box.")
         self.click_place = gui.add_checkbox(
             "Click on table drops a box", False,
             hint="A click on the table places a box of the typed size standing there.")
@@ -249,7 +249,7 @@ class BoxObstaclesPanel(Panel):
     def _on_load(self, event: viser.GuiEvent) -> None:
         upload = self.load_button.value
         try:
-            scene = scene_from_json(upload.content.decode("utf-8"))
+            scene = scene_from_json(upload.content.decode("utf-8"), self.app.robot.body_radius)
         except (ValueError, UnicodeDecodeError) as exc:
             self._error(event, f"Could not load {upload.name}: {exc}")
             return

@@ -18,7 +18,7 @@ planner and the tip target's IK) start when a browser opens, not on the first re
 "Hardware:" line and the tip target's warnings read the link supervisor's health (the same
 source as the Hardware panel and the header's Link field); this panel pushes the header's Phase
 field for the extensible arm: idle, moving to target, running path t/T s, holding after STOP,
-fault. With box obstacles (the Obstacles panel) the plan keeps the arm's whole backbone their
+fault. With box obstacles (the Obstacles panel) the plan keeps the arm's whole body their
 clearance away along the whole motion, or says why it cannot ("blocked", naming the box).
 """
 
@@ -272,7 +272,7 @@ class PathsPanel(Panel):
         summary = (f"{req.kind} {fmt_mm(req.size, 0)} mm in {req.plane} at "
                    f"{fmt_mm(req.speed, 0)} mm/s: {path.duration:.1f} s, {len(path.times)} samples, "
                    f"max planned tip error {fmt_mm(path.max_error, 2)} mm, {path.jumps} jumps"
-                   + (f", backbone ≥ {fmt_mm(path.clearance, 1)} mm from box "
+                   + (f", arm ≥ {fmt_mm(path.clearance, 1)} mm from box "
                       f"'{path.nearest_box}'" if path.nearest_box else ""))
         if not ok:
             self._set_status(f"⚠ {summary}. The path leaves the reachable workspace: shrink it "

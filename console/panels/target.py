@@ -20,7 +20,7 @@ path, control lost, motors not armed): never silence. Only the operator may move
 (``operator_only``).
 
 Box obstacles (the Obstacles panel, ``console.panels.obstacles_boxes``): with boxes placed, the
-worker process solves the IK with them (every backbone point keeps the clearance from every
+worker process solves the IK with them (the arm's body surface keeps the clearance from every
 box) and a route there whose straight rack-space legs -- what the hold-to-run set-point and the
 runner follow -- stay clear too (``core.planning.box_routes.reach_clear``: direct, or through
 straightened / retracted postures, moved through leg by leg). When the boxes leave no
@@ -411,7 +411,7 @@ class TargetPanel(Panel):
             body = (f"Target {mm_xyz(result.tip)} mm reachable (IK error "
                     f"{fmt_mm(result.error, 2)} mm): the tip goes there.")
             if result.nearest_box:
-                body += (f" The backbone keeps {fmt_mm(result.clearance, 1)} mm from box "
+                body += (f" The arm keeps {fmt_mm(result.clearance, 1)} mm from box "
                          f"'{html.escape(result.nearest_box)}'"
                          + (f", moving via {self._route_len - 1} posture"
                             f"{'s' if self._route_len > 2 else ''} around the boxes."

@@ -1,4 +1,4 @@
-"""How far the extensible arm's backbone is from axis-aligned boxes (shelves, drawer walls).
+"""How far the extensible arm's body is from axis-aligned boxes (shelves, drawer walls).
 
 The operator's obstacles for the extensible arm are axis-aligned boxes in the base frame
 (:class:`Box`: centre and full edge lengths, metres). This module is the geometry the tip IK
@@ -11,15 +11,25 @@ share:
 * :func:`backbone_points`: points along every segment's constant-curvature backbone, sampled
   by arc fraction (the backbone at fraction s of segment i is the tip of segment i with its
   Delta scaled to (s dx, s dy) and its length to s L);
-* :func:`clearance_of` / :func:`motion_clearance`: the smallest signed distance from the sampled
-  backbone to any box, for a posture or for the straight rack-space lines between postures
+* :func:`clearance_of` / :func:`motion_clearance`: the smallest distance from the arm's body
+  surface to any box, for a posture or for the straight rack-space lines between postures
   (what the runner streams: Delta = M L - Delta_0 is affine in the racks, so a straight line in
   L is one in Delta), with the box and the backbone point where it is smallest
   (:class:`Clearance`).
 
+The body. The arm is more than its centre line: the racks run at ``rack_radius`` and the
+platforms reach ``half_width`` from it. The robot file's ``[segments] body_radius`` (default
+the platform radius) is the arm's body: every point within ``body_radius`` of the backbone.
+The distance from that tube to a box is the backbone's distance minus ``body_radius``
+(:func:`surface_distance`; negative once the body touches or enters the box), and every
+clearance here, in the IK's box task, in paths and in their messages is that surface distance:
+"clearance 10 mm" is 10 mm between the arm's surface and the box. The base keep-out
+(:func:`check_box_for_base`) counts the body too.
+
 Sampling bound: backbone points ``spacing`` apart along the arc leave every other backbone point
 within ``spacing / 2`` of a sample, so the true clearance is at least the sampled one minus
-``spacing / 2`` (a distance function is 1-Lipschitz).
+``spacing / 2`` (a distance function is 1-Lipschitz). The body radius is a constant offset of
+that distance, so the bound holds for the surface distance unchanged.
 """
 
 from __future__ import annotations
@@ -112,21 +122,32 @@ def check_clearance(clearance: object) -> float:
     return c
 
 
-def check_box_for_base(box: Box, clearance: float) -> None:
-    """Refuse a box the arm's base (the backbone's first point, the origin) is inside of or
-    closer to than ``clearance``: no posture could then keep the arm clear of it."""
+def check_box_for_base(box: Box, clearance: float, body_radius: float = 0.0) -> None:
+    """Refuse a box the arm's base (the backbone's first point, the origin, with the body
+    ``body_radius`` (m) around it) is inside of or closer to than ``clearance``: no posture
+    could then keep the arm clear of it."""
     d = float(signed_distance(np.zeros(3), box))
     if d <= 0:
         raise ValueError(f"box '{box.name}' contains the arm's base (origin)")
-    if d < clearance:
-        raise ValueError(f"box '{box.name}' is {d * 1e3:.1f} mm from the arm's base, closer than "
-                         f"the clearance {clearance * 1e3:.1f} mm: no posture could keep clear")
+    if d - body_radius <= 0:
+        raise ValueError(f"box '{box.name}' touches the arm's body at its base ({d * 1e3:.1f} mm "
+                         f"from the origin, within the body radius {body_radius * 1e3:.1f} mm)")
+    if d - body_radius < clearance:
+        raise ValueError(f"box '{box.name}' is {(d - body_radius) * 1e3:.1f} mm from the arm's "
+                         f"body at its base, closer than the clearance {clearance * 1e3:.1f} mm: "
+                         f"no posture could keep clear")
 
 
 def signed_distance(points: npt.ArrayLike, box: Box) -> Array:
     """Signed distance (...,) of ``points`` (..., 3) to ``box``: the Euclidean distance outside,
     minus the depth to the nearest face inside."""
     return signed_distance_and_gradient(points, box)[0]
+
+
+def surface_distance(robot: ExtensibleArm, points: npt.ArrayLike, box: Box) -> Array:
+    """Distance (...,) from the arm's body around backbone ``points`` (..., 3) to ``box``: the
+    signed distance minus ``robot.body_radius`` (negative once the body reaches the box)."""
+    return signed_distance(points, box) - robot.body_radius
 
 
 def signed_distance_and_gradient(points: npt.ArrayLike, box: Box) -> tuple[Array, Array]:
@@ -184,12 +205,14 @@ def samples_for(robot: ExtensibleArm, spacing: float = DENSE_SPACING) -> int:
 
 @dataclasses.dataclass(frozen=True)
 class Clearance:
-    """The smallest backbone-to-box distance found.
+    """The smallest distance found from the arm's body surface to a box.
 
     Attributes:
-        distance: Signed distance (m); ``inf`` without boxes, negative inside a box.
+        distance: Surface distance (m): the backbone's signed distance minus the body radius;
+            ``inf`` without boxes, negative when the body reaches into a box.
         box: Name of the nearest box ("" without boxes).
-        point: (3,) backbone point where it is smallest (None without boxes).
+        point: (3,) backbone point where it is smallest (None without boxes); the body's
+            surface there is the body radius nearer the box.
         index: Which posture (of a sequence) it belongs to (0 for a single posture).
     """
 
@@ -202,22 +225,22 @@ class Clearance:
         return self.distance >= clearance
 
     def describe(self) -> str:
-        """'the backbone passes 12.3 mm from box "Shelf"' (or inside it)."""
+        """'the arm passes 12.3 mm from box "Shelf"' (its surface; or into it)."""
         if not self.box:
             return "no boxes"
         if self.distance < 0:
-            return f"the backbone enters box '{self.box}' ({-self.distance * 1e3:.1f} mm deep)"
-        return f"the backbone passes {self.distance * 1e3:.1f} mm from box '{self.box}'"
+            return f"the arm enters box '{self.box}' ({-self.distance * 1e3:.1f} mm deep)"
+        return f"the arm passes {self.distance * 1e3:.1f} mm from box '{self.box}'"
 
 
 NO_BOXES = Clearance(math.inf)
 
 
-def _nearest(points: Array, boxes: Sequence[Box]) -> Clearance:
+def _nearest(robot: ExtensibleArm, points: Array, boxes: Sequence[Box]) -> Clearance:
     """Nearest (box, point) over points (K, P, 3): K postures of P backbone points."""
     best = NO_BOXES
     for box in boxes:
-        d = signed_distance(points, box)
+        d = surface_distance(robot, points, box)
         k, j = np.unravel_index(int(np.argmin(d)), d.shape)
         if d[k, j] < best.distance:
             best = Clearance(float(d[k, j]), box.name, points[k, j].copy(), int(k))
@@ -226,12 +249,12 @@ def _nearest(points: Array, boxes: Sequence[Box]) -> Clearance:
 
 def clearance_of(robot: ExtensibleArm, delta: npt.ArrayLike, boxes: Sequence[Box],
                  spacing: float = DENSE_SPACING) -> Clearance:
-    """Smallest distance of the backbone at ``delta`` (n, 3) to ``boxes``, sampled every
-    ``spacing`` (or closer) along each segment."""
+    """Smallest distance of the arm's body surface at ``delta`` (n, 3) to ``boxes``, the
+    backbone sampled every ``spacing`` (or closer) along each segment."""
     if not boxes:
         return NO_BOXES
     pts = backbone_points(robot, np.asarray(delta, dtype=float)[None], samples_for(robot, spacing))
-    return _nearest(pts, boxes)
+    return _nearest(robot, pts, boxes)
 
 
 
@@ -249,17 +272,18 @@ def _refined(robot: ExtensibleArm, L: Array, boxes: Sequence[Box], spacing: floa
     for a in range(0, len(L), chunk):
         pts = backbone_points(robot, dk.delta_from_actuators(L[a:a + chunk], robot.phi,
                                                              robot.L0), mc)
-        d_c[a:a + chunk] = np.min([signed_distance(pts, b).min(axis=-1) for b in boxes], axis=0)
+        d_c[a:a + chunk] = np.min([surface_distance(robot, pts, b).min(axis=-1)
+                                   for b in boxes], axis=0)
         if below is not None and d_c[a:a + chunk].min() < below:
             k = a + int(np.argmin(d_c[a:a + chunk]))
-            return dataclasses.replace(_nearest(pts[k - a][None], boxes), index=k)
+            return dataclasses.replace(_nearest(robot, pts[k - a][None], boxes), index=k)
     rows = np.flatnonzero(d_c - 0.5 * gap <= d_c.min())
     best = NO_BOXES
     m = samples_for(robot, spacing)
     for a in range(0, len(rows), chunk):
         idx = rows[a:a + chunk]
         pts = backbone_points(robot, dk.delta_from_actuators(L[idx], robot.phi, robot.L0), m)
-        found = _nearest(pts, boxes)
+        found = _nearest(robot, pts, boxes)
         if found.distance < best.distance:
             best = dataclasses.replace(found, index=int(idx[found.index]))
     return best
@@ -267,7 +291,7 @@ def _refined(robot: ExtensibleArm, L: Array, boxes: Sequence[Box], spacing: floa
 
 def motion_clearance(robot: ExtensibleArm, lengths: npt.ArrayLike, boxes: Sequence[Box],
                      spacing: float = DENSE_SPACING, below: float | None = None) -> Clearance:
-    """Smallest backbone-to-box distance along straight rack-space lines through the rack
+    """Smallest body-surface-to-box distance along straight rack-space lines through the rack
     lengths ``lengths`` (K, n, 3) (the runner streams straight lines in rack space), with the
     backbone sampled every ``spacing`` along the arc and each line subdivided so no backbone
     sample moves more than about ``spacing / 2`` between checked postures.

@@ -55,7 +55,8 @@ same problem (``polish_iterations``) and kept if closer. Reachable targets never
 The final rack lengths are moved into the feasible set once more and the error is re-evaluated
 by forward kinematics. Solver settings come from the robot file's optional ``[ik]`` table.
 
-Box obstacles. With ``boxes`` every backbone point must also keep ``clearance`` from every box:
+Box obstacles. With ``boxes`` the arm's body (every point within the robot file's
+``body_radius`` of the backbone) must also keep ``clearance`` from every box:
 one more set-based task with priority over the tip, solved in
 :mod:`core.kinematics.delta_ik_boxes` (which imports this module, hence the import inside
 :func:`solve_tip_ik`); the result then carries the clearance and, when no collision-free
@@ -99,8 +100,9 @@ class TipIKResult:
         reachable: ``error <= tolerance``.
         starts: Starts iterated: 1 when the warm start converged, otherwise the warm start (if
             any) plus the batch of seeds.
-        clearance: With boxes: the smallest distance from the backbone (sampled every
-            millimetre) to a box (m; negative inside one); ``inf`` without boxes.
+        clearance: With boxes: the smallest distance from the arm's body surface (the
+            backbone, sampled every millimetre, minus ``body_radius``) to a box (m; negative
+            when the body reaches into one); ``inf`` without boxes.
         nearest_box: With boxes: the name of the box that distance is to.
         clear: ``clearance`` is at least the clearance asked for (always True without boxes).
         refusal: With boxes: why no collision-free posture reaches the target (which box, how
@@ -309,10 +311,10 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
         restarts: Iterate the batch of seeds when the warm start stalls above the tolerance.
             Turn off to follow one continuous branch (path tracking).
         settings: Overrides the robot file's ``[ik]`` settings.
-        boxes: Box obstacles (:class:`core.kinematics.box_clearance.Box`): every backbone
-            point must stay ``clearance`` away from each (a set-based task with priority over
-            the tip, :mod:`core.kinematics.delta_ik_boxes`).
-        clearance: Distance (m) the backbone keeps from every box.
+        boxes: Box obstacles (:class:`core.kinematics.box_clearance.Box`): the arm's body
+            (``body_radius`` around the backbone) must stay ``clearance`` away from each (a
+            set-based task with priority over the tip, :mod:`core.kinematics.delta_ik_boxes`).
+        clearance: Distance (m) the body's surface keeps from every box.
 
     Returns:
         The best configuration found; for an unreachable target the closest feasible one found,

@@ -1,10 +1,11 @@
-"""Tip IK that keeps the extensible arm's backbone a set clearance away from box obstacles.
+"""Tip IK that keeps the extensible arm's body a set clearance away from box obstacles.
 
 Problem (4) of Hughes 2020 with one more set-based task of the kind eq. (5) gives priority over
-the tip task: every sampled backbone point p_k(L) must stay ``clearance`` away from every box,
+the tip task: the arm's body (every point within ``body_radius`` r of the backbone) must stay
+``clearance`` away from every box, i.e. every sampled backbone point p_k(L) must satisfy
 
     min ||x_d - h(L)||   s.t.  L in [rack_min, rack_max]^3n,  |(dx_i, dy_i)| <= d theta_max,
-                              sd_b(p_k(L)) >= clearance   for every box b and sample k,
+                              sd_b(p_k(L)) - r >= clearance   for every box b and sample k,
 
 where sd_b is the signed distance to box b (:mod:`core.kinematics.box_clearance`). The rack and
 bending limits are the paper's set-based tasks; the clearance rows are inequality constraints
@@ -69,7 +70,7 @@ def _constraints(robot: ExtensibleArm, pb: _ik._Problem, boxes: Sequence[bc.Box]
         vals, jacs = [], []
         for box in boxes:
             d, g = bc.signed_distance_and_gradient(pts[0], box)
-            vals.append(d - need)
+            vals.append(d - robot.body_radius - need)
             jacs.append(np.einsum("pi,jpi->pj", g, dp))
         return np.concatenate(vals), np.concatenate(jacs)
 
@@ -142,12 +143,16 @@ def solve_clear(robot: ExtensibleArm, target: Array, free: _ik.TipIKResult,
     first = _candidate(robot, pb, free.lengths.reshape(-1), boxes)
     if first.clear.clear_of(clearance):
         return _result(robot, pb, first, s, clearance, free.iterations, free.starts, "")
-    # The target itself: the tip is a backbone point.
+    # The target itself: the tip is a backbone point, with the body around it.
     near = min(boxes, key=lambda b: float(bc.signed_distance(target, b)))
     d_t = float(bc.signed_distance(target, near))
-    if d_t < clearance:
+    if d_t - robot.body_radius < clearance:
+        body = (f"{_mm(d_t)} from box '{near.name}': the arm's body there "
+                f"({_mm(robot.body_radius)} radius)")
         where = (f"inside box '{near.name}'" if d_t < 0 else
-                 f"{_mm(d_t)} from box '{near.name}', closer than the clearance {_mm(clearance)}")
+                 f"{body} would reach into it" if d_t < robot.body_radius else
+                 f"{body} would be {_mm(d_t - robot.body_radius)} from it, closer than the "
+                 f"clearance {_mm(clearance)}")
         return _result(robot, pb, first, s, clearance, free.iterations, free.starts,
                        f"the target is {where}")
     starts: list[Array] = [first.L]
@@ -192,7 +197,7 @@ def solve_clear(robot: ExtensibleArm, target: Array, free: _ik.TipIKResult,
         return _result(robot, pb, best, s, clearance, iters, count, "")
     why = (f"{'the boxes block it' if free.reachable else 'it is out of reach'}: the closest "
            f"collision-free posture found puts the tip "
-           f"{_mm(best.error)} from the target, with the backbone {_mm(best.clear.distance)} "
+           f"{_mm(best.error)} from the target, with the arm {_mm(best.clear.distance)} "
            f"from box '{best.clear.box}'")
     if free.reachable:
         why += f" (without the boxes it is reachable, but {first.clear.describe()})"

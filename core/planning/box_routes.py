@@ -67,8 +67,9 @@ def _candidates(robot: ExtensibleArm, start: Array, goal: Array) -> list[list[Ar
 
 @dataclasses.dataclass(frozen=True)
 class Route:
-    """Postures to move through in turn (the last is the goal), and the smallest backbone
-    clearance along the straight rack-space lines through them (m; inf without boxes)."""
+    """Postures to move through in turn (the last is the goal), and the smallest clearance of
+    the arm's body surface along the straight rack-space lines through them (m; inf without
+    boxes)."""
 
     postures: tuple[Array, ...]
     clearance: float
@@ -78,7 +79,8 @@ class Route:
 def clear_route(robot: ExtensibleArm, start: npt.ArrayLike, goal: npt.ArrayLike,
                 boxes: Sequence[bc.Box], clearance: float) -> Route:
     """Straight rack-space legs from ``start`` to ``goal`` (Delta, (n, 3) each) that keep the
-    backbone ``clearance`` from every box (see the module).
+    arm's body ``clearance`` from every box (its surface: the backbone's distance minus the
+    robot file's ``body_radius``; see the module).
 
     Raises:
         BlockedPath: no candidate route is clear; names the box and how close the direct

@@ -25,8 +25,10 @@ centre, a size and a plane; :func:`polyline` takes any list).
    (theta <= theta_max) and that set is convex, so every interpolated sample is too;
 4. motor demands: U^-1 L in encoder counts (:func:`delta.motor_counts_from_lengths`).
 
-Box obstacles (``boxes``, ``clearance``; :mod:`core.kinematics.box_clearance`): every sampled
-tip target must itself be ``clearance`` from every box; each IK sample is solved with the boxes
+Box obstacles (``boxes``, ``clearance``; :mod:`core.kinematics.box_clearance`): the clearance is
+the arm's body surface's (the backbone's distance minus the robot file's ``body_radius``); every
+sampled tip target, with the body around it, must itself be ``clearance`` from every box; each
+IK sample is solved with the boxes
 (a set-based clearance task, :mod:`core.kinematics.delta_ik_boxes`) and ``PATH_MARGIN`` more
 clearance, so the straight rack-space lines between samples keep the rest; and the finished
 motion -- every 100 Hz sample and the lines between them, which the runner streams -- is
@@ -81,8 +83,8 @@ class MotionPath:
         rate_hz: Sample rate.
         jumps: Branch switches plus IK intervals still steeper than ``jump_ratio`` after
             bisection; the racks cross them at their speed limit, the tip off the path.
-        clearance: Planned with boxes: the smallest distance from the backbone to a box over
-            the whole motion, sampled densely (m); ``inf`` without boxes.
+        clearance: Planned with boxes: the smallest distance from the arm's body surface to a
+            box over the whole motion, sampled densely (m); ``inf`` without boxes.
         nearest_box: The box that distance is to ("" without boxes).
     """
 
@@ -236,9 +238,9 @@ def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float 
             starts at its tip and first moves to ``waypoints[0]``; otherwise it starts at
             ``waypoints[0]`` (cold IK).
         settings: Overrides the robot file's ``[paths]`` settings.
-        boxes: Box obstacles the whole backbone keeps ``clearance`` from, along the whole
+        boxes: Box obstacles the arm's whole body keeps ``clearance`` from, along the whole
             motion (see "Box obstacles" above).
-        clearance: That distance (m).
+        clearance: That distance (m), from the body's surface.
 
     Returns:
         The :class:`MotionPath`.
@@ -270,7 +272,7 @@ def plan_path(robot: "ExtensibleArm", waypoints: npt.ArrayLike, *, speed: float 
     spacing = min(ps.spacing, v / ps.rate_hz)
     samples = _sample_polyline(points, spacing)
     if box_list:
-        _check_targets(samples, box_list, need)
+        _check_targets(robot, samples, box_list, need)
     if start_delta is None:
         first = solve_tip_ik(robot, points[0], settings=ik, boxes=box_list,
                              clearance=need + PATH_MARGIN if box_list else 0.0)
@@ -304,13 +306,19 @@ def _check_boxes(boxes: Sequence[bc.Box], clearance: float) -> tuple[tuple[bc.Bo
     return items, bc.check_clearance(clearance)
 
 
-def _check_targets(samples: Array, boxes: tuple[bc.Box, ...], clearance: float) -> None:
-    """The tip is a backbone point: every tip target must be ``clearance`` from every box."""
+def _check_targets(robot: "ExtensibleArm", samples: Array, boxes: tuple[bc.Box, ...],
+                   clearance: float) -> None:
+    """The tip is a backbone point: the body around every tip target must be ``clearance``
+    from every box."""
     for box in boxes:
         d = bc.signed_distance(samples, box)
         k = int(np.argmin(d))
-        if d[k] < clearance:
-            where = "inside" if d[k] < 0 else f"{d[k] * 1e3:.1f} mm from"
+        if d[k] - robot.body_radius < clearance:
+            where = ("inside" if d[k] < 0 else
+                     f"{d[k] * 1e3:.1f} mm (the arm's body reaching into it) from"
+                     if d[k] < robot.body_radius else
+                     f"{d[k] * 1e3:.1f} mm (the arm's surface "
+                     f"{(d[k] - robot.body_radius) * 1e3:.1f} mm) from")
             raise BlockedPath(f"the path's tip passes {where} box '{box.name}' at "
                               f"{_mm_xyz(samples[k])} mm, closer than the clearance "
                               f"{clearance * 1e3:.1f} mm")

@@ -1,13 +1,13 @@
 """Browser test of the extensible arm's box obstacles: the operator places a shelf board in the
-Obstacles panel, types a tip target over its edge, and the arm reaches it with its whole
-backbone clear of the shelf.
+Obstacles panel, types a tip target over it, and the arm reaches it with its whole body (the
+robot file's ``body_radius`` around the backbone) clear of the shelf.
 
 serve.py runs in a subprocess (conftest's ``console_server``, mock hardware). What the server
 holds is read from the page: the Obstacles panel's info (``data-count``, ``data-names``), the
 tip target's status (``data-state``, ``data-clearance-mm``), the tip readout and the Δ jog
 sliders (the commanded posture). The posture's clearance is checked here independently, by
 sampling the backbone every 0.5 mm with ``delta.forward_kinematics`` and measuring each point's
-distance to the box by clipping. Screenshots go to ``artifacts/``.
+distance to the box by clipping, minus the body radius. Screenshots go to ``artifacts/``.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from core.robots import load
 pytestmark = pytest.mark.browser
 ROBOT = load("extensible")
 SHELF_CENTRE_MM, SHELF_SIZE_MM = (200.0, 0.0, 250.0), (200.0, 300.0, 20.0)
-TARGET_MM = np.array([200.0, 0.0, 320.0])  # 60 mm above the board, over its near edge
+TARGET_MM = np.array([200.0, 0.0, 380.0])  # 120 mm above the board: room for the 45 mm body
 CLEARANCE_MM = 20.0                          # the panel's default
 
 
@@ -47,9 +47,10 @@ def fill(page, label: str, value: str) -> None:
     box.press("Tab", timeout=60_000)
 
 
-def backbone_distance_mm(delta: np.ndarray) -> float:
-    """Smallest distance (mm) from the backbone at ``delta`` to the shelf, sampled every 0.5 mm
-    (an arc fraction s of segment i is segment i with (s dx, s dy, s L))."""
+def surface_distance_mm(delta: np.ndarray) -> float:
+    """Smallest distance (mm) from the arm's body at ``delta`` to the shelf: the backbone's,
+    sampled every 0.5 mm (an arc fraction s of segment i is segment i with (s dx, s dy, s L)),
+    minus the body radius."""
     lo = (np.array(SHELF_CENTRE_MM) - np.array(SHELF_SIZE_MM) / 2) / 1e3
     hi = (np.array(SHELF_CENTRE_MM) + np.array(SHELF_SIZE_MM) / 2) / 1e3
     frames = dk.forward_kinematics(delta, ROBOT.L0, ROBOT.d)
@@ -62,7 +63,7 @@ def backbone_distance_mm(delta: np.ndarray) -> float:
     p = np.vstack(pts)
     outside = np.linalg.norm(p - np.clip(p, lo, hi), axis=-1)
     inside = np.minimum(p - lo, hi - p).min(axis=-1)
-    return float(np.where(outside > 0, outside, -inside).min() * 1e3)
+    return float((np.where(outside > 0, outside, -inside).min() - ROBOT.body_radius) * 1e3)
 
 
 def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
@@ -71,7 +72,7 @@ def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
                  '[data-testid="tip-readout"]', timeout_ms=180_000)  # (a loaded box)
     # Without the shelf the plain IK's arc would pass through it (so this is a real detour).
     plain = solve_tip_ik(ROBOT, TARGET_MM / 1e3)
-    assert plain.reachable and backbone_distance_mm(plain.delta) < 0
+    assert plain.reachable and surface_distance_mm(plain.delta) < 0
 
     info = page.locator('[data-testid="boxes-info"]')
     for axis, c, s in zip("xyz", SHELF_CENTRE_MM, SHELF_SIZE_MM):
@@ -99,7 +100,7 @@ def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
         dk.tip_position(ROBOT, jog_posture(page)) * 1e3 - TARGET_MM) <= 1.0, timeout=30)
     posture = jog_posture(page)
     # The sliders show 1e-6 mm; 0.5 mm sampling leaves at most 0.25 mm between samples.
-    assert backbone_distance_mm(posture) >= CLEARANCE_MM - 0.3
+    assert surface_distance_mm(posture) >= CLEARANCE_MM - 0.3
     page.get_by_text("Obstacles (boxes)", exact=True).scroll_into_view_if_needed()
     time.sleep(0.5)
     page.screenshot(path=str(artifacts_dir / "browser_boxes_shelf_reached.png"))

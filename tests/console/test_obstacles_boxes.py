@@ -113,6 +113,35 @@ def test_operator_places_edits_and_removes_boxes_and_bad_input_changes_nothing(g
     assert box_scene_of(app)[0].names() == ["Crate 1"] and len(panel._handles) == 1
 
 
+def test_the_panel_checks_boxes_at_the_base_with_the_robot_body(gated, tmp_path):
+    from fakes import FakeClient
+
+    from console.panels.obstacles_boxes import BoxObstaclesPanel, box_scene_of
+
+    app = gated
+    panel = app.panel(BoxObstaclesPanel)
+    op = FakeClient(1)
+    app.access.take(op.client_id, "tok", name="Alice")
+    assert box_scene_of(app)[0].body_radius == EXT.body_radius == 0.045
+    # 40 mm above the base: clear of the backbone's first point, inside the 45 mm body
+    type_box(panel, op, "Low", (0, 0, 90), (100, 100, 100))
+    user(panel.add_button, op)
+    assert box_scene_of(app)[0].boxes == () and "touches the arm's body at its base" in \
+        op.notes[-1][1]
+    # a loaded file is checked the same way
+    text = scene_to_json(BoxScene((bc.make_box("Low", (0, 0, 0.09), (0.1, 0.1, 0.1)),), 0.0))
+    user(panel.load_button, op, viser_upload("low.json", text.encode()))
+    assert box_scene_of(app)[0].boxes == () and "arm's body at its base" in op.notes[-1][1]
+    type_box(panel, op, "High", (0, 0, 120), (100, 100, 100))           # 70 mm: body keeps 25
+    user(panel.add_button, op)
+    assert box_scene_of(app)[0].names() == ["High"]
+
+
+def viser_upload(name: str, content: bytes):
+    import viser
+    return viser.UploadedFile(name, content)
+
+
 def test_viewers_change_nothing_and_scene_files_round_trip(gated):
     import viser
     from fakes import FakeClient, ScopedClient
@@ -178,10 +207,11 @@ def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated,
     status = target.status.content
     assert state_of(status) == "blocked" and "Ceiling" in status and "Not moved" in status
     assert app.hold.target() is None and np.array_equal(app.store.command.q, q_before)
-    # A shelf beside the arm: the target over its edge is reached with the backbone clear.
+    # A shelf beside the arm: the target over it is reached with the arm's body clear (120 mm
+    # above the board: at 60 mm the 45 mm body radius would leave 15 mm < the clearance).
     shelf = bc.make_box("Shelf", (0.2, 0.0, 0.25), (0.2, 0.3, 0.02))
     obstacles.set_scene(BoxScene((shelf,), 0.02), "Shelf")
-    target.solve(np.array([0.2, 0.0, 0.32]), True, op.client_id, target.worker.generation)
+    target.solve(np.array([0.2, 0.0, 0.38]), True, op.client_id, target.worker.generation)
     status = target.status.content
     assert state_of(status) == "reachable", status
     assert float(state_of(status, "clearance-mm")) >= 20.0
@@ -189,7 +219,7 @@ def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated,
     assert goal is not None
     legs = [goal] + target._legs[1]
     assert bc.clearance_of(EXT, legs[-1], [shelf]).clear_of(0.02)
-    np.testing.assert_allclose(dk.tip_position(EXT, legs[-1]), [0.2, 0.0, 0.32], atol=1e-3)
+    np.testing.assert_allclose(dk.tip_position(EXT, legs[-1]), [0.2, 0.0, 0.38], atol=1e-3)
     chain = dk.robot_rack_lengths(EXT, np.stack([q_before, *legs]))
     assert bc.motion_clearance(EXT, chain, [shelf]).clear_of(0.02)
     app.hold.cancel()

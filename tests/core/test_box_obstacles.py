@@ -1,6 +1,7 @@
 """Box obstacles for the extensible arm: box distance, the tip IK and paths keeping the whole
-backbone a set clearance from every box (checked by independent dense forward kinematics),
-refusals that name the box, and the scene file round trip."""
+body (``body_radius`` around the backbone) a set clearance from every box (checked by
+independent dense forward kinematics), refusals that name the box, and the scene file round
+trip."""
 
 import json
 import math
@@ -45,8 +46,9 @@ def dense_backbone(delta, step=0.0005):
 
 
 def min_distance(delta, boxes):
+    """Distance of the arm's body surface (ARM.body_radius around the dense backbone)."""
     pts = dense_backbone(delta)
-    return min(float(box_distance(pts, b.lo, b.hi).min()) for b in boxes)
+    return min(float(box_distance(pts, b.lo, b.hi).min()) for b in boxes) - ARM.body_radius
 
 
 def test_signed_distance_matches_an_independent_formula_and_its_gradient():
@@ -72,9 +74,11 @@ def test_backbone_samples_lie_on_the_forward_kinematics():
     assert gaps.max() < 1e-4
 
 
-# A shelf board beside the arm; the target sits on it, over its near edge.
+# A shelf board beside the arm; the target sits over it, high enough for the arm's body (45 mm
+# radius) plus the clearance to reach over the board (at 60 mm above it, as before the body
+# counted, the body would leave 15 mm < 20 mm).
 SHELF = bc.make_box("Shelf", (0.20, 0.0, 0.25), (0.20, 0.30, 0.02))
-OVER_SHELF = np.array([0.20, 0.0, 0.32])
+OVER_SHELF = np.array([0.20, 0.0, 0.38])
 
 
 def test_ik_reaches_over_a_shelf_edge_keeping_the_backbone_clear():
@@ -90,13 +94,14 @@ def test_ik_reaches_over_a_shelf_edge_keeping_the_backbone_clear():
 
 
 def drawer():
-    """A drawer opening facing the arm (x 200-450 mm, z 80-200 mm inside): top and bottom
-    boards, back wall and two sides."""
-    return [bc.make_box("Top", (0.325, 0.0, 0.21), (0.25, 0.30, 0.02)),
-            bc.make_box("Bottom", (0.325, 0.0, 0.07), (0.25, 0.30, 0.02)),
-            bc.make_box("Back", (0.46, 0.0, 0.14), (0.02, 0.30, 0.16)),
-            bc.make_box("Left", (0.325, 0.16, 0.14), (0.25, 0.02, 0.16)),
-            bc.make_box("Right", (0.325, -0.16, 0.14), (0.25, 0.02, 0.16))]
+    """A drawer opening facing the arm (x 200-450 mm, z 60-220 mm inside: 160 mm tall, so the
+    body's 45 mm radius and the 20 mm clearance fit above and below the target at z 140 mm):
+    top and bottom boards, back wall and two sides."""
+    return [bc.make_box("Top", (0.325, 0.0, 0.23), (0.25, 0.30, 0.02)),
+            bc.make_box("Bottom", (0.325, 0.0, 0.05), (0.25, 0.30, 0.02)),
+            bc.make_box("Back", (0.46, 0.0, 0.14), (0.02, 0.30, 0.20)),
+            bc.make_box("Left", (0.325, 0.16, 0.14), (0.25, 0.02, 0.20)),
+            bc.make_box("Right", (0.325, -0.16, 0.14), (0.25, 0.02, 0.20))]
 
 
 def test_ik_reaches_into_a_drawer_opening_clear_of_every_wall():
@@ -114,9 +119,10 @@ def test_a_target_the_boxes_cut_off_is_refused_naming_the_box():
     ceiling = bc.make_box("Ceiling", (0.0, 0.0, 0.26), (2.0, 2.0, 0.02))
     res = solve_tip_ik(ARM, OVER_SHELF, boxes=[ceiling], clearance=CLEARANCE)
     assert not res.reachable and "Ceiling" in res.refusal
-    # the answer is the closest collision-free posture: tip below the board, clear of it
+    # the answer is the closest collision-free posture: tip below the board, clear of it (the
+    # tip's body too: at most 0.25 - clearance - body radius high)
     assert min_distance(res.delta, [ceiling]) >= CLEARANCE - 2.5e-4
-    assert res.error >= OVER_SHELF[2] - (0.25 - CLEARANCE) - 1e-3
+    assert res.error >= OVER_SHELF[2] - (0.25 - CLEARANCE - ARM.body_radius) - 1e-3
     assert "mm" in res.refusal
 
 
@@ -125,6 +131,9 @@ def test_a_target_inside_or_too_near_a_box_is_refused():
     assert not res.reachable and "inside box 'Shelf'" in res.refusal
     res = solve_tip_ik(ARM, [0.2, 0.0, 0.27], boxes=[SHELF], clearance=CLEARANCE)
     assert not res.reachable and "10.0 mm from box 'Shelf'" in res.refusal
+    # 60 mm from the board: the backbone would keep 20 mm, but the body keeps 60 - 45 = 15 mm
+    res = solve_tip_ik(ARM, [0.2, 0.0, 0.32], boxes=[SHELF], clearance=CLEARANCE)
+    assert not res.reachable and "would be 15.0 mm from it" in res.refusal
 
 
 def test_ik_box_input_is_checked():
@@ -136,7 +145,10 @@ def test_ik_box_input_is_checked():
         solve_tip_ik(ARM, OVER_SHELF, boxes=[SHELF, SHELF], clearance=0.01)
 
 
-POST = bc.make_box("Post", (0.0, 0.0, 0.17), (0.04, 0.04, 0.04))
+# A post beside the straight arm (its near face 40 mm from the backbone: the body reaches 5 mm
+# into it). Above the base, as before the body counted, no posture moving the tip across over
+# it keeps the body 20 mm clear (the arm must cross the straight posture under it).
+POST = bc.make_box("Post", (0.0, 0.06, 0.17), (0.04, 0.04, 0.04))
 TRAVERSE = np.array([[-0.12, 0.0, 0.30], [0.12, 0.0, 0.30]])
 
 
@@ -162,7 +174,7 @@ def test_path_keeps_the_backbone_clear_of_a_box_between_its_points():
 
 def test_path_through_a_box_is_refused_naming_it():
     with pytest.raises(BlockedPath, match="box 'Post'"):
-        plan_path(ARM, [[-0.12, 0.0, 0.17], [0.12, 0.0, 0.17]], settings=COARSE,
+        plan_path(ARM, [[-0.12, 0.06, 0.17], [0.12, 0.06, 0.17]], settings=COARSE,
                   boxes=[POST], clearance=CLEARANCE)
 
 

@@ -12,7 +12,7 @@ fingers on both sides: :mod:`core.planning.sides`) and :func:`per_side` counts s
 :func:`run_trials` runs a batch through any ``map`` (the builtin: in this process; a process
 pool's ``map``: in parallel - the caller owns the pool). :func:`run_row_trial` takes several
 objects in a row to the bin in one run (:mod:`core.control.row`), e.g. objects drawn by
-:func:`draw_row_objects`.
+:func:`draw_row_objects` on one side of the arm or alternating (the released count per side).
 
 Command line: ``python -m core.control.trials`` (:mod:`core.control.trials.__main__`).
 """
@@ -235,19 +235,37 @@ def summary(results: Sequence[TrialResult], wall_s: float, workers: int) -> dict
 ROW_QUADRANT = "left"  # drawn objects lie in the left quadrant, like the paper's spots A-E
 
 
-def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float,
+def check_row_side(robot: SoftArm, side: str) -> None:
+    """Refuse a row ``side`` the robot's gripper has no finger for (ValueError with the reason):
+    ``right`` and ``both`` need ``[gripper] fingers = "both"`` (:mod:`core.planning.sides`)."""
+    if side not in SIDE_CHOICES:
+        raise ValueError(f"side must be one of {', '.join(SIDE_CHOICES)}, got {side!r}")
+    sides = robot.gripper.sides
+    missing = [s for s in (("left", "right") if side == "both" else (side,)) if s not in sides]
+    if missing:
+        raise ValueError(f"robot '{robot.name}' has no finger closing to the {missing[0]} "
+                         f"([gripper] fingers = \"{robot.gripper.fingers}\"): objects on the "
+                         f"{missing[0]} need fingers = \"both\"")
+
+
+def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float, side: str = "left",
                      spacing_m: float = 0.02, max_draws: int = 2000) -> list[tuple[float, float, float]]:
-    """``n`` objects drawn reproducibly from ``seed`` among reachable spots.
+    """``n`` objects drawn reproducibly from ``seed`` among reachable spots on ``side``.
 
     Candidates are uniform over the left quadrant within the arm's reach (where the paper's
-    spots lie); a candidate is kept when the planner (the reachability map's,
-    :func:`core.planning.reachability.cell_status`) plans a grasp for it from the straight arm,
-    which is where the arm is at the start and after each release at the (straight) bin, and
-    when it keeps ``spacing_m`` clear of the objects drawn before it.
+    spots lie); for a right-side object the candidate is mirrored across the base's heading
+    line (:func:`core.planning.sides.mirror_xy`) into the right quadrant, where the right
+    finger closes toward it. ``side``: ``left`` (the paper's), ``right``, or ``both``
+    (alternating, left first). A candidate is kept when the planner (the reachability map's,
+    :func:`core.planning.reachability.cell_status`, which plans on the object's side) plans a
+    grasp for it from the straight arm, which is where the arm is at the start and after each
+    release at the (straight) bin, and when it keeps ``spacing_m`` clear of the objects drawn
+    before it. ValueError for a side the gripper has no finger for (:func:`check_row_side`).
     """
     from core.planning.reachability import PLANNABLE, cell_status, map_planner
     if n < 1:
         raise ValueError(f"need at least one object, got {n}")
+    check_row_side(robot, side)
     rng = np.random.default_rng([seed, 17])
     planner = map_planner(robot)
     straight = np.zeros(robot.n_segments)
@@ -257,6 +275,8 @@ def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float,
         x, y = base + rng.uniform(0.0, robot.reach, 2) * (-1.0, 1.0)
         if np.hypot(x - base[0], y - base[1]) > robot.reach:
             continue
+        if side == "right" or (side == "both" and len(out) % 2 == 1):
+            x, y = mirror_xy(robot, (x, y))
         if any(np.hypot(x - ox, y - oy) < radius + r + spacing_m for ox, oy, r in out):
             continue
         if cell_status(planner, straight, float(x), float(y), radius) == PLANNABLE:
@@ -268,7 +288,12 @@ def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float,
 
 @dataclasses.dataclass(frozen=True)
 class RowTrialResult:
-    """One row: per-object outcomes (queue order) and the run's totals."""
+    """One row: per-object outcomes (queue order) and the run's totals.
+
+    ``sides`` is the side of the arm each object lay on (queue order,
+    :func:`core.planning.sides.object_side`); ``drops`` maps a released object's queue index to
+    the finger that held it and where the simulated object lay right after the release (m).
+    """
 
     objects: list[ObjectOutcome]
     bin: tuple[float, float] | None  # where the operator put the bin; None: the robot's [bin]
@@ -280,10 +305,21 @@ class RowTrialResult:
     ticks: int
     stalls: int
     work_ms_p99: float
+    sides: tuple[str, ...] = ()
+    drops: dict[int, tuple[str, tuple[float, float]]] = dataclasses.field(default_factory=dict)
 
     @property
     def released(self) -> int:
         return sum(o.released for o in self.objects)
+
+    def per_side(self) -> dict[str, dict[str, int]]:
+        """``{"left": {"released": k, "objects": n}, "right": ...}`` for the sides in the row."""
+        out: dict[str, dict[str, int]] = {}
+        for o in self.objects:
+            d = out.setdefault(self.sides[o.index], {"released": 0, "objects": 0})
+            d["objects"] += 1
+            d["released"] += int(o.released)
+        return {s: out[s] for s in ("left", "right") if s in out}
 
 
 def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int, *,
@@ -315,6 +351,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
         lambda req: plan_request(plan_fn, robot, req)))
     loop = SimLoop(sim, stack, 0.01)
     drop_radius = BinParams.from_robot(robot).drop_radius_m
+    drops: dict[int, tuple[str, tuple[float, float]]] = {}
 
     def place(obj: RowObject) -> None:
         sim.place_object(obj.x + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M),
@@ -325,6 +362,8 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
             return "object still in the gripper after release"
         # Held by the finger that closed on it: its drop point is on that side of the gripper.
         side = stack.machine.closing_side
+        assert row.current is not None
+        drops[row.current] = (side, (float(sim.obj.xy[0]), float(sim.obj.xy[1])))
         d = float(np.hypot(*(sim.obj.xy - bin_drop_point(robot, obj.r, bin_params, side))))
         return None if d <= drop_radius else f"object released {d * 1000:.0f} mm from the bin drop point"
 
@@ -337,18 +376,24 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     wall = time.perf_counter() - wall
     return RowTrialResult(list(row.outcomes), where, row.state, row.reason, seed,
                           round(loop.ticks * 0.01, 2), round(wall, 3), loop.ticks, sim.stalls,
-                          round(loop.stats().work_ms_p99, 4))
+                          round(loop.stats().work_ms_p99, 4),
+                          tuple(object_side(robot, (o.x, o.y)) for o in row_objects), drops)
 
 
 def row_json(result: RowTrialResult) -> dict[str, Any]:
     """The ``--json`` form of a row: per-object results (SI units) and the totals."""
     def num(v: float | None) -> float | None:
         return None if v is None else round(v, 3)
+    def drop(i: int) -> dict[str, Any]:
+        finger, xy = result.drops.get(i, (None, None))
+        return {"finger": finger, "final_object": None if xy is None else list(xy)}
     return {"row": [{"object": [o.object.x, o.object.y, o.object.r], "status": o.status,
                      "reason": o.reason, "started_s": num(o.started_s), "ended_s": num(o.ended_s),
                      "approach_s": num(o.approach_s), "return_s": num(o.return_s),
-                     "replans": o.replans} for o in result.objects],
+                     "replans": o.replans, "side": result.sides[o.index], **drop(o.index)}
+                    for o in result.objects],
             "bin": None if result.bin is None else list(result.bin),
-            "released": result.released, "objects": len(result.objects), "state": result.state,
+            "released": result.released, "objects": len(result.objects),
+            "sides": result.per_side(), "state": result.state,
             "reason": result.reason, "seed": result.seed, "sim_s": result.sim_s,
             "wall_s": result.wall_s}

@@ -15,10 +15,15 @@ object ``{"trials": [...], "loop": {...}}`` (``loop.sides``: ``{"left": {"succes
 
 ``--objects-in-a-row N`` instead takes N objects to the bin one after another in one run
 (:func:`core.control.trials.run_row_trial`): the N ``--object`` given, or without ``--object``
-N drawn from ``--seed`` among reachable spots (paper's object radius); ``--time-limit`` is then
-per object; ``--bin X Y`` puts the bin at that point of the table (m) instead of the robot
-file's bin configuration. Prints one row per object (released / failed and why) and "k/N released", or with
-``--json`` one object ``{"row": [...], "released": k, "objects": N, ...}``.
+N drawn from ``--seed`` among reachable spots (paper's object radius) on ``--side``: left (the
+default), right (the right finger's quadrant), or both (alternating, left first); a side the
+robot file's gripper has no finger for is refused. ``--time-limit`` is then per object;
+``--bin X Y`` puts the bin at that point of the table (m) instead of the robot file's bin
+configuration. Prints one row per object (its side, released / failed and why), "k/N
+released" and the released count per side, or with ``--json`` one object ``{"row": [...],
+"released": k, "objects": N, "sides": {"left": {"released": k, "objects": n}, ...}, ...}``
+(each row entry with its ``side``, the ``finger`` that held it and the simulated
+``final_object`` position after the release).
 """
 
 from __future__ import annotations
@@ -88,17 +93,19 @@ def format_table(results: Sequence[TrialResult]) -> str:
 def format_row_table(result: RowTrialResult) -> str:
     """One row per object of a row run (lengths in mm, times in s), then "k/N released"."""
     lines = [(f"{'#':>3} {'x (mm)':>7} {'y (mm)':>7} {'r (mm)':>6} {'status':<8} "
-              f"{'approach (s)':>12} {'return (s)':>10} {'replans':>7}  reason")]
+              f"{'approach (s)':>12} {'return (s)':>10} {'replans':>7} {'side':<5}  reason")]
     for o in result.objects:
         times = (f"{o.approach_s:>12.1f}" if o.approach_s is not None else f"{'-':>12}",
                  f"{o.return_s:>10.1f}" if o.return_s is not None else f"{'-':>10}")
         lines.append(f"{o.index + 1:>3} {fmt_mm(o.object.x):>7} {fmt_mm(o.object.y):>7} "
                      f"{fmt_mm(o.object.r):>6} {o.status:<8} {times[0]} {times[1]} "
-                     f"{o.replans:>7d}  {o.reason or ''}")
+                     f"{o.replans:>7d} {result.sides[o.index]:<5}  {o.reason or ''}")
     if result.bin is not None:
         lines.append(f"bin at ({fmt_mm(result.bin[0])}, {fmt_mm(result.bin[1])}) mm")
     lines.append(f"{result.released}/{len(result.objects)} released"
                  + (f" (row stopped: {result.reason})" if result.state == "stopped" else ""))
+    lines.append("per side: " + ", ".join(f"{side} {d['released']}/{d['objects']} released"
+                                           for side, d in result.per_side().items()))
     return "\n".join(lines)
 
 
@@ -116,15 +123,19 @@ def run_row_cli(a: argparse.Namespace, ap: argparse.ArgumentParser, robot: SoftA
         except ValueError as exc:
             ap.error(f"--bin {a.bin[0]} {a.bin[1]}: {exc}")
     if a.object:
+        if a.side is not None:
+            ap.error("--side draws the row's objects on that side; with --object each object is "
+                     "grasped on the side where it lies")
         if len(a.object) != n:
             ap.error(f"--objects-in-a-row {n} with {len(a.object)} --object: give {n} objects, "
                      f"or none to draw {n} from --seed")
         objects = [tuple(o) for o in a.object]
     else:
         try:
-            objects = draw_row_objects(robot, n, a.seed, robot.capture.nominal_object_radius)
+            objects = draw_row_objects(robot, n, a.seed, robot.capture.nominal_object_radius,
+                                       side=a.side or "left")
         except ValueError as exc:
-            ap.error(f"--objects-in-a-row {n}: {exc}")
+            ap.error(f"--objects-in-a-row {n} --side {a.side or 'left'}: {exc}")
     result = run_row_trial(robot, objects, a.seed, planner=a.planner, bin_xy=bin_xy,
                            object_time_limit_s=a.time_limit, sim_overrides=overrides or None)
     if a.json:
@@ -153,9 +164,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                     help="also record the trials (arm, object, phases) as MCAP")
     ap.add_argument("--csv", type=Path, default=None, metavar="PATH.csv",
                     help="also write one CSV row per trial (units in the header)")
-    ap.add_argument("--side", choices=SIDE_CHOICES, default="left",
-                    help="left: the spots as given (the paper's experiment); right: their mirror "
-                         "images across the arm's base line; both: each, then its mirror image")
+    ap.add_argument("--side", choices=SIDE_CHOICES, default=None,
+                    help="left (default): the spots as given (the paper's experiment); right: "
+                         "their mirror images across the arm's base line; both: each, then its "
+                         "mirror image. With --objects-in-a-row: the side the row's objects are "
+                         "drawn on (both: alternating)")
     ap.add_argument("--objects-in-a-row", type=int, default=None, metavar="N",
                     help="take N objects to the bin one after another in one run: the N "
                          "--object given, or N drawn from --seed among reachable spots")
@@ -187,8 +200,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)) or r <= 0:
                 ap.error(f"--object {x} {y} {r}: need finite X Y and R > 0")
     if a.objects_in_a_row is not None:
-        if a.side != "left":
-            ap.error("--side applies to a batch of trials, not to --objects-in-a-row")
         return run_row_cli(a, ap, robot, overrides)
     if a.bin is not None:
         ap.error("--bin applies to --objects-in-a-row only")
@@ -198,7 +209,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         r0 = robot.capture.nominal_object_radius
         objects = [(k, (x, y, r0)) for k, (x, y) in paper_locations().items()]
-    objects = sided_objects(robot, objects, a.side)
+    objects = sided_objects(robot, objects, a.side or "left")
     wall = time.perf_counter()
     from core.labdata.progress import trial_progress  # a bar on a terminal, nothing when piped
     with trial_progress(len(objects) * repeats) as progress:
