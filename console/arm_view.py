@@ -18,12 +18,9 @@ nothing and a slow move is still drawn every frame; a held-back frame is sent wh
 goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frames(q)`` methods
 (vectorised numpy, no viser), which tests check against the kinematics without a server.
 
-* Soft planar arm: the backbone as a tube lying on the table (z = half-width), dark rings at the
-  segment boundaries, the pleated gripper in a contrasting colour (a plain rod in the
-  ``"vertices"`` drawing) and the palm point w_t.
-* Extensible arm (base at the origin, local z = world z up): a thin backbone, the three racks of
-  every segment as tubes on their constant-curvature offset arcs (one colour per rack, matching
-  the readout), platform discs at the base and every segment end, and a tip frame.
+The arms' own drawings: :mod:`console.planar_arm_view` (soft planar arm) and
+:mod:`console.delta_arm_view` (extensible arm); this module holds what they share and
+:func:`make_arm_view`, which picks one by the model's kind.
 """
 
 from __future__ import annotations
@@ -39,13 +36,10 @@ import viser
 import viser.transforms as vtf
 
 from console.dead_band import DeadBand, Steadiness
-from console.gripper_mesh import GripperShape, gripper_vertices, load_asset
 from console.model import ArmModel, DeltaModel, PlanarModel
-from console.skin import TubeSkin, planar_matrices
-from console.tube import TubeTopology, frames_from_matrices, planar_frames
+from console.skin import TubeSkin
+from console.tube import TubeTopology
 from console.viser_fixes import set_bone_poses
-from core.kinematics import delta as dk
-from core.kinematics import planar as pk
 
 Array = npt.NDArray[np.float64]
 Geometry = dict[str, Any]
@@ -206,291 +200,14 @@ class ArmView(ABC):
         self.sent_at.append(time.monotonic())
 
 
-class PlanarArmView(ArmView):
-    """Soft planar arm lying on the table plane."""
-
-    samples_per_segment = 16
-    sides = 20
-    bone_stride = 4  # samples between bones: 4 bones per segment, 27 in all
-    ring_half_length = 0.003
-
-    def __init__(self, scene: viser.SceneApi, model: PlanarModel, root: str = "/arm",
-                 method: Method = "skinned", dead_band: DeadBand | None = DeadBand()) -> None:
-        super().__init__(scene, model, root, method, dead_band)
-        r = model.robot
-        self.radius = r.half_width
-        self.z = r.half_width  # the tube rests on the table
-        n_rings = r.n_segments * self.samples_per_segment + 1
-        self.body_topology = TubeTopology(n_rings, self.sides)
-        self.ring_topology = TubeTopology(2, self.sides, n_tubes=r.n_segments)
-        self.gripper_topology = TubeTopology(2, self.sides)
-        self.gripper_closed = False
-        self.skin = TubeSkin(n_rings, self.bone_stride,
-                             float(np.mean(r.lengths)) / self.samples_per_segment
-                             * self.bone_stride)
-        q0 = model.zero()
-        g = self.geometry(q0)
-        if method == "vertices":
-            self.body = scene.add_mesh_simple(f"{root}/body", g["body"],
-                                              self.body_topology.faces, color=BODY_COLOR)
-            self.rings = scene.add_mesh_simple(f"{root}/segment_rings", g["rings"],
-                                               self.ring_topology.faces, color=RING_COLOR)
-            self.gripper = scene.add_mesh_simple(f"{root}/gripper", g["gripper"],
-                                                 self.gripper_topology.faces,
-                                                 color=GRIPPER_COLOR)
-        else:
-            self.body = add_skinned_tube(scene, f"{root}/body", self.skin, self.body_topology,
-                                         self.radius, BODY_COLOR)
-            # One ring band and one gripper, drawn in their own frames (tangent = local z).
-            band = TubeTopology(2, self.sides)
-            ends = self._frames_at_ends(self.frames(q0))
-            self.rings = scene.add_batched_meshes_simple(
-                f"{root}/segment_rings",
-                band.vertices([[0, 0, -self.ring_half_length], [0, 0, self.ring_half_length]],
-                              [[1, 0, 0]] * 2, [[0, 1, 0]] * 2, self.radius * 1.18),
-                band.faces, wxyzs(ends), ends[:, :3, 3],
-                batched_colors=batched_color(RING_COLOR), lod="off")
-            # The pleated gripper (static/gripper.stl fitted to the robot file), open and
-            # closed, under one node moved by the tip pose; closing only swaps visibility.
-            self.gripper = scene.add_frame(f"{root}/gripper", show_axes=False)
-            shape = GripperShape.of(r)
-            asset = load_asset()
-            self.gripper_shapes = {
-                closed: scene.add_mesh_simple(
-                    f"{root}/gripper/{'closed' if closed else 'open'}",
-                    *gripper_vertices(shape, closed, asset), color=GRIPPER_COLOR,
-                    flat_shading=True, visible=not closed)
-                for closed in (False, True)}
-        self.palm = scene.add_icosphere(f"{root}/palm_point", radius=0.006, color=PALM_COLOR,
-                                        position=g["palm"], cast_shadow=False)
-        base = r.base_pose
-        self.mount = scene.add_box(
-            f"{root}/base_mount", color=MOUNT_COLOR, dimensions=(0.05, 0.02, 2 * self.z + 0.006),
-            position=(base[0] - 0.01 * np.cos(base[2]), base[1] - 0.01 * np.sin(base[2]),
-                      self.z + 0.003),
-            wxyz=vtf.SO3.from_z_radians(base[2] - np.pi / 2).wxyz)
-        self.update(q0)
-
-    def set_gripper_closed(self, closed: bool) -> None:
-        """Show the pleated gripper curled (closed) or straight (open): two visibility
-        messages on a change, nothing otherwise; any thread (``"vertices"`` draws a rod)."""
-        shapes = getattr(self, "gripper_shapes", None)
-        closed = bool(closed)
-        if shapes is None or closed == self.gripper_closed:
-            return
-        self.gripper_closed = closed
-        shapes[closed].visible = True
-        shapes[not closed].visible = False
-
-    def _frames_at_ends(self, frames: Array) -> Array:
-        return frames[self.samples_per_segment::self.samples_per_segment]
-
-    def frames(self, q: Array) -> Array:
-        """(n S + 1, 4, 4) backbone frames at the table height (tangent = local z)."""
-        m: PlanarModel = self.model  # type: ignore[assignment]
-        r = m.robot
-        backbone = pk.sample_backbone(q, r.lengths, self.samples_per_segment, r.base_pose)
-        return planar_matrices(backbone, self.z)
-
-    def geometry(self, q: Array) -> Geometry:
-        m: PlanarModel = self.model  # type: ignore[assignment]
-        r = m.robot
-        backbone = pk.sample_backbone(q, r.lengths, self.samples_per_segment, r.base_pose)
-        body = self.body_topology.vertices(*planar_frames(backbone, self.z), self.radius)
-        ends = backbone[self.samples_per_segment::self.samples_per_segment]  # (N, 3)
-        half = self.ring_half_length
-        heading = np.stack([np.cos(ends[:, 2]), np.sin(ends[:, 2]), np.zeros(len(ends))], -1)
-        c, n, b = planar_frames(ends, self.z)
-        ring_c = np.stack([c - half * heading, c + half * heading], axis=1)
-        rings = self.ring_topology.vertices(ring_c, np.repeat(n[:, None], 2, 1),
-                                            np.repeat(b[:, None], 2, 1), self.radius * 1.18)
-        tip = ends[-1]
-        g_end = tip.copy()
-        g_end[:2] += r.gripper.length * heading[-1, :2]
-        gc, gn, gb = planar_frames(np.stack([tip, g_end]), self.z)
-        gripper = self.gripper_topology.vertices(gc, gn, gb, r.gripper.half_width * 0.85)
-        palm_xy = m.palm_point(tip)
-        return {"body": body, "rings": rings, "gripper": gripper, "tip": tip,
-                "palm": np.array([palm_xy[0], palm_xy[1], self.z + 0.004])}
-
-    def _palm(self, tip_frame: Array) -> Array:
-        m: PlanarModel = self.model  # type: ignore[assignment]
-        heading = np.arctan2(tip_frame[1, 2], tip_frame[0, 2])
-        palm_xy = m.palm_point(np.array([tip_frame[0, 3], tip_frame[1, 3], heading]))
-        return np.array([palm_xy[0], palm_xy[1], self.z + 0.004])
-
-    def _send(self, q: Array, frames: Array) -> None:
-        if self.method == "vertices":
-            g = self.geometry(q)
-            self.body.vertices = g["body"]
-            self.rings.vertices = g["rings"]
-            self.gripper.vertices = g["gripper"]
-            self.palm.position = g["palm"]
-            return
-        pose_bones(self.body, self.skin.bone_poses(frames))
-        ends = self._frames_at_ends(frames)
-        self.rings.batched_wxyzs = wxyzs(ends)
-        self.rings.batched_positions = ends[:, :3, 3]
-        tip = ends[-1]
-        self.gripper.wxyz = wxyzs(tip[None])[0]
-        self.gripper.position = tip[:3, 3]
-        self.palm.position = self._palm(tip)
-
-
-class DeltaArmView(ArmView):
-    """Extensible tri-rack arm standing on the table."""
-
-    samples_per_segment = 32
-    sides = 12
-    backbone_radius = 0.005
-    rack_radius = 0.0035
-    platform_thickness = 0.008
-
-    bone_stride = 8  # samples between bones: 4 bones per segment
-
-    def __init__(self, scene: viser.SceneApi, model: DeltaModel, root: str = "/arm",
-                 method: Method = "skinned", dead_band: DeadBand | None = DeadBand()) -> None:
-        super().__init__(scene, model, root, method, dead_band)
-        r = model.robot
-        n, s = r.n_segments, self.samples_per_segment
-        self.beta = dk.rack_angles(r.phi)
-        self.backbone_topology = TubeTopology(n * s + 1, self.sides)
-        self.rack_topology = TubeTopology(s + 1, 8, n_tubes=n)
-        self.platform_topology = TubeTopology(2, 40, n_tubes=n + 1)
-        q0 = model.zero()
-        # A bone set per segment (backbone and racks): the bend changes sharply at a
-        # platform, and the racks' ends stay on it.
-        self.skin = TubeSkin(s + 1, self.bone_stride,
-                             float(r.L0 + np.mean(q0[:, 2])) / s * self.bone_stride)
-        g = self.geometry(q0)
-        if method == "vertices":
-            self.backbone = scene.add_mesh_simple(
-                f"{root}/backbone", g["backbone"], self.backbone_topology.faces,
-                color=BACKBONE_COLOR)
-            self.racks = [
-                scene.add_mesh_simple(f"{root}/rack_{j + 1}", g["racks"][j],
-                                      self.rack_topology.faces, color=RACK_COLORS[j])
-                for j in range(3)]
-            self.platforms = scene.add_mesh_simple(
-                f"{root}/platforms", g["platforms"], self.platform_topology.faces,
-                color=PLATFORM_COLOR)
-        else:
-            self.backbone = add_skinned_tube(scene, f"{root}/backbone", self.skin,
-                                             self.backbone_topology, self.backbone_radius,
-                                             BACKBONE_COLOR, segments=n)
-            self.racks = [
-                add_skinned_tube(scene, f"{root}/rack_{j + 1}", self.skin,
-                                 self.rack_topology, self.rack_radius, RACK_COLORS[j],
-                                 each=True)
-                for j in range(3)]
-            disc = TubeTopology(2, 40)
-            t = self.platform_thickness
-            ends = self._platform_frames(self.frames(q0))
-            self.platforms = scene.add_batched_meshes_simple(
-                f"{root}/platforms",
-                disc.vertices([[0, 0, -t / 2], [0, 0, t / 2]], [[1, 0, 0]] * 2, [[0, 1, 0]] * 2,
-                              r.half_width),
-                disc.faces, wxyzs(ends), ends[:, :3, 3],
-                batched_colors=batched_color(PLATFORM_COLOR), lod="off")
-        self.tip = scene.add_frame(f"{root}/tip", axes_length=0.05, axes_radius=0.003,
-                                   origin_radius=0.006, position=g["tip_position"],
-                                   wxyz=g["tip_wxyz"])
-        self.update(q0)
-
-    def frames(self, q: Array) -> Array:
-        """(n S + 1, 4, 4) backbone frames, segment ends once (tangent = local z)."""
-        f = self.sample_frames(q)
-        return np.concatenate([f[0, :1], f[:, 1:].reshape(-1, 4, 4)])
-
-    def rack_frames(self, frames: Array, j: int) -> Array:
-        """Frames of rack ``j``'s centre line: the backbone's, moved out to radius d."""
-        m: DeltaModel = self.model  # type: ignore[assignment]
-        out = frames.copy()
-        b = self.beta[j]
-        out[:, :3, 3] += m.robot.d * (np.cos(b) * frames[:, :3, 0] + np.sin(b) * frames[:, :3, 1])
-        return out
-
-    def rack_bone_poses(self, frames: Array, j: int) -> Array:
-        """Bone poses of rack ``j``: one bone set per segment, on the rack's centre line."""
-        return self.skin.bone_poses_segments(self.rack_frames(frames, j),
-                                                  (len(frames) - 1) // self.samples_per_segment)
-
-    def _platform_frames(self, frames: Array) -> Array:
-        ends = frames[::self.samples_per_segment].copy()
-        ends[0, :3, 3] += self.platform_thickness / 2 * ends[0, :3, 2]  # base disc on the table
-        return ends
-
-    def sample_frames(self, q: Array) -> Array:
-        """Backbone frames (n, S+1, 4, 4): each segment sampled evenly in arc length."""
-        m: DeltaModel = self.model  # type: ignore[assignment]
-        r = m.robot
-        ends = m.frames(q)  # (n+1, 4, 4)
-        s = np.linspace(0.0, 1.0, self.samples_per_segment + 1)  # (S+1,)
-        length = r.L0 + q[:, 2]  # (n,)
-        # A constant-curvature sub-arc of arc fraction s bends s times as far: delta scales by s
-        # in (dx, dy) and its length is s L, i.e. dL_s = s L - L0.
-        sub = np.empty((len(q), len(s), 3))
-        sub[..., :2] = q[:, None, :2] * s[None, :, None]
-        sub[..., 2] = length[:, None] * s[None, :] - r.L0
-        local = dk.segment_transform(sub, r.L0, r.d)  # (n, S+1, 4, 4)
-        return np.einsum("nij,nsjk->nsik", ends[:-1], local)
-
-    def geometry(self, q: Array) -> Geometry:
-        m: DeltaModel = self.model  # type: ignore[assignment]
-        r = m.robot
-        frames = self.sample_frames(q)
-        c, x, y = frames_from_matrices(frames)  # each (n, S+1, 3)
-        def flat(a: Array) -> Array:  # (n, S+1, 3) -> (n S + 1, 3): shared segment ends once
-            return np.concatenate([a[0, :1], a[:, 1:].reshape(-1, 3)])
-
-        backbone = self.backbone_topology.vertices(flat(c), flat(x), flat(y),
-                                                   self.backbone_radius)
-        # Rack j runs on the offset arc at angle beta_j, radius d, around the backbone.
-        centres = [c + r.d * (np.cos(b) * x + np.sin(b) * y) for b in self.beta]
-        racks = [self.rack_topology.vertices(cj, x, y, self.rack_radius) for cj in centres]
-        ends = m.frames(q)
-        pc, px, py = frames_from_matrices(ends)
-        pz = ends[:, :3, 2]
-        t = self.platform_thickness
-        lift = np.zeros(len(ends))
-        lift[0] = t / 2  # the base platform sits on the table
-        mid = pc + lift[:, None] * pz
-        disc_c = np.stack([mid - t / 2 * pz, mid + t / 2 * pz], axis=1)
-        platforms = self.platform_topology.vertices(
-            disc_c, np.repeat(px[:, None], 2, 1), np.repeat(py[:, None], 2, 1), r.half_width)
-        tip = ends[-1]
-        return {"backbone": backbone, "racks": racks, "platforms": platforms,
-                "rack_centres": centres,
-                "tip_position": tip[:3, 3], "tip_wxyz": vtf.SO3.from_matrix(tip[:3, :3]).wxyz}
-
-    def _send(self, q: Array, frames: Array) -> None:
-        if self.method == "vertices":
-            g = self.geometry(q)
-            self.backbone.vertices = g["backbone"]
-            for handle, verts in zip(self.racks, g["racks"]):
-                handle.vertices = verts
-            self.platforms.vertices = g["platforms"]
-        else:
-            # The backbone and the three racks posed in one vectorised step, their
-            # quaternions in one conversion (per tube, these were half the render's time).
-            tubes = np.stack([frames, *(self.rack_frames(frames, j) for j in range(3))])
-            poses = self.skin.bone_poses_segments(tubes, len(q))  # (4, B, 4, 4)
-            quats = quantize(wxyzs(poses.reshape(-1, 4, 4))).reshape(len(tubes), -1, 4)
-            positions = quantize(poses[..., :3, 3])
-            for handle, wxyz, position in zip((self.backbone, *self.racks), quats, positions):
-                set_bone_poses(handle, wxyz, position)
-            ends = self._platform_frames(frames)
-            self.platforms.batched_wxyzs = wxyzs(ends)
-            self.platforms.batched_positions = ends[:, :3, 3]
-        tip = frames[-1]
-        self.tip.position = tip[:3, 3]
-        self.tip.wxyz = wxyzs(tip[None])[0]
-
-
 def make_arm_view(scene: viser.SceneApi, model: ArmModel, root: str = "/arm",
                   method: Method = "skinned",
                   dead_band: DeadBand | None = DeadBand()) -> ArmView:
     """The view class matching the model's robot kind."""
+    # Imported here: both views subclass ArmView, so they import this module.
+    from console.delta_arm_view import DeltaArmView
+    from console.planar_arm_view import PlanarArmView
+
     if isinstance(model, PlanarModel):
         return PlanarArmView(scene, model, root, method, dead_band)
     if isinstance(model, DeltaModel):

@@ -37,7 +37,10 @@ with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each fram
    before it is stored: only that browser gets its widget's value back, plus one notification
    (``ConsoleApp.refuse`` coalesces them) naming who holds control.
 
-The guard runs on viser's event loop; it only reads GUI state and queues messages.
+Rules 1 and 2 are :meth:`ClientGuard.admit`; rules 3 and 4, per message type, are the
+``_check_<MessageType>`` methods it inherits from
+:class:`console.client_message_checks.MessageTypeChecks`. The guard runs on viser's event loop;
+it only reads GUI state and queues messages.
 """
 
 from __future__ import annotations
@@ -48,8 +51,8 @@ import logging
 import time
 from typing import Any, Callable
 
-from console.client_values import (GuardLimits, OutOfBounds, Refused, check_fields, short,
-                                   validate_value)
+from console.client_message_checks import MessageTypeChecks
+from console.client_values import GuardLimits, Refused, check_fields, short
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +63,6 @@ CLIENT_MESSAGES = frozenset({
     "TransformControlsUpdateMessage", "TransformControlsDragStartMessage",
     "TransformControlsDragEndMessage", "FileTransferStartUpload", "FileTransferPart",
     "LocalStorageGetItemResponseMessage"})
-_UPLOAD_CHUNK = 512 * 1024  # viser's browser uploads files in parts of this size
 
 
 class _Disconnect(Exception):
@@ -73,7 +75,7 @@ class _Disconnect(Exception):
 
 
 @dataclasses.dataclass
-class _ClientState:
+class ClientState:
     """Per-connection bookkeeping (event-loop thread only)."""
 
     tokens: float
@@ -82,7 +84,7 @@ class _ClientState:
     uploads: set = dataclasses.field(default_factory=set)
 
 
-class ClientGuard:
+class ClientGuard(MessageTypeChecks):
     """Checks every message a browser sends before viser stores or broadcasts anything.
 
     Args:
@@ -105,7 +107,7 @@ class ClientGuard:
         self._refusal = refusal
         self._clock = clock
         self._viewer_allowed: set[str] = set()
-        self._clients: dict[int, _ClientState] = {}
+        self._clients: dict[int, ClientState] = {}
         self._logged: dict[tuple[int, str], list[float]] = {}
         self.counts: collections.Counter[str] = collections.Counter()
         server._websock_server._client_guard = self
@@ -154,7 +156,7 @@ class ClientGuard:
         now = self._clock()
         state = self._clients.get(client_id)
         if state is None:
-            state = self._clients[client_id] = _ClientState(lim.burst, now)
+            state = self._clients[client_id] = ClientState(lim.burst, now)
         state.tokens = min(lim.burst, state.tokens + (now - state.last) * lim.rate)
         state.last = now
         if state.tokens < 1.0:
@@ -198,7 +200,7 @@ class ClientGuard:
         self.counts["accepted"] += 1
         return message
 
-    def _drop(self, client_id: int, state: _ClientState, reason: str, detail: str) -> None:
+    def _drop(self, client_id: int, state: ClientState, reason: str, detail: str) -> None:
         """Drop a message: count it, log it (coalesced), disconnect a client that keeps on."""
         self.counts[reason] += 1
         self.log(client_id, reason, detail)
@@ -221,185 +223,3 @@ class ClientGuard:
         more = f" (+{entry[1] - 1} more since the last line)" if entry[1] > 1 else ""
         log.warning("client %s: %s%s", client_id, short(detail, 200), more)
         entry[0], entry[1] = now, 0
-
-    # -- per message type (True: pass on; False: handled here; Refused: invalid) --------------
-
-    def _client(self, client_id: int) -> Any:
-        return self.server._connected_clients.get(client_id)
-
-    def _gui_handle(self, client_id: int, uuid: str, registry: str) -> tuple[Any, bool]:
-        """(handle, shared) for a GUI element of the server's or this browser's GUI."""
-        handle = getattr(self.server.gui, registry).get(uuid)
-        if handle is not None:
-            return handle, True
-        client = self._client(client_id)
-        if client is not None:
-            handle = getattr(client.gui, registry).get(uuid)
-        return handle, False
-
-    def _may_use(self, client_id: int, handle: Any, shared: bool, key: str) -> bool:
-        return (not shared or key in self._viewer_allowed or self._is_operator(client_id))
-
-    def _refuse_use(self, client_id: int, handle: Any, label: str, is_button: bool) -> None:
-        self.counts["refused"] += 1
-        verb = "press" if is_button else "change"
-        action = _action_of(handle) or f"{verb} “{label}”"
-        self.log(client_id, "refused", f"viewer refused: {action}")
-        client = self._client(client_id)
-        if client is not None:
-            self._refuse(client, self._refusal(action), action)
-
-    def _check_GuiUpdateMessage(self, client_id: int, state: _ClientState, msg: Any) -> bool:
-        updates = msg.updates
-        if not isinstance(updates, dict) or set(updates) != {"value"}:
-            keys = list(updates) if isinstance(updates, dict) else updates
-            raise Refused(f"only 'value' may be sent, got {short(keys)}")
-        handle, shared = self._gui_handle(client_id, msg.uuid, "_gui_input_handle_from_uuid")
-        if handle is None:
-            raise Refused(f"no input widget {short(msg.uuid)}")
-        impl = handle._impl
-        props = impl.props
-        label = str(getattr(props, "label", type(handle).__name__))[:40]
-        if impl.removed or getattr(props, "disabled", False) or not getattr(props, "visible", 1):
-            self.log(client_id, "inactive", f"“{label}” is disabled or hidden")
-            return False
-        if not self._may_use(client_id, handle, shared, impl.uuid):
-            self._restore(client_id, handle)
-            self._refuse_use(client_id, handle, label, impl.is_button)
-            return False
-        try:
-            value = validate_value(handle, updates["value"], self.limits)
-        except OutOfBounds as exc:
-            self.counts["invalid"] += 1
-            self.log(client_id, "bounds", f"“{label}”: {exc}")
-            return False
-        except Refused as exc:
-            self._restore(client_id, handle)
-            self.counts["invalid"] += 1
-            self.log(client_id, "invalid", f"“{label}”: {exc}")
-            client = self._client(client_id)
-            if client is not None:
-                self._refuse(client, f"“{label}”: {exc}", f"value for {label}")
-            return False
-        msg.updates = {"value": value}
-        return True
-
-    def _restore(self, client_id: int, handle: Any) -> None:
-        """Send this browser (only) its widget's current value back."""
-        from viser import _messages
-
-        client = self._client(client_id)
-        impl = handle._impl
-        if client is None or impl.is_button or type(handle).__name__ == "GuiUploadButtonHandle":
-            return
-        client._websock_connection.queue_message(
-            _messages.GuiUpdateMessage(impl.uuid, {"value": impl.value}))
-
-    def _check_GuiButtonHoldMessage(self, client_id: int, state: _ClientState, msg: Any) -> bool:
-        handle, shared = self._gui_handle(client_id, msg.uuid, "_gui_input_handle_from_uuid")
-        if handle is None or not handle._impl.is_button:
-            raise Refused(f"no button {short(msg.uuid)}")
-        if not 0.0 < float(msg.frequency) <= 100.0:
-            raise Refused(f"hold frequency {short(msg.frequency)}")
-        if getattr(handle._impl.props, "disabled", False):
-            return False
-        if not self._may_use(client_id, handle, shared, handle._impl.uuid):
-            self._refuse_use(client_id, handle, _label(handle), True)
-            return False
-        return True
-
-    def _check_CommandTriggerMessage(self, client_id: int, state: _ClientState, msg: Any) -> bool:
-        handle, shared = self._gui_handle(client_id, msg.uuid, "_command_handle_from_uuid")
-        if handle is None:
-            raise Refused(f"no command {short(msg.uuid)}")
-        if not self._may_use(client_id, handle, shared, handle._impl.uuid):
-            self._refuse_use(client_id, handle, _label(handle), True)
-            return False
-        return True
-
-    def _gizmo(self, client_id: int, name: str) -> tuple[Any, bool]:
-        handle = self.server.scene._handle_from_transform_controls_name.get(name)
-        if handle is not None:
-            return handle, True
-        client = self._client(client_id)
-        return (None if client is None else
-                client.scene._handle_from_transform_controls_name.get(name)), False
-
-    def _check_TransformControlsUpdateMessage(self, client_id: int, state: _ClientState,
-                                              msg: Any) -> bool:
-        handle, shared = self._gizmo(client_id, msg.name)
-        if handle is None:
-            raise Refused(f"no transform control {short(msg.name)}")
-        if len(msg.wxyz) != 4 or len(msg.position) != 3 or not any(msg.wxyz):
-            raise Refused("pose must be a unit quaternion and a 3-vector")
-        if max(abs(float(p)) for p in msg.position) > 100.0:
-            raise Refused(f"position {short(msg.position)} is off the scene")
-        if not self._may_use(client_id, handle, shared, msg.name):
-            self._restore_gizmo(client_id, handle, msg)
-            self._refuse_use(client_id, handle, msg.name, False)
-            return False
-        return True
-
-    def _restore_gizmo(self, client_id: int, handle: Any, msg: Any) -> None:
-        from viser import _messages
-
-        client = self._client(client_id)
-        if client is None:
-            return
-        for out in (_messages.SetPositionMessage(msg.name, tuple(map(float, handle.position))),
-                    _messages.SetOrientationMessage(msg.name, tuple(map(float, handle.wxyz)))):
-            out.owner = msg.owner  # type: ignore[attr-defined]
-            client._websock_connection.queue_message(out)
-
-    def _check_gizmo_phase(self, client_id: int, msg: Any) -> bool:
-        handle, shared = self._gizmo(client_id, msg.name)
-        if handle is None:
-            raise Refused(f"no transform control {short(msg.name)}")
-        return self._may_use(client_id, handle, shared, msg.name)
-
-    def _check_TransformControlsDragStartMessage(self, client_id: int, state: _ClientState,
-                                                 msg: Any) -> bool:
-        return self._check_gizmo_phase(client_id, msg)
-
-    def _check_TransformControlsDragEndMessage(self, client_id: int, state: _ClientState,
-                                               msg: Any) -> bool:
-        return self._check_gizmo_phase(client_id, msg)
-
-    def _check_FileTransferStartUpload(self, client_id: int, state: _ClientState,
-                                       msg: Any) -> bool:
-        handle, shared = self._gui_handle(client_id, msg.source_component_uuid,
-                                          "_gui_input_handle_from_uuid")
-        if handle is None or type(handle).__name__ != "GuiUploadButtonHandle":
-            raise Refused(f"no upload button {short(msg.source_component_uuid)}")
-        size, parts = int(msg.size_bytes), int(msg.part_count)
-        if not 0 <= size <= self.limits.max_upload_bytes:
-            raise Refused(f"file of {size} bytes (at most {self.limits.max_upload_bytes})")
-        if not 0 <= parts <= size // _UPLOAD_CHUNK + 1:
-            raise Refused(f"{parts} parts for {size} bytes")
-        if not self._may_use(client_id, handle, shared, handle._impl.uuid):
-            self._refuse_use(client_id, handle, _label(handle), True)
-            return False
-        state.uploads.add(msg.transfer_uuid)
-        return True
-
-    def _check_FileTransferPart(self, client_id: int, state: _ClientState, msg: Any) -> bool:
-        if msg.transfer_uuid not in state.uploads:
-            raise Refused("part of an upload this browser did not start")
-        if len(msg.content) > _UPLOAD_CHUNK:
-            raise Refused(f"upload part of {len(msg.content)} bytes")
-        return True
-
-
-def _label(handle: Any) -> str:
-    return str(getattr(handle._impl.props, "label", type(handle).__name__))[:40]
-
-
-def _action_of(handle: Any) -> str | None:
-    """The ``operator_only`` action of one of ``handle``'s callbacks (the refusal's wording)."""
-    impl = handle._impl
-    holds = [cb for cbs in getattr(impl, "hold_cbs_from_freq", {}).values() for cb in cbs]
-    for cb in (*holds, *getattr(impl, "update_cb", ()), *getattr(impl, "trigger_cb", ())):
-        what = getattr(cb, "operator_only", None)
-        if what:
-            return str(what)
-    return None

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from console.plan_view import TableObject, validate_obstacles
+from console.table_scene import TableObject, validate_obstacles
 from core.planning.obstacles import Obstacle, check_clearance
 
 DEFAULT_CLEARANCE = 0.010   # m between the arm (gripper included) and any obstacle

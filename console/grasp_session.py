@@ -29,11 +29,11 @@ import viser
 from console.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
 from console.lab_feed import feed_grasp
 from console.obstacle_view import ObstacleLayer
-from console.plan_view import (LIVE_HZ, Outcome, PlanScene, SessionView, TableObject,
-                               validate_object)
+from console.plan_view import LIVE_HZ, Outcome, PlanScene, SessionView
 from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
 from console.table_bin import BinView, TableBin
+from console.table_scene import TableObject, validate_object
 from core.planning.feasibility import GraspRefused
 from core.planning.obstacles import Obstacle
 from core.planning.reachability import ReachMap

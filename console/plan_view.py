@@ -11,18 +11,16 @@ child process (:func:`console.reach_job.start_reach_map`), so it never holds the
 or the GIL; it is drawn smooth and clipped to the table (:mod:`console.reach_shading`).
 
 Geometry comes from pure functions (``plan_geometry``, ``ghost_segments``, ``object_mesh``,
-``reach_mesh``, ``ray_to_table``), tested without a server. Scene JSON is
-``{"objects": [{"name", "x", "y", "r"}, ...], "obstacles": [{"name", "x", "y", "r"}, ...]}`` in
-metres (``obstacles`` is optional: older files without it load with none; obstacles are drawn
-by :mod:`console.obstacle_view`). :class:`Outcome` /
-:class:`SessionView` / :func:`outcome_html` are what the panels show.
+``reach_mesh``, ``ray_to_table``), tested without a server. The table objects themselves, their
+checks and scene JSON are :mod:`console.table_scene` (obstacles are drawn by
+:mod:`console.obstacle_view`). :class:`Outcome` / :class:`SessionView` / :func:`outcome_html`
+are what the panels show.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import html
-import json
 import math
 from typing import Any, Callable
 
@@ -30,10 +28,10 @@ import numpy as np
 import numpy.typing as npt
 
 from core.kinematics import planar as pk
-from core.planning.arm_model import ArmModel
-from core.planning.obstacles import Obstacle, check_obstacles
+from core.planning.obstacles import Obstacle
 from core.planning.plan_types import GraspPlan
 from console.reach_shading import shading_meshes
+from console.table_scene import TableObject
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap
 from core.units import fmt_mm
 
@@ -49,74 +47,6 @@ TRAIL_WAYPOINTS = 4                 # the trail shows at most this many passed w
 TRAIL_FADE = 0.45                   # the oldest of them is this far faded towards the table
 TABLE_TINT = np.array([226, 222, 214], float)  # what a faded trail fades into
 LABEL_GAP = 0.022                   # m between a waypoint's dot and its number
-
-
-@dataclasses.dataclass(frozen=True)
-class TableObject:
-    """A cylinder on the table (the paper's enclosing cylinder of the object)."""
-
-    name: str
-    x: float
-    y: float
-    r: float
-
-
-def validate_object(obj: TableObject, robot) -> TableObject:
-    """Raise ValueError with an operator message if ``obj`` is not a sensible object."""
-    if not all(math.isfinite(v) for v in (obj.x, obj.y, obj.r)):
-        raise ValueError("object position and radius must be finite numbers")
-    if not 0.002 <= obj.r <= 0.2:
-        raise ValueError(f"object radius must be between 2 and 200 mm, got {obj.r * 1e3:.1f} mm")
-    if max(abs(obj.x), abs(obj.y)) > 2.0:
-        raise ValueError("object must lie on the table (within 2 m of the base)")
-    return obj
-
-
-def validate_obstacles(obstacles: list[Obstacle], robot) -> list[Obstacle]:
-    """Raise ValueError with an operator message for a bad obstacle (not finite, radius not
-    positive, on the arm's base, names not unique); else return them."""
-    return list(check_obstacles(obstacles, ArmModel.from_robot(robot),
-                                robot.planner.base_keepout))
-
-
-@dataclasses.dataclass(frozen=True)
-class Scene:
-    """What a scene file holds: the table objects and the obstacles."""
-
-    objects: list[TableObject]
-    obstacles: list[Obstacle]
-
-
-def scene_to_json(objects: list[TableObject], obstacles: list[Obstacle] = ()) -> str:
-    """Scene JSON (objects and obstacles in metres)."""
-    return json.dumps({"objects": [dataclasses.asdict(o) for o in objects],
-                       "obstacles": [dataclasses.asdict(o) for o in obstacles]}, indent=1)
-
-
-def _items(data, key: str, kind: type, label: str) -> list:
-    return [kind(str(o.get("name", f"{label} {i + 1}")), float(o["x"]), float(o["y"]),
-                 float(o["r"])) for i, o in enumerate(data[key])]
-
-
-def parse_scene(text: str, robot) -> Scene:
-    """Parse and validate scene JSON (objects and, if present, obstacles); ValueError (with
-    the reason) changes nothing."""
-    try:
-        data = json.loads(text)
-        objs = _items(data, "objects", TableObject, "Object")
-        obstacles = (_items(data, "obstacles", Obstacle, "Obstacle")
-                     if data.get("obstacles") is not None else [])
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ValueError(f"not a scene file ({type(exc).__name__}: {exc})") from None
-    names = [o.name for o in objs]
-    if len(set(names)) != len(names):
-        raise ValueError("object names must be unique")
-    return Scene([validate_object(o, robot) for o in objs], validate_obstacles(obstacles, robot))
-
-
-def scene_from_json(text: str, robot) -> list[TableObject]:
-    """The objects of scene JSON (:func:`parse_scene`); ValueError changes nothing."""
-    return parse_scene(text, robot).objects
 
 
 def ray_to_table(origin: npt.ArrayLike, direction: npt.ArrayLike) -> tuple[float, float] | None:

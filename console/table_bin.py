@@ -57,7 +57,7 @@ def locate_bin(robot: Any, x: float, y: float) -> TableBin:
 
 
 def scene_json_with_bin(scene_text: str, table_bin: TableBin | None) -> str:
-    """Scene JSON (``console.plan_view.scene_to_json``) with the bin under ``"bin"`` if any."""
+    """Scene JSON (``console.table_scene.scene_to_json``) with the bin under ``"bin"`` if any."""
     data = json.loads(scene_text)
     if table_bin is not None:
         data["bin"] = table_bin.record()

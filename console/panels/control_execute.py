@@ -21,13 +21,13 @@ import viser
 
 from console.panels.base import operator_only
 from console.panels.control_text import ExecuteTarget, execute_target, table_point
-from console.plan_view import validate_object
+from console.table_scene import validate_object
 from hw_bridge.soft_arm_process import ARM_FIRST
 
 
 def target_object(target: ExecuteTarget) -> Any:
     """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
-    from console.plan_view import TableObject
+    from console.table_scene import TableObject
     return TableObject(target.name, target.x, target.y, target.r)
 
 

@@ -27,7 +27,7 @@ import viser
 from console.header import Tone
 from console.panels.base import operator_only
 from console.panels.control_text import IDLE_PHASES
-from console.plan_view import validate_object
+from console.table_scene import validate_object
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST, ControlView
 
 NO_BIN = ("Place a bin first: in the Objects panel choose 'Table click places: Bin' and click "

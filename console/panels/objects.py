@@ -9,7 +9,7 @@ leaves the table alone. Objects: each object carries a transform gizmo in the 3D
 planner re-plans live while it moves, see ``console.panels.planner``). The number boxes show and
 edit the selected object, in mm (SI inside: the session keeps metres); "Add object" places one
 at the typed x, y, r. The scene (objects and obstacles) is saved as a JSON download and loaded
-from an uploaded file (``console.plan_view.parse_scene``; a bad file is refused with its reason
+from an uploaded file (``console.table_scene.parse_scene``; a bad file is refused with its reason
 and changes nothing; a file without obstacles loads with none).
 
 Sharing: the objects and the selection are the same for every browser and drive the plan, so
@@ -34,9 +34,10 @@ import viser
 from console.panels.base import Panel, operator_only
 from console.panels.obstacle_editor import ObstacleEditor
 from console.panels.planner import SessionView, session_for
-from console.plan_view import parse_scene, ray_to_table, scene_to_json
+from console.plan_view import ray_to_table
 from console.table_bin import (BinLocator, TableBin, bin_point_from_scene_json,
                                scene_json_with_bin)
+from console.table_scene import parse_scene, scene_to_json
 
 # What a click on free table places (dropdown options; a click on an object or obstacle
 # selects it).

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
-from console.arm_view import DeltaArmView
+from console.delta_arm_view import DeltaArmView
 from core.planning.paths import MotionPath
 
 Array = npt.NDArray[np.float64]

@@ -25,7 +25,6 @@ clearance away along the whole motion, or says why it cannot ("blocked", naming 
 from __future__ import annotations
 
 import concurrent.futures as cf
-import dataclasses
 import html
 import threading
 import time
@@ -43,6 +42,7 @@ from console.panels.base import Panel
 from console.panels.extensible_status import (extensible_runner, hardware_html, runner_phase,
                                               worker_pool)
 from console.panels.obstacles_boxes import box_scene_of
+from console.panels.path_request import PathRequest, PendingPlan
 from console.panels.path_scene import PathScene, trail_tail
 from console.panels.plot_data import thin
 from console.state import ArmState
@@ -58,28 +58,6 @@ PLOT_HZ = 5.0
 PLAN_TIMEOUT_S = 30.0  # s: a Fig. 9 path plans in 2-5 s unloaded, 10-25 s on a busy 2-core box
 STATUS_HZ = 2.0  # planning seconds, Hardware line and the header's Phase field
 TRAIL_S = 30.0  # the measured tip trace shows at most the run's last this many seconds
-
-
-@dataclasses.dataclass(frozen=True)
-class PathRequest:
-    """What the operator asked for (lengths in m, speed in m/s)."""
-
-    kind: str
-    plane: str
-    size: float
-    speed: float
-    start: tuple[float, ...]  # flattened commanded posture the path starts from
-    obstacles: int = 0  # version of the box obstacles it was planned around
-
-
-@dataclasses.dataclass
-class _Planning:
-    """A plan in the worker: what was asked, since when (perf_counter s)."""
-
-    req: PathRequest
-    waypoints: Array
-    future: cf.Future
-    started: float
 
 
 class PathsPanel(Panel):
@@ -123,7 +101,7 @@ class PathsPanel(Panel):
         self._lock = threading.Lock()
         self._pool: cf.ProcessPoolExecutor | None = None
         self._planned: tuple[PathRequest, MotionPath] | None = None
-        self._planning: _Planning | None = None
+        self._planning: PendingPlan | None = None
         self._execute_after_plan = False
         self._job = 0
         self._plot_at = 0.0
@@ -184,7 +162,7 @@ class PathsPanel(Panel):
             self._set_status(f"⚠ Planning failed: the planner worker is gone ({exc}); "
                              "Preview again.", "error")
             return
-        planning = _Planning(req, waypoints, future, time.perf_counter())
+        planning = PendingPlan(req, waypoints, future, time.perf_counter())
         with self._lock:
             self._planning = planning
         self._show_planning(planning)
@@ -241,7 +219,7 @@ class PathsPanel(Panel):
         for proc in list((getattr(pool, "_processes", None) or {}).values()):
             proc.terminate()  # stuck in a plan: shutdown alone would leave it computing
 
-    def _on_planned(self, planning: _Planning) -> None:
+    def _on_planned(self, planning: PendingPlan) -> None:
         """Worker callback: draw the plan and say what it is, or why there is none."""
         with self._lock:
             if self._planning is not planning:
@@ -253,7 +231,7 @@ class PathsPanel(Panel):
         except Exception as exc:  # noqa: BLE001 - a done-callback's exception would be lost
             self._set_status(f"⚠ Planning failed: {type(exc).__name__}: {exc}", "error")
 
-    def _show_plan(self, planning: _Planning, execute: bool) -> None:
+    def _show_plan(self, planning: PendingPlan, execute: bool) -> None:
         req, waypoints = planning.req, planning.waypoints
         try:
             path: MotionPath = planning.future.result()
@@ -299,7 +277,7 @@ class PathsPanel(Panel):
                          name="path-watch").start()
 
     # -- display ---------------------------------------------------------------------------
-    def _show_planning(self, planning: _Planning) -> None:
+    def _show_planning(self, planning: PendingPlan) -> None:
         """Planning status with its seconds; past ``PLAN_TIMEOUT_S`` say so and give up."""
         waited = time.perf_counter() - planning.started
         if waited >= PLAN_TIMEOUT_S:

@@ -1,13 +1,13 @@
 """Tip-target panel: drag a gizmo (or type x, y, z) and the extensible arm's tip follows by IK.
 
 A transform control in the 3D view holds the tip target. While the operator drags it, a worker
-thread has the tip IK (``core.kinematics.delta_ik.solve_tip_ik``) solved, warm-started from the
-posture being moved to, without restarts, at most ``LIVE_HZ`` times a second on the newest
-target only; on release (and for typed targets) it solves once more with restarts. The solve
-itself runs in a ``spawn``-ed worker process (started on the first solve), never in the console's
-process: there a CPU-bound solve holds the GIL the extensible runner's 100 Hz loop needs
-(measured: an IK thread next to the runner tripped the serial link's write timeout within
-seconds). The solution
+thread (``console.panels.target_worker``) has the tip IK
+(``core.kinematics.delta_ik.solve_tip_ik``) solved, warm-started from the posture being moved to,
+without restarts, at most ``LIVE_HZ`` times a second on the newest target only; on release (and
+for typed targets) it solves once more with restarts. The solve itself runs in a ``spawn``-ed
+worker process (started on the first solve), never in the console's process: there a CPU-bound
+solve holds the GIL the extensible runner's 100 Hz loop needs (measured: an IK thread next to the
+runner tripped the serial link's write timeout within seconds). The solution
 is a set-point for ``app.hold`` (``console.hold_to_run``: speed-capped, stops on STOP or a lost
 lease), like the jog sliders; on arrival the panel re-commands it as ``"target"`` so the Δ jog
 sliders show it. With the hardware runner started, the motors follow the command; when the
@@ -33,7 +33,6 @@ from __future__ import annotations
 import concurrent.futures as cf
 import html
 import threading
-import time
 from typing import Any
 
 import numpy as np
@@ -43,6 +42,7 @@ import viser
 from console.panels.base import Panel, operator_only
 from console.panels.extensible_status import link_summary, worker_pool
 from console.panels.obstacles_boxes import box_scene_of
+from console.panels.target_worker import TargetIKWorker
 from console.state import ArmState
 from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
 from core.kinematics import delta as dk
@@ -52,60 +52,11 @@ from core.planning.box_scene import BoxScene
 from core.robot_sections import IKSettings
 
 Array = npt.NDArray[np.float64]
-LIVE_HZ = 30.0
 TARGET_COLOR = (235, 130, 30)
 MISS_COLOR = (210, 40, 40)
-ARRIVAL_POLL_S = 0.05
 IK_TIMEOUT_S = 20.0  # s: a solve takes < 1 s unloaded; past this the worker is restarted
 _AXES = ("x", "y", "z")
 BLOCKED = "Blocked by the boxes: "  # an error message that starts so is shown as "blocked"
-
-
-class _IKWorker:
-    """Latest-value mailbox + one daemon thread: solves only the newest target."""
-
-    def __init__(self, panel: "TargetPanel") -> None:
-        self.panel = panel
-        self._cond = threading.Condition()
-        self._request: tuple[Array, bool, int] | None = None
-        self.generation = 0  # bumped by cancel(): results of older requests are dropped
-        threading.Thread(target=self._run, name="target-ik", daemon=True).start()
-
-    def submit(self, target: Array, final: bool, client_id: int) -> None:
-        with self._cond:
-            # A pending final solve is not downgraded by a live one.
-            final = final or (self._request is not None and self._request[1])
-            self._request = (np.array(target, dtype=float), final, client_id)
-            self._cond.notify()
-
-    def cancel(self) -> None:
-        with self._cond:
-            self._request = None
-            self.generation += 1
-
-    def _run(self) -> None:
-        last = 0.0
-        while True:
-            with self._cond:
-                self._cond.wait_for(lambda: self._request is not None, ARRIVAL_POLL_S)
-                request, self._request = self._request, None
-                generation = self.generation
-            self.panel.check_arrival()
-            if request is None:
-                continue
-            target, final, client_id = request
-            if not final:  # throttle live solves; a newer target replaces this one meanwhile
-                wait = last + 1.0 / LIVE_HZ - time.perf_counter()
-                if wait > 0:
-                    time.sleep(wait)
-                    with self._cond:
-                        if self._request is not None:
-                            continue
-            last = time.perf_counter()
-            try:
-                self.panel.solve(target, final, client_id, generation)
-            except Exception as exc:  # noqa: BLE001 - report, keep the worker alive
-                self.panel.report_error(str(exc))
 
 
 class TargetPanel(Panel):
@@ -149,7 +100,7 @@ class TargetPanel(Panel):
         self._synced_seq = self.app.store.command.seq
         self._pool: cf.ProcessPoolExecutor | None = None
         self._pool_lock = threading.Lock()
-        self.worker = _IKWorker(self)
+        self.worker = TargetIKWorker(self)
         self.gizmo.on_update(self._on_gizmo)
         for handle in self.inputs:
             handle.on_update(self._on_typed)

@@ -9,9 +9,11 @@ import numpy as np
 import pytest
 import viser
 
-from console.arm_view import DeltaArmView, PlanarArmView, make_arm_view
+from console.arm_view import make_arm_view
 from console.dead_band import DeadBand
+from console.delta_arm_view import DeltaArmView
 from console.model import model_for
+from console.planar_arm_view import PlanarArmView
 from console.skin import TubeSkin, bspline_weights
 from core.robots import load
 

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from console.app import ConsoleApp
-from console.arm_view import DeltaArmView, PlanarArmView, make_arm_view
+from console.arm_view import make_arm_view
+from console.delta_arm_view import DeltaArmView
+from console.planar_arm_view import PlanarArmView
 from console.panels.base import Panel
 from console.panels.jog import JogPanel
 from console.panels.readout import ReadoutPanel

@@ -16,7 +16,8 @@ from console.panels.control_text import (
     state_html,
     waypoint_text,
 )
-from console.plan_view import Outcome, SessionView, TableObject
+from console.plan_view import Outcome, SessionView
+from console.table_scene import TableObject
 from core.planning.grasp import plan_grasp
 from core.robots import load
 

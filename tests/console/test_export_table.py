@@ -20,10 +20,11 @@ from console.lab_feed import feed_grasp
 from console.model import model_for
 from console.panels import planner
 from console.panels.objects import ObjectsPanel
-from console.plan_view import SessionView, TableObject
+from console.plan_view import SessionView
 from console.recording import Recorder, load_recording
 from console.state import StateStore
 from console.table_bin import TableBin
+from console.table_scene import TableObject
 from core.planning.obstacles import Obstacle
 from core.robots import load
 from tests.console.test_lab_export import decode_embedded

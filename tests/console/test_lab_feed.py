@@ -17,9 +17,10 @@ from console.datadir import DataDir
 from console.lab_feed import ControlFeed, feed_grasp
 from console.model import model_for
 from hw_bridge.soft_arm_process import ControlView
-from console.plan_view import Outcome, SessionView, TableObject
+from console.plan_view import Outcome, SessionView
 from console.recording import Recorder, load_recording
 from console.state import StateStore
+from console.table_scene import TableObject
 from core.control.stack import Telemetry
 from core.planning.grasp import plan_grasp
 from core.robots import load

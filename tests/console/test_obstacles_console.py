@@ -16,10 +16,10 @@ from console.datadir import DataDir
 from console.lab_feed import feed_grasp
 from console.model import model_for
 from console.obstacle_view import hatch_segments, obstacle_geometry
-from console.plan_view import (TableObject, outcome_html, parse_scene, scene_from_json,
-                               scene_to_json)
+from console.plan_view import outcome_html
 from console.recording import Recorder, load_recording
 from console.state import StateStore
+from console.table_scene import TableObject, parse_scene, scene_from_json, scene_to_json
 from core.planning.obstacles import Obstacle
 from core.robots import load
 from fakes import FakeClient

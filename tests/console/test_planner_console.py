@@ -12,9 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from console.plan_view import (TableObject, circle_segments, ghost_segments, object_mesh,
-                               plan_geometry, ray_to_table, reach_mesh, scene_from_json,
-                               scene_to_json)
+from console.plan_view import (circle_segments, ghost_segments, object_mesh, plan_geometry,
+                               ray_to_table, reach_mesh)
+from console.table_scene import TableObject, scene_from_json, scene_to_json
 from core.kinematics import planar as pk
 from core.planning.sides import plan_grasp_sided
 from core.planning.reachability import PLANNABLE, from_json, reachability_map, to_json

@@ -21,9 +21,10 @@ from console.panels import planner
 from console.panels.control import ControlPanel
 from console.panels.control_row import NO_BIN, NO_OBJECTS
 from console.panels.objects import ObjectsPanel
-from console.plan_view import SessionView, TableObject, scene_from_json, scene_to_json
+from console.plan_view import SessionView
 from console.table_bin import (BIN_HEIGHT, TableBin, bin_point_from_scene_json, locate_bin,
                                open_box_mesh, scene_json_with_bin)
+from console.table_scene import TableObject, scene_from_json, scene_to_json
 from core.control.row import ObjectOutcome, RowObject, bin_at
 from core.control.row_stack import RowReport
 from core.robots import load
