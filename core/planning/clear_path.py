@@ -12,8 +12,8 @@ guaranteed lower bound, not a sampled estimate) to keep:
 * a held object (a disk of the grasped radius at the gripper's finger, :class:`HeldObject`)
   as far from every obstacle, or, when it starts closer (an object grasped next to an
   obstacle), never closer than it starts less :data:`HELD_SLACK`;
-* per-obstacle extra disks with their own required gap (``extra``: e.g. the object to grasp,
-  which the arm must not push on its way round).
+* extra disks with their own required gap for the arm body alone (``extra``: the object to
+  grasp, which the arm must not push on its way round while the gripper reaches around it).
 
 The search is RRT-connect in the box of curvature limits (every edge certified; a seeded
 ``numpy`` generator and an iteration cap make it deterministic), then a greedy shortcut (the
@@ -42,6 +42,8 @@ HELD_SLACK = 0.003      # m: a held object that starts inside the clearance may 
 START_SLACK = 0.0005    # m: an arm that starts inside clearance + pad keeps its gap less this
 STEP_M = 0.06           # m: longest RRT extension (bound on any arm point's displacement)
 MAX_ITERATIONS = 600    # RRT-connect rounds (the deterministic cap; budget_s cuts earlier)
+LOCAL_SHARE = 0.5       # of the samples drawn near a node of the growing tree ...
+LOCAL_SIGMA = 0.08      # ... with this standard deviation (fraction of the curvature range)
 
 
 class ClearPathRefused(GraspRefused):
@@ -114,7 +116,7 @@ class ClearPathProblem:
         clearance: Required gap (m), ``pad`` added for the planner's own margin.
         held: Held object, if any; its required gap is capped by its gap at ``start``.
         start: The start configuration (for the held object's cap).
-        extra: More disks as (obstacle, required gap) for the arm and gripper only.
+        extra: More disks as (obstacle, required gap) for the arm body only.
     """
 
     def __init__(self, model: ArmModel, gripper: GripperShape, obstacles: Sequence[Obstacle],
@@ -155,10 +157,19 @@ class ClearPathProblem:
     def margins(self, kappas: npt.ArrayLike) -> Array:
         """(..., D) margin to each disk (obstacles first, then the extra ones); >= 0 is clear."""
         k = np.asarray(kappas, float)
-        out = obstacle_clearance(self.model, k, self.disks, self.gripper) - self.need
+        out = self._gaps(k) - self.need
         if self.held is not None and self.n_obstacles:
             held = self.held_gaps(k) - self.held_need
             out[..., :self.n_obstacles] = np.minimum(out[..., :self.n_obstacles], held)
+        return out
+
+    def _gaps(self, k: Array) -> Array:
+        """(..., D) gaps of the arm and gripper to the obstacles, of the body to the extras."""
+        n = self.n_obstacles
+        out = np.empty(k.shape[:-1] + (len(self.disks),))
+        out[..., :n] = obstacle_clearance(self.model, k, self.disks[:n], self.gripper)
+        for j, o in enumerate(self.disks[n:], start=n):
+            out[..., j] = self.model.body_clearance(k, o.center, o.r)
         return out
 
     def margin(self, kappas: npt.ArrayLike) -> Array:
@@ -178,7 +189,7 @@ class ClearPathProblem:
         """The disk the straight line a -> b comes closest to and that smallest gap (dense)."""
         tau = np.linspace(0.0, 1.0, 129)[:, None]
         ks = a + tau * (b - a)
-        gaps = obstacle_clearance(self.model, ks, self.disks, self.gripper)
+        gaps = self._gaps(ks)
         if self.held is not None and self.n_obstacles:
             gaps[:, :self.n_obstacles] = np.minimum(gaps[:, :self.n_obstacles],
                                                     self.held_gaps(ks))
@@ -197,9 +208,9 @@ def _refuse_end(problem: ClearPathProblem, k: Array, name: str) -> None:
         return
     j = int(np.argmin(m))
     o = problem.disks[j]
-    gap = float(m[j] + problem.need[j]) if problem.held is None or j >= problem.n_obstacles \
-        else float(min(obstacle_clearance(problem.model, k, (o,), problem.gripper)[0],
-                       problem.held_gaps(k)[j]))
+    gap = float(problem._gaps(k)[j])
+    if problem.held is not None and j < problem.n_obstacles:
+        gap = min(gap, float(problem.held_gaps(k)[j]))
     where = f"overlaps it by {_mm(-gap)}" if gap < 0 else f"comes {_mm(gap)} from it"
     pad = f" (planned with {_mm(problem.pad)} more)" if problem.pad > 0 else ""
     raise ClearPathRefused(
@@ -307,10 +318,14 @@ def _rrt_connect(problem: ClearPathProblem, a: Array, b: Array, deadline: float,
         if time.perf_counter() > deadline:
             break
         grow, other = trees[it % 2], trees[1 - it % 2]
-        q = rng.uniform(m.lo, m.hi)
+        if rng.random() < LOCAL_SHARE:  # near a node of the tree: narrow passages
+            near = grow.nodes[rng.integers(grow.size)]
+            q = np.clip(near + rng.normal(0.0, LOCAL_SIGMA, m.n) * (m.hi - m.lo), m.lo, m.hi)
+        else:
+            q = rng.uniform(m.lo, m.hi)
         i = grow.nearest(q)
         qn, _ = _steer(w, grow.nodes[i], q)
-        if not edge_ok(grow.nodes[i], qn):
+        if problem.margin(qn) < 0.0 or not edge_ok(grow.nodes[i], qn):
             continue
         new = grow.add(qn, i)
         # Connect: grow the other tree toward the new node while every step is clear.
