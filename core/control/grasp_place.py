@@ -431,7 +431,8 @@ class GraspAndPlace:
                 self.gripper_closed = False
                 return self._replan(t, "object lost while moving to the bin", settle=True)
         nxt = self.carry.advance(obs.kappa, obs.reference_finished, self.p.advance_dkappa)
-        if nxt is not None:
+        if nxt is not None:  # each target of the carry gets move_timeout_s
+            self._since = t
             self.events.append((t, f"carry: target {self.carry.index + 1}/"
                                    f"{len(self.carry.targets)}"))
             return Decision(Phase.MOVE_TO_BIN, kappa_target=nxt, gripper_closed=True)
@@ -443,8 +444,11 @@ class GraspAndPlace:
             self._enter(Phase.RELEASE, t, f"palm {dist * 1000:.0f} mm from the bin")
             return Decision(Phase.RELEASE, gripper_closed=False)
         if t - self._since > self.p.move_timeout_s:
-            return self._stop(t, f"bin not reached within {self.p.move_timeout_s:g} s "
-                                 f"(palm {dist * 1000:.0f} mm away)")
+            what = "bin" if self.carry.last else \
+                f"carry target {self.carry.index + 1}/{len(self.carry.targets)}"
+            return self._stop(t, f"{what} not reached within {self.p.move_timeout_s:g} s "
+                                 f"(palm {dist * 1000:.0f} mm away)" if self.carry.last
+                              else f"{what} not reached within {self.p.move_timeout_s:g} s")
         return Decision(Phase.MOVE_TO_BIN, gripper_closed=True)
 
     def _on_release(self, obs: Observation, t: float) -> Decision:
