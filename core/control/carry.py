@@ -9,8 +9,8 @@
 * :class:`CarryFollower` -- ``move_to_bin``'s targets one after another: the next is sent
   once the reference rests at the current one (ruckig, phase-synchronised: straight lines in
   kappa, the lines that were certified) and the arm is within ``tolerance`` of it.
-* :func:`bin_refusal` -- why a bin pose is too close to the obstacles (or None), for a
-  refusal before a task starts.
+* :func:`bin_refusal`, :func:`check_bin` -- why a bin pose is too close to the obstacles, for
+  a refusal before a task or a row starts.
 """
 
 from __future__ import annotations
@@ -87,6 +87,15 @@ def bin_refusal(robot: Any, bin_kappa: npt.ArrayLike, obstacles: Any,
     where = f"overlaps it by {-gap * 1e3:.0f} mm" if gap < 0 else f"is {gap * 1e3:.0f} mm from it"
     return (f"The bin is too close to {o.name}: the arm at the bin pose {where}, the clearance "
             f"is {clearance * 1e3:.0f} mm. Move the bin or {o.name}, or lower the clearance.")
+
+
+def check_bin(robot: Any, bin_params: Any, obstacles: Any, clearance: float) -> None:
+    """Raise ValueError with :func:`bin_refusal`'s reason when either finger's bin pose of
+    ``bin_params`` (``BinParams``) is too close to an obstacle."""
+    for side in ("left", "right") if obstacles else ():
+        why = bin_refusal(robot, bin_params.kappa_for(side), obstacles, clearance)
+        if why:
+            raise ValueError(why)
 
 
 class CarryFollower:

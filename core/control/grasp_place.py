@@ -29,7 +29,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 import numpy.typing as npt
 
-from core.control.carry import CarryFollower, bin_refusal, plan_side
+from core.control.carry import CarryFollower, check_bin, plan_side
 from core.control.params import BinParams, StateMachineParams
 from core.control.fastkin import fk, point_in_pose
 from core.robots import SoftArm
@@ -225,11 +225,7 @@ class GraspAndPlace:
         self._pending = self._begin_approach(t)  # the first step() hands out the first target
 
     def _check_bin(self) -> None:
-        for side in ("left", "right"):
-            why = bin_refusal(self.robot, self.bin.kappa_for(side), self.obstacles,
-                              self.clearance)
-            if why:
-                raise ValueError(why)
+        check_bin(self.robot, self.bin, self.obstacles, self.clearance)
 
     def stop(self, t: float, reason: str = "operator STOP") -> None:
         """Freeze the arm where it is (cylinder volumes held) with a reason."""

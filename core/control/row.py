@@ -30,7 +30,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from core.control.carry import bin_refusal
+from core.control.carry import check_bin
 from core.control.grasp_place import Phase
 from core.control.params import BinParams, StateMachineParams
 from core.robots import SoftArm
@@ -122,13 +122,9 @@ class ObjectRow:
             raise RuntimeError(f"the row was already started ({self.state})")
         if not stack.armed:
             raise RuntimeError("row refused: the arm is not armed")
-        m = stack.machine
-        obstacles = getattr(m, "obstacles", ())
-        bin_params = m.bin if self.bin_params is None else self.bin_params
-        for side in ("left", "right") if obstacles else ():  # before anything changes
-            why = bin_refusal(m.robot, bin_params.kappa_for(side), obstacles, m.clearance)
-            if why:
-                raise ValueError(why)
+        m = stack.machine  # a bin too close to an obstacle: ValueError before anything changes
+        check_bin(m.robot, m.bin if self.bin_params is None else self.bin_params,
+                  getattr(m, "obstacles", ()), getattr(m, "clearance", 0.0))
         self._robot_bin = stack.machine.bin
         if self.bin_params is not None:
             stack.machine.bin = self.bin_params  # for this row only: put back when it ends

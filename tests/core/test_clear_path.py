@@ -9,7 +9,7 @@ import pytest
 from core import robots
 from core.control.grasp_place import PlanRequest, immediate
 from core.control.planner_spec import plan_request
-from core.control.row import bin_at
+from core.control.row import ObjectRow, RowObject, bin_at
 from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
@@ -139,6 +139,18 @@ def test_a_bin_too_close_to_an_obstacle_is_refused_before_anything_moves(bin_par
     stack.set_obstacles([Obstacle("Cup", float(tip[0]), float(tip[1]), 0.01)], CLEARANCE)
     with pytest.raises(ValueError, match="The bin is too close to Cup"):
         stack.machine.start(0.0)
+    assert stack.machine.phase.value == "idle" and not stack.machine.events
+
+
+def test_a_row_to_a_bin_too_close_to_an_obstacle_is_refused_before_it_starts(bin_params):
+    stack = ControlStack(ARM, 0.01, immediate(lambda req: None))
+    stack.armed = True  # what the row looks at; nothing is stepped here
+    tip = planar.forward_kinematics(bin_params.kappa_right, ARM.lengths, ARM.base_pose)[-1]
+    stack.set_obstacles([Obstacle("Cup", float(tip[0]), float(tip[1]), 0.01)], CLEARANCE)
+    row = ObjectRow([RowObject(*OBJECT, R)], bin_params)
+    with pytest.raises(ValueError, match="The bin is too close to Cup"):
+        row.start(stack, 0.0)
+    assert row.state == "idle" and stack.machine.bin is ARM.bin
     assert stack.machine.phase.value == "idle" and not stack.machine.events
 
 
