@@ -16,10 +16,12 @@ which obstacle is in the way and by how much.
    which no clear shape is found: first with the operator's delta_d, then with more approach
    circles (delta_d / 2), then from other first configurations around the object (table
    configurations clear of the obstacles), for at most :data:`SEARCH_BUDGET_S`.
-4. Then the long way round (``global_search``): the clear final approach of one of those plans
-   (or of the plain plan) reached from ``kappa_meas`` by a certified path around the obstacles
-   (:mod:`core.planning.global_approach`), searched until the same budget runs out (at least
-   :data:`~core.planning.global_approach.MIN_TAIL_BUDGET_S` per final approach tried).
+4. Then the long way round (``global_search``, :mod:`core.planning.global_approach`, every
+   line certified): those plans with each line that is not clear replaced by a certified path
+   (:func:`core.planning.clear_path.clear_path`); Algorithm 1 from relay configurations near
+   the object reached by such a path; the clear final approach of one of the plans reached
+   from ``kappa_meas`` by such a path; for what is left of the budget plus
+   :data:`GLOBAL_BUDGET_S`.
 5. When none succeeds the request is refused (``obstacle``), naming the obstacle the plain
    approach comes closest to, how close and how much clearance is missing.
 """
