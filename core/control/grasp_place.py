@@ -29,6 +29,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from core.control.carry import CarryFollower, check_bin, plan_side
 from core.control.params import BinParams, StateMachineParams
 from core.control.fastkin import fk, point_in_pose
 from core.robots import SoftArm
@@ -56,21 +57,27 @@ MOVING = (Phase.APPROACH, Phase.GRASP, Phase.MOVE_TO_BIN, Phase.RELEASE)
 @dataclasses.dataclass(frozen=True)
 class PlanRequest:
     """What the planner needs: measured curvatures, object centre and radius, and the obstacles
-    (``core.planning.obstacles.Obstacle``) every plan keeps ``clearance`` (m) from."""
+    (``core.planning.obstacles.Obstacle``) every plan keeps ``clearance`` (m) from; with
+    obstacles the bin (``BinParams``) the carry goes to, and ``plan`` when the grasp is given
+    (only its carry is planned, :func:`core.control.planner_spec.plan_request`)."""
 
     kappa: Array
     center: Array
     radius: float
     obstacles: tuple[Any, ...] = ()
     clearance: float = 0.0
+    bin: Any = None
+    plan: Any = None
 
 
 @dataclasses.dataclass(frozen=True)
 class WaypointPlan:
-    """The part of a ``GraspPlan`` the machine executes: waypoints (n, N) and palm poses (n, 3)."""
+    """The part of a ``GraspPlan`` the machine executes: waypoints (n, N), palm poses (n, 3)
+    and the carry to the bin (``GraspPlan.carry``)."""
 
     kappas: Array
     palm_poses: Array
+    carry: Array | None = None
 
 
 class PlanHandle(Protocol):
@@ -168,7 +175,7 @@ class GraspAndPlace:
 
     def _request(self, kappa: Array, center: Array, radius: float) -> PlanRequest:
         return PlanRequest(kappa.copy(), center.copy(), float(radius), self.obstacles,
-                           self.clearance)
+                           self.clearance, self.bin if self.obstacles else None, self._given)
 
     def reset(self) -> None:
         """Back to idle; forget plan, counters and times."""
@@ -191,18 +198,34 @@ class GraspAndPlace:
         self._ref_done_since: float | None = None
         self._grip_rel: Array | None = None
         self._pending: Decision | None = None
+        self._given: Any = None     # an executed plan whose carry is being planned
+        self.carry: CarryFollower | None = None
 
     def start(self, t: float) -> None:
-        """Run the full grasp-and-place: wait for the object to settle, plan, execute."""
+        """Run the full grasp-and-place: wait for the object to settle, plan, execute.
+
+        Raises ValueError (nothing changes) when the bin pose is too close to an obstacle."""
+        self._check_bin()
         self.reset()
         self._enter(Phase.SETTLING, t, "start")
 
     def execute(self, plan: Any, center: npt.ArrayLike, t: float) -> None:
-        """Run a given plan (approach, grasp, place) for the object at ``center``."""
+        """Run a given plan (approach, grasp, place) for the object at ``center``. With
+        obstacles and no ``carry`` in the plan its carry is planned first (the arm holds).
+
+        Raises ValueError (nothing changes) when the bin pose is too close to an obstacle."""
+        self._check_bin()
         self.reset()
         self.plan, self.plan_center = plan, np.asarray(center, dtype=float)
         self.times["start"] = t
+        if self.obstacles and getattr(plan, "carry", None) is None:
+            self._given, self.plan = plan, None
+            self._enter(Phase.PLANNING, t, "planning the carry to the bin")
+            return
         self._pending = self._begin_approach(t)  # the first step() hands out the first target
+
+    def _check_bin(self) -> None:
+        check_bin(self.robot, self.bin, self.obstacles, self.clearance)
 
     def stop(self, t: float, reason: str = "operator STOP") -> None:
         """Freeze the arm where it is (cylinder volumes held) with a reason."""
@@ -230,12 +253,7 @@ class GraspAndPlace:
         A plan without a ``side`` (a :class:`WaypointPlan` sent by the console) is read from
         its final palm pose: the object centre lies on the closing finger's side of it.
         """
-        side = getattr(self.plan, "side", None)
-        if side is None and self.plan is not None and self.plan_center is not None:
-            pose = np.asarray(self.plan.palm_poses, dtype=float)[-1]
-            d = self.plan_center - pose[:2]
-            return "right" if math.cos(pose[2]) * d[1] - math.sin(pose[2]) * d[0] < 0 else "left"
-        return "right" if side == "right" else "left"
+        return plan_side(self.plan, self.plan_center)
 
     def _side_sign(self) -> float:
         return -1.0 if self.closing_side == "right" else 1.0
@@ -262,6 +280,7 @@ class GraspAndPlace:
         if self.replans >= self.p.max_replans:
             return self._stop(t, f"{why}; gave up after {self.replans} re-plans")
         self.replans += 1
+        self._given = None
         self.events.append((t, f"re-plan {self.replans}: {why}"))
         self.plan = None
         self._settle_reset(None, t)
@@ -333,6 +352,7 @@ class GraspAndPlace:
         if not self._handle.done():
             return Decision(Phase.PLANNING, hold_reference=True, gripper_closed=self.gripper_closed)
         handle, self._handle = self._handle, None
+        self._given = None
         try:
             self.plan = handle.result()
         except Exception as exc:  # noqa: BLE001 - every planner failure becomes a stated reason
@@ -395,8 +415,10 @@ class GraspAndPlace:
         self._grip_rel = rel
         self.times["grasp_end"] = t
         self._enter(Phase.MOVE_TO_BIN, t, "grasped")
-        return Decision(Phase.MOVE_TO_BIN, kappa_target=self.bin.kappa_for(self.closing_side),
-                        gripper_closed=True)
+        carry = getattr(self.plan, "carry", None)
+        self.carry = CarryFollower(self.bin.kappa_for(self.closing_side) if carry is None
+                                   else carry)
+        return Decision(Phase.MOVE_TO_BIN, kappa_target=self.carry.target, gripper_closed=True)
 
     def _on_move_to_bin(self, obs: Observation, t: float) -> Decision:
         if obs.object_xy is not None and self._grip_rel is not None:
@@ -404,16 +426,25 @@ class GraspAndPlace:
             if float(np.hypot(*(rel - self._grip_rel))) > self.p.capture_check_m:
                 self.gripper_closed = False
                 return self._replan(t, "object lost while moving to the bin", settle=True)
-        bin_kappa = self.bin.kappa_for(self.closing_side)
+        nxt = self.carry.advance(obs.kappa, obs.reference_finished, self.p.advance_dkappa)
+        if nxt is not None:  # each target of the carry gets move_timeout_s
+            self._since = t
+            self.events.append((t, f"carry: target {self.carry.index + 1}/"
+                                   f"{len(self.carry.targets)}"))
+            return Decision(Phase.MOVE_TO_BIN, kappa_target=nxt, gripper_closed=True)
+        bin_kappa = self.carry.targets[-1]
         dist = float(np.hypot(*(self.palm(obs.kappa) - self.palm(bin_kappa))))
-        if dist <= self.p.release_distance_m:
+        if dist <= self.p.release_distance_m and self.carry.last:
             self.gripper_closed = False
             self.times["release"] = t
             self._enter(Phase.RELEASE, t, f"palm {dist * 1000:.0f} mm from the bin")
             return Decision(Phase.RELEASE, gripper_closed=False)
         if t - self._since > self.p.move_timeout_s:
-            return self._stop(t, f"bin not reached within {self.p.move_timeout_s:g} s "
-                                 f"(palm {dist * 1000:.0f} mm away)")
+            what = "bin" if self.carry.last else \
+                f"carry target {self.carry.index + 1}/{len(self.carry.targets)}"
+            return self._stop(t, f"{what} not reached within {self.p.move_timeout_s:g} s "
+                                 f"(palm {dist * 1000:.0f} mm away)" if self.carry.last
+                              else f"{what} not reached within {self.p.move_timeout_s:g} s")
         return Decision(Phase.MOVE_TO_BIN, gripper_closed=True)
 
     def _on_release(self, obs: Observation, t: float) -> Decision:

@@ -30,8 +30,19 @@ def plan_request(fn: Callable[..., Any], robot: Any, req: "PlanRequest") -> Any:
     """``fn`` (a planning function as above) called for a state machine's request: around the
     request's obstacles with its clearance when it has any (the first plan and every re-plan
     alike), else with the four positional arguments only (a planner that knows no obstacles
-    still works without them)."""
-    if req.obstacles:
-        return fn(robot, req.kappa, req.center, req.radius, obstacles=req.obstacles,
+    still works without them).
+
+    With obstacles and a bin (``req.bin``) the plan also gets its carry to the bin around
+    them (:func:`core.control.carry.with_carry`); a request with a given plan (``req.plan``,
+    an executed plan) only gets that carry, ``fn`` is not called."""
+    if req.plan is not None:
+        plan = req.plan
+    elif req.obstacles:
+        plan = fn(robot, req.kappa, req.center, req.radius, obstacles=req.obstacles,
                   clearance=req.clearance)
-    return fn(robot, req.kappa, req.center, req.radius)
+    else:
+        return fn(robot, req.kappa, req.center, req.radius)
+    if req.obstacles and req.bin is not None:
+        from core.control.carry import with_carry
+        return with_carry(robot, plan, req)
+    return plan

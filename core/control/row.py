@@ -11,7 +11,8 @@ the next object. Only the operator's STOP (:meth:`ObjectRow.stop`) or a disarmed
 row early; the objects not tried are recorded as skipped, with that reason. (The operator's STOP
 must go through :meth:`ObjectRow.stop`: a stop the row does not know of looks like a failure
 of the current object, and the row would go on.) A bin given to the row is the machine's for
-that row only.
+that row only. With obstacles (``stack.set_obstacles``) every object's carry to the bin keeps
+their clearance (:mod:`core.control.carry`), and a bin too close to one is refused at the start.
 
 The row is pure bookkeeping, called from the loop thread (the only one that touches the stack):
 :meth:`ObjectRow.start` and :meth:`ObjectRow.after_tick` return the object whose turn begins, so
@@ -29,6 +30,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from core.control.carry import check_bin
 from core.control.grasp_place import Phase
 from core.control.params import BinParams, StateMachineParams
 from core.robots import SoftArm
@@ -120,6 +122,9 @@ class ObjectRow:
             raise RuntimeError(f"the row was already started ({self.state})")
         if not stack.armed:
             raise RuntimeError("row refused: the arm is not armed")
+        m = stack.machine  # a bin too close to an obstacle: ValueError before anything changes
+        check_bin(m.robot, m.bin if self.bin_params is None else self.bin_params,
+                  getattr(m, "obstacles", ()), getattr(m, "clearance", 0.0))
         self._robot_bin = stack.machine.bin
         if self.bin_params is not None:
             stack.machine.bin = self.bin_params  # for this row only: put back when it ends

@@ -16,7 +16,13 @@ which obstacle is in the way and by how much.
    which no clear shape is found: first with the operator's delta_d, then with more approach
    circles (delta_d / 2), then from other first configurations around the object (table
    configurations clear of the obstacles), for at most :data:`SEARCH_BUDGET_S`.
-4. When none succeeds the request is refused (``obstacle``), naming the obstacle the plain
+4. Then the long way round (``global_search``, :mod:`core.planning.global_approach`, every
+   line certified): those plans with each line that is not clear replaced by a certified path
+   (:func:`core.planning.clear_path.clear_path`); Algorithm 1 from relay configurations near
+   the object reached by such a path; the clear final approach of one of the plans reached
+   from ``kappa_meas`` by such a path; for what is left of the budget plus
+   :data:`GLOBAL_BUDGET_S`.
+5. When none succeeds the request is refused (``obstacle``), naming the obstacle the plain
    approach comes closest to, how close and how much clearance is missing.
 """
 
@@ -31,6 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.planning.feasibility import GraspRefused, seeds_near
+from core.planning.global_approach import connect_final_approach, plan_by_relay, repair
 from core.planning.obstacles import (GripperShape, Obstacle, ObstacleSetup, check_clearance,
                                      check_obstacles)
 from core.planning.plan_types import GraspPlan
@@ -40,6 +47,7 @@ Array = npt.NDArray[np.float64]
 OTHER_STARTS = 2        # first configurations around the object tried after the warm starts
 OBSTACLE_RESTARTS = 2   # restarts per radius while planning around obstacles
 SEARCH_BUDGET_S = 2.5   # no new approach is tried after this long (the refusal follows)
+GLOBAL_BUDGET_S = 0.5   # the long way round gets what is left of that, plus this much
 
 
 class ObstacleRefused(GraspRefused):
@@ -146,10 +154,11 @@ def _other_starts(planner, setup: ObstacleSetup, km, center, radius: float,
 
 def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float,
                 delta_d: float | None, weights: npt.ArrayLike | None,
-                obstacles: tuple[Obstacle, ...], clearance: float) -> GraspPlan:
+                obstacles: tuple[Obstacle, ...], clearance: float,
+                global_search: bool = True) -> GraspPlan:
     """Plan a grasp that keeps the arm and gripper ``clearance`` from every obstacle; see the
-    module docstring. Raises :class:`GraspRefused` (``ObstacleRefused`` when obstacles are
-    in the way)."""
+    module docstring (``global_search`` False: the local search only, steps 1-3 and 5).
+    Raises :class:`GraspRefused` (``ObstacleRefused`` when obstacles are in the way)."""
     setup = _check(planner, kappa_meas, center, radius, tuple(obstacles), clearance)
     kw = dict(delta_d=delta_d, weights=weights)
     plain = planner._plan(kappa_meas, center, radius, **kw)   # refuses what cannot work at all
@@ -170,6 +179,7 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
     attempts += [dict(kw, first_start=s)
                  for s in _other_starts(planner, setup, km, center, radius, dd)]
     first: GraspPlan | None = None
+    made = [plain] if plain.success else []
     tried = 0
     deadline = time.perf_counter() + SEARCH_BUDGET_S
     for attempt in attempts:
@@ -183,6 +193,17 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
         first = first or plan
         if plan.success:
             return plan
+        made.append(plan)
+    if global_search and plain.success:
+        end = deadline + GLOBAL_BUDGET_S
+        found = next((p for p in (repair(planner, setup, q, end) for q in made[1:])
+                      if p is not None), None)
+        if found is None:
+            found = plan_by_relay(planner, constrained, setup, km, center, radius, dd, kw, end)
+        if found is None:
+            found = connect_final_approach(planner, setup, km, made[1:] + made[:1], end)
+        if found is not None:
+            return found
     if not plain.success:
         return first if first is not None else plain
     j, gap = _closest(planner, setup, plain)

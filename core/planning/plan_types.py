@@ -142,6 +142,9 @@ class GraspPlan:
             obstacle at each waypoint (m); None without obstacles.
         obstacle_path_clearance: (n,) certified lower bound of that gap along the straight
             line in kappa into each waypoint (m); None without obstacles.
+        carry: (m, N) the targets of the carry to the bin after the grasp (vias, then the bin
+            pose), certified clear of the obstacles (:mod:`core.control.carry`); None: straight
+            to the bin.
     """
 
     center: Array
@@ -173,6 +176,7 @@ class GraspPlan:
     obstacle_margin: float = 0.0
     obstacle_clearance: Array | None = None
     obstacle_path_clearance: Array | None = None
+    carry: Array | None = None
 
     @property
     def n(self) -> int:

@@ -32,11 +32,13 @@ CLEARANCE = 0.010
 def _run(moved_to):
     """Execute the plan around WALL for the object at START; when the approach reaches its
     second waypoint, move the object to ``moved_to``. Returns (telemetry at the end, the
-    planner's calls as (request, plan or None, error or None), the simulated arm's smallest
+    planner's grasp calls as (request, plan or None, error or None), the simulated arm's smallest
     gap to WALL)."""
     calls = []
 
     def planner(req):
+        if req.plan is not None:  # the executed plan's carry to the bin: not a grasp plan
+            return plan_request(plan_grasp_sided, ARM, req)
         try:
             plan = plan_request(plan_grasp_sided, ARM, req)
         except GraspRefused as exc:
