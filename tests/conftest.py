@@ -19,7 +19,7 @@ import time
 import urllib.error
 import urllib.request
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Iterator
 
 import pytest
 
@@ -123,20 +123,29 @@ class ConsoleServers:
 
     def __init__(self) -> None:
         self.procs: list[subprocess.Popen[bytes]] = []
+        self.logs: dict[str, Path] = {}
 
-    def start(self, robot: str, *extra: str) -> str:
-        """Start serve.py, wait until it serves, return its base URL."""
+    def log(self, url: str) -> str:
+        """What the server at ``url`` printed so far (stdout and stderr)."""
+        return self.logs[url].read_text()
+
+    def start(self, robot: str, *extra: str, hardware: str | None = "mock") -> str:
+        """Start serve.py (``--hardware mock`` unless ``hardware`` says otherwise; None: its
+        default), wait until it serves, return its base URL; :meth:`log` is what it printed."""
         port = _free_port()
         log = REPO / "artifacts" / f"serve-{Path(robot).stem}-{port}.log"  # one per server
         log.parent.mkdir(exist_ok=True)
         out = log.open("wb")
+        device = ["--hardware", hardware] if hardware is not None else []
         proc = subprocess.Popen(
             [sys.executable, str(REPO / "serve.py"), "--robot", robot, "--host", "127.0.0.1",
-             "--port", str(port), "--hardware", "mock", *extra],
-            cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
+             "--port", str(port), *device, *extra],
+            cwd=REPO, stdout=out, stderr=subprocess.STDOUT,
+            env={**os.environ, "PYTHONUNBUFFERED": "1"})  # the log is current while it runs
         out.close()
         self.procs.append(proc)
         url = f"http://127.0.0.1:{port}/"
+        self.logs[url] = log
         deadline = time.monotonic() + SERVER_START_TIMEOUT
         while time.monotonic() < deadline:
             if proc.poll() is not None:
@@ -150,6 +159,8 @@ class ConsoleServers:
         pytest.fail(f"serve.py did not serve {url} within {SERVER_START_TIMEOUT:.0f} s:\n"
                     f"{log.read_text()}")
 
+    __call__ = start
+
     def close(self) -> None:
         for proc in self.procs:
             proc.terminate()
@@ -161,18 +172,19 @@ class ConsoleServers:
 
 
 @pytest.fixture
-def console_server() -> Iterator[Callable[..., str]]:
-    """Factory: ``console_server("soft-arm")`` starts serve.py and returns its base URL."""
+def console_server() -> Iterator[ConsoleServers]:
+    """Factory: ``console_server("soft-arm")`` starts serve.py and returns its base URL
+    (:meth:`ConsoleServers.start`; ``console_server.log(url)``: what it printed)."""
     servers = ConsoleServers()
-    yield servers.start
+    yield servers
     servers.close()
 
 
 @pytest.fixture(scope="module")
-def module_console_server() -> Iterator[Callable[..., str]]:
+def module_console_server() -> Iterator[ConsoleServers]:
     """``console_server`` for one module: the servers live until its last test ends."""
     servers = ConsoleServers()
-    yield servers.start
+    yield servers
     servers.close()
 
 

@@ -27,19 +27,31 @@ class Lab:
         self.contexts: list[Any] = []
 
     def page(self) -> Any:
-        context = self.browser.new_context(viewport={"width": 1280, "height": 900})
-        self.contexts.append(context)
-        page = context.new_page()
-        n = len(self.server.get_clients())
-        page.goto(self.url)
-        open_tab(page, "Session")  # the per-browser role line and Take control live there
-        page.locator('[data-testid="role"]').wait_for(timeout=10_000)
-        open_tab(page, "Operate")
-        wait_for(lambda: len(self.server.get_clients()) > n)
-        notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
-        if notice.count():
-            notice.locator("button").first.click()
-        return page
+        """A new browser (its own context, 1280x900) on the console, the Operate tab open."""
+        return self.pages(1)[0]
+
+    def pages(self, n: int) -> list[Any]:
+        """``n`` new browsers on the console, each as :meth:`page`, loaded side by side: a load
+        is seconds of software rendering, which two renderer processes share out over both
+        cores."""
+        before = len(self.server.get_clients())
+        pages = []
+        for _ in range(n):
+            context = self.browser.new_context(viewport={"width": 1280, "height": 900})
+            self.contexts.append(context)
+            page = context.new_page()
+            page.goto(self.url, wait_until="commit")  # the next starts loading meanwhile
+            pages.append(page)
+        for page in pages:
+            open_tab(page, "Session")  # the per-browser role line and Take control live there
+            page.locator('[data-testid="role"]').wait_for(timeout=10_000)
+            open_tab(page, "Operate")
+        wait_for(lambda: len(self.server.get_clients()) >= before + n)
+        for page in pages:
+            notice = page.locator(".mantine-Notification-root", has_text="Software WebGL")
+            if notice.count():
+                notice.locator("button").first.click()
+        return pages
 
     def take_control(self, page: Any, name: str) -> None:
         """Take control in the Session tab, then open the Operate tab again."""

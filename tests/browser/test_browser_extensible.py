@@ -14,12 +14,7 @@ Hardware panel. Screenshots go to ``artifacts/``.
 
 from __future__ import annotations
 
-import socket
-import subprocess
-import sys
 import time
-import urllib.error
-import urllib.request
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -140,7 +135,7 @@ def test_path_preview_and_execute_on_mock_hardware(
 
 
 @pytest.fixture
-def emulator_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[str]:
+def emulator_console(tmp_path: Path, console_server: Any) -> Iterator[str]:
     """``serve.py --robot <extensible>`` with its default hardware (no ``--hardware``): the
     device emulator on a pty. The robot file is the shipped one with 0.5 s link timeout and
     watchdog (like tests/hw_bridge/test_extensible_runner.py): the loop shares its process with the GUI
@@ -149,39 +144,9 @@ def emulator_console(tmp_path: Path, artifacts_dir: Path) -> Iterator[str]:
     robot_file = robot_copy("extensible", tmp_path,
                             {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500},
                             name="extensible")
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-    log = artifacts_dir / "serve-extensible-emulator.log"
-    with log.open("wb") as out:
-        proc = subprocess.Popen([sys.executable, str(REPO / "serve.py"), "--robot",
-                                 str(robot_file), "--host", "127.0.0.1", "--port", str(port),
-                                 "--data-dir", str(tmp_path / "runs")],
-                                cwd=REPO, stdout=out, stderr=subprocess.STDOUT)
-    url = f"http://127.0.0.1:{port}/"
-    try:
-        deadline = time.monotonic() + 30
-        while True:
-            if proc.poll() is not None:
-                pytest.fail(f"serve.py exited with {proc.returncode}:\n{log.read_text()}")
-            try:
-                with urllib.request.urlopen(url, timeout=1.0) as resp:
-                    if resp.status == 200:
-                        break
-            except (urllib.error.URLError, ConnectionError, TimeoutError):
-                pass
-            if time.monotonic() > deadline:
-                pytest.fail(f"serve.py did not serve {url}:\n{log.read_text()}")
-            time.sleep(0.1)
-        yield url
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-    assert "device emulator on a pseudo-terminal" in log.read_text()  # the default hardware
+    url = console_server(str(robot_file), "--data-dir", str(tmp_path / "runs"), hardware=None)
+    yield url
+    assert "device emulator on a pseudo-terminal" in console_server.log(url)  # the default
 
 
 def link_text(page) -> str:
@@ -191,13 +156,8 @@ def link_text(page) -> str:
     return link.last.locator("xpath=..").inner_text() if link.count() else "no link line"
 
 
-def emulator_log() -> str:
-    path = REPO / "artifacts" / "serve-extensible-emulator.log"
-    return path.read_text()[-600:] if path.exists() else ""
-
-
 def test_emulator_console_measured_tip_reaches_a_typed_target(
-        page, emulator_console: str, artifacts_dir: Path) -> None:
+        page, emulator_console: str, console_server: Any, artifacts_dir: Path) -> None:
     open_extensible(page, emulator_console)
     # The operator connects and arms the emulator's pty through the Hardware panel (the
     # runner's bridge_controls). serve.py armed the link at start already, but on a loaded box
@@ -245,7 +205,8 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     status = page.locator('[data-testid="target-status"]')
     wait_until("the measured tip at the target", arrived, timeout=60,
                show=lambda: f"(readout {samples[-1] if samples else None}; target panel: "
-                            f"{status.inner_text()!r}; {link_text(page)}; log: {emulator_log()})")
+                            f"{status.inner_text()!r}; {link_text(page)}; "
+                            f"log: {console_server.log(emulator_console)[-600:]})")
     elapsed = time.monotonic() - t0
     # Encoder-driven: the motors take time. The measured tip cannot cover the distance faster
     # than the tip speed limit, and the readout showed it on the way (not a jump to the target).

@@ -31,7 +31,7 @@ pytestmark = pytest.mark.browser
 def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
         lab, artifacts_dir: Path) -> None:
     app = lab.app
-    alice, bob = lab.page(), lab.page()
+    alice, bob = lab.pages(2)
     open_tab(alice, "Session")
     open_tab(bob, "Session")
     field(alice, "Operator token").fill("typed-by-alice")
@@ -90,7 +90,7 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
 
 def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> None:
     app = lab.app
-    alice, bob = lab.page(), lab.page()
+    alice, bob = lab.pages(2)
     lab.take_control(alice, "Alice")
     mouse = press(alice, jog_button(alice, "κ₂", "+"))
     wait_for(lambda: app.store.command.source == HOLD_SOURCE, timeout=3.0)
@@ -118,7 +118,7 @@ def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> Non
 
 def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(lab) -> None:
     app = lab.app
-    alice, bob = lab.page(), lab.page()
+    alice, bob = lab.pages(2)
     lab.take_control(alice, "Alice")
     session_button(alice, "Run demo motion").click()
     wait_for(lambda: app.services.demo.running)
@@ -180,7 +180,7 @@ def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
         grasp_lab, artifacts_dir: Path) -> None:
     app = grasp_lab.app
     session = app.grasp_session  # type: ignore[attr-defined]
-    alice, bob = grasp_lab.page(), grasp_lab.page()
+    alice, bob = grasp_lab.pages(2)
     grasp_lab.take_control(alice, "Alice")
     planned = wait_for(lambda: session.view().outcome, timeout=10.0)
     objects = session.view().objects

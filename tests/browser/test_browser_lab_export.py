@@ -84,7 +84,7 @@ def test_exported_scene_opens_from_disk_and_shows_the_arm_and_the_plan(
 
 def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -> None:
     app = lab.app
-    alice, bob = lab.page(), lab.page()  # Bob, a viewer, will replay and export
+    alice, bob = lab.pages(2)  # Bob, a viewer, will replay and export
     lab.take_control(alice, "Alice")
     session_button(alice, "Start recording").click()
     wait_for(lambda: app.recorder.recording)

@@ -6,6 +6,10 @@ into the Objects panel, arms and presses *Execute grasp-and-place* on the simula
 "released" -- which the state machine says only after it saw the object held where the right
 finger's pocket is and carried to the bin -- and during the grasp the palm readout is at the
 object, on the right of the arm (x > 0).
+
+The arm is a test copy of the soft arm that moves three times faster with shorter waits
+(tests/robot_files.py QUICK_MOTION): the test is about which side the gripper takes, not the
+shipped timing.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from robot_files import QUICK_MOTION, robot_copy
 from test_browser_control import open_control, start_grasp, state_text, wait_phase
 
 from core.control.trials import paper_locations
@@ -30,12 +35,13 @@ def palm_mm(page: Any) -> tuple[float, float]:
 
 
 def test_execute_grasps_a_right_side_object_and_releases_it(
-        page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
+        page, console_server: Callable[..., str], tmp_path: Path, artifacts_dir: Path) -> None:
     x, y = paper_locations()["E"]
     spot = (-x, y)  # right of the arm
     page.set_viewport_size({"width": 1024, "height": 760})
     try:
-        open_control(page, console_server("soft-arm", "--no-token"))
+        open_control(page, console_server(str(robot_copy("soft-arm", tmp_path, QUICK_MOTION)),
+                                          "--no-token"))
         start_grasp(page, *spot, until=("grasp", "move_to_bin"), timeout=90.0)
         palm = palm_mm(page)
         page.screenshot(path=str(artifacts_dir / "browser_right_grasp.png"))

@@ -10,6 +10,10 @@ mock, ``--no-token``).
   and the Waypoints panel tell the same plan.
 * 19.3: a clean start shows no fault (header Link field, Control panel), and Execute while
   disarmed is refused ("Arm first") and does not arm.
+
+The arm is a test copy of the soft arm that moves three times faster with shorter waits
+(tests/robot_files.py QUICK_MOTION; its link and watchdog are the shipped ones): the tests are
+about which object Execute grasps and what the panels say, not the shipped timing.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from browser_tabs import (
     open_tab,
     wait_until,
 )
+from robot_files import QUICK_MOTION, robot_copy
 
 pytestmark = pytest.mark.browser
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
@@ -160,10 +165,13 @@ def run_to_grasp(page: Any, n: int, palms: list) -> set[str] | None:
 
 
 @pytest.fixture(scope="module")
-def operate_page(module_page: Any, module_console_server: Callable[..., str]) -> Any:
-    """One soft-arm console (``--no-token``) loaded once for both tests (a load costs seconds of
-    software rendering): the clean start is checked first, then the run on the same console."""
-    open_operate(module_page, module_console_server("soft-arm", "--no-token"))
+def operate_page(module_page: Any, module_console_server: Callable[..., str],
+                 tmp_path_factory: Any) -> Any:
+    """One soft-arm console (``--no-token``, the quick test copy) loaded once for both tests (a
+    load costs seconds of software rendering): the clean start is checked first, then the run
+    on the same console."""
+    robot = robot_copy("soft-arm", tmp_path_factory.mktemp("robot"), QUICK_MOTION)
+    open_operate(module_page, module_console_server(str(robot), "--no-token"))
     return module_page
 
 
