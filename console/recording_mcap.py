@@ -18,7 +18,8 @@ from typing import Any, Callable
 import numpy as np
 
 from console.model import ArmModel
-from console.recording import MAX_DECOMPRESSED, Event, ReadBudget, Recording, _describe
+from console.recording_reader import (MAX_DECOMPRESSED, Event, ReadBudget, Recording,
+                                      describe_record)
 from core.labdata.channels import ArmGeometry, record_from_message
 from core.labdata.mcap_file import McapLog, iter_messages, read_header, stored_size
 
@@ -104,8 +105,8 @@ def load_mcap(path: Path, model: ArmModel, budget: ReadBudget | None = None) -> 
                     times.append(t)
                     sources.append(str(rec.get("source", "")))
                 else:
-                    events.append(Event(t, rec["kind"], str(rec.get("who", "")), _describe(rec),
-                                        rec.get("data")))
+                    events.append(Event(t, rec["kind"], str(rec.get("who", "")),
+                                        describe_record(rec), rec.get("data")))
     except ValueError:
         raise
     except Exception as exc:  # mcap raises its own errors for truncated or foreign files

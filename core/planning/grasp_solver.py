@@ -27,7 +27,6 @@ the loop here at the first iteration that needs more.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import os
 import sys
@@ -38,147 +37,17 @@ import numpy as np
 import numpy.typing as npt
 
 from core.planning.arm_model import ArmModel
+from core.planning.grasp_solver_types import (CLEARANCE, CURVATURE_LIMIT, NO_CONVERGENCE, OK,
+                                              STATUS_NAMES, Clearance, Constraints, SolveResult,
+                                              SolverOptions, joined)
 from core.planning.solver_kernel import Kernel, PointEval, kkt_solve, unit_rows
+from core.planning.sqp_corrections import KKT_REG, refine_kkt_step, restore_feasibility
+
+__all__ = ["CLEARANCE", "CURVATURE_LIMIT", "KKT_REG", "NO_CONVERGENCE", "OK", "STATUS_NAMES",
+           "Clearance", "Constraints", "SolveResult", "SolverOptions", "compiled_kernel", "joined",
+           "solve"]
 
 Array = npt.NDArray[np.float64]
-
-OK, NO_CONVERGENCE, CURVATURE_LIMIT, CLEARANCE = 0, 1, 2, 3
-STATUS_NAMES = ("ok", "no_convergence", "curvature_limit", "clearance")
-
-
-@dataclasses.dataclass(frozen=True)
-class SolverOptions:
-    """Tolerances and limits; the defaults converge far below the paper's 2e-3 tolerance."""
-
-    max_iter: int = 40
-    ctol: float = 1e-8           # m, equality violation counted as converged
-    xtol: float = 1e-8           # 1/m, last step size counted as converged
-    gtol: float = 1e-6           # relative Lagrangian-gradient norm counted as converged
-    max_qp_iter: int = 12
-    armijo: float = 1e-4
-    min_alpha: float = 1e-4
-    clearance_tol: float = 1e-9  # m
-    max_step: float = 16.0       # 1/m, longest curvature step per iteration (damping)
-
-
-@dataclasses.dataclass
-class SolveResult:
-    """Result of one waypoint solve."""
-
-    kappa: Array
-    lam: tuple[float, float]  # multipliers of the two palm-point equalities
-    status: int               # OK / NO_CONVERGENCE / CURVATURE_LIMIT / CLEARANCE
-    iterations: int
-    violation: float          # max |palm point - circle point| (m)
-    cost: float
-    active: tuple[int, ...]   # per kappa: -1 at the lower bound, +1 at the upper, 0 free
-    error: complex = 0j                    # q - c: object-centre point error (complex)
-    dkappa_dr: Array | None = None         # sensitivity of the solution to the circle radius
-    dlam_dr: tuple[float, float] | None = None
-
-    @property
-    def ok(self) -> bool:
-        return self.status == OK
-
-
-@dataclasses.dataclass(frozen=True)
-class Clearance:
-    """Arm-body clearance constraints: every segment's arc stays >= rho from ``center``.
-
-    A constraint set gives the solver ``size(n)`` rows h(kappa) >= 0: ``evaluate`` returns
-    their values (array) and what ``jacobian`` needs again (the closest points' arc lengths);
-    ``jacobian`` returns the rows dh/dkappa as lists. :class:`Constraints` joins several sets.
-    """
-
-    center: complex
-    rho: float
-
-    def size(self, n: int) -> int:
-        return n
-
-    def evaluate(self, model: ArmModel, x: list[float]) -> tuple[Array, Array]:
-        dist, sstar = model.arc_distances(np.array(x)[None], self.center)
-        return dist[0] - self.rho, sstar
-
-    def jacobian(self, model: ArmModel, x: list[float], aux: Array) -> list[list[float]]:
-        pts, Jp = model.arc_points(np.array(x)[None], aux)
-        u = pts[0] - self.center
-        u = np.conj(u / np.maximum(np.abs(u), 1e-12))
-        return (u[:, None] * Jp[0]).real.tolist()
-
-
-@dataclasses.dataclass(frozen=True)
-class Constraints:
-    """Several constraint sets (e.g. object clearance and obstacles) as one."""
-
-    parts: tuple
-
-    def size(self, n: int) -> int:
-        return sum(p.size(n) for p in self.parts)
-
-    def evaluate(self, model: ArmModel, x: list[float]) -> tuple[Array, list]:
-        out = [p.evaluate(model, x) for p in self.parts]
-        return np.concatenate([h for h, _ in out]), [a for _, a in out]
-
-    def jacobian(self, model: ArmModel, x: list[float], aux: list) -> list[list[float]]:
-        return [row for p, a in zip(self.parts, aux) for row in p.jacobian(model, x, a)]
-
-
-def joined(*sets):
-    """The constraint sets that are not None, as one set (None when there are none)."""
-    parts = tuple(s for s in sets if s is not None)
-    return None if not parts else parts[0] if len(parts) == 1 else Constraints(parts)
-
-
-def _restore(kn: Kernel, p: PointEval, Jx: list[float], Jy: list[float],
-             opts: SolverOptions) -> PointEval | None:
-    """Feasibility restoration: min-norm Gauss-Newton step on |q - c|, damped and backtracked
-    until the violation drops by 1e-4 relative; None when it cannot."""
-    axx = sum(map(mul, Jx, Jx))
-    ayy = sum(map(mul, Jy, Jy))
-    axy = sum(map(mul, Jx, Jy))
-    reg = 1e-6 * (axx + ayy) + 1e-16
-    axx, ayy = axx + reg, ayy + reg
-    det = axx * ayy - axy * axy
-    ex, ey = p.e.real, p.e.imag
-    zx = (ayy * ex - axy * ey) / det
-    zy = (axx * ey - axy * ex) / det
-    d = [-(a * zx + b * zy) for a, b in zip(Jx, Jy)]
-    big = max(map(abs, d))
-    if big > opts.max_step:
-        d = [v * opts.max_step / big for v in d]
-    alpha = 1.0
-    while alpha > 1e-3:
-        cand = PointEval(kn, [min(max(xj + alpha * dj, a), b)
-                           for xj, dj, a, b in zip(p.x, d, kn.lo, kn.hi)])
-        if cand.viol < (1.0 - 1e-4) * p.viol:
-            return cand
-        alpha *= 0.5
-    return None
-
-
-KKT_REG = 1e-13  # regularisation of the two equality rows of the KKT matrix (see _refine)
-
-
-def _refine(rows: list, sol: list[float], n: int, viol: float, opts: SolverOptions
-            ) -> list[float]:
-    """``sol`` with the regularisation's error taken out (one step of iterative refinement).
-
-    The equality rows carry ``-KKT_REG`` on the diagonal so the KKT matrix stays invertible
-    when the palm-point Jacobian is (nearly) rank-deficient; the step then meets the linearised
-    equalities only up to ``KKT_REG * lam``. With huge multipliers (a nearly singular Jacobian:
-    e.g. the arm stretched with a curvature at its limit) that error exceeds the solver's
-    tolerance and, divided by the small singular value, becomes a spurious step that no line
-    search accepts from a feasible point (the waypoint was then refused with curvature_limit
-    although it had been found). Re-solving for the residual removes it; it is skipped while
-    that error is small next to the violation ``viol`` the step has to remove.
-    """
-    l0, l1 = sol[n], sol[n + 1]
-    if KKT_REG * max(abs(l0), abs(l1)) <= 1e-3 * max(viol, opts.ctol):
-        return sol
-    r = [0.0] * len(rows)
-    r[n], r[n + 1] = -KKT_REG * l0, -KKT_REG * l1
-    return list(map(add, sol, kkt_solve(rows, r)))
 
 
 @functools.lru_cache(maxsize=1)
@@ -290,8 +159,8 @@ def solve(
             # Newton-KKT step when it has positive curvature and stays in the bounds; anything
             # else goes through the active-set loop below (which re-solves from scratch).
             rows = W + [Jx + reg_x, Jy + reg_y]
-            sol = _refine(rows, kkt_solve(rows, [-g for g in grad] + [-ex, -ey]), n, p.viol,
-                          opts)
+            sol = refine_kkt_step(rows, kkt_solve(rows, [-g for g in grad] + [-ex, -ey]), n,
+                                  p.viol, opts)
             d = sol[:n]
             l0, l1 = sol[n], sol[n + 1]
             gd = sum(map(mul, grad, d))
@@ -336,7 +205,7 @@ def solve(
                 else:
                     rows.append(unit[n + 2 + i])
                     rhs.append(0.0)
-            sol = _refine(rows, kkt_solve(rows, rhs), n, p.viol, opts)
+            sol = refine_kkt_step(rows, kkt_solve(rows, rhs), n, p.viol, opts)
             d = sol[:n]
             l0, l1 = sol[n], sol[n + 1]
             if not (nc or shift or any(act)):
@@ -440,7 +309,7 @@ def solve(
             # Restoration: a damped Gauss-Newton step on the constraint violation alone, then
             # SQP again with fresh multipliers. If even that cannot reduce the violation, the
             # palm cannot get closer to the circle from here within the bounds.
-            trial = _restore(kn, p, Jx, Jy, opts)
+            trial = restore_feasibility(kn, p, Jx, Jy, opts)
             if trial is None:
                 status = CURVATURE_LIMIT
                 break

@@ -19,7 +19,6 @@ Command line: ``python -m core.planning.grasp --object X Y R [--json]``
 from __future__ import annotations
 
 import cmath
-import dataclasses
 import functools
 import math
 import time
@@ -29,60 +28,20 @@ import numpy.typing as npt
 
 from core.planning import grasp_solver as gs
 from core.planning.arm_model import ArmModel, wrap
-from core.planning.clearance import certify_lines
 from core.planning.feasibility import (GraspRefused, best_start, check_request, find_final_config,
                                       seeds_near)
+from core.planning.grasp_waypoint import REASONS, PlannedWaypoint
 from core.planning.obstacles import Obstacle, ObstacleSetup
 from core.planning.plan_types import GraspPlan, PlannerConfig, RadiusFailure, format_plan
+from core.planning.sweep_clearance import SweepClearance
 
 Array = npt.NDArray[np.float64]
 
 __all__ = ["GraspPlan", "GraspPlanner", "GraspRefused", "Obstacle", "PlannerConfig",
            "RadiusFailure", "format_plan", "plan_grasp"]
 
-_REASONS = {
-    gs.CURVATURE_LIMIT: ("curvature_limit", "the palm cannot lie tangent on this circle within "
-                         "the curvature limits"),
-    gs.NO_CONVERGENCE: ("no_convergence", "the optimiser did not converge"),
-    gs.CLEARANCE: ("clearance", "every configuration found lets the arm touch the object"),
-}
 
-
-@dataclasses.dataclass(eq=False)
-class _Waypoint:
-    radius: float
-    kappa: Array
-    lam: tuple[float, float] | None
-    status: int
-    iterations: int
-    restarts: int
-    ms: float
-    index: int                  # Algorithm 1's i; inserted waypoints carry the next i
-    depth: int = 0              # insertion depth (0 = Algorithm 1's radius)
-    constrained: bool = False
-    clearance: float = math.nan
-    path_clearance: float = math.nan
-    cost: float = math.nan
-    violation: float = math.nan
-    error: complex = 0j         # object-centre point error q - c of the solution
-    obstacle_clearance: float = math.inf        # gap to the nearest obstacle here
-    obstacle_path_clearance: float = math.inf   # certified bound along the line into it
-    detail: str = ""
-    dk: Array | None = None     # d kappa / d r_a at the solution (predictor)
-    dl: tuple[float, float] | None = None
-
-
-def _sweep_detail(p: _Waypoint, from_start: bool) -> str:
-    where = ("the arm's current shape to the first waypoint" if from_start
-             else "the previous waypoint")
-    if p.path_clearance < 0.0:
-        return (f"the motion from {where} would sweep the arm {-p.path_clearance * 1e3:.1f} mm "
-                f"into the object")
-    return (f"the motion from {where} would bring the arm within "
-            f"{max(p.obstacle_path_clearance, 0.0) * 1e3:.1f} mm of an obstacle")
-
-
-class GraspPlanner:
+class GraspPlanner(SweepClearance):
     """Algorithm 1 for one robot; keeps the model and settings between plans.
 
     With obstacles (``plan(..., obstacles=..., clearance=...)``) the plan is made by a shallow
@@ -162,8 +121,8 @@ class GraspPlanner:
         # Warm starts: the first radius from the best table configuration (or kappa_meas);
         # later radii from the previous waypoint moved along its sensitivity d kappa / d r_a
         # (the optimal kappa(r_a) is smooth); the plain previous waypoint is the first restart.
-        wps: list[_Waypoint] = []
-        prev: _Waypoint | None = None
+        wps: list[PlannedWaypoint] = []
+        prev: PlannedWaypoint | None = None
         witness: Array | None = None
         witness_tried = False
         for i, ra in enumerate(radii, start=1):
@@ -205,8 +164,8 @@ class GraspPlanner:
 
     def _solve_radius(self, c: complex, ra: float, x0: Array, lam0, km: Array, w: Array,
                       index: int, seeds: list[Array] | None = None,
-                      previous: _Waypoint | None = None,
-                      first_restart: Array | None = None, tangent: bool = True) -> _Waypoint:
+                      previous: PlannedWaypoint | None = None,
+                      first_restart: Array | None = None, tangent: bool = True) -> PlannedWaypoint:
         """findOptimalConfig(r_a): from the warm start, then from restart seeds if that fails.
 
         With ``previous`` (a failed attempt at this radius) only ``seeds`` are tried and the
@@ -217,7 +176,7 @@ class GraspPlanner:
         if previous is None:
             res = self._solve(self.model, c, off, x0, km, w, lam0, self._rows(), opts=self.solver,
                            tangent=tangent)
-            wp = _Waypoint(ra, res.kappa, res.lam, res.status, res.iterations, 0, 0.0, index,
+            wp = PlannedWaypoint(ra, res.kappa, res.lam, res.status, res.iterations, 0, 0.0, index,
                            cost=res.cost, violation=res.violation, error=res.error,
                            dk=res.dkappa_dr, dl=res.dlam_dr)
             if not res.ok:
@@ -239,7 +198,7 @@ class GraspPlanner:
                     wp.error = res.error
                     break
             else:
-                wp.detail = _REASONS[wp.status][1]
+                wp.detail = REASONS[wp.status][1]
         wp.ms += (time.perf_counter() - t0) * 1e3
         return wp
 
@@ -290,127 +249,9 @@ class GraspPlanner:
         """Obstacle constraint rows for the solver (None without obstacles)."""
         return None if self.obstacles is None else self.obstacles.rows
 
-    def _certify(self, starts: Array, ends: Array, c: complex, r_o: float) -> tuple[Array, Array]:
-        """Certified lower bounds along lines: (n,) to the object, (n,) to the nearest
-        obstacle (inf without obstacles)."""
-        cfg = self.config
-        cert = certify_lines(self.model, starts, ends, c, r_o, 0.0, cfg.line_samples)
-        if self.obstacles is None:
-            return cert.lower_bound, np.full(len(cert.lower_bound), math.inf)
-        return cert.lower_bound, self.obstacles.certify(self.model, starts, ends,
-                                                        cfg.line_samples)
-
-    def _line_bad(self, p: _Waypoint) -> bool:
-        """The line into ``p`` touches the object or comes closer than the set clearance to
-        an obstacle."""
-        need = -math.inf if self.obstacles is None else self.obstacles.clearance
-        return p.path_clearance < 0.0 or p.obstacle_path_clearance < need
-
-    def _constrained(self, wp: _Waypoint, starts: list[Array], c: complex, r_o: float,
-                     km: Array, w: Array) -> None:
-        """Re-solve a waypoint with arm-body clearance constraints, in place."""
-        t0 = time.perf_counter()
-        clr = gs.Clearance(c, r_o + self.model.half_width + self.config.clearance_margin)
-        for s in starts:
-            res = self._solve(self.model, c, self._offset(wp.radius), s, km, w, wp.lam,
-                           gs.joined(clr, self._rows()), self.solver)
-            wp.iterations += res.iterations
-            if res.ok:
-                wp.kappa, wp.lam, wp.cost, wp.violation = res.kappa, res.lam, res.cost, \
-                    res.violation
-                wp.error = res.error
-                break
-        else:
-            wp.status = gs.CLEARANCE
-            wp.detail = (f"no configuration on this circle keeps the arm "
-                         f"{self.config.clearance_margin * 1e3:.0f} mm clear of the object")
-        wp.constrained = True
-        wp.ms += (time.perf_counter() - t0) * 1e3
-
-    def _secure_clearance(self, wps: list[_Waypoint], km: Array, d1: float, c: complex,
-                          r_o: float, w: Array) -> list[_Waypoint]:
-        """Make every waypoint and every straight line in kappa between them clear the object.
-
-        Waypoints closer than the margin are re-solved with clearance constraints; lines whose
-        certified clearance is negative get waypoints inserted on intermediate circles.
-        """
-        cfg, m = self.config, self.model
-        cert = None
-        for _ in range(2):
-            good = [p for p in wps if p.status == gs.OK]
-            if not good:
-                return wps
-            chain = np.array([km] + [p.kappa for p in good])
-            cert = certify_lines(m, chain[:-1], chain[1:], c, r_o, 0.0, cfg.line_samples)
-            obs_lb = (None if self.obstacles is None else
-                      self.obstacles.certify(m, chain[:-1], chain[1:], cfg.line_samples))
-            changed = False
-            prev_k = km
-            for p, gap in zip(good, cert.end_clearance.tolist()):
-                p.clearance = gap
-                if gap < cfg.clearance_margin - 1e-9 and not p.constrained:
-                    self._constrained(p, [p.kappa, prev_k], c, r_o, km, w)
-                    changed = True
-                if p.status == gs.OK:
-                    prev_k = p.kappa
-            if not changed:
-                break
-        out: list[_Waypoint] = []
-        prev_k, prev_r = km, d1
-        k = 0
-        for p in wps:
-            if p.status == gs.OK:
-                p.path_clearance = float(cert.lower_bound[k])
-                if obs_lb is not None:
-                    p.obstacle_path_clearance = float(obs_lb[k])
-                k += 1
-                if self._line_bad(p):
-                    out += self._bridge(prev_k, prev_r, p, 1, c, r_o, km, w)
-                prev_k, prev_r = p.kappa, p.radius
-            out.append(p)
-        return out
-
-    def _bridge(self, ka: Array, ra: float, p: _Waypoint, depth: int, c: complex, r_o: float,
-                km: Array, w: Array) -> list[_Waypoint]:
-        """Waypoints on circles between r_a and ``p`` so every straight line in kappa is clear.
-
-        Bisects the radius: the midpoint waypoint is solved from the midpoint of the line; the
-        two halves are certified and bisected again, up to ``max_insertions`` levels. When the
-        depth runs out, the waypoint at the end of the failing line is marked ``clearance``.
-        """
-        cfg, m = self.config, self.model
-        mid = self._solve_radius(c, 0.5 * (ra + p.radius), 0.5 * (ka + p.kappa), p.lam, km, w,
-                                 p.index)
-        mid.depth = depth
-        if mid.status == gs.OK:
-            mid.clearance = m.clearance_py(mid.kappa.tolist(), c, r_o)
-            if mid.clearance < cfg.clearance_margin - 1e-9:
-                self._constrained(mid, [mid.kappa, ka, p.kappa], c, r_o, km, w)
-                mid.clearance = m.clearance_py(mid.kappa.tolist(), c, r_o)
-        if mid.status != gs.OK:
-            p.status = gs.CLEARANCE
-            p.detail = _sweep_detail(p, ka is km) + (
-                ", and no waypoint in between could be found")
-            return []
-        obj_lb, obs_lb = self._certify(np.array([ka, mid.kappa]), np.array([mid.kappa, p.kappa]),
-                                       c, r_o)
-        mid.path_clearance, p.path_clearance = (float(v) for v in obj_lb)
-        mid.obstacle_path_clearance, p.obstacle_path_clearance = (float(v) for v in obs_lb)
-        out: list[_Waypoint] = []
-        for lo_k, lo_r, hi_wp in ((ka, ra, mid), (mid.kappa, mid.radius, p)):
-            if self._line_bad(hi_wp):
-                if depth < cfg.max_insertions:
-                    out += self._bridge(lo_k, lo_r, hi_wp, depth + 1, c, r_o, km, w)
-                else:
-                    hi_wp.status = gs.CLEARANCE
-                    hi_wp.detail = _sweep_detail(hi_wp, lo_k is km)
-            if hi_wp is mid:
-                out.append(mid)
-        return out
-
     # ------------------------------------------------------------------ result
 
-    def _assemble(self, wps: list[_Waypoint], km: Array, ctr: Array, r_o: float, d1: float,
+    def _assemble(self, wps: list[PlannedWaypoint], km: Array, ctr: Array, r_o: float, d1: float,
                   d2: float, num_moves: int, dd: float, w: Array, t_start: float) -> GraspPlan:
         m = self.model
         n_wp = len(wps)
@@ -428,7 +269,7 @@ class GraspPlanner:
                            p.obstacle_path_clearance))
             ints.append((p.depth > 0, p.constrained, p.iterations, p.restarts))
             if p.status != gs.OK:
-                name = _REASONS[p.status][0]
+                name = REASONS[p.status][0]
                 failures.append(RadiusFailure(p.index, p.radius, name, p.detail))
                 status.append(name)
             else:
