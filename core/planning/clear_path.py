@@ -234,6 +234,7 @@ def clear_path(problem: ClearPathProblem, start: npt.ArrayLike, goal: npt.ArrayL
         ValueError: start or goal of the wrong shape, not finite or outside the limits.
     """
     t0 = time.perf_counter()
+    c0 = time.thread_time()     # the budget is this thread's CPU time: load does not change it
     m = problem.model
     a = np.asarray(start, float)
     b = np.asarray(goal, float)
@@ -247,7 +248,7 @@ def clear_path(problem: ClearPathProblem, start: npt.ArrayLike, goal: npt.ArrayL
     lb = problem.certify(a, b, samples)
     if lb[0] >= 0.0:
         return ClearPath(np.array([a, b]), lb, True, 0, (time.perf_counter() - t0) * 1e3)
-    deadline = t0 + budget_s
+    deadline = c0 + budget_s
     path, tried = _rrt_connect(problem, a, b, deadline, seed, samples, hints)
     if path is None:
         j, gap = problem.worst(a, b)
@@ -315,7 +316,7 @@ def _rrt_connect(problem: ClearPathProblem, a: Array, b: Array, deadline: float,
         return seeded, trees[0].size
 
     for it in range(MAX_ITERATIONS):
-        if time.perf_counter() > deadline:
+        if time.thread_time() > deadline:
             break
         grow, other = trees[it % 2], trees[1 - it % 2]
         if rng.random() < LOCAL_SHARE:  # near a node of the tree: narrow passages

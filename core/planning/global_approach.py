@@ -64,7 +64,7 @@ def clear_tail(planner, setup: ObstacleSetup, plan: GraspPlan) -> int | None:
 def connect_final_approach(planner, setup: ObstacleSetup, km: Array, plans: Sequence[GraspPlan],
                            deadline: float, seed: int = 0) -> GraspPlan | None:
     """A plan reaching one of ``plans``' clear tails from ``km`` (see the module docstring),
-    longest tail first; None when none connects before ``deadline`` (perf_counter)."""
+    longest tail first; None when none connects before ``deadline`` (time.thread_time: the planning thread's CPU time)."""
     cfg = planner.config
     tails = []
     for plan in plans:
@@ -72,14 +72,14 @@ def connect_final_approach(planner, setup: ObstacleSetup, km: Array, plans: Sequ
         if i is not None:
             tails.append((i - plan.n, len(tails), plan, i))
     for _, _, plan, i in sorted(tails, key=lambda t: t[:2]):
-        budget = max(MIN_TAIL_BUDGET_S, deadline - time.perf_counter())
+        budget = max(MIN_TAIL_BUDGET_S, deadline - time.thread_time())
         problem = _problem(planner, setup, plan)
         try:
             path = clear_path(problem, km, plan.kappas[i], budget_s=budget, seed=seed,
                               samples=cfg.line_samples, goal_name="the final approach",
                               hints=plan.kappas[:i])
         except ClearPathRefused:
-            if time.perf_counter() > deadline:
+            if time.thread_time() > deadline:
                 break
             continue
         out = splice(planner, setup, plan, i, path.kappas[1:-1])
@@ -109,7 +109,7 @@ def plan_by_relay(planner, constrained, setup: ObstacleSetup, km: Array, center:
     problem = ClearPathProblem(m, setup.gripper, setup.obstacles, setup.clearance, 0.0,
                                extra=[(obj, cfg.clearance_margin)])
     for v in seeds[np.argsort(cost)][:RELAYS]:
-        if time.perf_counter() > deadline:
+        if time.thread_time() > deadline:
             break
         try:
             path = clear_path(problem, km, v, budget_s=RELAY_BUDGET_S, seed=seed,
@@ -118,7 +118,7 @@ def plan_by_relay(planner, constrained, setup: ObstacleSetup, km: Array, center:
         except GraspRefused:
             continue
         if not plan.success:
-            plan = repair(planner, setup, plan, min(deadline, time.perf_counter()
+            plan = repair(planner, setup, plan, min(deadline, time.thread_time()
                                                     + RELAY_BUDGET_S), seed)
         if plan is not None:
             out = splice(planner, setup, dataclasses.replace(plan, kappa_meas=km), 0,
@@ -148,7 +148,7 @@ def repair(planner, setup: ObstacleSetup, plan: GraspPlan, deadline: float,
         a = plan.kappa_meas if i == 0 else k[i - 1]
         try:
             path = clear_path(problem, a, k[i], samples=cfg.line_samples, seed=seed,
-                              budget_s=max(MIN_TAIL_BUDGET_S, deadline - time.perf_counter()),
+                              budget_s=max(MIN_TAIL_BUDGET_S, deadline - time.thread_time()),
                               goal_name="the next waypoint")
         except GraspRefused:
             return None
