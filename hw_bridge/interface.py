@@ -296,15 +296,12 @@ class SerialHardware(HardwareInterface):
     def _own_stall(self, now: float, last_state: float | None) -> float:
         """How much of the time since the last STATE this host could not listen, s.
 
-        The control thread calls :meth:`read` once a period. When the calls are further apart
-        (the loop's own CPU was taken: measured on the 2-core VM, ticks of 35-60 ms in which
-        the loop thread ran slowly or another real-time process ran; see the README's "Real
-        time"), the receive thread could not decode and, with the device emulator on the same
-        CPU, the device could not send either: that time is the host's own silence, not the
-        device's. It is credited (the part beyond one period of every late read since the last
-        STATE), so the link is called lost after ``state_timeout_s`` of silence while this host
-        was listening. A host that reads on time gets no credit: the 40 ms rule is unchanged.
-        The device's own watchdog still acts on the DEMANDs the stalled host did not send.
+        :meth:`read` runs once a period; when calls are further apart the loop's CPU was taken
+        (35-60 ms measured on the 2-core VM: benchmarks/link_gaps.py), the receive thread could
+        not decode and the emulator on that CPU could not send. That part beyond one period of
+        each late read is credited: the link is lost after ``state_timeout_s`` of silence while
+        this host listened (a punctual host: the 40 ms rule unchanged). The device's watchdog
+        still acts on the DEMANDs a stalled host did not send.
         """
         prev, self._last_read = self._last_read, now
         if last_state != self._stall_since:  # a newer STATE: the count starts again
