@@ -229,6 +229,21 @@ class Emulator:
             except OSError:
                 self._check_host()  # EIO: the host closed the port meanwhile
 
+    def _send_soon(self, within: float) -> None:
+        """Write the frames due within ``within`` s now, sleeping until each is due.
+
+        Before the plant step: that step took up to 25 ms when other real-time work shared the
+        CPU, and a STATE waiting for its wire time behind it reached the host up to 70 ms late
+        (benchmarks/link_gaps.py).
+        """
+        while self.tx_pending:
+            wait = self.tx_pending[0][0] - time.monotonic()
+            if wait > within:
+                return
+            if wait > 0:
+                time.sleep(wait)
+            self._send_due(time.monotonic())
+
     # -- timer --------------------------------------------------------------------------------
     def _tick(self, now: float, late: float = 0.0) -> None:
         """One device period at ``now``, ``late`` s after it was due (see :meth:`_serve`)."""
@@ -248,7 +263,7 @@ class Emulator:
                 self.emit("link_cut" if cut else "link_restored")
         self.core.tick(now, late)
         self._flush_output(now)  # the STATE is due a wire time after the tick, not after the
-        # plant step below (up to a few ms): it goes out as soon as that step is done
+        self._send_soon(0.002)  # plant step below: wait for that (< 1 ms at 1 Mbaud) and send
         ev = self.core.take_events()
         pos = [int(c) for c in self.core.motors.encoders]
         if ev.watchdog_tripped:
