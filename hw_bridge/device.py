@@ -52,6 +52,7 @@ class DeviceCore:
         self._t0 = now
         self._last_tick = now
         self._last_demand = now
+        self._stalled = 0.0  # the device's own stalls since the last DEMAND (see tick)
         self._seq = 0
         self._ack_seq = 0
         self._seq_valid = False
@@ -82,7 +83,7 @@ class DeviceCore:
             self.armed, self.tripped = True, False
             self.motors.hold()
             self.motors.enabled = True
-            self._last_demand = now
+            self._last_demand, self._stalled = now, 0.0
             self.events.armed = True
         elif isinstance(msg, p.Disarm):
             self._disarm(now)
@@ -93,7 +94,7 @@ class DeviceCore:
                 return  # addresses motors we do not have: ignore the whole demand
             self._seq_valid = True
             self._ack_seq = msg.seq
-            self._last_demand = now
+            self._last_demand, self._stalled = now, 0.0
             if self.armed and not self.tripped:
                 self.motors.set_targets(msg.mask, msg.counts)
             self._send_state(now)
@@ -116,9 +117,16 @@ class DeviceCore:
         self.motors.enabled = False
 
     # -- timer ----------------------------------------------------------------------------
-    def tick(self, now: float) -> None:
-        """Control tick: watchdog, plant step, periodic STATE."""
-        if self.armed and now - self._last_demand > self.watchdog_s:
+    def tick(self, now: float, stalled_s: float = 0.0) -> None:
+        """Control tick: watchdog, plant step, periodic STATE.
+
+        ``stalled_s``: how late this tick runs because the device itself could not (0 on a
+        microcontroller; the emulator on a shared CPU passes its own lateness). The watchdog
+        does not count that time as the host's silence (the DEMANDs the host sent meanwhile
+        are still on their way in); the time since the last DEMAND while the device ran does.
+        """
+        self._stalled += max(0.0, stalled_s)
+        if self.armed and now - self._last_demand - self._stalled > self.watchdog_s:
             self.armed, self.tripped = False, True
             self.motors.hold()
             self.motors.enabled = False

@@ -229,8 +229,24 @@ class Emulator:
             except OSError:
                 self._check_host()  # EIO: the host closed the port meanwhile
 
+    def _send_soon(self, within: float) -> None:
+        """Write the frames due within ``within`` s now, sleeping until each is due.
+
+        Before the plant step: that step took up to 25 ms when other real-time work shared the
+        CPU, and a STATE waiting for its wire time behind it reached the host up to 70 ms late
+        (benchmarks/link_gaps.py).
+        """
+        while self.tx_pending:
+            wait = self.tx_pending[0][0] - time.monotonic()
+            if wait > within:
+                return
+            if wait > 0:
+                time.sleep(wait)
+            self._send_due(time.monotonic())
+
     # -- timer --------------------------------------------------------------------------------
-    def _tick(self, now: float) -> None:
+    def _tick(self, now: float, late: float = 0.0) -> None:
+        """One device period at ``now``, ``late`` s after it was due (see :meth:`_serve`)."""
         elapsed = now - self.t0
         a = self.options
         if a.stall_after is not None and elapsed >= a.stall_after and not self.stalled:
@@ -245,9 +261,9 @@ class Emulator:
                 self.cut = cut
                 self.rx_pending.clear()
                 self.emit("link_cut" if cut else "link_restored")
-        self.core.tick(now)
+        self.core.tick(now, late)
         self._flush_output(now)  # the STATE is due a wire time after the tick, not after the
-        # plant step below (up to a few ms): it goes out as soon as that step is done
+        self._send_soon(0.002)  # plant step below: wait for that (< 1 ms at 1 Mbaud) and send
         ev = self.core.take_events()
         pos = [int(c) for c in self.core.motors.encoders]
         if ev.watchdog_tripped:
@@ -378,7 +394,12 @@ class Emulator:
             if self.control is not None:
                 self._serve_control()
             if now >= next_tick:
-                self._tick(now)
+                # A tick more than half a period late: this process could not run (its CPU was
+                # taken; on the 2-core VM the loop and the emulator share one and stalls of
+                # 35-60 ms were measured). A microcontroller is never late: the watchdog does
+                # not count that time as the host's silence (DeviceCore.tick).
+                late = now - next_tick
+                self._tick(now, late if late > period / 2 else 0.0)
                 next_tick += period
                 if next_tick <= now:  # overrun: skip, do not catch up
                     next_tick = now + period

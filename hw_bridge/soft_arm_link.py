@@ -50,6 +50,7 @@ class EmulatorProcess:
     def __init__(self, args: list[str], start_timeout: float = 10.0, sched_priority: int = 45):
         if sched_priority and "--sched-priority" not in args:
             args = [*args, "--sched-priority", str(sched_priority)]
+        self.realtime = _arg(args, "--sched-priority") not in (None, "0")
         self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", *args],
                                      cwd=_ROOT, stdout=subprocess.PIPE, text=True,
                                      env=child_env(), preexec_fn=quiesce_blas_on_fork)
@@ -99,6 +100,12 @@ class EmulatorProcess:
                 self.proc.kill()
                 self.proc.wait(timeout)
         return self.proc.returncode
+
+
+def _arg(args: Any, flag: str) -> str | None:
+    """The value after ``flag`` in a command line, or None."""
+    args = list(args)
+    return args[args.index(flag) + 1] if flag in args[:-1] else None
 
 
 class UdpScene:
@@ -265,6 +272,11 @@ def open_link(robot: Any, kind: DeviceKind, *, port_path: str | None = None, see
         emu.stop()
         rx.stop()
         raise
+    if emu.realtime:  # it serves once its pty keeper (a Python process) has started: under
+        try:  # load that took longer than the first HELLO's 500 ms ("no HELLO answer" at start)
+            emu.wait_event("scheduling", 30.0)  # (its last event before serving)
+        except TimeoutError:
+            pass  # then the first configure may fail; the operator's Arm configures again
     hw = SerialHardware(config, emu.path)
     return SoftArmLink(kind, hw, rx, HardwareDevice(hw, rx, n, radius), scene, emu)
 

@@ -279,3 +279,7 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
             return xdist_group_of(nodeid) or nodeid
 
     return GroupScheduling(config, log)
+
+
+# Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py).
+pytest_plugins = ["rerun_reasons"]

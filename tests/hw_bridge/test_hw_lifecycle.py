@@ -225,3 +225,100 @@ def test_device_watchdog_latches_until_arm() -> None:
     assert dev.tripped and dev.motors.position[0] == pos
     dev.receive(p.encode(p.Arm()), t)
     assert dev.armed and not dev.tripped
+
+
+def test_device_watchdog_does_not_count_the_devices_own_stall() -> None:
+    """The emulator shares the loop's CPU: when that CPU is taken for 50 ms, its tick runs late
+    and the host's DEMANDs are still on their way in. That lateness is not the host's
+    silence; the time the device ran without a DEMAND still is."""
+    def armed_device() -> DeviceCore:
+        dev = DeviceCore(MotorBank(1, 1000.0), 0.05, 0.01, now=0.0)
+        dev.receive(p.encode(p.Arm()) + p.encode(p.Demand.full(1, [10])), 0.0)
+        return dev
+
+    dev = armed_device()
+    dev.tick(0.01)
+    dev.tick(0.065, stalled_s=0.045)  # due at 0.02, ran 45 ms late: 20 ms of host silence
+    assert dev.armed and not dev.tripped
+    dev.receive(p.encode(p.Demand.full(2, [20])), 0.066)  # the DEMAND that was on its way
+    dev.tick(0.075)
+    assert dev.armed
+    dev.tick(0.12)
+    dev.tick(0.127)  # 61 ms after the last DEMAND, all of it running: the host was silent
+    assert dev.tripped and not dev.armed
+
+    dev = armed_device()  # the same lateness not declared (a microcontroller): trips
+    dev.tick(0.01)
+    dev.tick(0.065)
+    assert dev.tripped
+
+    dev = armed_device()  # credit does not outlive the next DEMAND
+    dev.tick(0.065, stalled_s=0.045)
+    dev.receive(p.encode(p.Demand.full(2, [20])), 0.066)
+    dev.tick(0.12)
+    assert dev.tripped  # 54 ms since that DEMAND
+
+
+class _NullTransport:
+    def __init__(self) -> None:
+        self.written: list[bytes] = []
+
+    def read_chunk(self) -> bytes:
+        return b""
+
+    def write(self, data: bytes) -> None:
+        self.written.append(data)
+
+    def reset_input(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _active_link(clock) -> SerialHardware:
+    """An armed SerialHardware whose last STATE arrived at clock time 0 (no threads)."""
+    from hw_bridge.link import Link
+    hw = SerialHardware(BridgeConfig.from_robot(ROBOT), "null://", clock=clock)
+    hw.link = Link(_NullTransport(), clock)
+    hw.state = LifecycleState.ACTIVE
+    hw.link.last_state = p.State(1, 0, 0, int(p.Status.ARMED), 0, (0,) * 6)
+    hw.link.last_state_time = 0.0
+    return hw
+
+
+def test_link_lost_counts_only_the_time_the_host_listened() -> None:
+    """The host's own stall (its read() late because its CPU was taken) is not the device's
+    silence: the link is lost after 40 ms without STATE while the host was reading."""
+    now = [0.0]
+    clock = lambda: now[0]  # noqa: E731
+    timeout = BridgeConfig.from_robot(ROBOT).link_timeout_s
+    assert timeout == pytest.approx(0.04)
+
+    hw = _active_link(clock)  # a punctual host: unchanged, lost at the first read past 40 ms
+    for k in range(1, 6):
+        now[0] = k * 0.01
+        r = hw.read()
+        assert (r is ReturnType.OK) == (k * 0.01 <= timeout + 1e-9), k
+    assert "no valid STATE for 50 ms" in (hw.fault or "") and "stalled" not in hw.fault
+
+    hw = _active_link(clock)  # reads at 10, 20, 30 ms, then the host stalls until 90 ms
+    for t in (0.01, 0.02, 0.03, 0.09):
+        now[0] = t
+        assert hw.read() is ReturnType.OK, t  # 90 ms old, 50 of them the host's own stall
+    hw.link.last_state_time = 0.092  # the device was there all along
+    now[0] = 0.10
+    assert hw.read() is ReturnType.OK
+    for t in (0.11, 0.12, 0.13):  # and the credit went with that STATE
+        now[0] = t
+        assert hw.read() is ReturnType.OK
+    now[0] = 0.14
+    assert hw.read() is ReturnType.ERROR  # 48 ms without STATE, listening all the time
+
+    hw = _active_link(clock)  # a stall, then still no STATE: lost 40 listening ms after it
+    for t in (0.01, 0.02, 0.03, 0.09):
+        now[0] = t
+        assert hw.read() is ReturnType.OK
+    now[0] = 0.10
+    assert hw.read() is ReturnType.ERROR
+    assert "no valid STATE for 100 ms (this host stalled 50 ms of it)" in (hw.fault or "")
