@@ -25,8 +25,9 @@ from core.control.params import BinParams
 from core.kinematics import planar as pk
 
 Array = npt.NDArray[np.float64]
-CARRY_COLOR = (0, 150, 140)          # teal: where the object goes, like the bin
-CARRY_GHOST_COLOR = (150, 200, 195)  # faint: the arm at each carry target
+CARRY_COLOR = (0, 135, 145)          # teal: where the object goes, like the bin
+CARRY_GHOST_COLOR = (95, 180, 180)   # lighter and thin: the arm at each carry target
+Z_CARRY = Z_PLAN + 0.002             # over the approach's ghost arms where they cross
 PATH_SAMPLES = 12                    # palm points per certified line of the carry
 
 
@@ -79,12 +80,43 @@ def carry_geometry(robot: Any, plan: Any) -> dict[str, Array] | None:
     t = np.linspace(0.0, 1.0, PATH_SAMPLES + 1)[1:, None, None]
     legs = shapes[:-1][None] + t * (shapes[1:] - shapes[:-1])[None]       # (S, m, N)
     along = np.vstack([shapes[:1], legs.transpose(1, 0, 2).reshape(-1, shapes.shape[1])])
-    path = np.c_[palm_points(robot, plan, along), np.full(len(along), Z_PLAN)]
+    path = np.c_[palm_points(robot, plan, along), np.full(len(along), Z_CARRY)]
     return {
-        "targets": np.c_[palm_points(robot, plan, carry), np.full(len(carry), Z_PLAN)],
+        "targets": np.c_[palm_points(robot, plan, carry), np.full(len(carry), Z_CARRY)],
         "path": np.stack([path[:-1], path[1:]], 1),
         "ghosts": ghost_segments(robot, carry, Z_PLAN - 0.001).reshape(-1, 2, 3),
     }
+
+
+def _padded(segments: Array, size: int) -> Array:
+    """``segments`` (k, 2, 3), 1 <= k <= size, filled up to ``size`` with copies of the last
+    one (drawn over it, so nothing shows)."""
+    return np.concatenate([segments, np.repeat(segments[-1:], size - len(segments), 0)])
+
+
+class _Lines:
+    """A line-segments node of a fixed number of segments in one colour: only its points
+    change (a browser given new points and colours of another length in two messages may
+    draw the lines white), and it is made again, larger, when a carry needs more."""
+
+    def __init__(self, scene: Any, name: str, color: tuple[int, int, int], thickness: float,
+                 size: int) -> None:
+        self.scene, self.name, self.color, self.thickness = scene, name, color, thickness
+        self.handle = self._make(size)
+
+    def _make(self, size: int) -> Any:
+        colors = np.broadcast_to(np.array(self.color, np.uint8), (size, 2, 3)).copy()
+        return self.scene.add_line_segments(self.name, np.zeros((size, 2, 3)), colors,
+                                            thickness=self.thickness, visible=False)
+
+    def show(self, segments: Array) -> None:
+        size = len(self.handle.points)
+        if len(segments) > size:
+            self.handle.remove()
+            self.handle = self._make(max(len(segments), 2 * size))
+            size = len(self.handle.points)
+        self.handle.points = _padded(segments, size)
+        self.handle.visible = True
 
 
 class CarryLayer:
@@ -93,15 +125,23 @@ class CarryLayer:
 
     def __init__(self, server: Any, robot: Any) -> None:
         self.robot = robot
-        scene, empty = server.scene, np.zeros((1, 2, 3))
-        self.ghosts = scene.add_line_segments("/grasp/plan/carry_ghosts", empty,
-                                              CARRY_GHOST_COLOR, thickness=0.003,
-                                              visible=False)
-        self.path = scene.add_line_segments("/grasp/plan/carry_path", empty, CARRY_COLOR,
-                                            thickness=0.006, visible=False)
+        scene = server.scene
+        arm = ghost_segments(robot, np.zeros((1, robot.n_segments)), 0.0).shape[1]
+        self._ghosts = _Lines(scene, "/grasp/plan/carry_ghosts", CARRY_GHOST_COLOR, 0.0025,
+                              4 * arm)
+        self._path = _Lines(scene, "/grasp/plan/carry_path", CARRY_COLOR, 0.008,
+                            4 * PATH_SAMPLES)
         self.targets = scene.add_point_cloud("/grasp/plan/carry_targets", np.zeros((1, 3)),
                                              CARRY_COLOR, point_size=0.012,
                                              point_shape="circle", visible=False)
+
+    @property
+    def ghosts(self) -> Any:
+        return self._ghosts.handle
+
+    @property
+    def path(self) -> Any:
+        return self._path.handle
 
     def draw(self, plan: Any) -> None:
         """Show ``plan``'s carry; hide the layer when it has none (or ``plan`` is None)."""
@@ -110,13 +150,8 @@ class CarryLayer:
             for h in (self.ghosts, self.path, self.targets):
                 h.visible = False
             return
-        self.ghosts.points = g["ghosts"]
-        self.ghosts.colors = np.broadcast_to(np.array(CARRY_GHOST_COLOR, np.uint8),
-                                             g["ghosts"].shape).copy()
-        self.path.points = g["path"]
-        self.path.colors = np.broadcast_to(np.array(CARRY_COLOR, np.uint8),
-                                           g["path"].shape).copy()
+        self._ghosts.show(g["ghosts"])
+        self._path.show(g["path"])
         self.targets.points = g["targets"]
         self.targets.colors = np.tile(np.array(CARRY_COLOR, np.uint8), (len(g["targets"]), 1))
-        for h in (self.ghosts, self.path, self.targets):
-            h.visible = True
+        self.targets.visible = True

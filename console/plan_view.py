@@ -361,6 +361,7 @@ class SessionView:
 def _carry_words(plan: GraspPlan, note: str | None) -> str:
     """The carry to the bin in words (empty without obstacles or a bin)."""
     if note:
+        note = note.removeprefix("Carry to the bin: ")
         return f"; <b style='color:#c92a2a'>no carry to the bin:</b> {html.escape(note)}"
     if plan.carry is None:
         return ""

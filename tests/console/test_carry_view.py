@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from console.carry_view import PATH_SAMPLES
 from console.planning_clock import PlanningClock
 from console.plan_view import outcome_html
 from console.table_bin import locate_bin
@@ -84,7 +85,11 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
     want = np.array([palm_by_fk(k, plan.side) for k in plan.carry])
     # viser keeps a point cloud in float16 (0.12 mm steps here), line segments in float32.
     np.testing.assert_allclose(layer.targets.points[:, :2], want, atol=2e-4)
-    path = layer.path.points
+    drawn = layer.path.points                    # the path, then copies of its last segment
+    n = PATH_SAMPLES * len(plan.carry)
+    path = drawn[:n]
+    np.testing.assert_array_equal(drawn[n:], np.broadcast_to(path[-1], drawn[n:].shape))
+    assert np.all(np.hypot(*(path[:, 1, :2] - path[:, 0, :2]).T) > 0)   # none of them empty
     np.testing.assert_allclose(path[0, 0, :2], palm_by_fk(plan.kappas[-1], plan.side),
                                atol=1e-6)                       # from the grasp pose
     np.testing.assert_allclose(path[-1, 1, :2], want[-1], atol=1e-6)  # to the bin pose
