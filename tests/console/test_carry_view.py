@@ -202,3 +202,34 @@ def test_a_slow_plan_shows_planning_with_the_button_disabled_then_the_refusal(ga
     wait_for(lambda: "Obstacle 1 is in the way" in pp.summary.content and
              not pp.plan_button.disabled, what="the refusal shown, the button back")
     assert 'data-state="refused"' in pp.summary.content
+
+
+def test_execute_and_click_to_grasp_show_the_machines_planning_then_its_refusal() -> None:
+    """Execute without a plan and Click to grasp plan on the machine (its planning process):
+    its phase "planning" is the header's busy field and the Control panel's state line while
+    it runs, and the refusal is the state line's reason when it ends."""
+    from console.panels.control_text import execute_target, header_phase, state_html
+    from console.plan_view import SessionView
+    from core.control.stack import Telemetry
+    from hw_bridge.loop import LoopSnapshot, LoopStats
+    from hw_bridge.soft_arm_process import ControlView
+
+    def view(phase: str, reason: str | None) -> ControlView:
+        c = Telemetry(t=3.0, armed=True, phase=phase, reason=reason, waypoint=0,
+                      n_waypoints=0, replans=0, tracking_ok=True, prepressurised=True,
+                      kappa_meas=np.zeros(6), kappa_ref=np.zeros(6), kappa_target=np.zeros(6),
+                      commands=np.zeros(13), saturated=np.zeros(6, bool),
+                      gripper_closed=False, object_xy=None)
+        snap = LoopSnapshot(300, 3.0, c, 10.0, 0.5, 0.1, 0.3, 0.1, 0, None)
+        return ControlView(snap, LoopStats(300, 0, 0, 0, *([0.0] * 9)), "default", None,
+                           None, False, None)
+
+    target = execute_target(SessionView((CUP,), "Cup", None, 0, False, 2.0, True, "off"))
+    planning = view("planning", "object settled at (-0.200, 0.200)")
+    assert header_phase(planning, target) == ("planning · Cup · ARMED", "busy")
+    assert 'data-phase="planning"' in state_html(planning, target)
+    why = "planner refused: Obstacle 1 is in the way: no approach found."
+    refused = view("stopped", why)
+    assert header_phase(refused, target)[1] == "ok"
+    html = state_html(refused, target)
+    assert 'data-phase="stopped"' in html and f"<b>Reason:</b> {why}" in html
