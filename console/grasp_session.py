@@ -7,7 +7,9 @@ and gripper ``clearance`` (m) from them (drawn by :class:`console.obstacle_view.
 Callbacks only call :class:`GraspSession` methods, which take a lock, record the request and
 wake one worker thread. The worker plans the newest request with
 :class:`core.planning.sides.SidedPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
-second, on the newest position only), steps waypoint playback, redraws the grasp layer
+second, on the newest position only; a final plan with obstacles and a bin also gets its carry
+to the bin, :mod:`console.carry_view`; from 0.5 s on the panels show "Planning… (n s)",
+:mod:`console.planning_clock`), steps waypoint playback, redraws the grasp layer
 (:class:`console.plan_view.PlanScene`, of which it is the only writer) and then tells the panels,
 which refresh their widgets. Who may change it is decided by the panels (operator-only
 callbacks); the session itself trusts its callers.
