@@ -7,7 +7,9 @@ and gripper ``clearance`` (m) from them (drawn by :class:`console.obstacle_view.
 Callbacks only call :class:`GraspSession` methods, which take a lock, record the request and
 wake one worker thread. The worker plans the newest request with
 :class:`core.planning.sides.SidedPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
-second, on the newest position only), steps waypoint playback, redraws the grasp layer
+second, on the newest position only; a final plan with obstacles and a bin also gets its carry
+to the bin, :mod:`console.carry_view`; from 0.5 s on the panels show "Planning… (n s)",
+:mod:`console.planning_clock`), steps waypoint playback, redraws the grasp layer
 (:class:`console.plan_view.PlanScene`, of which it is the only writer) and then tells the panels,
 which refresh their widgets. Who may change it is decided by the panels (operator-only
 callbacks); the session itself trusts its callers.
@@ -28,8 +30,10 @@ import viser
 
 from console.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
 from console.lab_feed import feed_grasp
+from console.carry_view import CarryLayer, plan_carry
 from console.obstacle_view import ObstacleLayer
 from console.plan_view import LIVE_HZ, Outcome, PlanScene, SessionView
+from console.planning_clock import PlanningClock
 from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
 from console.table_bin import BinView, TableBin
@@ -57,6 +61,7 @@ class GraspSession(ObstacleEdits):
         self.robot = robot
         self.planner = SidedPlanner(robot)  # the side the object lies on (core.planning.sides)
         self.scene = PlanScene(app.server, robot)
+        self.carry_layer = CarryLayer(app.server, robot)  # a final plan's carry to the bin
         self.bin_view = BinView(app.server.scene)
         self._bin: TableBin | None = None  # where "Clear table into bin" takes the objects
         self.obstacle_layer = ObstacleLayer(app.server)
@@ -87,6 +92,7 @@ class GraspSession(ObstacleEdits):
         self.gizmo_handler: Callable[[str, viser.TransformControlsEvent], None] | None = None
         if not self.compute_reach:
             self._reach = "off"
+        self.clock = PlanningClock(self._tell_planning)  # "Planning… (n s)" from 0.5 s on
         self._thread = threading.Thread(target=self._run, name="grasp-session", daemon=True)
         self._thread.start()
         if self.compute_reach:
@@ -227,6 +233,7 @@ class GraspSession(ObstacleEdits):
         with self._cond:
             self._stop = True
             self._cond.notify_all()
+        self.clock.close()
 
     def _find(self, name: str) -> int:
         for i, o in enumerate(self._objects):
@@ -319,11 +326,16 @@ class GraspSession(ObstacleEdits):
                     self._playing = self._index < last
                     dirty.add("inspect")
                 objects, selected = list(self._objects), self._selected
-                settings = (self.delta_d, self.weights, tuple(self._obstacles), self.clearance)
+                settings = (self.delta_d, self.weights, tuple(self._obstacles), self.clearance,
+                            None if request else self._bin)  # live plans skip the carry
             if request is not None:
                 if request:
                     last_live = time.perf_counter()
-                outcome = self._plan(objects, selected, settings)
+                self.clock.start()
+                try:
+                    outcome = self._plan(objects, selected, settings)
+                finally:
+                    self.clock.stop()
                 with self._cond:
                     self._outcome = outcome
                     n = self._n()
@@ -345,12 +357,22 @@ class GraspSession(ObstacleEdits):
             plan = self.planner.plan(kappa, (obj.x, obj.y), obj.r, delta_d=settings[0],
                                      weights=settings[1], obstacles=settings[2],
                                      clearance=settings[3])
+            plan, note = plan_carry(self.robot, plan, obj, settings[4], settings[2],
+                                    settings[3])
         except GraspRefused as exc:
             return Outcome(obj, None, str(exc), seq)
         except Exception as exc:  # a planner bug must not kill the worker
             log.exception("grasp planning failed")
             return Outcome(obj, None, f"The planner failed unexpectedly ({exc}).", seq)
-        return Outcome(obj, plan, None, seq)
+        return Outcome(obj, plan, None, seq, note)
+
+    def _tell_planning(self, seconds: float) -> None:
+        """The planning clock's thread: the panels show that a plan has run ``seconds``."""
+        view = dataclasses.replace(self.view(), planning_s=seconds)
+        with self._cond:
+            listeners = list(self._listeners)
+        for fn in listeners:
+            fn(view)
 
     def _draw(self, dirty: set[str]) -> None:
         view = self.view()
@@ -366,6 +388,8 @@ class GraspSession(ObstacleEdits):
                 if dirty & {"plan", "inspect"}:
                     plan = view.outcome.plan if view.outcome else None
                     self.scene.draw_plan(plan, view.index, view.trail, view.trail_from)
+                    if "plan" in dirty:
+                        self.carry_layer.draw(plan)
                 if "reach" in dirty and isinstance(view.reach, ReachMap):
                     self.scene.draw_reach(view.reach, self.show_reach, self.table_extent)
         except Exception:  # a drawing error must not kill the worker

@@ -334,6 +334,7 @@ class Outcome:
     plan: GraspPlan | None
     refusal: str | None
     seq: int
+    carry_note: str | None = None   # why the plan has no carry to the bin (console.carry_view)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -354,6 +355,26 @@ class SessionView:
     obstacles: tuple[Obstacle, ...] = ()
     obstacle_selected: str | None = None
     clearance: float = 0.0  # m, the planner keeps the arm this far from every obstacle
+    planning_s: float | None = None  # s the running plan has taken so far (None: idle)
+
+
+def _carry_words(plan: GraspPlan, note: str | None) -> str:
+    """The carry to the bin in words (empty without obstacles or a bin)."""
+    if note:
+        note = note.removeprefix("Carry to the bin: ")
+        return f"; <b style='color:#c92a2a'>no carry to the bin:</b> {html.escape(note)}"
+    if plan.carry is None:
+        return ""
+    vias = len(plan.carry) - 1
+    return ("; carry to the bin: straight" if vias == 0 else
+            f"; carry to the bin: {vias} via shape{'s' if vias > 1 else ''} (teal)")
+
+
+def planning_html(seconds: float) -> str:
+    """What the planner summary shows while a plan takes longer than a moment."""
+    return (f'<div data-testid="plan-summary" data-state="planning" data-waypoints="" '
+            f'data-ms="" data-obstacle-mm="" style="font-size:0.85em"><b>Planning… '
+            f'({seconds:.1f} s)</b></div>')
 
 
 def outcome_html(outcome: Outcome | None) -> str:
@@ -372,6 +393,7 @@ def outcome_html(outcome: Outcome | None) -> str:
                 gap = float(np.min(plan.obstacle_path_clearance))
                 body += (f"; the arm keeps ≥ {fmt_mm(gap, 0)} mm from the obstacles "
                          f"(clearance {fmt_mm(plan.obstacle_margin, 0)} mm)")
+            body += _carry_words(plan, outcome.carry_note)
         else:
             f = plan.failures[0]
             body = (f"<b style='color:#c92a2a'>Failed</b> at approach circle {f.index} "

@@ -21,7 +21,7 @@ import html
 
 from console.grasp_session import GraspSession, session_for
 from console.panels.base import Panel, operator_only
-from console.plan_view import SessionView, outcome_html
+from console.plan_view import SessionView, outcome_html, planning_html
 from core.planning.reachability import ReachMap
 
 __all__ = ["GraspSession", "PlannerPanel", "SessionView", "grasp_panels", "outcome_html",
@@ -124,8 +124,12 @@ class PlannerPanel(Panel):
             self.reach.value = s.show_reach
 
     def refresh(self, view: SessionView) -> None:
-        """Worker thread: show the newest outcome."""
-        text = outcome_html(view.outcome)
+        """Worker thread: show the newest outcome, or "Planning… (n s)" with Plan grasp
+        disabled while a plan has run longer than a moment (the session's planning clock)."""
+        planning = view.planning_s is not None
+        text = planning_html(view.planning_s) if planning else outcome_html(view.outcome)
+        if self.plan_button.disabled != planning:
+            self.plan_button.disabled = planning
         if text != self._shown:
             self._shown = text
             self.summary.content = text

@@ -53,6 +53,7 @@ def _legend(kind: str) -> tuple[LegendEntry, ...]:
         from console.plan_view import (CAPTURE_COLOR, CIRCLE_COLOR, FAIL_COLOR, GHOST_COLOR,
                                        GHOST_SEL_COLOR, OBJECT_COLOR, OBJECT_SEL_COLOR,
                                        PALM_COLOR, REACH_COLORS)
+        from console.carry_view import CARRY_COLOR, CARRY_GHOST_COLOR
         from console.table_bin import BIN_COLOR
         from core.planning.reachability import FAILS, PLANNABLE
         return (
@@ -68,6 +69,9 @@ def _legend(kind: str) -> tuple[LegendEntry, ...]:
             LegendEntry((OBJECT_COLOR, OBJECT_SEL_COLOR), "fill",
                         "Object to grasp (pink: selected)"),
             LegendEntry((CAPTURE_COLOR,), "area", "Capture region at the last waypoint"),
+            LegendEntry((CARRY_COLOR, CARRY_GHOST_COLOR), "line",
+                        "Carry to the bin around the obstacles: the palm's path (faint: "
+                        "the arm at each via)"),
             LegendEntry((REACH_COLORS[PLANNABLE],), "area", "Table: a grasp can be planned"),
             LegendEntry((REACH_COLORS[FAILS],), "area", "Table: planning fails here"),
             LegendEntry((control.OBJECT_COLOR,), "fill", "Control's grasp-and-place object"),
