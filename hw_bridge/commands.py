@@ -93,6 +93,8 @@ class GraspAt:
     r: float
     obstacles: tuple[ObstacleRow, ...] = ()
     clearance: float = 0.0
+    bin_kappa: tuple[float, ...] = ()        # the bin placed on the table (empty: the robot's)
+    bin_kappa_right: tuple[float, ...] = ()  # its right finger's pose (empty: bin_kappa)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,6 +109,8 @@ class ExecutePlan:
     r: float
     obstacles: tuple[ObstacleRow, ...] = ()  # the plan's: its re-plans keep clear of them too
     clearance: float = 0.0
+    bin_kappa: tuple[float, ...] = ()        # as GraspAt's
+    bin_kappa_right: tuple[float, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,6 +141,16 @@ def obstacle_rows(obstacles: Any) -> tuple[ObstacleRow, ...]:
         name, x, y, r = (o.name, o.x, o.y, o.r) if hasattr(o, "name") else o
         out.append((str(name), float(x), float(y), float(r)))
     return tuple(out)
+
+
+def bin_rows(bin_params: Any) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """A placed bin (``core.control.params.BinParams``; None: none) as a command's
+    ``bin_kappa`` and ``bin_kappa_right`` rows (empty: the robot's bin; the left pose)."""
+    if bin_params is None:
+        return (), ()
+    def flat(k: Any) -> tuple[float, ...]:
+        return () if k is None else tuple(float(v) for v in k)
+    return flat(bin_params.kappa), flat(getattr(bin_params, "kappa_right", None))
 
 
 def obstacles_of(cmd: Any) -> list[Any]:

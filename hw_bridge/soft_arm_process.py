@@ -40,7 +40,8 @@ import numpy as np
 
 from hw_bridge.commands import (BRIDGE_COMMANDS, SCENE_COMMANDS, Arm, Connect, Disarm, Disconnect,
                                ExecutePlan, Goto, GraspAt, PlaceObject, RunRow, SoftArmCommand,
-                               StartGrasp, StopArm, obstacle_rows, obstacles_of)
+                               StartGrasp, StopArm, bin_rows, obstacle_rows,
+                               obstacles_of)
 from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
 from hw_bridge.loop_process import (LoopProcess, ProcessBridgeControls, reply_when_done,
@@ -142,24 +143,34 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             except (RuntimeError, OSError, ValueError):
                 pass  # the machine does not see it: that object fails with its reason
 
-    def run_row(s: RowControlStack, t: float, cmd: RunRow) -> None:
+    def bin_of(cmd: RunRow | GraspAt | ExecutePlan) -> Any:
+        """The command's table bin as ``BinParams`` (None: it names none); ValueError when
+        its poses are not n curvatures within the limits."""
         from core.control.params import BinParams
+        kappas = [np.asarray(k, float) for k in (cmd.bin_kappa, cmd.bin_kappa_right) if k]
+        if not kappas:
+            return None
+        if any(k.shape != (robot.n_segments,) or not np.all(np.abs(k) <= robot.kappa_max)
+               for k in kappas):
+            raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
+                             f"±{robot.kappa_max:g} 1/m")
+        return BinParams(kappas[0], robot.bin.drop_radius_m,
+                         kappas[1] if len(kappas) > 1 else None)
+
+    def run_row(s: RowControlStack, t: float, cmd: RunRow) -> None:
         from core.control.row import RowObject
         if not s.armed:
             raise RuntimeError(ROW_ARM_FIRST)
         objects = [RowObject(*o) for o in cmd.objects]  # ValueError names a bad one
         if not objects:
             raise ValueError("no objects to take to the bin")
-        kappas = [np.asarray(k, float) for k in (cmd.bin_kappa, cmd.bin_kappa_right) if k]
-        if not kappas or any(k.shape != (robot.n_segments,)
-                             or not np.all(np.abs(k) <= robot.kappa_max) for k in kappas):
+        bin_params = bin_of(cmd)
+        if bin_params is None:
             raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
                              f"±{robot.kappa_max:g} 1/m")
         s.set_obstacles(obstacles_of(cmd), cmd.clearance)  # ValueError: nothing set, nothing runs
         place(objects[0].x, objects[0].y, objects[0].r)
-        s.start_row(cmd.row_id, objects, BinParams(kappas[0], robot.bin.drop_radius_m,
-                                                   kappas[1] if len(kappas) > 1 else None), t,
-                    place_row_object)
+        s.start_row(cmd.row_id, objects, bin_params, t, place_row_object)
 
     def link(s: RowControlStack, cmd: Any) -> None:
         world.apply(cmd, s)
@@ -185,7 +196,9 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         elif isinstance(cmd, (GraspAt, ExecutePlan)):
             if not s.armed:  # arming is the operator's own, visible act: never implied here
                 raise RuntimeError(ARM_FIRST)
+            bin_params = bin_of(cmd)  # ValueError before anything is set
             s.set_obstacles(obstacles_of(cmd), cmd.clearance)  # first plan and re-plans
+            s.set_bin(bin_params)  # the table's bin, else the robot file's
             place(cmd.x, cmd.y, cmd.r)
             if isinstance(cmd, GraspAt):
                 s.start(t)
@@ -337,20 +350,24 @@ class ControlProcess(LoopProcess):
         return self.send(PlaceObject(float(x), float(y), float(r)))
 
     def grasp_at(self, x: float, y: float, r: float, obstacles: Any = (),
-                 clearance: float = 0.0) -> cf.Future:
+                 clearance: float = 0.0, bin_params: Any = None) -> cf.Future:
         """Place the object and run the grasp task; every plan keeps ``clearance`` (m) from
-        ``obstacles`` (``core.planning.obstacles.Obstacle``)."""
+        ``obstacles`` (``core.planning.obstacles.Obstacle``); the object goes to
+        ``bin_params`` (the table's bin, ``core.control.row.bin_at``; None: the robot's)."""
         return self.send(GraspAt(float(x), float(y), float(r), obstacle_rows(obstacles),
-                                 float(clearance)))
+                                 float(clearance), *bin_rows(bin_params)))
 
-    def execute(self, plan: Any, x: float, y: float, r: float) -> cf.Future:
-        """Place the object at (x, y) and run ``plan`` (a GraspPlan for it), then place it;
-        re-plans keep the plan's clearance from the plan's obstacles."""
+    def execute(self, plan: Any, x: float, y: float, r: float,
+                bin_params: Any = None) -> cf.Future:
+        """Place the object at (x, y) and run ``plan`` (a GraspPlan for it), then place it in
+        ``bin_params`` (as :meth:`grasp_at`); re-plans keep the plan's clearance from the
+        plan's obstacles."""
         rows = lambda a: tuple(tuple(float(v) for v in row) for row in np.asarray(a, float))  # noqa: E731
         return self.send(ExecutePlan(rows(plan.kappas), rows(plan.palm_poses), float(x),
                                      float(y), float(r),
                                      obstacle_rows(getattr(plan, "obstacles", ())),
-                                     float(getattr(plan, "obstacle_margin", 0.0) or 0.0)))
+                                     float(getattr(plan, "obstacle_margin", 0.0) or 0.0),
+                                     *bin_rows(bin_params)))
 
     def run_row(self, row_id: int, objects: Any, bin_xy: Any, bin_kappa: Any,
                 bin_kappa_right: Any = (), obstacles: Any = (),

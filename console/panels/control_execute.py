@@ -92,14 +92,17 @@ class ExecuteControls:
         """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
         self.panel._stopped = False
         self.target = target
+        session = self.app.grasp_session
+        view = None if session is None else session.view()
+        table_bin = getattr(view, "bin", None)  # a placed bin; None: the robot file's
         if target.plan is not None:
-            fut = self.panel.ctl.execute(target.plan, target.x, target.y, target.r)
+            fut = self.panel.ctl.execute(target.plan, target.x, target.y, target.r,
+                                         bin_params=table_bin)
         else:
-            session = self.app.grasp_session
-            view = None if session is None else session.view()
             fut = self.panel.ctl.grasp_at(target.x, target.y, target.r,
                                           tuple(getattr(view, "obstacles", ())),
-                                          float(getattr(view, "clearance", 0.0)))
+                                          float(getattr(view, "clearance", 0.0)),
+                                          bin_params=table_bin)
         fut.add_done_callback(lambda f: self.panel._report(event, f))
         client = getattr(event, "client", None)
         if client is not None:

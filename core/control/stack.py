@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.control.controller import CurvatureController
+from core.control.params import BinParams
 from core.control.grasp_place import GraspAndPlace, Observation, Phase, Planner
 from core.control.trajectory import TrajectoryGenerator
 from core.control.fastkin import fit
@@ -102,6 +103,11 @@ class ControlStack:
         """Obstacles every plan of the task keeps ``clearance`` (m) from (first plan and
         re-plans; :meth:`GraspAndPlace.set_obstacles`)."""
         self.machine.set_obstacles(obstacles, clearance)
+
+    def set_bin(self, bin_params: BinParams | None) -> None:
+        """Where the next task takes the object: a bin placed on the table
+        (:func:`core.control.row.bin_at`), or None for the robot file's ``[bin]``."""
+        self.machine.bin = BinParams.from_robot(self.robot) if bin_params is None else bin_params
 
     def execute(self, plan: Any, center: npt.ArrayLike, t: float) -> None:
         """Execute a given grasp plan for the object at ``center``, then place it."""

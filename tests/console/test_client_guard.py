@@ -326,8 +326,8 @@ def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) ->
     assert objects.r.value == r0
     sent: list[tuple] = []
     real = panel.ctl.grasp_at, panel.ctl.execute
-    panel.ctl.grasp_at = lambda *a: sent.append(a)  # type: ignore[method-assign]
-    panel.ctl.execute = lambda *a: sent.append(a)  # type: ignore[method-assign]
+    panel.ctl.grasp_at = lambda *a, **k: sent.append(a)  # type: ignore[method-assign]
+    panel.ctl.execute = lambda *a, **k: sent.append(a)  # type: ignore[method-assign]
     panel._disarmed = lambda: False  # type: ignore[method-assign]  # as if armed
     client = FakeClient(op.client_id)
     event = type("E", (), {"client": client, "client_id": op.client_id})()

@@ -62,6 +62,18 @@ class FakeRowControl:
         fut.set_result(None)
         return fut
 
+    def grasp_at(self, x, y, r, obstacles=(), clearance=0.0, bin_params=None):
+        self.sent.append(("grasp_at", (x, y, r), bin_params))
+        fut = cf.Future()
+        fut.set_result(None)
+        return fut
+
+    def execute(self, plan, x, y, r, bin_params=None):
+        self.sent.append(("execute", (x, y, r), bin_params))
+        fut = cf.Future()
+        fut.set_result(None)
+        return fut
+
     def stop_arm(self, reason="operator STOP"):
         self.sent.append(("stop", reason))
 
@@ -275,3 +287,20 @@ def test_the_bin_is_an_open_box_as_wide_as_its_drop_circle():
     assert f.min() == 0 and f.max() == len(v) - 1 and len(f) == 4 * 12  # four closed walls
     centroids = v[f].mean(axis=1)  # every triangle lies in a wall band: no floor, no lid
     assert np.abs(centroids[:, :2]).max(axis=1).min() >= 0.046 - 1e-9
+
+
+def test_execute_takes_the_object_to_the_placed_bin(rig):
+    """Execute (and Click to grasp) send the bin placed on the table with the task, so the arm
+    carries the object where the plan view draws the carry; without one, the robot file's."""
+    app, objects_panel, control, ctl, operator, _ = rig
+    show(control, view_with(armed=True))
+    event = type("E", (), {"client": operator, "client_id": operator.client_id})()
+    control.execute._execute(event)
+    assert ctl.sent[-1][0] in ("grasp_at", "execute") and ctl.sent[-1][2] is None  # no bin
+    table_bin = place_scene(app, objects_panel, operator)
+    control.execute._execute(event)
+    kind, _, sent_bin = ctl.sent[-1]
+    assert kind in ("grasp_at", "execute") and sent_bin == table_bin
+    from hw_bridge.commands import GraspAt, bin_rows
+    cmd = GraspAt(0.0, 0.0, 0.01, (), 0.0, *bin_rows(sent_bin))
+    np.testing.assert_allclose(cmd.bin_kappa, bin_at(SOFT, *BIN_XY).kappa, atol=1e-9)

@@ -93,3 +93,35 @@ def test_a_re_plan_in_the_control_process_keeps_to_the_obstacles():
         assert ctl.view.snapshot.control.phase == "stopped"
     finally:
         ctl.close()
+
+
+def test_grasp_takes_the_object_to_the_bin_placed_on_the_table(tmp_path):
+    """Grasp / Execute with a bin placed on the table: the object is released there, not at the
+    robot file's bin (the console draws the carry to the placed bin, so the arm must go there);
+    a malformed bin is refused before anything is placed or moves."""
+    from robot_files import QUICK_MOTION, robot_copy
+
+    from core.control.params import BinParams
+    from core.control.row import bin_at, bin_drop_point
+    robot = load(robot_copy("soft-arm", tmp_path, QUICK_MOTION, name="soft-arm-quick"))
+    placed = bin_at(robot, -0.12, 0.10, R)
+    robots_bin = bin_drop_point(robot, BinParams.from_robot(robot).kappa, R, "left")
+    assert np.hypot(*(robots_bin - (-0.12, 0.10))) > 0.1  # the two bins are far apart
+    ctl = ControlProcess(robot, seed=3, device="sim", sched_priority=None)
+    try:
+        wait_for(lambda: ctl.view is not None and ctl.view.snapshot.control is not None, 30.0)
+        ctl.arm().result(10)
+        wait_for(lambda: ctl.view.snapshot.control.prepressurised, 20.0)
+        bad = BinParams(np.zeros(4), 0.02)
+        with pytest.raises(RuntimeError, match="6 curvatures"):
+            ctl.grasp_at(*START, R, bin_params=bad).result(10)
+        assert ctl.view.snapshot.control.phase == "idle" and ctl.view.object_xy is None
+        ctl.grasp_at(*START, R, bin_params=placed).result(10)
+        wait_for(lambda: ctl.view.snapshot.control.phase in ("stopped", "released"), 120.0)
+        c = ctl.view.snapshot.control
+        assert c.phase == "released", c.reason
+        xy = ctl.view.object_xy
+        assert xy is not None and not ctl.view.captured
+        assert np.hypot(xy[0] + 0.12, xy[1] - 0.10) < placed.drop_radius_m, xy
+    finally:
+        ctl.close()
