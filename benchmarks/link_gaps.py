@@ -170,24 +170,7 @@ def _traced_emulator_class() -> Any:
     class Traced(soft_arm_link.EmulatorProcess):
         """EmulatorProcess running this file's :func:`emulator_main`."""
 
-        def __init__(self, args: list[str], start_timeout: float = 10.0,
-                     sched_priority: int = 45):
-            import queue
-            from hw_bridge.parent_watch import child_env, quiesce_blas_on_fork
-            if sched_priority and "--sched-priority" not in args:
-                args = [*args, "--sched-priority", str(sched_priority)]
-            self.realtime = "--sched-priority" in args
-            self.proc = subprocess.Popen([sys.executable, __file__, "--emulator", *args],
-                                         cwd=ROOT, stdout=subprocess.PIPE, text=True,
-                                         env=child_env(), preexec_fn=quiesce_blas_on_fork)
-            assert self.proc.stdout is not None
-            self.path = self.proc.stdout.readline().strip()
-            if not self.path.startswith("/dev/"):
-                self.stop()
-                raise RuntimeError(f"emulator did not start (first line {self.path!r})")
-            self.events = queue.Queue()
-            self.last = {}
-            threading.Thread(target=self._pump, daemon=True, name="emulator-events").start()
+        command = (__file__, "--emulator")
 
     return Traced
 

@@ -47,11 +47,13 @@ class EmulatorProcess:
     waits for its watchdog to trip, logs that (stderr, the event log) and exits within 0.4 s.
     """
 
+    command: tuple[str, ...] = ("-m", "hw_bridge.emulator")  # what the interpreter runs
+
     def __init__(self, args: list[str], start_timeout: float = 10.0, sched_priority: int = 45):
         if sched_priority and "--sched-priority" not in args:
             args = [*args, "--sched-priority", str(sched_priority)]
         self.realtime = _arg(args, "--sched-priority") not in (None, "0")
-        self.proc = subprocess.Popen([sys.executable, "-m", "hw_bridge.emulator", *args],
+        self.proc = subprocess.Popen([sys.executable, *self.command, *args],
                                      cwd=_ROOT, stdout=subprocess.PIPE, text=True,
                                      env=child_env(), preexec_fn=quiesce_blas_on_fork)
         assert self.proc.stdout is not None
