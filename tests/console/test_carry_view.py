@@ -97,7 +97,8 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
     for w in want:                                              # through every target
         assert np.min(np.hypot(*(path[:, 1, :2] - w).T)) < 1e-6
     vias = len(plan.carry) - 1
-    assert f"carry to the bin: {vias} via shape" in pp.summary.content
+    wait_for(lambda: f"carry to the bin: {vias} via shape" in pp.summary.content,
+             what="the summary's vias")
     from console.panels.view import legend_html
     assert "Carry to the bin" in legend_html("planar")
 
@@ -109,7 +110,8 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
     wait_for(lambda: len(layer.targets.points) == 1, what="the straight carry drawn")
     np.testing.assert_allclose(layer.targets.points[0, :2],
                                palm_by_fk(out.plan.carry[0], out.plan.side), atol=2e-4)
-    assert "carry to the bin: straight" in pp.summary.content
+    wait_for(lambda: "carry to the bin: straight" in pp.summary.content,
+             what="the summary's straight carry")  # the panel refreshes after the layer
 
     # No bin, no carry: the layer is hidden.
     s.set_bin(None)
@@ -117,7 +119,8 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
     assert out.plan is not None and out.plan.carry is None
     wait_for(lambda: not (layer.path.visible or layer.targets.visible or layer.ghosts.visible),
              what="the carry hidden")
-    assert "carry to the bin" not in pp.summary.content
+    wait_for(lambda: "carry to the bin" not in pp.summary.content and "Planning" not in
+             pp.summary.content, what="the summary without a carry")
 
     # Back with the bin and the obstacle, then the plan cleared (the object removed).
     s.set_bin(locate_bin(ROBOT, *BIN_XY))
