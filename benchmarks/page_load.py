@@ -84,7 +84,7 @@ def wire(url: str, gap: float = 0.3, limit: float = 20.0) -> dict[str, Any]:
     t0 = time.monotonic()
     ws.send(encode(CAMERA))
     frames = nbytes = 0
-    last = t0
+    last = first = t0
     kinds: Counter[str] = Counter()
     kind_bytes: Counter[str] = Counter()
     while time.monotonic() - t0 < limit:
@@ -93,6 +93,8 @@ def wire(url: str, gap: float = 0.3, limit: float = 20.0) -> dict[str, Any]:
         except TimeoutError:
             break
         last = time.monotonic()
+        if not frames:
+            first = last
         assert isinstance(frame, bytes)
         frames += 1
         nbytes += len(frame)
@@ -108,7 +110,7 @@ def wire(url: str, gap: float = 0.3, limit: float = 20.0) -> dict[str, Any]:
                 None, None, m["request_uuid"])))
     ws.close()
     return {"frames": frames, "messages": sum(kinds.values()), "bytes": nbytes,
-            "burst_s": last - t0, "kinds": kinds, "kind_bytes": kind_bytes}
+            "burst_s": last - t0, "first_s": first - t0, "kinds": kinds, "kind_bytes": kind_bytes}
 
 
 def load(browser: Any, url: str, timeout_ms: float = 120_000) -> dict[str, float]:
@@ -136,6 +138,40 @@ def load(browser: Any, url: str, timeout_ms: float = 120_000) -> dict[str, float
         context.close()
 
 
+def profile(browser: Any, url: str) -> dict[str, float]:
+    """One load (goto to STOP visible) under the CDP sampling profiler: ms of the page's main
+    thread by where it went (the HTML's inline script decodes viser's bundle, which viser
+    1.1.1 ships inlined and compressed in index.html; the bundle then runs from an eval'd
+    script without a URL; "(program)" is Chromium's own work: style, layout, paint, WebGL)."""
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    page = context.new_page()
+    cdp = context.new_cdp_session(page)
+    try:
+        cdp.send("Profiler.enable")
+        cdp.send("Profiler.setSamplingInterval", {"interval": 500})
+        cdp.send("Profiler.start")
+        page.goto(url + "?fixedDpr=0.5")
+        page.get_by_role("button", name="STOP (Esc)").wait_for(timeout=120_000)
+        prof = cdp.send("Profiler.stop")["profile"]
+    finally:
+        context.close()
+    nodes = {n["id"]: n["callFrame"] for n in prof["nodes"]}
+    spent: Counter[str] = Counter()
+    for sample, dt in zip(prof["samples"], prof["timeDeltas"]):
+        frame = nodes[sample]
+        name, where = frame["functionName"], frame["url"]
+        if name in ("(program)", "(garbage collector)", "(idle)"):
+            key = name
+        elif where.startswith("http"):
+            key = "inline script: decode viser's bundle"
+        elif where.startswith("wasm"):
+            key = "wasm"
+        else:
+            key = "viser bundle (React, three.js)"
+        spent[key] += dt / 1e3
+    return dict(spent)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robot", nargs="+", default=["soft-arm"])
@@ -144,6 +180,8 @@ def main() -> None:
                         help="one --disk-cache-dir for the session's contexts")
     parser.add_argument("--repo", type=Path, nargs="+", default=[REPO])
     parser.add_argument("--no-browser", action="store_true", help="the wire figures only")
+    parser.add_argument("--profile", action="store_true",
+                        help="one more load under the CPU profiler: where the main thread went")
     parser.add_argument("extra", nargs="*", help="more serve.py flags (after --)")
     args = parser.parse_args()
     from playwright.sync_api import sync_playwright
@@ -164,7 +202,7 @@ def main() -> None:
                                                            key=lambda kv: -w["kind_bytes"][kv[0]])[:6])
                         print(f"{repo.name:10s} {robot:10s} wire: {w['frames']} frames, "
                               f"{w['messages']} messages, {w['bytes'] / 1e3:.0f} kB sent, "
-                              f"burst {w['burst_s']:.2f} s; by size: {top}", flush=True)
+                              f"first {w['first_s']:.2f} s, burst {w['burst_s']:.2f} s; by size: {top}", flush=True)
                         if browser is None:
                             continue
                         rows = [load(browser, url) for _ in range(args.loads)]
@@ -173,6 +211,11 @@ def main() -> None:
                                   f"{r['ws']:5.2f}, scene {r['scene']:5.2f}, last msg "
                                   f"{r['last']:5.2f}, STOP {r['stop']:5.2f} s "
                                   f"({r['messages']} messages)", flush=True)
+                        if args.profile:
+                            spent = profile(browser, url)
+                            print(f"{'':21s} profile (main thread, ms): " + ", ".join(
+                                f"{k} {v:.0f}" for k, v in sorted(spent.items(),
+                                                                  key=lambda kv: -kv[1])))
                         print(f"{'':21s} median STOP "
                               f"{statistics.median(r['stop'] for r in rows):.2f} s", flush=True)
                     finally:
