@@ -36,7 +36,7 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from benchmarks.page_busy import ARGS, CHROMIUM, _serve  # noqa: E402
+from benchmarks.page_busy import ARGS, CHROMIUM, _serve
 
 # Records when the page's viser worker passes on server messages (performance.now(), ms).
 _TIMES = """(() => {
@@ -76,6 +76,7 @@ def wire(url: str, gap: float = 0.3, limit: float = 20.0) -> dict[str, Any]:
     connect burst; a live console keeps streaming state after it), at most ``limit`` s."""
     import msgspec
     import viser
+    from viser import _messages
     from websockets.sync.client import connect
 
     from tests.ws_client import CAMERA, decode_payload, encode
@@ -104,10 +105,10 @@ def wire(url: str, gap: float = 0.3, limit: float = 20.0) -> dict[str, Any]:
             kinds[m["type"]] += 1
             kind_bytes[m["type"]] += len(msgspec.msgpack.encode(m)) + sum(
                 lengths[i] for i in _binary_indices(m))
-        if m.get("type") == "LocalStorageGetItemRequestMessage":
-            from viser import _messages
-            ws.send(encode(_messages.LocalStorageGetItemResponseMessage(
-                None, None, m["request_uuid"])))
+        for m in payload["messages"]:  # answered like a browser tab (the operator's lease)
+            if m["type"] == "LocalStorageGetItemRequestMessage":
+                ws.send(encode(_messages.LocalStorageGetItemResponseMessage(
+                    None, None, m["request_uuid"])))
     ws.close()
     return {"frames": frames, "messages": sum(kinds.values()), "bytes": nbytes,
             "burst_s": last - t0, "first_s": first - t0, "kinds": kinds, "kind_bytes": kind_bytes}
