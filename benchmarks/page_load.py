@@ -14,7 +14,8 @@ this one) and measures:
   ``--disk-cache-dir`` shared by the contexts when ``--cache`` is given): from ``goto`` to
   DOMContentLoaded, to the first server message (the websocket is open), to the first scene
   node, to the last message of the connect burst, and to the STOP button visible (what
-  tests/browser/browser_tabs.open_console waits for, via the Operate tab's panel).
+  tests/browser/browser_tabs.open_console waits for, via the Operate tab's panel); first
+  the same for a bare viser server with just that button (viser's own floor).
 
 Everything runs one after the other, so two checkouts given in one call (``--repo /work/main .``)
 are compared under the same machine load.
@@ -27,7 +28,6 @@ import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -173,12 +173,36 @@ def profile(browser: Any, url: str) -> dict[str, float]:
     return dict(spent)
 
 
+def floor(browser: Any, loads: int) -> list[float]:
+    """viser's own floor: seconds from goto to a lone "STOP (Esc)" button of a bare viser
+    server (one grid in the scene) -- the bundle's decode and start, three.js, the software
+    WebGL context; what a console load costs beyond this is the console's content."""
+    import viser
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        srv.gui.add_button("STOP (Esc)")
+        srv.scene.add_grid("/grid")
+        url = f"http://127.0.0.1:{srv.get_port()}/"
+        out = []
+        for _ in range(loads):
+            context = browser.new_context(viewport={"width": 1280, "height": 800})
+            try:
+                page = context.new_page()
+                t0 = time.monotonic()
+                page.goto(url + "?fixedDpr=0.5")
+                page.get_by_role("button", name="STOP (Esc)").wait_for(timeout=120_000)
+                out.append(time.monotonic() - t0)
+            finally:
+                context.close()
+        return out
+    finally:
+        srv.stop()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robot", nargs="+", default=["soft-arm"])
     parser.add_argument("--loads", type=int, default=2)
-    parser.add_argument("--cache", action="store_true",
-                        help="one --disk-cache-dir for the session's contexts")
     parser.add_argument("--repo", type=Path, nargs="+", default=[REPO])
     parser.add_argument("--no-browser", action="store_true", help="the wire figures only")
     parser.add_argument("--profile", action="store_true",
@@ -188,15 +212,19 @@ def main() -> None:
     from playwright.sync_api import sync_playwright
 
     print(f"load average {os.getloadavg()[0]:.1f}")
-    with sync_playwright() as pw, tempfile.TemporaryDirectory() as cache:
-        launch_args = ARGS + ([f"--disk-cache-dir={cache}"] if args.cache else [])
+    with sync_playwright() as pw:
         browser = None if args.no_browser else pw.chromium.launch(
-            executable_path=CHROMIUM, headless=True, args=launch_args)
+            executable_path=CHROMIUM, headless=True, args=ARGS)
         try:
+            if browser is not None:
+                got = floor(browser, args.loads)
+                print("bare viser (the floor): STOP " + ", ".join(f"{t:.2f}" for t in got)
+                      + " s", flush=True)
             for repo in args.repo:
                 for robot in args.robot:
                     proc, url = _serve(robot, args.extra, repo)
                     try:
+                        time.sleep(5.0)  # serve.py answers HTTP before its panels exist
                         w = wire(url)
                         top = ", ".join(f"{k} {n}x {w['kind_bytes'][k] / 1e3:.0f} kB"
                                         for k, n in sorted(w["kinds"].items(),
