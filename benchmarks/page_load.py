@@ -10,12 +10,12 @@ this one) and measures:
   connect burst; the state stream goes on after it): frames, messages, bytes
   (compressed, as sent) and the biggest message types;
 - ``--loads`` page loads in one headless Chromium (/usr/bin/chromium, the browser tests' flags,
-  ``?fixedDpr=0.5``), each in a fresh context as the tests' ``page`` fixture makes them (a
-  ``--disk-cache-dir`` shared by the contexts when ``--cache`` is given): from ``goto`` to
-  DOMContentLoaded, to the first server message (the websocket is open), to the first scene
-  node, to the last message of the connect burst, and to the STOP button visible (what
+  ``?fixedDpr=0.5``), each in a fresh context as the tests' ``page`` fixture makes them: from
+  ``goto`` to DOMContentLoaded, to the first server message (the websocket is open), to the
+  first scene node, to the STOP button visible (what
   tests/browser/browser_tabs.open_console waits for, via the Operate tab's panel); first
-  the same for a bare viser server with just that button (viser's own floor).
+  the same for a bare viser server with just that button (viser's own floor). ("last msg" is
+  the last message received up to 1.5 s after STOP shows: the state stream goes on.)
 
 Everything runs one after the other, so two checkouts given in one call (``--repo /work/main .``)
 are compared under the same machine load.
