@@ -29,6 +29,7 @@ import numpy as np
 import viser
 
 from console.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
+from console.grasp_inspection import WaypointInspection
 from console.lab_feed import feed_grasp
 from console.carry_view import CarryLayer, plan_carry
 from console.obstacle_view import ObstacleLayer
@@ -49,7 +50,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
-class GraspSession(ObstacleEdits):
+class GraspSession(ObstacleEdits, WaypointInspection):
     """Shared grasp state of one console; see the module docstring for the threading rules."""
 
     compute_reach = True    # tests switch the (CPU-heavy) reachability map off
@@ -191,43 +192,6 @@ class GraspSession(ObstacleEdits):
             if show_reach is not None:
                 self.show_reach = bool(show_reach)
                 self._changed("reach")
-
-    def inspect(self, index: int | None = None, step: int = 0) -> None:
-        """Inspect waypoint ``index`` (0-based) or move by ``step``; stops playback."""
-        with self._cond:
-            n = self._n()
-            i = self._index + step if index is None else int(index)
-            self._index = min(max(i, 0), max(n - 1, 0))
-            self._trail_from = min(self._trail_from, self._index)
-            self._playing = False
-            self._changed("inspect")
-
-    def play(self, playing: bool, speed: float | None = None) -> None:
-        with self._cond:
-            if speed is not None:
-                self._speed = float(min(max(speed, 0.1), 50.0))
-            if playing and self._index >= self._n() - 1:
-                self._index = self._trail_from = 0
-            self._playing = bool(playing) and self._n() > 1
-            self._next_tick = time.perf_counter() + 1.0 / self._speed
-            self._changed("inspect")
-
-    def set_trail(self, trail: bool) -> None:
-        with self._cond:
-            self._trail = bool(trail)
-            self._changed("inspect")
-
-    def clear_trail(self) -> None:
-        """Hide the trail of the waypoints passed so far (it grows again from here)."""
-        with self._cond:
-            self._trail_from = self._index
-            self._changed("inspect")
-
-    def inspected_kappa(self) -> np.ndarray | None:
-        with self._cond:
-            if self._outcome is None or self._outcome.plan is None:
-                return None
-            return self._outcome.plan.kappas[self._index].copy()
 
     def close(self) -> None:
         with self._cond:
