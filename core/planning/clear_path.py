@@ -172,6 +172,14 @@ class ClearPathProblem:
             out[..., j] = self.model.body_clearance(k, o.center, o.r)
         return out
 
+    def gaps(self, kappas: Array) -> Array:
+        """(..., D) gaps to each disk, the held object's folded into the obstacles' (m)."""
+        gaps = self._gaps(kappas)
+        if self.held is not None and self.n_obstacles:
+            gaps[..., :self.n_obstacles] = np.minimum(gaps[..., :self.n_obstacles],
+                                                      self.held_gaps(kappas))
+        return gaps
+
     def margin(self, kappas: npt.ArrayLike) -> Array:
         """(...,) smallest margin over every disk (inf without disks)."""
         m = self.margins(kappas)
@@ -188,11 +196,7 @@ class ClearPathProblem:
     def worst(self, a: Array, b: Array) -> tuple[int, float]:
         """The disk the straight line a -> b comes closest to and that smallest gap (dense)."""
         tau = np.linspace(0.0, 1.0, 129)[:, None]
-        ks = a + tau * (b - a)
-        gaps = self._gaps(ks)
-        if self.held is not None and self.n_obstacles:
-            gaps[:, :self.n_obstacles] = np.minimum(gaps[:, :self.n_obstacles],
-                                                    self.held_gaps(ks))
+        gaps = self.gaps(a + tau * (b - a))
         per = (gaps - self.need).min(axis=0)
         j = int(np.argmin(per))
         return j, float(gaps[:, j].min())
@@ -208,9 +212,7 @@ def _refuse_end(problem: ClearPathProblem, k: Array, name: str) -> None:
         return
     j = int(np.argmin(m))
     o = problem.disks[j]
-    gap = float(problem._gaps(k)[j])
-    if problem.held is not None and j < problem.n_obstacles:
-        gap = min(gap, float(problem.held_gaps(k)[j]))
+    gap = float(problem.gaps(k)[j])
     where = f"overlaps it by {_mm(-gap)}" if gap < 0 else f"comes {_mm(gap)} from it"
     pad = f" (planned with {_mm(problem.pad)} more)" if problem.pad > 0 else ""
     raise ClearPathRefused(
