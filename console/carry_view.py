@@ -21,7 +21,6 @@ import numpy.typing as npt
 
 from console.plan_view import Z_PLAN, ghost_segments
 from core.control.carry import plan_side, with_carry
-from core.control.params import BinParams
 from core.kinematics import planar as pk
 
 Array = npt.NDArray[np.float64]
@@ -39,8 +38,7 @@ class _CarryRequest:
         self.radius = float(radius)
         self.obstacles = tuple(obstacles)
         self.clearance = float(clearance)
-        right = np.asarray(table_bin.kappa_right, float) if table_bin.kappa_right else None
-        self.bin = BinParams(np.asarray(table_bin.kappa, float), table_bin.drop_radius, right)
+        self.bin = table_bin.params()
 
 
 def plan_carry(robot: Any, plan: Any, obj: Any, table_bin: Any, obstacles: Any,

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from core.control.params import BinParams
 from core.control.row import bin_at
 
 Array = npt.NDArray[np.float64]
@@ -41,6 +42,11 @@ class TableBin:
 
     def describe(self) -> str:
         return f"bin at ({self.x * 1e3:.0f}, {self.y * 1e3:.0f}) mm"
+
+    def params(self) -> BinParams:
+        """As the state machine's ``BinParams`` (what :func:`locate_bin` was made from)."""
+        right = np.asarray(self.kappa_right, float) if self.kappa_right else None
+        return BinParams(np.asarray(self.kappa, float), self.drop_radius, right)
 
     def record(self) -> dict[str, float]:
         """For the scene JSON and recordings: where it is (the pose is found again on load)."""

@@ -135,6 +135,12 @@ def test_a_click_places_the_bin_the_arm_can_hold_an_object_over(rig):
     assert (table_bin.x, table_bin.y) == BIN_XY
     np.testing.assert_allclose(table_bin.kappa, expected.kappa, atol=1e-9)
     assert table_bin.drop_radius == SOFT.bin.drop_radius_m
+    back = table_bin.params()  # and back to what the state machine reads
+    np.testing.assert_allclose(back.kappa, expected.kappa, atol=1e-9)
+    assert back.drop_radius_m == expected.drop_radius_m
+    assert (back.kappa_right is None) == (expected.kappa_right is None)
+    if expected.kappa_right is not None:
+        np.testing.assert_allclose(back.kappa_right, expected.kappa_right, atol=1e-9)
     box = app.grasp_session.bin_view
     wait_for(lambda: box.shown == table_bin)
     assert box.label.visible and tuple(box.box.position[:2]) == pytest.approx(BIN_XY)
