@@ -143,15 +143,15 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             except (RuntimeError, OSError, ValueError):
                 pass  # the machine does not see it: that object fails with its reason
 
-    def bin_of(cmd: RunRow | GraspAt | ExecutePlan) -> Any:
-        """The command's table bin as ``BinParams`` (None: it names none); ValueError when
-        its poses are not n curvatures within the limits."""
+    def bin_of(cmd: RunRow | GraspAt | ExecutePlan, required: bool = False) -> Any:
+        """The command's table bin as ``BinParams`` (None: it names none, unless
+        ``required``); ValueError when its poses are not n curvatures within the limits."""
         from core.control.params import BinParams
         kappas = [np.asarray(k, float) for k in (cmd.bin_kappa, cmd.bin_kappa_right) if k]
-        if not kappas:
+        if not kappas and not required:
             return None
-        if any(k.shape != (robot.n_segments,) or not np.all(np.abs(k) <= robot.kappa_max)
-               for k in kappas):
+        if not kappas or any(k.shape != (robot.n_segments,)
+                             or not np.all(np.abs(k) <= robot.kappa_max) for k in kappas):
             raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
                              f"±{robot.kappa_max:g} 1/m")
         return BinParams(kappas[0], robot.bin.drop_radius_m,
@@ -164,10 +164,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         objects = [RowObject(*o) for o in cmd.objects]  # ValueError names a bad one
         if not objects:
             raise ValueError("no objects to take to the bin")
-        bin_params = bin_of(cmd)
-        if bin_params is None:
-            raise ValueError(f"the bin needs {robot.n_segments} curvatures within "
-                             f"±{robot.kappa_max:g} 1/m")
+        bin_params = bin_of(cmd, required=True)
         s.set_obstacles(obstacles_of(cmd), cmd.clearance)  # ValueError: nothing set, nothing runs
         place(objects[0].x, objects[0].y, objects[0].r)
         s.start_row(cmd.row_id, objects, bin_params, t, place_row_object)
