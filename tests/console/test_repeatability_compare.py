@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import re
 import threading
-import time
 from typing import Any
 
 import numpy as np
@@ -39,7 +38,8 @@ class SlippingRunner:
     started = True
 
     def __init__(self, slip: float = 0.2, jitter: float = 0.05, seed: int = 4,
-                 stop_after: int | None = None, on_move: Any = None) -> None:
+                 stop_after: int | None = None, on_move: Any = None,
+                 on_wait: Any = None) -> None:
         self.robot = EXT
         self.slip, self.jitter = slip, jitter
         self.rng = np.random.default_rng(seed)
@@ -51,6 +51,7 @@ class SlippingRunner:
         self.measured: list[tuple[int, np.ndarray]] = []
         self.stops = 0
         self.on_move = on_move
+        self.on_wait = on_wait  # called with the job waited for, while it "runs"
         self.samples: set[int | None] = set()
 
     def start(self) -> SlippingRunner:
@@ -72,6 +73,8 @@ class SlippingRunner:
         return job
 
     def wait(self, job: int, timeout: float | None = None) -> JobResult:
+        if self.on_wait is not None:
+            self.on_wait(job)
         return self.jobs[job]
 
     def stop(self) -> None:
@@ -164,11 +167,12 @@ def test_stop_queues_no_further_move_and_skips_the_closed_loop(server) -> None:
     stopped_at: list[int] = []
 
     def stop_on_third(n: int) -> None:
-        if n == 3:  # STOP from the header while the third move is queued
+        if n == 3:  # STOP from the header while the third move runs (the run waits for it)
             stopped_at.append(n)
-            threading.Thread(target=panel[0].app.stop_motion, args=("test",)).start()
-            time.sleep(0.3)
-    fake = SlippingRunner(on_move=stop_on_third)
+            panel[0].app.stop_motion("test")
+    # (STOP used to come from a thread started inside move_to, 0.3 s before the run went on:
+    # the run's next move could take the gate's lock first, 2 in 9 runs)
+    fake = SlippingRunner(on_wait=stop_on_third)
     panel.append(panel_with(server, fake))
     operator = FakeClient(12)
     panel[0].app.access.take(operator.client_id, "tok", name="Alice")
