@@ -34,7 +34,7 @@ def _ask(ch, peer, addr, payload: bytes) -> dict:
         try:
             peer.settimeout(0.05)
             return json.loads(peer.recv(4096))
-        except socket.timeout:
+        except TimeoutError:
             continue
 
 
