@@ -121,5 +121,4 @@ class CarryLayer:
         self._ghosts.show(g["ghosts"])
         self._path.show(g["path"])
         self.targets.points = g["targets"]
-        self.targets.colors = np.tile(np.array(CARRY_COLOR, np.uint8), (len(g["targets"]), 1))
         self.targets.visible = True

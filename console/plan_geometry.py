@@ -141,6 +141,7 @@ def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool,
     ghost_colors = np.repeat(trail_colors(shown, index), ghosts.shape[1], 0)
     return {
         "circles": circles, "circle_colors": np.repeat(circle_colors[:, None], 2, 1),
+        "circle_ok": np.repeat(ok, per),                # which segments' circle is not failed
         "circle_sel": circle_segments(plan.center, plan.radii[index:index + 1], Z_PLAN - 0.001),
         "ghosts": ghosts[shown].reshape(-1, 2, 3),
         "ghost_colors": np.repeat(ghost_colors[:, None], 2, 1),

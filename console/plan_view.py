@@ -4,7 +4,9 @@
 approach circles (green; a failed radius red; labelled with their radii), ghost arms of the
 waypoints (the inspected one highlighted, a fading trail of the last few passed), numbered palm
 points, the gripper's capture region at the final
-waypoint and the reachability shading. Exactly one thread may draw into it: the grasp session's
+waypoint and the reachability shading. Each line or point node has one colour, or a fixed size
+(:class:`console.line_nodes.FixedLines`), so a browser never holds a node's points and colours
+at different lengths (drawn as white lines). Exactly one thread may draw into it: the grasp session's
 worker (``console.panels.planner.GraspSession``). The shading (where a grasp can be planned from
 the straight arm, :mod:`core.planning.reachability`) comes from a disk cache or a low-priority
 child process (:func:`console.reach_job.start_reach_map`), so it never holds the GUI's threads
@@ -26,6 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from console.line_nodes import FixedLines
 from console.plan_geometry import (  # noqa: F401 (re-exported: the plan layer's pure pieces)
     CIRCLE_COLOR, FAIL_COLOR, GHOST_COLOR, LABEL_GAP, TABLE_TINT, TRAIL_FADE, TRAIL_WAYPOINTS,
     Z_PLAN, Array, circle_segments, disk_mesh, ghost_segments, object_mesh, plan_geometry,
@@ -44,13 +47,12 @@ OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
 REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
 
 
-def _set_lines(handle, points: Array, colors) -> None:
-    """Assign points with colours of the same length (viser keeps them as parallel arrays)."""
-    colors = np.asarray(colors, np.uint8)
-    if colors.ndim == 1:
-        colors = np.broadcast_to(colors, points.shape).copy()
-    handle.points = points
-    handle.colors = colors
+def _show_lines(handle: Any, segments: Array) -> None:
+    """Show ``segments`` on a node of one colour (any number of them: its colour is one RGB,
+    whatever the points' length), or hide it when there are none."""
+    if len(segments):
+        handle.points = segments
+    handle.visible = len(segments) > 0
 
 
 class PlanScene:
@@ -60,13 +62,19 @@ class PlanScene:
         self.server, self.robot = server, robot
         scene = server.scene
         empty = np.zeros((1, 2, 3))
+        # Every node has one colour (or a fixed size): a browser given a node's new points and
+        # colours of another length in two messages may draw its lines white.
         self.circles = scene.add_line_segments("/grasp/plan/circles", empty, CIRCLE_COLOR,
                                                thickness=0.0025, visible=False)
+        self.circles_failed = scene.add_line_segments("/grasp/plan/circles_failed", empty,
+                                                      FAIL_COLOR, thickness=0.0025,
+                                                      visible=False)
         self.circle_sel = scene.add_line_segments("/grasp/plan/circle_sel", empty,
                                                   CIRCLE_SEL_COLOR, thickness=0.006,
                                                   visible=False)
-        self.ghosts = scene.add_line_segments("/grasp/plan/ghosts", empty, GHOST_COLOR,
-                                              thickness=0.004, visible=False)
+        arm = ghost_segments(robot, np.zeros((1, robot.n_segments)), 0.0).shape[1]
+        self._ghosts = FixedLines(scene, "/grasp/plan/ghosts", GHOST_COLOR, 0.004,
+                                  TRAIL_WAYPOINTS * arm)
         self.ghost_sel = scene.add_line_segments("/grasp/plan/ghost_sel", empty,
                                                  GHOST_SEL_COLOR, thickness=0.009,
                                                  visible=False)
@@ -85,29 +93,40 @@ class PlanScene:
         self.objects: dict[str, tuple[Any, Any, float]] = {}   # name -> (gizmo, body, radius)
         self._made = 0
 
+    @property
+    def ghosts(self) -> Any:
+        """The trail's ghost arms' node."""
+        return self._ghosts.handle
+
     def draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
                   trail_from: int = 0) -> None:
         """Show ``plan`` (None hides the plan layer); the trail starts at ``trail_from``."""
-        handles = (self.circles, self.circle_sel, self.ghosts, self.ghost_sel, self.palms,
-                   self.palm_sel, self.capture)
+        with self.server.atomic():          # one change in the browser, where it can be
+            self._draw_plan(plan, index, trail, trail_from)
+
+    def _draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
+                   trail_from: int) -> None:
+        handles = (self.circles, self.circles_failed, self.circle_sel, self.ghosts,
+                   self.ghost_sel, self.palms, self.palm_sel, self.capture)
         if plan is None or plan.n == 0:
             for h in handles:
                 h.visible = False
             self._draw_labels({"circles": [], "waypoints": []})
             return
         g = plan_geometry(self.robot, plan, index, trail, trail_from)
-        _set_lines(self.circles, g["circles"], g["circle_colors"])
-        _set_lines(self.circle_sel, g["circle_sel"], CIRCLE_SEL_COLOR)
+        _show_lines(self.circles, g["circles"][g["circle_ok"]])
+        _show_lines(self.circles_failed, g["circles"][~g["circle_ok"]])
+        self.circle_sel.points = g["circle_sel"]
         if len(g["ghosts"]):
-            _set_lines(self.ghosts, g["ghosts"], g["ghost_colors"])
-        self.ghosts.visible = len(g["ghosts"]) > 0
-        _set_lines(self.ghost_sel, g["ghost_sel"], GHOST_SEL_COLOR)
+            self._ghosts.show(g["ghosts"], g["ghost_colors"])
+        else:
+            self._ghosts.hide()
+        self.ghost_sel.points = g["ghost_sel"]
         self.palms.points = g["palms"]
-        self.palms.colors = np.tile(np.array(PALM_COLOR, np.uint8), (len(g["palms"]), 1))
         self.palm_sel.position = tuple(g["palm_sel"])
         self.capture.vertices = g["capture"][0]
         self.capture.visible = g["capture_visible"]
-        for h in (self.circles, self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
+        for h in (self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
             h.visible = True
         self._draw_labels(g["labels"])
 
