@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from console.line_nodes import FixedLines
 from console.plan_view import Z_PLAN, ghost_segments
 from core.control.carry import plan_side, with_carry
 from core.kinematics import planar as pk
@@ -86,37 +87,6 @@ def carry_geometry(robot: Any, plan: Any) -> dict[str, Array] | None:
     }
 
 
-def _padded(segments: Array, size: int) -> Array:
-    """``segments`` (k, 2, 3), 1 <= k <= size, filled up to ``size`` with copies of the last
-    one (drawn over it, so nothing shows)."""
-    return np.concatenate([segments, np.repeat(segments[-1:], size - len(segments), 0)])
-
-
-class _Lines:
-    """A line-segments node of a fixed number of segments in one colour: only its points
-    change (a browser given new points and colours of another length in two messages may
-    draw the lines white), and it is made again, larger, when a carry needs more."""
-
-    def __init__(self, scene: Any, name: str, color: tuple[int, int, int], thickness: float,
-                 size: int) -> None:
-        self.scene, self.name, self.color, self.thickness = scene, name, color, thickness
-        self.handle = self._make(size)
-
-    def _make(self, size: int) -> Any:
-        colors = np.broadcast_to(np.array(self.color, np.uint8), (size, 2, 3)).copy()
-        return self.scene.add_line_segments(self.name, np.zeros((size, 2, 3)), colors,
-                                            thickness=self.thickness, visible=False)
-
-    def show(self, segments: Array) -> None:
-        size = len(self.handle.points)
-        if len(segments) > size:
-            self.handle.remove()
-            self.handle = self._make(max(len(segments), 2 * size))
-            size = len(self.handle.points)
-        self.handle.points = _padded(segments, size)
-        self.handle.visible = True
-
-
 class CarryLayer:
     """The carry's scene nodes (``/grasp/plan/carry_*``); only the grasp session's worker
     draws into it."""
@@ -125,9 +95,9 @@ class CarryLayer:
         self.robot = robot
         scene = server.scene
         arm = ghost_segments(robot, np.zeros((1, robot.n_segments)), 0.0).shape[1]
-        self._ghosts = _Lines(scene, "/grasp/plan/carry_ghosts", CARRY_GHOST_COLOR, 0.0025,
+        self._ghosts = FixedLines(scene, "/grasp/plan/carry_ghosts", CARRY_GHOST_COLOR, 0.0025,
                               4 * arm)
-        self._path = _Lines(scene, "/grasp/plan/carry_path", CARRY_COLOR, 0.008,
+        self._path = FixedLines(scene, "/grasp/plan/carry_path", CARRY_COLOR, 0.008,
                             4 * PATH_SAMPLES)
         self.targets = scene.add_point_cloud("/grasp/plan/carry_targets", np.zeros((1, 3)),
                                              CARRY_COLOR, point_size=0.012,
@@ -151,5 +121,4 @@ class CarryLayer:
         self._ghosts.show(g["ghosts"])
         self._path.show(g["path"])
         self.targets.points = g["targets"]
-        self.targets.colors = np.tile(np.array(CARRY_COLOR, np.uint8), (len(g["targets"]), 1))
         self.targets.visible = True

@@ -4,14 +4,17 @@
 approach circles (green; a failed radius red; labelled with their radii), ghost arms of the
 waypoints (the inspected one highlighted, a fading trail of the last few passed), numbered palm
 points, the gripper's capture region at the final
-waypoint and the reachability shading. Exactly one thread may draw into it: the grasp session's
+waypoint and the reachability shading. Each line or point node has one colour, or a fixed size
+(:class:`console.line_nodes.FixedLines`), so a browser never holds a node's points and colours
+at different lengths (drawn as white lines). Exactly one thread may draw into it: the grasp session's
 worker (``console.panels.planner.GraspSession``). The shading (where a grasp can be planned from
 the straight arm, :mod:`core.planning.reachability`) comes from a disk cache or a low-priority
 child process (:func:`console.reach_job.start_reach_map`), so it never holds the GUI's threads
 or the GIL; it is drawn smooth and clipped to the table (:mod:`console.reach_shading`).
 
 Geometry comes from pure functions (``plan_geometry``, ``ghost_segments``, ``object_mesh``,
-``reach_mesh``, ``ray_to_table``), tested without a server. The table objects themselves, their
+``reach_mesh``, ``ray_to_table``: :mod:`console.plan_geometry`, re-exported here), tested
+without a server. The table objects themselves, their
 checks and scene JSON are :mod:`console.table_scene` (obstacles are drawn by
 :mod:`console.obstacle_view`). :class:`Outcome` / :class:`SessionView` / :func:`outcome_html`
 are what the panels show.
@@ -21,13 +24,15 @@ from __future__ import annotations
 
 import dataclasses
 import html
-import math
 from typing import Any, Callable
 
 import numpy as np
-import numpy.typing as npt
 
-from core.kinematics import planar as pk
+from console.line_nodes import FixedLines
+from console.plan_geometry import (  # noqa: F401 (re-exported: the plan layer's pure pieces)
+    CIRCLE_COLOR, FAIL_COLOR, GHOST_COLOR, LABEL_GAP, TABLE_TINT, TRAIL_FADE, TRAIL_WAYPOINTS,
+    Z_PLAN, Array, circle_segments, disk_mesh, ghost_segments, object_mesh, plan_geometry,
+    plan_labels, ray_to_table, reach_mesh, trail_colors, trail_mask)
 from core.planning.obstacles import Obstacle
 from core.planning.plan_types import GraspPlan
 from console.reach_shading import shading_meshes
@@ -35,165 +40,19 @@ from console.table_scene import TableObject
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap
 from core.units import fmt_mm
 
-Array = npt.NDArray[np.float64]
 LIVE_HZ = 20.0
-Z_PLAN = 0.03                       # plan drawings float above the arm tube
-CIRCLE_COLOR, CIRCLE_SEL_COLOR, FAIL_COLOR = (40, 170, 70), (10, 230, 60), (215, 45, 45)
-GHOST_COLOR, GHOST_SEL_COLOR = (120, 140, 170), (245, 120, 20)
+CIRCLE_SEL_COLOR, GHOST_SEL_COLOR = (10, 230, 60), (245, 120, 20)
 PALM_COLOR, CAPTURE_COLOR = (200, 40, 60), (70, 140, 235)
 OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
 REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
-TRAIL_WAYPOINTS = 4                 # the trail shows at most this many passed waypoints
-TRAIL_FADE = 0.45                   # the oldest of them is this far faded towards the table
-TABLE_TINT = np.array([226, 222, 214], float)  # what a faded trail fades into
-LABEL_GAP = 0.022                   # m between a waypoint's dot and its number
 
 
-def ray_to_table(origin: npt.ArrayLike, direction: npt.ArrayLike) -> tuple[float, float] | None:
-    """Where a click ray meets the table plane z = 0 (None if it points away)."""
-    o, d = np.asarray(origin, float), np.asarray(direction, float)
-    if d[2] >= -1e-9:
-        return None
-    t = -o[2] / d[2]
-    return (float(o[0] + t * d[0]), float(o[1] + t * d[1])) if t > 0 else None
-
-
-def disk_mesh(center: npt.ArrayLike, radius: float, z: float, n: int = 48) -> tuple[Array, Any]:
-    """Triangle fan of a flat disk."""
-    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    v = np.zeros((n + 1, 3))
-    v[0] = (center[0], center[1], z)
-    v[1:, 0] = center[0] + radius * np.cos(a)
-    v[1:, 1] = center[1] + radius * np.sin(a)
-    v[:, 2] = z
-    f = np.stack([np.zeros(n, int), 1 + np.arange(n), 1 + (np.arange(n) + 1) % n], -1)
-    return v, f.astype(np.uint32)
-
-
-def object_mesh(radius: float, height: float = 0.04, n: int = 32) -> tuple[Array, Any]:
-    """Closed cylinder of ``radius`` standing on z = 0, in the object's own frame."""
-    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    ring = np.stack([radius * np.cos(a), radius * np.sin(a)], -1)
-    v = np.concatenate([np.c_[ring, np.zeros(n)], np.c_[ring, np.full(n, height)],
-                        [[0, 0, 0], [0, 0, height]]])
-    i, j = np.arange(n), (np.arange(n) + 1) % n
-    side = np.concatenate([np.stack([i, j, n + j], -1), np.stack([i, n + j, n + i], -1)])
-    caps = np.concatenate([np.stack([np.full(n, 2 * n), j, i], -1),
-                           np.stack([np.full(n, 2 * n + 1), n + i, n + j], -1)])
-    return v, np.concatenate([side, caps]).astype(np.uint32)
-
-
-def circle_segments(center: npt.ArrayLike, radii: npt.ArrayLike, z: float, n: int = 72) -> Array:
-    """Line segments (len(radii) * n, 2, 3) of circles around ``center``."""
-    a = np.linspace(0, 2 * np.pi, n + 1)
-    r = np.asarray(radii, float)[:, None]
-    pts = np.stack([center[0] + r * np.cos(a), center[1] + r * np.sin(a),
-                    np.full_like(r * a, z)], -1)                     # (k, n+1, 3)
-    return np.stack([pts[:, :-1], pts[:, 1:]], 2).reshape(-1, 2, 3)
-
-
-def ghost_segments(robot, kappas: Array, z: float, per_segment: int = 8) -> Array:
-    """Backbone polyline plus straight gripper of each configuration: (k, S, 2, 3)."""
-    kappas = np.asarray(kappas, float).reshape(-1, robot.n_segments)
-    bb = pk.sample_backbone(kappas, robot.lengths, per_segment, robot.base_pose)  # (k, P, 3)
-    tip = bb[:, -1]
-    g_end = tip[:, :2] + robot.gripper.length * np.stack([np.cos(tip[:, 2]),
-                                                           np.sin(tip[:, 2])], -1)
-    pts = np.concatenate([bb[:, :, :2], g_end[:, None]], 1)             # (k, P+1, 2)
-    pts = np.concatenate([pts, np.full(pts.shape[:2] + (1,), z)], -1)
-    return np.stack([pts[:, :-1], pts[:, 1:]], 2)
-
-
-def trail_mask(n: int, index: int, trail: bool, trail_from: int = 0) -> Array:
-    """Which waypoints' ghost arms the trail shows: at most :data:`TRAIL_WAYPOINTS` of those
-    passed before ``index``, none before ``trail_from`` ("Clear trails"), none if ``trail``
-    is off."""
-    i = np.arange(n)
-    if not trail:
-        return np.zeros(n, bool)
-    return (i < index) & (i >= max(trail_from, index - TRAIL_WAYPOINTS))
-
-
-def trail_colors(shown: Array, index: int) -> Array:
-    """One colour per shown ghost arm: the newest in :data:`GHOST_COLOR`, older ones faded."""
-    age = index - np.nonzero(shown)[0]                                  # 1 = the last passed
-    fade = TRAIL_FADE * (age - 1) / max(TRAIL_WAYPOINTS - 1, 1)
-    c = (1 - fade[:, None]) * np.array(GHOST_COLOR, float) + fade[:, None] * TABLE_TINT
-    return np.round(c).astype(np.uint8)
-
-
-def plan_labels(robot, plan: GraspPlan) -> dict[str, list[tuple[str, tuple[float, ...], str]]]:
-    """Text, position and anchor of each label: every approach circle's radius just outside
-    the circle on the side away from the arm's base (where no arm is drawn; the text runs
-    outwards, off the circles), and every waypoint's number just outside its palm dot."""
-    c = np.asarray(plan.center[:2], float)
-    base = np.asarray(robot.base_pose[:2], float)
-    away = c - base
-    away = away / np.linalg.norm(away) if np.linalg.norm(away) > 1e-9 else np.array([0.0, 1.0])
-    side = "center-right" if away[0] < 0 else "center-left"     # text extends away, not inwards
-    circles = [(f"r{k + 1} {fmt_mm(r, 0)} mm", (*(c + (r + LABEL_GAP / 3) * away), Z_PLAN), side)
-               for k, r in enumerate(np.asarray(plan.radii, float))]
-    points = []
-    for k, p in enumerate(np.asarray(plan.palm_poses)[:, :2]):
-        out = p - c
-        n = np.linalg.norm(out)
-        out = out / n if n > 1e-9 else -away
-        points.append((f"{k + 1}", (*(p + LABEL_GAP * out), Z_PLAN), "center-center"))
-    return {"circles": circles, "waypoints": points}
-
-
-def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool,
-                  trail_from: int = 0) -> dict[str, Any]:
-    """Everything the plan layer draws for ``plan`` with waypoint ``index`` (0-based) inspected."""
-    ok = np.array([s == "ok" for s in plan.status])
-    circles = circle_segments(plan.center, plan.radii, Z_PLAN - 0.002)
-    per = len(circles) // max(plan.n, 1)
-    circle_colors = np.repeat(np.where(ok[:, None], [CIRCLE_COLOR], [FAIL_COLOR]), per, 0)
-    ghosts = ghost_segments(robot, plan.kappas, Z_PLAN)
-    shown = trail_mask(plan.n, index, trail, trail_from)
-    palm = np.c_[plan.palm_poses[:, :2], np.full(plan.n, Z_PLAN)]
-    final = plan.palm_poses[-1]
-    # The capture region is on the closing finger's side: the gripper's left, or its right
-    # for a plan of the right finger (core.planning.sides).
-    side = -1.0 if getattr(plan, "side", "left") == "right" else 1.0
-    left = np.array([-math.sin(final[2]), math.cos(final[2])])
-    aim = final[:2] + side * left * (robot.gripper.g_off + robot.capture.nominal_object_radius)
-    ghost_colors = np.repeat(trail_colors(shown, index), ghosts.shape[1], 0)
-    return {
-        "circles": circles, "circle_colors": np.repeat(circle_colors[:, None], 2, 1),
-        "circle_sel": circle_segments(plan.center, plan.radii[index:index + 1], Z_PLAN - 0.001),
-        "ghosts": ghosts[shown].reshape(-1, 2, 3),
-        "ghost_colors": np.repeat(ghost_colors[:, None], 2, 1),
-        "ghost_sel": ghosts[index],
-        "palms": palm, "palm_sel": palm[index],
-        "capture": disk_mesh(aim, robot.capture.diameter / 2, 0.0012),
-        "capture_visible": bool(ok.all()) and index == plan.n - 1,
-        "labels": plan_labels(robot, plan),
-    }
-
-
-def reach_mesh(reach: ReachMap, status: int, z: float = 0.0007) -> tuple[Array, Any] | None:
-    """Quads of the cells with ``status`` as one mesh (None if there are none)."""
-    iy, ix = np.nonzero(reach.status == status)
-    if len(ix) == 0:
-        return None
-    h = reach.step / 2
-    cx, cy = reach.xs[ix], reach.ys[iy]
-    corners = np.stack([np.c_[cx - h, cy - h], np.c_[cx + h, cy - h], np.c_[cx + h, cy + h],
-                        np.c_[cx - h, cy + h]], 1)                       # (k, 4, 2)
-    v = np.concatenate([corners, np.full(corners.shape[:2] + (1,), z)], -1).reshape(-1, 3)
-    b = 4 * np.arange(len(ix))[:, None]
-    f = np.concatenate([b + [0, 1, 2], b + [0, 2, 3]]).astype(np.uint32)
-    return v, f
-
-
-def _set_lines(handle, points: Array, colors) -> None:
-    """Assign points with colours of the same length (viser keeps them as parallel arrays)."""
-    colors = np.asarray(colors, np.uint8)
-    if colors.ndim == 1:
-        colors = np.broadcast_to(colors, points.shape).copy()
-    handle.points = points
-    handle.colors = colors
+def _show_lines(handle: Any, segments: Array) -> None:
+    """Show ``segments`` on a node of one colour (any number of them: its colour is one RGB,
+    whatever the points' length), or hide it when there are none."""
+    if len(segments):
+        handle.points = segments
+    handle.visible = len(segments) > 0
 
 
 class PlanScene:
@@ -203,13 +62,19 @@ class PlanScene:
         self.server, self.robot = server, robot
         scene = server.scene
         empty = np.zeros((1, 2, 3))
+        # Every node has one colour (or a fixed size): a browser given a node's new points and
+        # colours of another length in two messages may draw its lines white.
         self.circles = scene.add_line_segments("/grasp/plan/circles", empty, CIRCLE_COLOR,
                                                thickness=0.0025, visible=False)
+        self.circles_failed = scene.add_line_segments("/grasp/plan/circles_failed", empty,
+                                                      FAIL_COLOR, thickness=0.0025,
+                                                      visible=False)
         self.circle_sel = scene.add_line_segments("/grasp/plan/circle_sel", empty,
                                                   CIRCLE_SEL_COLOR, thickness=0.006,
                                                   visible=False)
-        self.ghosts = scene.add_line_segments("/grasp/plan/ghosts", empty, GHOST_COLOR,
-                                              thickness=0.004, visible=False)
+        arm = ghost_segments(robot, np.zeros((1, robot.n_segments)), 0.0).shape[1]
+        self._ghosts = FixedLines(scene, "/grasp/plan/ghosts", GHOST_COLOR, 0.004,
+                                  TRAIL_WAYPOINTS * arm)
         self.ghost_sel = scene.add_line_segments("/grasp/plan/ghost_sel", empty,
                                                  GHOST_SEL_COLOR, thickness=0.009,
                                                  visible=False)
@@ -228,29 +93,40 @@ class PlanScene:
         self.objects: dict[str, tuple[Any, Any, float]] = {}   # name -> (gizmo, body, radius)
         self._made = 0
 
+    @property
+    def ghosts(self) -> Any:
+        """The trail's ghost arms' node."""
+        return self._ghosts.handle
+
     def draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
                   trail_from: int = 0) -> None:
         """Show ``plan`` (None hides the plan layer); the trail starts at ``trail_from``."""
-        handles = (self.circles, self.circle_sel, self.ghosts, self.ghost_sel, self.palms,
-                   self.palm_sel, self.capture)
+        with self.server.atomic():          # one change in the browser, where it can be
+            self._draw_plan(plan, index, trail, trail_from)
+
+    def _draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
+                   trail_from: int) -> None:
+        handles = (self.circles, self.circles_failed, self.circle_sel, self.ghosts,
+                   self.ghost_sel, self.palms, self.palm_sel, self.capture)
         if plan is None or plan.n == 0:
             for h in handles:
                 h.visible = False
             self._draw_labels({"circles": [], "waypoints": []})
             return
         g = plan_geometry(self.robot, plan, index, trail, trail_from)
-        _set_lines(self.circles, g["circles"], g["circle_colors"])
-        _set_lines(self.circle_sel, g["circle_sel"], CIRCLE_SEL_COLOR)
+        _show_lines(self.circles, g["circles"][g["circle_ok"]])
+        _show_lines(self.circles_failed, g["circles"][~g["circle_ok"]])
+        self.circle_sel.points = g["circle_sel"]
         if len(g["ghosts"]):
-            _set_lines(self.ghosts, g["ghosts"], g["ghost_colors"])
-        self.ghosts.visible = len(g["ghosts"]) > 0
-        _set_lines(self.ghost_sel, g["ghost_sel"], GHOST_SEL_COLOR)
+            self._ghosts.show(g["ghosts"], g["ghost_colors"])
+        else:
+            self._ghosts.hide()
+        self.ghost_sel.points = g["ghost_sel"]
         self.palms.points = g["palms"]
-        self.palms.colors = np.tile(np.array(PALM_COLOR, np.uint8), (len(g["palms"]), 1))
         self.palm_sel.position = tuple(g["palm_sel"])
         self.capture.vertices = g["capture"][0]
         self.capture.visible = g["capture_visible"]
-        for h in (self.circles, self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
+        for h in (self.circle_sel, self.ghost_sel, self.palms, self.palm_sel):
             h.visible = True
         self._draw_labels(g["labels"])
 

@@ -12,7 +12,8 @@ actions, not per-cycle calls. Only the control thread may call these methods.
 
 A receive thread (one per connection) reads the port in chunks, decodes and timestamps STATE
 frames on arrival, so round trips do not include the control loop's phase; :meth:`read`
-drains what it queued.
+drains what it queued. The time this host itself stalled is not the device's silence
+(:class:`hw_bridge.stall_credit.OwnStall`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import numpy.typing as npt
 from hw_bridge import protocol as p
 from hw_bridge.config import BridgeConfig
 from hw_bridge.link import Link
+from hw_bridge.stall_credit import OwnStall
 from hw_bridge.transport import Transport, TransportError, open_serial
 
 
@@ -132,9 +134,7 @@ class SerialHardware(HardwareInterface):
         self._rxq: queue.SimpleQueue[p.Message | TransportError] = queue.SimpleQueue()
         self._rx_stop = threading.Event()
         self._rx_thread: threading.Thread | None = None
-        self._last_read: float | None = None  # when read() last ran (see _own_stall)
-        self._stall_since: float | None = None  # the STATE time the stall count belongs to
-        self._stalled_s = 0.0
+        self._own_stall = OwnStall(config.period_s)  # this host's stalls since the last STATE
 
     # -- receive thread ---------------------------------------------------------------------
     def _start_rx(self, link: Link) -> None:
@@ -158,7 +158,7 @@ class SerialHardware(HardwareInterface):
         if self.state is not LifecycleState.UNCONFIGURED:
             return self._refuse(f"configure: already {self.state.value}")
         self.fault = None
-        self._last_read, self._stall_since, self._stalled_s = None, None, 0.0
+        self._own_stall.reset()
         try:
             transport = self._factory(self.port, self.baud)
         except TransportError as exc:
@@ -279,7 +279,7 @@ class SerialHardware(HardwareInterface):
         now = self._clock()
         last = self.link.last_state_time
         age = now - last if last is not None else float("inf")
-        stalled = self._own_stall(now, last)
+        stalled = self._own_stall.credit(now, last)
         if age - stalled > self.state_timeout_s():
             note = f" (this host stalled {stalled * 1000:.0f} ms of it)" if stalled else ""
             return self.on_error(f"link lost: no valid STATE for {age * 1000:.0f} ms{note}")
@@ -292,25 +292,6 @@ class SerialHardware(HardwareInterface):
             if not st.status & p.Status.ARMED:
                 return self.on_error("device disarmed itself")
         return ReturnType.OK
-
-    def _own_stall(self, now: float, last_state: float | None) -> float:
-        """How much of the time since the last STATE this host could not listen, s.
-
-        :meth:`read` runs once a period; when calls are further apart the loop's CPU was taken
-        (35-60 ms measured on the 2-core VM: benchmarks/link_gaps.py), the receive thread could
-        not decode and the emulator on that CPU could not send. That part beyond one period of
-        each late read is credited: the link is lost after ``state_timeout_s`` of silence while
-        this host listened (a punctual host: the 40 ms rule unchanged). The device's watchdog
-        still acts on the DEMANDs a stalled host did not send.
-        """
-        prev, self._last_read = self._last_read, now
-        if last_state != self._stall_since:  # a newer STATE: the count starts again
-            self._stall_since, self._stalled_s = last_state, 0.0
-        if prev is not None and last_state is not None:
-            late = now - max(prev, last_state) - self.config.period_s
-            if late > self.config.period_s / 2:  # (ordinary jitter is not a stall)
-                self._stalled_s += late
-        return self._stalled_s
 
     def state_timeout_s(self) -> float:
         """How long :meth:`read` waits for a STATE before it calls the link lost.

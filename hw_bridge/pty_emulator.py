@@ -6,7 +6,7 @@ with pyserial, a wire model at the configured baud rate (each direction a serial
 wire for a while), the firmware's :class:`~hw_bridge.device.DeviceCore` with its motor bank and,
 for the soft arm, the seeded :class:`core.control.sim.EmulatorPlant` sending one UDP
 motion-capture frame per tick and an optional UDP scene channel (place/remove the object, read
-the scene); for the extensible arm, optionally racks that slip on their pinions and a noisy tip
+the scene: :class:`hw_bridge.emulator_scene.SceneChannel`); for the extensible arm, optionally racks that slip on their pinions and a noisy tip
 stream (``--slip``, ``--tip-port``: :mod:`core.control.rack_slip`). What it does is reported through an :data:`EventSink` (the command line prints
 each event as a JSON line). :class:`EmulatorOptions` are its settings.
 
@@ -18,8 +18,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import json
-import math
 import os
 import random
 import select
@@ -31,6 +29,7 @@ from typing import Any, Callable
 from core.robots import ExtensibleArm, Robot
 from hw_bridge.config import BridgeConfig, EmulatorConfig
 from hw_bridge.device import DeviceCore
+from hw_bridge.emulator_scene import SceneChannel
 from hw_bridge.mocap import encode_mocap_packet
 from hw_bridge.plants import MotorBank
 
@@ -93,6 +92,7 @@ class Emulator:
         self.plant: Any = None  # core.control.sim.EmulatorPlant for the soft arm
         self.udp: socket.socket | None = None
         self.control: socket.socket | None = None
+        self.scene: SceneChannel | None = None  # the scene channel on ``control``
         if not isinstance(robot, ExtensibleArm):
             from core.control.sim import EmulatorPlant
             self.plant = EmulatorPlant(robot, seed=0 if options.seed is None else options.seed)
@@ -105,6 +105,7 @@ class Emulator:
                 self.control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
                 self.control.bind(("127.0.0.1", options.control_port))
                 self.control.setblocking(False)
+                self.scene = SceneChannel(self.control, self.plant.sim, emit)
         elif options.object is not None or options.control_port is not None:
             raise ValueError("--object and --control-port need the soft arm")
         self.racks: Any = None  # core.control.rack_slip.SlippingRacks (extensible arm)
@@ -285,46 +286,6 @@ class Emulator:
             self._step_racks(now)
         self._flush_output(now)
 
-    # -- scene channel (soft arm) --------------------------------------------------------------
-    def _serve_control(self) -> None:
-        """Answer waiting scene datagrams (non-blocking; see the module docstring)."""
-        assert self.control is not None
-        while True:
-            try:
-                data, addr = self.control.recvfrom(4096)
-            except (BlockingIOError, InterruptedError):
-                return
-            except OSError:
-                return
-            try:
-                reply = self._scene_command(json.loads(data))
-            except Exception as exc:  # noqa: BLE001 - bad input: answer, change nothing
-                reply = {"ok": False, "error": str(exc)}
-            try:
-                self.control.sendto(json.dumps(reply).encode(), addr)
-            except OSError:
-                pass
-
-    def _scene_command(self, msg: dict[str, Any]) -> dict[str, Any]:
-        sim = self.plant.sim
-        cmd = msg.get("cmd") if isinstance(msg, dict) else None
-        if cmd == "place_object":
-            x, y, r = (float(msg[k]) for k in ("x", "y", "r"))
-            if not all(map(math.isfinite, (x, y, r))):
-                raise ValueError("object x, y, r must be finite")
-            sim.place_object(x, y, r)
-            self.emit("object_placed", xy=[x, y], r=r)
-            return {"ok": True}
-        if cmd == "remove_object":
-            sim.remove_object()
-            return {"ok": True}
-        if cmd == "scene":
-            obj = sim.obj
-            finger = sim.gripper_polyline().tolist() if sim.turn > 1e-3 else None
-            return {"ok": True, "captured": sim.captured, "finger": finger,
-                    "object": None if obj is None else [*map(float, obj.xy), obj.radius]}
-        raise ValueError(f"unknown scene command {cmd!r}")
-
     def status(self) -> None:
         """Print a status event (SIGUSR1)."""
         self.emit("status", armed=self.core.armed, tripped=self.core.tripped, estop=self.core.estop,
@@ -391,8 +352,8 @@ class Emulator:
                 self._deliver(now)  # (and writes the frames due by now)
             if self.requests:
                 self._serve_requests(now)
-            if self.control is not None:
-                self._serve_control()
+            if self.scene is not None:
+                self.scene.serve()
             if now >= next_tick:
                 # A tick more than half a period late: this process could not run (its CPU was
                 # taken; on the 2-core VM the loop and the emulator share one and stalls of

@@ -23,7 +23,8 @@ import numpy as np
 import numpy.typing as npt
 
 from core.planning.arm_model import ArmModel
-from core.planning.clear_path import ClearPathProblem, ClearPathRefused, HeldObject, clear_path
+from core.planning.clear_path import (ClearPathProblem, ClearPathRefused, HeldObject, clear_path,
+                                      too_close)
 from core.planning.obstacles import GripperShape
 
 Array = npt.NDArray[np.float64]
@@ -77,16 +78,8 @@ def bin_refusal(robot: Any, bin_kappa: npt.ArrayLike, obstacles: Any,
         return None
     model, gripper = _model(robot)
     problem = ClearPathProblem(model, gripper, tuple(obstacles), float(clearance))
-    k = np.asarray(bin_kappa, float)
-    m = problem.margins(k)
-    j = int(np.argmin(m))
-    if m[j] >= 0.0:
-        return None
-    gap = float(m[j]) + float(clearance)
-    o = problem.disks[j]
-    where = f"overlaps it by {-gap * 1e3:.0f} mm" if gap < 0 else f"is {gap * 1e3:.0f} mm from it"
-    return (f"The bin is too close to {o.name}: the arm at the bin pose {where}, the clearance "
-            f"is {clearance * 1e3:.0f} mm. Move the bin or {o.name}, or lower the clearance.")
+    why = too_close(problem, np.asarray(bin_kappa, float), "the bin pose")
+    return None if why is None else why[0]
 
 
 def check_bin(robot: Any, bin_params: Any, obstacles: Any, clearance: float) -> None:

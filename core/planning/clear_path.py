@@ -206,19 +206,27 @@ def _what(problem: ClearPathProblem) -> str:
     return "arm, gripper and held object" if problem.held is not None else "arm and gripper"
 
 
-def _refuse_end(problem: ClearPathProblem, k: Array, name: str) -> None:
+def too_close(problem: ClearPathProblem, k: Array, name: str) -> tuple[str, str] | None:
+    """Why the arm at shape ``k`` (``name``: "the bin pose", "a relay", ...) is closer than
+    ``problem``'s clearance to a disk, and that disk's name; None when it is not. The one
+    wording of this refusal (the planner's start and goal, the bin's check before a task)."""
     m = problem.margins(k)
     if not len(m) or m.min() >= 0.0:
-        return
+        return None
     j = int(np.argmin(m))
     o = problem.disks[j]
     gap = float(problem.gaps(k)[j])
-    where = f"overlaps it by {_mm(-gap)}" if gap < 0 else f"comes {_mm(gap)} from it"
+    where = f"overlap it by {_mm(-gap)}" if gap < 0 else f"come {_mm(gap)} from it"
     pad = f" (planned with {_mm(problem.pad)} more)" if problem.pad > 0 else ""
-    raise ClearPathRefused(
-        f"{name[:1].upper() + name[1:]} is too close to {o.name}: the {_what(problem)} "
-        f"{where}, the clearance is {_mm(problem.clearance)}{pad}. Move {o.name} or "
-        f"{'the bin' if 'bin' in name else 'the object'}, or lower the clearance.", o.name)
+    return (f"{name[:1].upper() + name[1:]} is too close to {o.name}: the {_what(problem)} "
+            f"{where}, the clearance is {_mm(problem.clearance)}{pad}. Move {o.name} or "
+            f"{'the bin' if 'bin' in name else 'the object'}, or lower the clearance.", o.name)
+
+
+def _refuse_end(problem: ClearPathProblem, k: Array, name: str) -> None:
+    why = too_close(problem, k, name)
+    if why is not None:
+        raise ClearPathRefused(*why)
 
 
 def clear_path(problem: ClearPathProblem, start: npt.ArrayLike, goal: npt.ArrayLike, *,

@@ -137,7 +137,7 @@ def test_a_bin_too_close_to_an_obstacle_is_refused_before_anything_moves(bin_par
     tip = planar.forward_kinematics(bin_params.kappa, ARM.lengths, ARM.base_pose)[-1]
     stack.machine.bin = bin_params
     stack.set_obstacles([Obstacle("Cup", float(tip[0]), float(tip[1]), 0.01)], CLEARANCE)
-    with pytest.raises(ValueError, match="The bin is too close to Cup"):
+    with pytest.raises(ValueError, match="The bin pose is too close to Cup"):
         stack.machine.start(0.0)
     assert stack.machine.phase.value == "idle" and not stack.machine.events
 
@@ -148,7 +148,7 @@ def test_a_row_to_a_bin_too_close_to_an_obstacle_is_refused_before_it_starts(bin
     tip = planar.forward_kinematics(bin_params.kappa_right, ARM.lengths, ARM.base_pose)[-1]
     stack.set_obstacles([Obstacle("Cup", float(tip[0]), float(tip[1]), 0.01)], CLEARANCE)
     row = ObjectRow([RowObject(*OBJECT, R)], bin_params)
-    with pytest.raises(ValueError, match="The bin is too close to Cup"):
+    with pytest.raises(ValueError, match="The bin pose is too close to Cup"):
         row.start(stack, 0.0)
     assert row.state == "idle" and stack.machine.bin is ARM.bin
     assert stack.machine.phase.value == "idle" and not stack.machine.events
