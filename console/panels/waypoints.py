@@ -92,8 +92,17 @@ class WaypointsPanel(Panel):
             self.session.inspect(int(self.slider.value) - 1)
 
     @operator_only(action="play the waypoints")
-    def _on_play(self, _event) -> None:
+    def _on_play(self, event) -> None:
         view = self.session.view()
+        plan = view.outcome.plan if view.outcome else None
+        n = 0 if plan is None else plan.n
+        if not view.playing and n < 2:  # nothing to play: say why instead of doing nothing
+            why = ("No plan to play: the Grasp planner has none for the selected object."
+                   if n == 0 else "The plan has one waypoint: nothing to play.")
+            if event.client is not None:
+                event.client.add_notification("Waypoints", why, color="yellow",
+                                              auto_close_seconds=4)
+            return
         self.session.play(not view.playing, float(self.speed.value))
 
     @operator_only(action="move the arm")
