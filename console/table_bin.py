@@ -62,6 +62,18 @@ def locate_bin(robot: Any, x: float, y: float) -> TableBin:
                     float(params.drop_radius_m), right)
 
 
+def bin_overlap(x: float, y: float, half: float, obstacles: Any) -> str | None:
+    """Why the bin's box (half width ``half``, m) cannot stand at ``(x, y)``: it would overlap
+    one of ``obstacles`` (disks with ``name``, ``x``, ``y``, ``r``); None when it is clear."""
+    for o in obstacles:
+        outside = float(np.hypot(max(abs(o.x - x) - half, 0.0), max(abs(o.y - y) - half, 0.0)))
+        if outside < o.r:
+            return (f"the bin's box ({2 * half * 1e3:.0f} mm wide) at ({x * 1e3:.0f}, "
+                    f"{y * 1e3:.0f}) mm would stand on {o.name} (by {(o.r - outside) * 1e3:.0f} "
+                    f"mm): click farther from it, or move {o.name}")
+    return None
+
+
 def scene_json_with_bin(scene_text: str, table_bin: TableBin | None) -> str:
     """Scene JSON (``console.table_scene.scene_to_json``) with the bin under ``"bin"`` if any."""
     data = json.loads(scene_text)

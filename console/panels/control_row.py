@@ -33,6 +33,7 @@ from hw_bridge.soft_arm_process import ROW_ARM_FIRST, ControlView
 NO_BIN = ("Place a bin first: in the Objects panel choose 'Table click places: Bin' and click "
           "on the table where it stands.")
 NO_OBJECTS = "No objects on the table to clear into the bin: place some in the Objects panel."
+KEEP_ROWS = 8  # rows taken whose names the panel keeps (a report names the newest)
 STATUS_WORDS = {"released": "released", "failed": "failed", "skipped": "skipped"}
 
 
@@ -110,7 +111,7 @@ class RowControls:
         self.status = gui.add_html(row_html(None, None))
         self.button.on_click(operator_only(self._clear, panel=panel,
                                            action="clear the table into the bin"))
-        self.sent: SentRow | None = None
+        self.rows: dict[int, SentRow] = {}  # rows this console sent, by id (newest few)
         self._ids = itertools.count(1)
         self._taken_off: set[tuple[int, int]] = set()  # (row id, index) removed from the table
         self._recorded_end: int | None = None  # the row whose end went into the recording
@@ -139,14 +140,25 @@ class RowControls:
             return
         sent = SentRow(next(self._ids), tuple(o.name for o in view.objects),
                        view.bin.describe())
-        self.sent = sent
+        # By id: a second press while this row runs (a double click) is refused by the control
+        # process and must not take the running row's names from it.
+        self.rows[sent.row_id] = sent
+        for old in sorted(self.rows)[:-KEEP_ROWS]:
+            del self.rows[old]
         self.panel._stopped = False  # (as Execute: a new task after a STOP)
         self.panel.execute.target = None
         fut = self.panel.ctl.run_row(sent.row_id, [(o.x, o.y, o.r) for o in view.objects],
                                      (view.bin.x, view.bin.y), view.bin.kappa,
                                      view.bin.kappa_right, tuple(view.obstacles),
                                      float(view.clearance))
-        fut.add_done_callback(lambda f: self.panel._report(event, f))
+        fut.add_done_callback(lambda f: self._sent(event, sent, f))
+
+    def _sent(self, event: Any, sent: SentRow, fut: Any) -> None:
+        """The control process took the row (say so) or refused it (the operator is told why)."""
+        if fut.exception() is not None:
+            self.rows.pop(sent.row_id, None)
+            self.panel._report(event, fut)
+            return
         what = f"{len(sent.names)} object{'s' if len(sent.names) != 1 else ''} into the " \
                f"{sent.bin_text}"
         client = getattr(event, "client", None)
@@ -155,12 +167,16 @@ class RowControls:
                                     color="blue", auto_close_seconds=6.0)
         self.app.recorder.action(f"clear table into bin: {what}", client)
 
+    def sent_for(self, report: Any) -> SentRow | None:
+        """The row this console sent that ``report`` is about (None: another console's)."""
+        return None if report is None else self.rows.get(report.row_id)
+
     # -- display (the Control panel's refresh) -------------------------------------------------
     def header(self, view: ControlView) -> tuple[str, Tone] | None:
-        return row_header_phase(view, self.sent)
+        return row_header_phase(view, self.sent_for(view.row))
 
     def show(self, view: ControlView) -> None:
-        text = row_html(view, self.sent)
+        text = row_html(view, self.sent_for(view.row))
         if text != self.status.content:
             self.status.content = text
         c = view.snapshot.control
@@ -177,14 +193,14 @@ class RowControls:
             return
         self._recorded_end = report.row_id
         outcomes = "; ".join(
-            f"{_name(self.sent, report, o.index)}: {o.status}"
+            f"{_name(self.sent_for(report), report, o.index)}: {o.status}"
             + ("" if o.reason is None else f" ({o.reason})") for o in report.outcomes)
         self.app.recorder.action(f"row {report.state}: {report.released} of {report.n} "
                                  f"released -- {outcomes}", None)
 
     def _take_off_released(self, report: Any) -> None:
         """Remove every object this console sent that the row released from the table."""
-        sent, session = self.sent, self.app.grasp_session
+        sent, session = self.sent_for(report), self.app.grasp_session
         if report is None or sent is None or sent.row_id != report.row_id or session is None:
             return
         names = {o.name for o in session.view().objects}

@@ -84,7 +84,8 @@ def waypoint_text(c: Any, planner_plan: bool = False) -> str:
              else "Grasp planner's plan" if planner_plan else "controller's plan")
     if c.phase == "approach":
         return f" · approach waypoint {c.waypoint + 1} of {c.n_waypoints} ({whose})"
-    return f" · plan of {c.n_waypoints} waypoints ({whose})"
+    s = "" if c.n_waypoints == 1 else "s"
+    return f" · plan of {c.n_waypoints} waypoint{s} ({whose})"
 
 
 def state_html(view: ControlView, target: ExecuteTarget | None = None) -> str:

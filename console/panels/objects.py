@@ -19,9 +19,9 @@ removing, loading, the click-placement choice, and the same for obstacles -- is
 A viewer's edit snaps back (fields, selection, and a dragged object returns to its place);
 "Save scene" (a download that changes nothing) works for everyone.
 
-The bin (``console.table_bin``): the arm must be able to hold an object over the clicked point,
-else the click is refused with the reason; it is saved in the scene JSON (optional ``"bin"``
-key).
+The bin (``console.table_bin``): the arm must be able to hold an object over the clicked point
+and its box must not stand on an obstacle, else the click is refused with the reason; it is
+saved in the scene JSON (optional ``"bin"`` key).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from console.panels.base import Panel, operator_only
 from console.panels.obstacle_editor import ObstacleEditor
 from console.panels.planner import SessionView, session_for
 from console.plan_view import ray_to_table
-from console.table_bin import (BinLocator, TableBin, bin_point_from_scene_json,
+from console.table_bin import (BinLocator, TableBin, bin_overlap, bin_point_from_scene_json,
                                scene_json_with_bin)
 from console.table_scene import parse_scene, scene_to_json
 
@@ -135,6 +135,11 @@ class ObjectsPanel(Panel):
             elif client is not None:
                 client.add_notification("Bin", f"Not placed: {error}", color="red",
                                         auto_close_seconds=8)
+        on = bin_overlap(point[0], point[1], self.app.robot.bin.drop_radius_m,
+                         self.session.view().obstacles)
+        if on is not None:
+            done(None, on)
+            return
         self.bins.request(point[0], point[1], done)
 
     @operator_only(action="move an object")

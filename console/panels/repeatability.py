@@ -298,6 +298,9 @@ class RepeatabilityPanel(Panel):
         tip = self.app.services.tip_sensor
         self.progress.value = 0.0
         self.plot.content = ""
+        # The new run's empty table at once (the last run's reason must not stand under it).
+        self.table.content = comparison_html(Comparison(
+            np.asarray(req.point, dtype=float), req.n, self.app.robot.n_segments, tip is not None))
         self._say("Running…")
 
         def show(c: Comparison) -> None:

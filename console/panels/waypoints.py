@@ -3,7 +3,7 @@
 Previous / Next, a slider, play / pause with a speed, and a trail toggle (ghost arms of the
 waypoints already passed). The inspected waypoint is highlighted in the 3D view (orange ghost
 arm, bright circle, palm point, and the capture region at the final one) and listed here with
-its kappa, phi, r_a and clearances (mm and degrees). "Move arm here" commands the waypoint's
+its kappa, phi, r_a and gaps to the object and, with obstacles, to them (mm and degrees). "Move arm here" commands the waypoint's
 configuration. Shown from the start, so it and the Grasp planner tell the same plan.
 
 Everything here is operator-only, browsing included: the inspected waypoint, playback, speed
@@ -15,9 +15,20 @@ trail edit snaps back; viewers watch the operator's inspection.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from console.panels.base import Panel, operator_only
 from console.panels.planner import SessionView, session_for
+
+
+def obstacle_rows(plan: Any, k: int) -> list[tuple[str, str]]:
+    """With obstacles: waypoint ``k``'s gap to the nearest one, the certified bound along the
+    line into it, and the clearance the planner keeps (mm); nothing without obstacles."""
+    if not plan.obstacles or plan.obstacle_clearance is None:
+        return []
+    return [("to obstacles", f"{plan.obstacle_clearance[k] * 1e3:.1f} mm (path ≥ "
+                             f"{plan.obstacle_path_clearance[k] * 1e3:.1f} mm; keeps "
+                             f"{plan.obstacle_margin * 1e3:.0f} mm)")]
 
 
 def waypoint_html(view: SessionView) -> str:
@@ -37,8 +48,9 @@ def waypoint_html(view: SessionView) -> str:
         ("κ (1/m)", kappa),
         ("palm", f"({plan.palm_poses[k, 0] * 1e3:.1f}, {plan.palm_poses[k, 1] * 1e3:.1f}) mm, "
                  f"{math.degrees(plan.palm_poses[k, 2]):.1f}°"),
-        ("clearance", f"{plan.clearance[k] * 1e3:.1f} mm (path ≥ "
-                      f"{plan.path_clearance[k] * 1e3:.1f} mm)"),
+        ("to the object", f"{plan.clearance[k] * 1e3:.1f} mm (path ≥ "
+                          f"{plan.path_clearance[k] * 1e3:.1f} mm)"),
+        *obstacle_rows(plan, k),
         ("solver", f"{plan.iterations[k]} iterations, {plan.solve_ms[k]:.2f} ms"),
         ("status", f"<span style='color:{colour}'>{status.replace('_', ' ')}</span>"),
     ]
@@ -92,8 +104,17 @@ class WaypointsPanel(Panel):
             self.session.inspect(int(self.slider.value) - 1)
 
     @operator_only(action="play the waypoints")
-    def _on_play(self, _event) -> None:
+    def _on_play(self, event) -> None:
         view = self.session.view()
+        plan = view.outcome.plan if view.outcome else None
+        n = 0 if plan is None else plan.n
+        if not view.playing and n < 2:  # nothing to play: say why instead of doing nothing
+            why = ("No plan to play: the Grasp planner has none for the selected object."
+                   if n == 0 else "The plan has one waypoint: nothing to play.")
+            if event.client is not None:
+                event.client.add_notification("Waypoints", why, color="yellow",
+                                              auto_close_seconds=4)
+            return
         self.session.play(not view.playing, float(self.speed.value))
 
     @operator_only(action="move the arm")

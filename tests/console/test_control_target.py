@@ -99,3 +99,8 @@ def test_tracking_error_keeps_a_still_arms_noise_small() -> None:
     big = err.copy()
     big[10, 0] = 7.3  # a real tracking error grows the range to show it
     assert error_range(big) == 9.0
+
+
+def test_a_one_waypoint_plan_is_one_waypoint() -> None:
+    """Seen in a walk through the console: "plan of 1 waypoints" after a right-side grasp."""
+    assert waypoint_text(telemetry("released", 0, 1)) == " · plan of 1 waypoint (controller's plan)"
