@@ -22,8 +22,13 @@ which obstacle is in the way and by how much.
    the object reached by such a path; the clear final approach of one of the plans reached
    from ``kappa_meas`` by such a path; for what is left of the budget plus
    :data:`GLOBAL_BUDGET_S`.
-5. When none succeeds the request is refused (``obstacle``), naming the obstacle the plain
-   approach comes closest to, how close and how much clearance is missing.
+5. Then final shapes sampled all around the object, each with its final approach, reached by
+   a certified path to any of them (:func:`core.planning.grasp_shapes.plan_by_shapes`), for
+   :data:`SHAPES_BUDGET_S` more (``shape_search``).
+6. When none succeeds the request is refused (``obstacle``), naming the obstacle in the way,
+   how close the plain approach comes to it, how much clearance is missing, and which case it
+   is: no sampled grasp shape keeps the clearance from it, or clear grasp shapes exist but no
+   clear way to them was found in the time.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ import numpy.typing as npt
 
 from core.planning.feasibility import GraspRefused, seeds_near
 from core.planning.global_approach import connect_final_approach, plan_by_relay, repair
+from core.planning.grasp_shapes import ShapeOutcome, plan_by_shapes
 from core.planning.obstacles import (GripperShape, Obstacle, ObstacleSetup, check_clearance,
                                      check_obstacles)
 from core.planning.plan_types import GraspPlan
@@ -48,6 +54,8 @@ OTHER_STARTS = 2        # first configurations around the object tried after the
 OBSTACLE_RESTARTS = 2   # restarts per radius while planning around obstacles
 SEARCH_BUDGET_S = 2.5   # s of the planning thread's CPU time: no new approach after this (refusal)
 GLOBAL_BUDGET_S = 0.5   # the long way round gets what is left of that, plus this much
+SHAPES_BUDGET_S = 1.0   # then sampled final shapes and a path to one of them get this much
+SHAPES = {"count": 8, "tries": 24, "iterations": 800}   # that search's caps (deterministic)
 
 
 class ObstacleRefused(GraspRefused):
@@ -121,15 +129,13 @@ def _with_obstacles(planner, setup: ObstacleSetup, plan: GraspPlan) -> GraspPlan
         obstacle_path_clearance=lb.min(axis=1, initial=math.inf))
 
 
-def _closest(planner, setup: ObstacleSetup, plan: GraspPlan) -> tuple[int, float]:
-    """The obstacle the plan comes closest to and that smallest gap (dense sampling)."""
+def _closest(planner, setup: ObstacleSetup, plan: GraspPlan) -> Array:
+    """(K,) the smallest gap of the plan to each obstacle (dense sampling)."""
     chain = np.vstack([plan.kappa_meas[None], plan.kappas])
     tau = np.linspace(0.0, 1.0, 65)
     a, b = chain[:-1], chain[1:]
     ks = a[:, None, :] + tau[:, None] * (b - a)[:, None, :]
-    gaps = setup.gaps(planner.model, ks).min(axis=(0, 1))
-    j = int(np.argmin(gaps))
-    return j, float(gaps[j])
+    return setup.gaps(planner.model, ks).min(axis=(0, 1))
 
 
 def _other_starts(planner, setup: ObstacleSetup, km, center, radius: float,
@@ -155,7 +161,7 @@ def _other_starts(planner, setup: ObstacleSetup, km, center, radius: float,
 def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radius: float,
                 delta_d: float | None, weights: npt.ArrayLike | None,
                 obstacles: tuple[Obstacle, ...], clearance: float,
-                global_search: bool = True) -> GraspPlan:
+                global_search: bool = True, shape_search: bool = True) -> GraspPlan:
     """Plan a grasp that keeps the arm and gripper ``clearance`` from every obstacle; see the
     module docstring (``global_search`` False: the local search only, steps 1-3 and 5).
     Raises :class:`GraspRefused` (``ObstacleRefused`` when obstacles are in the way)."""
@@ -194,6 +200,8 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
         if plan.success:
             return plan
         made.append(plan)
+    shapes: ShapeOutcome | None = None
+    t_shapes = 0.0
     if global_search and plain.success:
         end = deadline + GLOBAL_BUDGET_S
         found = next((p for p in (repair(planner, setup, q, end) for q in made[1:])
@@ -202,17 +210,43 @@ def plan_around(planner, kappa_meas: npt.ArrayLike, center: npt.ArrayLike, radiu
             found = plan_by_relay(planner, constrained, setup, km, center, radius, dd, kw, end)
         if found is None:
             found = connect_final_approach(planner, setup, km, made[1:] + made[:1], end)
+        if found is None and shape_search:
+            t0 = time.thread_time()
+            known = made[0].kappas[-1] if plain.success else None
+            shapes = plan_by_shapes(planner, constrained, setup, km, center, radius, dd,
+                                    max(end, t0) + SHAPES_BUDGET_S, plain=known, **SHAPES)
+            found, t_shapes = shapes.plan, time.thread_time() - t0
         if found is not None:
             return found
     if not plain.success:
         return first if first is not None else plain
-    j, gap = _closest(planner, setup, plain)
-    o = setup.obstacles[j]
+    raise _refusal(setup, _closest(planner, setup, plain), tried, shapes, t_shapes)
+
+
+def _refusal(setup: ObstacleSetup, gaps: Array, tried: int, shapes: ShapeOutcome | None,
+             seconds: float) -> ObstacleRefused:
+    """The refusal: the obstacle in the way (the one the sampled grasp shapes were most
+    often too close to, else the one the plain approach comes closest to), and which case."""
+    j = int(np.argmin(gaps))
+    if shapes is not None and not len(shapes.search.shapes) and shapes.search.closest.any():
+        j = int(np.argmax(shapes.search.closest))
+    o, gap = setup.obstacles[j], float(gaps[j])
     how = (f"passes through it by {_mm(-gap)}" if gap < 0 else f"passes {_mm(gap)} from it, "
            f"{_mm(setup.clearance - gap)} inside the clearance")
-    raise ObstacleRefused(
-        f"{o.name} is in the way: no approach found keeps the arm and gripper "
-        f"{_mm(setup.clearance)} clear of it ({tried} approach{'es' if tried > 1 else ''} "
-        f"tried); the direct approach "
-        f"{how}. Move {o.name} or the object, or lower the clearance.",
+    approaches = f"{tried} approach{'es' if tried > 1 else ''} tried"
+    if shapes is None:
+        why = f"no approach found keeps the arm and gripper {_mm(setup.clearance)} clear of it"
+    elif not len(shapes.search.shapes):
+        why = (f"no grasp shape found keeps the arm and gripper {_mm(setup.clearance)} clear "
+               f"of it ({shapes.search.solved} of {shapes.search.tried} sampled grasp shapes "
+               f"reach the object, each closer)")
+    else:
+        n = len(shapes.search.shapes)
+        why = (f"grasp shapes {_mm(setup.clearance)} clear of it exist ({n} found, "
+               f"{shapes.tails} with a clear final approach) but no clear way to them was "
+               f"found in {seconds:.1f} s ({approaches})")
+        approaches = ""
+    return ObstacleRefused(
+        f"{o.name} is in the way: {why}{f' ({approaches})' if approaches else ''}; the direct "
+        f"approach {how}. Move {o.name} or the object, or lower the clearance.",
         o.name, gap, setup.clearance)
