@@ -8,11 +8,10 @@ import time
 from typing import Any
 
 import pytest
+from test_recording_budget import GB, SOFT, header, max_rss_mb, write_gzip
 
 from console.model import model_for
 from console.recording import load_recording
-
-from test_recording_budget import GB, SOFT, header, max_rss_mb, write_gzip
 
 
 @pytest.fixture

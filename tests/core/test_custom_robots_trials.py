@@ -7,10 +7,9 @@ test_custom_robots.py (tests/conftest.py TIMING_FILES) it runs in the suite's pa
 from __future__ import annotations
 
 import pytest
+from test_custom_robots import DATA, SOFT, load, reachable_object
 
 from core.control.trials import run_trials
-
-from test_custom_robots import DATA, SOFT, load, reachable_object
 
 
 @pytest.mark.parametrize("name", SOFT)
