@@ -229,7 +229,7 @@ TIMING_FILES = frozenset({
     "tests/hw_bridge/test_soft_arm_row.py", "tests/hw_bridge/test_extensible_streamer.py",
     "tests/hw_bridge/test_soft_arm_obstacles.py",
     "tests/core/test_custom_robots.py", "tests/console/test_control_console.py",
-    "tests/console/test_hw_panel.py", "tests/console/test_recording_budget.py",
+    "tests/console/test_hw_panel.py", "tests/console/test_recording_budget_timing.py",
 })
 
 

@@ -1,8 +1,10 @@
 """Recordings are read within a budget: huge or corrupt files are refused quickly, with a reason
 the browser that asked sees, and loading never runs on the callback that asked for it.
 
-The huge files are generated streamingly (zlib over zero bytes / repeated short lines), so a
-1 GB recording is about 1 MB on disk.
+The huge files are written as repeated gzip members (a 1 MB block of zero bytes or short lines,
+compressed once), so a 1 GB recording is a few MB on disk and written in a few milliseconds.
+The one wall-clock claim ("within a second") is in test_recording_budget_timing.py, which runs
+alone (tests/conftest.py TIMING_FILES); the bounds here are far above what the reads take.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ import gzip
 import json
 import resource
 import time
-import zlib
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -36,16 +37,18 @@ def header(model: Any) -> bytes:
 
 
 def write_gzip(path: Path, head: bytes, chunk: bytes, total: int) -> None:
-    """``head`` then ``chunk`` repeated up to ``total`` bytes, gzip-compressed chunk by chunk."""
-    comp = zlib.compressobj(1, zlib.DEFLATED, 31)  # wbits 31: the gzip container
+    """``head`` then ``chunk`` repeated up to ``total`` bytes, gzip-compressed: one member for
+    ``head``, then one member of a 1 MB block written again and again (a gzip stream is its
+    members' concatenation), so a gigabyte is compressed once per megabyte, not a thousand
+    times."""
+    block = chunk * max(1, (1 << 20) // len(chunk))
+    member = gzip.compress(block, compresslevel=1)
     with open(path, "wb") as f:
-        f.write(comp.compress(head))
-        block = chunk * max(1, (1 << 20) // len(chunk))
+        f.write(gzip.compress(head, compresslevel=1))
         written = 0
         while written < total:
-            f.write(comp.compress(block))
+            f.write(member)
             written += len(block)
-        f.write(comp.flush())
 
 
 def max_rss_mb() -> float:
@@ -55,18 +58,6 @@ def max_rss_mb() -> float:
 @pytest.fixture
 def model() -> Any:
     return model_for(SOFT)
-
-
-def test_one_line_gigabyte_is_refused_within_a_second_without_growing(tmp_path, model):
-    path = tmp_path / "oneline.jsonl.gz"
-    write_gzip(path, header(model) + b'{"t": 0, "kind": "state", "q": "', b"\0" * 4096, GB)
-    assert path.stat().st_size < 8 << 20  # ~1 MB compressed
-    rss0 = max_rss_mb()
-    t0 = time.perf_counter()
-    with pytest.raises(ValueError, match="line 2 is longer than 1024 kB"):
-        load_recording(path, model)
-    assert time.perf_counter() - t0 < 1.0
-    assert max_rss_mb() - rss0 < 50  # never more than one line (1 MB) in memory
 
 
 def test_gigabyte_of_short_lines_is_refused_by_the_budget(tmp_path, model):

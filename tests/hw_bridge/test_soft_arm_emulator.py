@@ -8,6 +8,11 @@ The Hardware panel's controls (``ControlProcess.bridge_controls``): after Discon
 leaves the console and the device itself, asked over the released pty by this test, reports
 disarmed (not tripped) with still motors; Connect to the same pty brings telemetry back without
 arming; only Arm arms; a bad port is a clear fault; the sim and the mock say what they cannot do.
+
+The moves run on a test copy of the soft arm whose trajectory is three times faster
+(tests/robot_files.py QUICK_MOTION; its link timing is the shipped one): these tests are about
+the process, the link and the device, not the trajectory's speed. The test of the default link
+under CPU hogs keeps the shipped file, as serve.py starts it.
 """
 
 from __future__ import annotations
@@ -20,12 +25,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from robot_files import QUICK_MOTION, robot_copy
+
 from hw_bridge.link_supervisor import DISCONNECTED, NO_SERIAL_LINK
 from hw_bridge.soft_arm_process import ControlProcess
 from core.robots import load
 from hw_bridge import protocol as p
 
 SOFT = load("soft-arm")
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory: pytest.TempPathFactory):
+    """The soft arm with QUICK_MOTION (the shipped link and bridge timing)."""
+    folder = tmp_path_factory.mktemp("robots")
+    return load(robot_copy("soft-arm", folder, QUICK_MOTION, name="soft-arm-quick"))
 
 
 def wait_for(pred, timeout=20.0, what="condition"):
@@ -85,8 +99,8 @@ def device_state(path: str, timeout: float = 1.0) -> p.State:
         transport.close()
 
 
-def test_goto_stop_and_grasp_object_through_the_emulator():
-    ctl = ControlProcess(SOFT, seed=2, device="emulator", sched_priority=None)
+def test_goto_stop_and_grasp_object_through_the_emulator(quick):
+    ctl = ControlProcess(quick, seed=2, device="emulator", sched_priority=None)
     emu_pids: list[int] = []
     try:
         wait_for(lambda: ctl.view.link.state == "inactive", what="configured link")
@@ -139,8 +153,8 @@ def test_bad_device_is_refused():
         ControlProcess(SOFT, device="serial")  # type: ignore[arg-type]
 
 
-def test_link_fault_stops_commanding_and_does_not_rearm():
-    ctl = ControlProcess(SOFT, seed=3, device="emulator", sched_priority=None)
+def test_link_fault_stops_commanding_and_does_not_rearm(quick):
+    ctl = ControlProcess(quick, seed=3, device="emulator", sched_priority=None)
     try:
         wait_for(lambda: ctl.view.link.state == "inactive", what="configured link")
         (emu,) = emulator_children(ctl._proc.pid)
@@ -208,8 +222,8 @@ def test_the_default_link_holds_while_moving_under_cpu_hogs():
         ctl.close()
 
 
-def test_mock_device_runs_the_same_plant_in_process():
-    ctl = ControlProcess(SOFT, seed=4, device="mock", sched_priority=None)
+def test_mock_device_runs_the_same_plant_in_process(quick):
+    ctl = ControlProcess(quick, seed=4, device="mock", sched_priority=None)
     try:
         wait_for(lambda: ctl.view.link.state == "inactive", what="configured mock link")
         assert emulator_children(ctl._proc.pid) == []
@@ -239,8 +253,8 @@ def test_mock_device_runs_the_same_plant_in_process():
         ctl.close()
 
 
-def test_bridge_controls_disconnect_reconnect_and_arm_only_when_asked():
-    ctl = ControlProcess(SOFT, seed=5, device="emulator", sched_priority=50)
+def test_bridge_controls_disconnect_reconnect_and_arm_only_when_asked(quick):
+    ctl = ControlProcess(quick, seed=5, device="emulator", sched_priority=50)
     bc = ctl.bridge_controls
     try:
         wait_for(lambda: bc.health().state == "inactive", what="configured link")
