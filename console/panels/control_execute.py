@@ -5,7 +5,10 @@ Execute acts on its selected object, with the Grasp planner's plan for exactly t
 there is one (else the controller plans the approach), and says which; the state line names it
 and counts waypoints as the planner does. *Click to grasp* places (or selects) an object in the
 Objects panel where the click ray meets the table and executes it. Only Arm arms (issue 19.3):
-Execute or a click while disarmed is refused with "Arm first (press Arm)".
+Execute or a click while disarmed is refused with "Arm first (press Arm)". Once the arm has
+released the object in the bin it is taken off the table (the Objects panel), as a row's
+released objects are (:mod:`console.panels.control_row`), so no later grasp or row goes back
+for it.
 
 :class:`ExecuteControls` is built by the Control panel inside its folder (the target line,
 *Execute grasp-and-place*, *Click to grasp*); the panel's state line and header fields name
@@ -14,13 +17,15 @@ Execute or a click while disarmed is refused with "Arm first (press Arm)".
 
 from __future__ import annotations
 
+import dataclasses
 import html
 from typing import Any
 
+import numpy as np
 import viser
 
 from console.panels.base import operator_only
-from console.panels.control_text import ExecuteTarget, execute_target, table_point
+from console.panels.control_text import IDLE_PHASES, ExecuteTarget, execute_target, table_point
 from console.table_scene import validate_object
 from hw_bridge.soft_arm_process import ARM_FIRST
 
@@ -29,6 +34,18 @@ def target_object(target: ExecuteTarget) -> Any:
     """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
     from console.table_scene import TableObject
     return TableObject(target.name, target.x, target.y, target.r)
+
+
+@dataclasses.dataclass
+class SentGrasp:
+    """A single grasp-and-place this console sent: the table object it takes (name and where
+    it lay, m) and whether the arm has left the idle phases for it yet (a view from before the
+    command still shows the last task's "released")."""
+
+    name: str
+    x: float
+    y: float
+    started: bool = False
 
 
 class ExecuteControls:
@@ -52,6 +69,7 @@ class ExecuteControls:
                                                 action="run grasp-and-place"))
         panel.app.server.scene.on_click()(self._on_scene_click)
         self.target: ExecuteTarget | None = None  # what the last Execute acts on
+        self.sent: SentGrasp | None = None  # taken off the table once the arm released it
         if self.app.grasp_session is not None:
             self.app.grasp_session.add_listener(lambda _view: self._show_target())
 
@@ -92,6 +110,7 @@ class ExecuteControls:
         """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
         self.panel._stopped = False
         self.target = target
+        sent = self.sent = SentGrasp(target.name, target.x, target.y)
         session = self.app.grasp_session
         view = None if session is None else session.view()
         table_bin = getattr(view, "bin", None)  # a placed bin; None: the robot file's
@@ -103,12 +122,44 @@ class ExecuteControls:
                                           tuple(getattr(view, "obstacles", ())),
                                           float(getattr(view, "clearance", 0.0)),
                                           bin_params=table_bin)
-        fut.add_done_callback(lambda f: self.panel._report(event, f))
+        fut.add_done_callback(lambda f: self._report(event, f, sent))
         client = getattr(event, "client", None)
         if client is not None:
             client.add_notification("Grasp-and-place", target.describe(), color="blue",
                                     auto_close_seconds=6.0)
         self.app.recorder.action(f"execute grasp-and-place: {target.describe()}", None)
+
+    def _report(self, event: Any, fut: Any, sent: SentGrasp) -> None:
+        """The control process took the grasp or refused it (then nothing leaves the table)."""
+        if fut.exception() is not None and self.sent is sent:
+            self.sent = None
+        self.panel._report(event, fut)
+
+    def show(self, view: Any) -> None:
+        """The Control panel's refresh: once the arm, having started on the sent grasp, reads
+        "released", its object leaves the table (if it still lies where it was grasped); a
+        stop or a row ends the wait without taking anything off."""
+        sent, c = self.sent, view.snapshot.control
+        if sent is None or c is None:
+            return
+        if view.row is not None and view.row.running:
+            self.sent = None
+            return
+        if c.phase not in IDLE_PHASES:
+            sent.started = True
+            return
+        if not sent.started:
+            return
+        self.sent = None
+        session = self.app.grasp_session
+        if c.phase != "released" or session is None:
+            return
+        for o in session.view().objects:
+            if o.name == sent.name and np.hypot(o.x - sent.x, o.y - sent.y) <= o.r:
+                session.remove(o.name)
+                self.app.recorder.action(f"{o.name} released in the bin: taken off the table",
+                                         None)
+                return
 
     def _execute(self, event: Any) -> None:
         target = self._target(event)
