@@ -30,6 +30,25 @@ from console.table_scene import validate_object
 from hw_bridge.soft_arm_process import ARM_FIRST
 
 
+def bin_sentence(robot: Any, table_bin: Any, radius: float) -> str:
+    """Where Execute takes an object of ``radius`` (m): into ``table_bin`` (a placed
+    ``console.table_bin.TableBin``), else into the robot file's ``[bin]``, which is not drawn,
+    so the drop point of each finger is named."""
+    if table_bin is not None:
+        return f"into the {table_bin.describe()}"
+    from core.control.params import BinParams
+    from core.control.row import bin_drop_point
+    params = BinParams.from_robot(robot)
+    sides = tuple(robot.gripper.sides)
+    points = []
+    for side in sides:
+        x, y = bin_drop_point(robot, params.kappa_for(side), radius, side)
+        finger = f" ({side} finger)" if len(sides) > 1 else ""
+        points.append(f"({x * 1e3:.0f}, {y * 1e3:.0f}) mm{finger}")
+    return ("no bin placed: into the robot file's bin (not drawn), dropped at "
+            + " or ".join(points) + "; place a bin in the Objects panel to choose")
+
+
 def target_object(target: ExecuteTarget) -> Any:
     """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
     from console.table_scene import TableObject
@@ -79,7 +98,10 @@ class ExecuteControls:
         try:
             if session is None:
                 raise ValueError("No Objects panel: no object to grasp.")
-            text = "Execute acts on " + html.escape(execute_target(session.view()).describe())
+            view = session.view()
+            target = execute_target(view)
+            text = html.escape(f"Execute acts on {target.describe()}; "
+                               f"{bin_sentence(self.app.robot, view.bin, target.r)}")
         except ValueError as exc:
             text = html.escape(str(exc))
         return f'<small data-testid="control-target">{text}</small>'
@@ -125,8 +147,9 @@ class ExecuteControls:
         fut.add_done_callback(lambda f: self._report(event, f, sent))
         client = getattr(event, "client", None)
         if client is not None:
-            client.add_notification("Grasp-and-place", target.describe(), color="blue",
-                                    auto_close_seconds=6.0)
+            where = bin_sentence(self.app.robot, table_bin, target.r)
+            client.add_notification("Grasp-and-place", f"{target.describe()}; {where}",
+                                    color="blue", auto_close_seconds=6.0)
         self.app.recorder.action(f"execute grasp-and-place: {target.describe()}", None)
 
     def _report(self, event: Any, fut: Any, sent: SentGrasp) -> None:
