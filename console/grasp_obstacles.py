@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from console.table_scene import TableObject, validate_obstacles
+from console.table_scene import TableObject, disk_overlap, validate_obstacles
 from core.planning.obstacles import Obstacle, check_clearance
 
 DEFAULT_CLEARANCE = 0.010   # m between the arm (gripper included) and any obstacle
@@ -35,8 +35,8 @@ class ObstacleEdits:
     _changed: Callable[..., None]
 
     def place_obstacle(self, x: float, y: float, r: float | None = None) -> str:
-        """Select the obstacle under (x, y), or add a new one there (ValueError for a bad one:
-        nothing changes then); returns its name."""
+        """Select the obstacle under (x, y), or add a new one there (ValueError for a bad one,
+        or one that would overlap an object: nothing changes then); returns its name."""
         with self._cond:
             for o in self._obstacles:
                 if np.hypot(o.x - x, o.y - y) <= o.r + 0.005:
@@ -50,6 +50,9 @@ class ObstacleEdits:
             new = Obstacle(f"Obstacle {k}", float(x), float(y),
                            float(DEFAULT_OBSTACLE_RADIUS if r is None else r))
             validate_obstacles(self._obstacles + [new], self.robot)
+            why = disk_overlap(new.name, new.x, new.y, new.r, self._objects)
+            if why is not None:  # an object would be hidden inside it
+                raise ValueError(why)
             self._obstacle_count = k
             self._obstacles.append(new)
             self._obstacle_selected = new.name
@@ -58,7 +61,8 @@ class ObstacleEdits:
 
     def update_obstacle(self, name: str, *, x: float | None = None, y: float | None = None,
                         r: float | None = None) -> None:
-        """Change an obstacle (ValueError for bad values, nothing changes then)."""
+        """Change an obstacle (ValueError for bad values or an overlap with an object: nothing
+        changes then)."""
         with self._cond:
             i = self._find_obstacle(name)
             old = self._obstacles[i]
@@ -68,6 +72,9 @@ class ObstacleEdits:
             obstacles = list(self._obstacles)
             obstacles[i] = new
             validate_obstacles(obstacles, self.robot)
+            why = disk_overlap(name, new.x, new.y, new.r, self._objects)
+            if why is not None:
+                raise ValueError(why.replace("Not placed", "Not changed", 1))
             self._obstacles = obstacles
             self._changed("obstacles", plan=False)
 

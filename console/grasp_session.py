@@ -38,7 +38,7 @@ from console.planning_clock import PlanningClock
 from console.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
                                start_reach_map)
 from console.table_bin import BinView, TableBin
-from console.table_scene import TableObject, validate_object
+from console.table_scene import TableObject, disk_overlap, validate_object
 from core.planning.feasibility import GraspRefused
 from core.planning.obstacles import Obstacle
 from core.planning.reachability import ReachMap
@@ -120,7 +120,8 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         self._cond.notify_all()
 
     def place(self, x: float, y: float, r: float | None = None) -> str:
-        """Select the object under (x, y), or add a new one there; returns its name."""
+        """Select the object under (x, y), or add a new one there (ValueError for a bad one, or
+        one that would overlap an obstacle: nothing changes then); returns its name."""
         with self._cond:
             for o in self._objects:
                 if np.hypot(o.x - x, o.y - y) <= o.r + 0.005:
@@ -131,6 +132,9 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 self._count += 1
             obj = validate_object(TableObject(f"Object {self._count}", float(x), float(y),
                                               float(r or self.default_radius)), self.robot)
+            why = disk_overlap(obj.name, obj.x, obj.y, obj.r, self._obstacles)
+            if why is not None:  # hidden inside the obstacle; the planner would refuse it
+                raise ValueError(why)
             self._objects.append(obj)
             self._selected = obj.name
             self._changed("objects", plan=False)
@@ -138,13 +142,17 @@ class GraspSession(ObstacleEdits, WaypointInspection):
 
     def update(self, name: str, *, x: float | None = None, y: float | None = None,
                r: float | None = None, live: bool = False) -> None:
-        """Change an object (ValueError for bad values, nothing changes then)."""
+        """Change an object (ValueError for bad values or an overlap with an obstacle: nothing
+        changes then; a dragged object stops at an obstacle)."""
         with self._cond:
             i = self._find(name)
             old = self._objects[i]
             new = validate_object(dataclasses.replace(
                 old, x=old.x if x is None else float(x), y=old.y if y is None else float(y),
                 r=old.r if r is None else float(r)), self.robot)
+            why = disk_overlap(name, new.x, new.y, new.r, self._obstacles)
+            if why is not None:
+                raise ValueError(why.replace("Not placed", "Not moved", 1))
             self._objects[i] = new
             replan = (not live or self.live) and name == self._selected
             self._changed("objects", plan=live if replan else None)

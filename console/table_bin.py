@@ -74,6 +74,30 @@ def bin_overlap(x: float, y: float, half: float, obstacles: Any) -> str | None:
     return None
 
 
+def bin_on_arm(robot: Any, x: float, y: float, half: float) -> str | None:
+    """Why the bin's box (half width ``half``, m) cannot stand at ``(x, y)``: it would cover
+    the arm in its straight start pose (the body from the base to the tip, ``half_width`` to each
+    side, and the gripper beyond the tip, as capsules like the planner's clearances;
+    :func:`locate_bin` checks only that an object can be held over the point); None when it
+    is clear."""
+    from core.planning.arm_model import ArmModel
+    model = ArmModel.from_robot(robot)
+    tip, heading = model.point_py([0.0] * model.n)
+    end = tip + robot.gripper.length * complex(np.cos(heading), np.sin(heading))
+    t = np.linspace(0.0, 1.0, 401)[:, None]
+    pts = np.concatenate([model.base + (tip - model.base) * t, tip + (end - tip) * t])[:, 0]
+    width = np.concatenate([np.full(401, float(robot.half_width)),
+                            np.full(401, float(robot.gripper.half_width))])
+    outside = np.hypot(np.maximum(np.abs(pts.real - x) - half, 0.0),
+                       np.maximum(np.abs(pts.imag - y) - half, 0.0))
+    depth = float(np.max(width - outside))
+    if depth <= 1e-9:  # (touching is clear)
+        return None
+    return (f"the bin's box ({2 * half * 1e3:.0f} mm wide) at ({x * 1e3:.0f}, {y * 1e3:.0f}) mm "
+            f"would cover the arm where it starts, straight (by {depth * 1e3:.0f} mm): click "
+            "farther from the arm")
+
+
 def scene_json_with_bin(scene_text: str, table_bin: TableBin | None) -> str:
     """Scene JSON (``console.table_scene.scene_to_json``) with the bin under ``"bin"`` if any."""
     data = json.loads(scene_text)

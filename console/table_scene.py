@@ -39,6 +39,19 @@ def validate_object(obj: TableObject, robot) -> TableObject:
     return obj
 
 
+def disk_overlap(what: str, x: float, y: float, r: float, others) -> str | None:
+    """Why the disk ``what`` (centre ``(x, y)``, radius ``r``, m) may not be placed: it would
+    overlap one of ``others`` (disks with ``name``, ``x``, ``y``, ``r``: objects or obstacles),
+    as the planner would refuse it later; None when it is clear of them all."""
+    for o in others:
+        gap = math.hypot(o.x - x, o.y - y) - o.r - r
+        if gap < 0.0:
+            return (f"Not placed: {what} (r {r * 1e3:.1f} mm) at ({x * 1e3:.0f}, {y * 1e3:.0f}) "
+                    f"mm would overlap {o.name} (by {-gap * 1e3:.0f} mm): place it farther "
+                    f"from {o.name}, or move {o.name}")
+    return None
+
+
 def validate_obstacles(obstacles: list[Obstacle], robot) -> list[Obstacle]:
     """Raise ValueError with an operator message for a bad obstacle (not finite, radius not
     positive, on the arm's base, names not unique); else return them."""

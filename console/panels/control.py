@@ -272,6 +272,7 @@ class ControlPanel(Panel):
         target = self.execute.target
         self.app.header.show("phase", *(self.row.header(view) or header_phase(view, target)))
         self.row.show(view)
+        self.execute.show(view)  # a released single grasp's object leaves the table
         self.app.header.show("link", *header_link(view))
         if c is not None:
             busy = c.phase not in IDLE_PHASES + ("settling",)

@@ -5,7 +5,10 @@ Execute acts on its selected object, with the Grasp planner's plan for exactly t
 there is one (else the controller plans the approach), and says which; the state line names it
 and counts waypoints as the planner does. *Click to grasp* places (or selects) an object in the
 Objects panel where the click ray meets the table and executes it. Only Arm arms (issue 19.3):
-Execute or a click while disarmed is refused with "Arm first (press Arm)".
+Execute or a click while disarmed is refused with "Arm first (press Arm)". Once the arm has
+released the object in the bin it is taken off the table (the Objects panel), as a row's
+released objects are (:mod:`console.panels.control_row`), so no later grasp or row goes back
+for it.
 
 :class:`ExecuteControls` is built by the Control panel inside its folder (the target line,
 *Execute grasp-and-place*, *Click to grasp*); the panel's state line and header fields name
@@ -14,21 +17,54 @@ Execute or a click while disarmed is refused with "Arm first (press Arm)".
 
 from __future__ import annotations
 
+import dataclasses
 import html
 from typing import Any
 
+import numpy as np
 import viser
 
 from console.panels.base import operator_only
-from console.panels.control_text import ExecuteTarget, execute_target, table_point
+from console.panels.control_text import IDLE_PHASES, ExecuteTarget, execute_target, table_point
 from console.table_scene import validate_object
 from hw_bridge.soft_arm_process import ARM_FIRST
+
+
+def bin_sentence(robot: Any, table_bin: Any, radius: float) -> str:
+    """Where Execute takes an object of ``radius`` (m): into ``table_bin`` (a placed
+    ``console.table_bin.TableBin``), else into the robot file's ``[bin]``, which is not drawn,
+    so the drop point of each finger is named."""
+    if table_bin is not None:
+        return f"into the {table_bin.describe()}"
+    from core.control.params import BinParams
+    from core.control.row import bin_drop_point
+    params = BinParams.from_robot(robot)
+    sides = tuple(robot.gripper.sides)
+    points = []
+    for side in sides:
+        x, y = bin_drop_point(robot, params.kappa_for(side), radius, side)
+        finger = f" ({side} finger)" if len(sides) > 1 else ""
+        points.append(f"({x * 1e3:.0f}, {y * 1e3:.0f}) mm{finger}")
+    return ("no bin placed: into the robot file's bin (not drawn), dropped at "
+            + " or ".join(points) + "; place a bin in the Objects panel to choose")
 
 
 def target_object(target: ExecuteTarget) -> Any:
     """``target`` as the session's TableObject (to validate it like the Objects panel does)."""
     from console.table_scene import TableObject
     return TableObject(target.name, target.x, target.y, target.r)
+
+
+@dataclasses.dataclass
+class SentGrasp:
+    """A single grasp-and-place this console sent: the table object it takes (name and where
+    it lay, m) and whether the arm has left the idle phases for it yet (a view from before the
+    command still shows the last task's "released")."""
+
+    name: str
+    x: float
+    y: float
+    started: bool = False
 
 
 class ExecuteControls:
@@ -52,6 +88,7 @@ class ExecuteControls:
                                                 action="run grasp-and-place"))
         panel.app.server.scene.on_click()(self._on_scene_click)
         self.target: ExecuteTarget | None = None  # what the last Execute acts on
+        self.sent: SentGrasp | None = None  # taken off the table once the arm released it
         if self.app.grasp_session is not None:
             self.app.grasp_session.add_listener(lambda _view: self._show_target())
 
@@ -61,7 +98,10 @@ class ExecuteControls:
         try:
             if session is None:
                 raise ValueError("No Objects panel: no object to grasp.")
-            text = "Execute acts on " + html.escape(execute_target(session.view()).describe())
+            view = session.view()
+            target = execute_target(view)
+            text = html.escape(f"Execute acts on {target.describe()}; "
+                               f"{bin_sentence(self.app.robot, view.bin, target.r)}")
         except ValueError as exc:
             text = html.escape(str(exc))
         return f'<small data-testid="control-target">{text}</small>'
@@ -92,6 +132,7 @@ class ExecuteControls:
         """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
         self.panel._stopped = False
         self.target = target
+        sent = self.sent = SentGrasp(target.name, target.x, target.y)
         session = self.app.grasp_session
         view = None if session is None else session.view()
         table_bin = getattr(view, "bin", None)  # a placed bin; None: the robot file's
@@ -103,12 +144,45 @@ class ExecuteControls:
                                           tuple(getattr(view, "obstacles", ())),
                                           float(getattr(view, "clearance", 0.0)),
                                           bin_params=table_bin)
-        fut.add_done_callback(lambda f: self.panel._report(event, f))
+        fut.add_done_callback(lambda f: self._report(event, f, sent))
         client = getattr(event, "client", None)
         if client is not None:
-            client.add_notification("Grasp-and-place", target.describe(), color="blue",
-                                    auto_close_seconds=6.0)
+            where = bin_sentence(self.app.robot, table_bin, target.r)
+            client.add_notification("Grasp-and-place", f"{target.describe()}; {where}",
+                                    color="blue", auto_close_seconds=6.0)
         self.app.recorder.action(f"execute grasp-and-place: {target.describe()}", None)
+
+    def _report(self, event: Any, fut: Any, sent: SentGrasp) -> None:
+        """The control process took the grasp or refused it (then nothing leaves the table)."""
+        if fut.exception() is not None and self.sent is sent:
+            self.sent = None
+        self.panel._report(event, fut)
+
+    def show(self, view: Any) -> None:
+        """The Control panel's refresh: once the arm, having started on the sent grasp, reads
+        "released", its object leaves the table (if it still lies where it was grasped); a
+        stop or a row ends the wait without taking anything off."""
+        sent, c = self.sent, view.snapshot.control
+        if sent is None or c is None:
+            return
+        if view.row is not None and view.row.running:
+            self.sent = None
+            return
+        if c.phase not in IDLE_PHASES:
+            sent.started = True
+            return
+        if not sent.started:
+            return
+        self.sent = None
+        session = self.app.grasp_session
+        if c.phase != "released" or session is None:
+            return
+        for o in session.view().objects:
+            if o.name == sent.name and np.hypot(o.x - sent.x, o.y - sent.y) <= o.r:
+                session.remove(o.name)
+                self.app.recorder.action(f"{o.name} released in the bin: taken off the table",
+                                         None)
+                return
 
     def _execute(self, event: Any) -> None:
         target = self._target(event)

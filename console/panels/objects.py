@@ -20,8 +20,8 @@ A viewer's edit snaps back (fields, selection, and a dragged object returns to i
 "Save scene" (a download that changes nothing) works for everyone.
 
 The bin (``console.table_bin``): the arm must be able to hold an object over the clicked point
-and its box must not stand on an obstacle, else the click is refused with the reason; it is
-saved in the scene JSON (optional ``"bin"`` key).
+and its box must not stand on an obstacle nor cover the arm's straight start pose, else the
+click is refused with the reason; it is saved in the scene JSON (optional ``"bin"`` key).
 """
 
 from __future__ import annotations
@@ -35,8 +35,8 @@ from console.panels.base import Panel, operator_only
 from console.panels.obstacle_editor import ObstacleEditor
 from console.panels.planner import SessionView, session_for
 from console.plan_view import ray_to_table
-from console.table_bin import (BinLocator, TableBin, bin_overlap, bin_point_from_scene_json,
-                               scene_json_with_bin)
+from console.table_bin import (BinLocator, TableBin, bin_on_arm, bin_overlap,
+                               bin_point_from_scene_json, scene_json_with_bin)
 from console.table_scene import parse_scene, scene_to_json
 
 # What a click on free table places (dropdown options; a click on an object or obstacle
@@ -135,8 +135,9 @@ class ObjectsPanel(Panel):
             elif client is not None:
                 client.add_notification("Bin", f"Not placed: {error}", color="red",
                                         auto_close_seconds=8)
-        on = bin_overlap(point[0], point[1], self.app.robot.bin.drop_radius_m,
-                         self.session.view().obstacles)
+        half = self.app.robot.bin.drop_radius_m
+        on = (bin_overlap(point[0], point[1], half, self.session.view().obstacles)
+              or bin_on_arm(self.app.robot, point[0], point[1], half))
         if on is not None:
             done(None, on)
             return

@@ -27,7 +27,7 @@ from test_planner_browser import project
 
 pytestmark = pytest.mark.browser
 OBJECT_2, OBJECT_3 = (-0.16, 0.28), (-0.08, 0.33)
-BIN_XY = (0.05, 0.40)  # clear of the objects (its box is 100 mm wide)
+BIN_XY = (0.09, 0.40)  # clear of the objects and the straight arm (its box is 100 mm wide)
 ROW_TIMEOUT_S = 400.0
 
 
