@@ -281,5 +281,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
     return GroupScheduling(config, log)
 
 
-# Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py).
-pytest_plugins = ["rerun_reasons"]
+# Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py);
+# per-test wall and CPU seconds when PYTEST_CPU_TIMES=FILE (tests/cpu_times.py).
+pytest_plugins = ["rerun_reasons", "cpu_times"]
