@@ -235,11 +235,13 @@ TIMING_FILES = frozenset({
 
 def pytest_configure(config: pytest.Config) -> None:
     """Register the ``browser`` marker (tests that drive Chromium against serve.py) and the
-    ``alone`` marker (browser tests whose assertions hold tight wall-clock limits)."""
+    ``alone`` marker (browser tests whose assertions hold tight wall-clock limits or need the
+    page's full frame rate)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
     config.addinivalue_line(
         "markers", "alone: a browser test with tight wall-clock limits (a 300 ms hold expiry, "
-        "a 1 s answer, the lease): SUITE_PART=serial runs it alone, not with another browser test")
+        "a 1 s answer, the lease) or that samples a readout at the page's frame rate: "
+        "SUITE_PART=serial runs it alone, not with another browser test")
 
 
 def xdist_group_of(nodeid: str) -> str | None:
