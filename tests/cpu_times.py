@@ -11,6 +11,11 @@ cpu_s``; under pytest-xdist each worker appends its own lines) and prints a per-
 the terminal summary. ``wait_s = wall_s - cpu_s / cores`` is the time the test left the cores
 idle (on a 2-core machine: two tests that wait can share the cores).
 
+A process that ends during a test without being reaped by a process of the tree takes its CPU
+seconds out of the sum (the test's figure is too low, even negative): Chromium's renderers of
+a closed context, Chromium itself at the session's end (in the last test's teardown), the
+orphaned children of a killed serve.py. Compare such tests by wall time.
+
 Linux only (``/proc``); elsewhere the figures are not collected.
 """
 
