@@ -234,32 +234,53 @@ TIMING_FILES = frozenset({
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the ``browser`` marker (tests that drive Chromium against serve.py)."""
+    """Register the ``browser`` marker (tests that drive Chromium against serve.py) and the
+    ``alone`` marker (browser tests whose assertions hold tight wall-clock limits or need the
+    page's full frame rate)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
+    config.addinivalue_line(
+        "markers", "alone: a browser test with tight wall-clock limits (a 300 ms hold expiry, "
+        "a 1 s answer, the lease) or that samples a readout at the page's frame rate: "
+        "SUITE_PART=serial runs it alone, not with another browser test")
 
 
 def xdist_group_of(nodeid: str) -> str | None:
-    """The group a test runs in under ``pytest -n 2 --dist loadgroup`` (scripts/test): every
-    browser test (tests/browser/) on one worker, one after another (each loads Chromium's
-    software renderer, and several hold timings: a 300 ms hold, the lease), and likewise the
-    tests of ``TIMING_FILES``; None for the others, which spread over both workers."""
+    """The group a test runs in under ``pytest -n 2 --dist loadgroup``: every browser test
+    (tests/browser/) on one worker, one after another (each loads Chromium's software renderer,
+    and several hold timings: a 300 ms hold, the lease), and likewise the tests of
+    ``TIMING_FILES``; None for the others, which spread over both workers."""
     path = nodeid.split("::", 1)[0]
     if path.startswith("tests/browser/"):
         return "browser"
     return "timing" if path in TIMING_FILES else None
 
 
+SUITE_PARTS = ("parallel", "browser", "serial")
+
+
+def suite_part_of(item: pytest.Item) -> str:
+    """Which part of scripts/test runs ``item``: "parallel" (no group, :func:`xdist_group_of`),
+    "browser" (a browser test without the ``alone`` marker: two at a time, a file per worker)
+    or "serial" (``TIMING_FILES`` and the ``alone`` browser tests: one at a time)."""
+    group = xdist_group_of(item.nodeid)
+    if group is None:
+        return "parallel"
+    if group == "browser" and item.get_closest_marker("alone") is None:
+        return "browser"
+    return "serial"
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """``SUITE_PART=parallel`` keeps only the tests without a group (:func:`xdist_group_of`),
-    ``SUITE_PART=serial`` only the browser and timing tests: scripts/test runs the first part on
-    two workers, then the second alone, so no wall-clock assertion shares the cores."""
+    """``SUITE_PART=parallel|browser|serial`` keeps only that part's tests
+    (:func:`suite_part_of`): scripts/test runs the first on two workers, the browser tests two
+    at a time (each waits much of its time for the simulated arm or a page's round trips), then
+    the timing tests alone, so no tight wall-clock assertion shares the cores."""
     part = os.environ.get("SUITE_PART", "")
-    if part not in ("parallel", "serial"):
+    if part not in SUITE_PARTS:
         return
     keep, drop = [], []
     for item in items:
-        grouped = xdist_group_of(item.nodeid) is not None
-        (keep if grouped == (part == "serial") else drop).append(item)
+        (keep if suite_part_of(item) == part else drop).append(item)
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep
@@ -281,5 +302,6 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
     return GroupScheduling(config, log)
 
 
-# Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py).
-pytest_plugins = ["rerun_reasons"]
+# Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py);
+# per-test wall and CPU seconds when PYTEST_CPU_TIMES=FILE (tests/cpu_times.py).
+pytest_plugins = ["rerun_reasons", "cpu_times"]

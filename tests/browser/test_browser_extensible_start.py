@@ -27,7 +27,8 @@ from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 
-pytestmark = pytest.mark.browser
+# alone: a typed target answered within 1.5 s, Preview within 5 s (conftest's SUITE_PART=serial)
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 ROBOT = load("extensible")
 NEGATIVE_ZERO = re.compile(r"(?<![\d.])[-−]0(?:\.0+)?(?![\d.])")
 

@@ -17,7 +17,8 @@ from console.hold_to_run import HOLD_SOURCE
 from console.panels.jog import JogPanel
 from core.robots import load
 
-pytestmark = pytest.mark.browser
+# alone: a held jog ends within 0.6 s of the release (expiry 0.3 s) (conftest's SUITE_PART=serial)
+pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 
 @pytest.fixture(params=["soft-arm", "extensible"])

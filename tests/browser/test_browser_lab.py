@@ -88,6 +88,7 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     assert not app.services.demo.running
 
 
+@pytest.mark.alone  # a 300 ms hold expiry
 def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> None:
     app = lab.app
     alice, bob = lab.pages(2)
@@ -116,6 +117,7 @@ def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> Non
     mouse.up()
 
 
+@pytest.mark.alone  # closed: stopped within 2 s; frozen: within the lease + 0.6 s
 def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(lab) -> None:
     app = lab.app
     alice, bob = lab.pages(2)

@@ -1,12 +1,14 @@
-"""The test suite's own xdist groups (tests/conftest.py): scripts/test runs ``pytest -n 2``
-with the browser tests on one worker in turn and the timing-sensitive tests likewise; a file
-renamed or moved must not silently leave its group."""
+"""The test suite's own groups and parts (tests/conftest.py): scripts/test runs the tests
+without wall-clock limits on two workers, the browser tests two at a time and the
+timing-sensitive tests (``TIMING_FILES`` and the browser tests marked ``alone``) one at a
+time; a file renamed or moved must not silently leave its group."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from conftest import REPO, TIMING_FILES, xdist_group_of
+import pytest
+from conftest import REPO, TIMING_FILES, suite_part_of, xdist_group_of
 
 
 def test_every_timing_file_exists_and_is_grouped() -> None:
@@ -22,3 +24,22 @@ def test_browser_tests_share_one_group_and_the_rest_none() -> None:
         assert xdist_group_of(f"{rel}::test_x") == "browser"
     assert xdist_group_of(f"{Path(__file__).relative_to(REPO).as_posix()}::t") is None
     assert xdist_group_of("tests/core/test_units.py::test_radians_read_as_degrees") is None
+
+
+class _Item:
+    """What suite_part_of reads of a pytest item: its node id and markers."""
+
+    def __init__(self, nodeid: str, *markers: str) -> None:
+        self.nodeid, self.markers = nodeid, markers
+
+    def get_closest_marker(self, name: str) -> object | None:
+        return pytest.mark.alone if name in self.markers else None
+
+
+def test_suite_parts_split_the_browser_tests_by_the_alone_marker() -> None:
+    browser = "tests/browser/test_browser_lab.py::test_x"
+    assert suite_part_of(_Item(browser, "browser")) == "browser"  # type: ignore[arg-type]
+    assert suite_part_of(_Item(browser, "browser", "alone")) == "serial"  # type: ignore[arg-type]
+    timing = f"{sorted(TIMING_FILES)[0]}::test_x"
+    assert suite_part_of(_Item(timing)) == "serial"  # type: ignore[arg-type]
+    assert suite_part_of(_Item("tests/core/test_units.py::t")) == "parallel"  # type: ignore[arg-type]
