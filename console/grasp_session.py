@@ -301,6 +301,9 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 settings = (self.delta_d, self.weights, tuple(self._obstacles), self.clearance,
                             None if request else self._bin)  # live plans skip the carry
             if request is not None:
+                if dirty:   # what changed on the table is drawn before the plan for it runs
+                    self._draw(dirty)
+                    dirty = set()
                 if request:
                     last_live = time.perf_counter()
                 self.clock.start()

@@ -231,3 +231,37 @@ def test_a_replay_draws_the_recorded_obstacles_and_skips_bad_entries():
         assert draw_recorded_obstacles(server.scene, None, "/replay/obstacles") == []
     finally:
         server.stop()
+
+
+def test_a_placed_obstacle_is_drawn_and_recorded_before_its_re_plan_ends(gated):
+    """Placing an obstacle re-plans the selected object (seconds with obstacles): the obstacle
+    shows and is recorded at once, not after that plan (it used to wait for it)."""
+    import threading
+
+    from console.panels.objects import ObjectsPanel
+
+    app, s = gated, gated.grasp_session
+    logged = []
+    app.recorder = SimpleNamespace(log=lambda kind, data, *a: logged.append((kind, data)),
+                                   action=lambda *a, **k: None)
+    release, planning = threading.Event(), threading.Event()
+    plan = s.planner.plan
+
+    def slow_plan(*args, **kwargs):
+        planning.set()
+        release.wait(20.0)
+        return plan(*args, **kwargs)
+
+    s.planner.plan = slow_plan
+    op = app.panel(ObjectsPanel)
+    operator = FakeClient(62)
+    app.access.take(operator.client_id, "tok", name="Alice")
+    try:
+        user(op.click_place, operator, "Obstacle")
+        click_at(op, operator, POST.x, POST.y)
+        wait_for(lambda: any(k == "objects" and d["obstacles"] for k, d in logged))
+        assert planning.is_set() and not release.is_set()   # the re-plan is still running
+        assert not any(k == "plan" for k, _ in logged[1:])
+    finally:
+        release.set()
+    wait_for(lambda: any(k == "plan" for k, _ in logged))
