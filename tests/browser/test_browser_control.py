@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from browser_tabs import close_notices, open_console, open_tab
+from browser_tabs import close_notices, open_console, open_tab, wait_until
 from robot_files import QUICK_MOTION, robot_copy
 
 from core.control.trials import paper_locations
@@ -213,6 +213,15 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
             if LEASE_LOST not in state_text(page) or attempt == 2:
                 raise
     assert "ARMED" in state_text(page)
+    # The released object left the table (a single grasp clears it, as a row does): a new one.
+    wait_until("the released object off the table",
+               lambda: "Object 1 at" not in state_text(page), show=lambda: state_text(page))
+    page.get_by_label("x (mm)", exact=True).fill(f"{x * 1e3:g}")
+    page.get_by_label("y (mm)", exact=True).fill(f"{y * 1e3:g}")
+    page.keyboard.press("Tab")
+    page.get_by_role("button", name="Add object").click()
+    wait_until("a new object on the table", lambda: "Object:" in state_text(page),
+               show=lambda: state_text(page))
 
     # 2. Start again, STOP on the way: the arm holds where it is.
     for attempt in range(3):

@@ -9,6 +9,7 @@ values are the widgets' own state before the attack: nothing may change.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -24,6 +25,8 @@ from fakes import FakeClient
 from tests.ws_client import RawClient, wait_for
 
 PACE = 1.0 / 80  # below the guard's 100 messages/s per client: every message is judged
+BULK_RATE = 1000.0  # messages/s the bulk attack test lifts the limit to
+BULK_PACE = 1.0 / 400  # and its pace, below it
 VIEWER_ALLOWED = {"STOP  (Esc)", "Save scene", "Save boxes", "Export scene (HTML)",
                   # the View panel: each browser's own camera; a measurement moves nothing
                   "Perspective", "Top-down", "Front", "Side", "Reset view", "Measure distance",
@@ -174,11 +177,12 @@ def _other_valid(handle: Any) -> Any:
     return None
 
 
-def _paced(client: RawClient, sends: list[tuple[str, dict[str, Any]]]) -> None:
-    """Send each (uuid, updates) at PACE, below the guard's rate limit for one client."""
+def _paced(client: RawClient, sends: list[tuple[str, dict[str, Any]]],
+           pace: float = PACE) -> None:
+    """Send each (uuid, updates) at ``pace``, below the guard's rate limit for one client."""
     for uuid, updates in sends:
         assert client.update(uuid, **updates)
-        time.sleep(PACE)
+        time.sleep(pace)
 
 
 def test_non_value_keys_and_bad_values_are_refused_for_every_widget(console: tuple,
@@ -209,10 +213,19 @@ def test_non_value_keys_and_bad_values_are_refused_for_every_widget(console: tup
                      for value in _bad_values(handle)]
     op_sends = [(uuid, {"value": value}) for uuid, handle in [*shared.items(), *op_own.items()]
                 for value in _bad_values(handle)]
-    with ThreadPoolExecutor(1) as pool:
-        viewer_done = pool.submit(_paced, viewer, viewer_sends)
-        _paced(op, op_sends)
-        viewer_done.result()
+    # Every message is to be judged: the rate limit and the flood disconnect (their own tests:
+    # test_client_guard_flood.py) are lifted for this bulk.
+    limits = app.guard.limits
+    app.guard.limits = dataclasses.replace(limits, rate=BULK_RATE, burst=BULK_RATE,
+                                           flood_drops=10**6)
+    try:
+        with ThreadPoolExecutor(1) as pool:
+            viewer_done = pool.submit(_paced, viewer, viewer_sends, BULK_PACE)
+            _paced(op, op_sends, BULK_PACE)
+            viewer_done.result()
+    finally:
+        app.guard.limits = limits
+    assert app.guard.counts["rate"] == 0
     time.sleep(0.5)
     after = {u: _snapshot(h) for u, h in everything.items()}
     changed = _changed(before, after)
