@@ -214,14 +214,15 @@ def run_scenarios(page: Any, url: str, artifacts_dir: Path) -> None:
                 raise
     assert "ARMED" in state_text(page)
     # The released object left the table (a single grasp clears it, as a row does): a new one.
-    wait_until("the released object off the table",
-               lambda: "Object 1 at" not in state_text(page), show=lambda: state_text(page))
+    selected = page.get_by_label("Selected", exact=True)
+    wait_until("the released object off the table", lambda: selected.input_value() == "(none)",
+               show=lambda: selected.input_value())
     page.get_by_label("x (mm)", exact=True).fill(f"{x * 1e3:g}")
     page.get_by_label("y (mm)", exact=True).fill(f"{y * 1e3:g}")
     page.keyboard.press("Tab")
     page.get_by_role("button", name="Add object").click()
-    wait_until("a new object on the table", lambda: "Object:" in state_text(page),
-               show=lambda: state_text(page))
+    wait_until("a new object on the table", lambda: selected.input_value() not in ("", "(none)"),
+               show=lambda: selected.input_value())
 
     # 2. Start again, STOP on the way: the arm holds where it is.
     for attempt in range(3):
