@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -309,6 +309,27 @@ def _steer(w: Array, q_from: Array, q_to: Array) -> tuple[Array, bool]:
     return q_from + (q_to - q_from) * (STEP_M / d), False
 
 
+def extend_connect(problem: ClearPathProblem, w: Array, grow: _Tree, other: _Tree, q: Array,
+                   cap: int, edge_ok: Callable[[Array, Array], bool]) -> tuple[int, int] | None:
+    """One RRT-connect step: extend ``grow`` one steer toward ``q`` (a clear node along a clear
+    line), then grow ``other`` toward that new node while every step is clear. Returns the
+    node indices (in ``grow``, in ``other``) where the trees met, else None."""
+    i = grow.nearest(q)
+    qn, _ = _steer(w, grow.nodes[i], q)
+    if problem.margin(qn) < 0.0 or not edge_ok(grow.nodes[i], qn):
+        return None
+    new = grow.add(qn, i)
+    j = other.nearest(qn)
+    while other.size < cap - 1:
+        qs, reached = _steer(w, other.nodes[j], qn)
+        if not edge_ok(other.nodes[j], qs):
+            return None
+        j = other.add(qs, j)
+        if reached:
+            return new, j
+    return None
+
+
 def _rrt_connect(problem: ClearPathProblem, a: Array, b: Array, deadline: float, seed: int,
                  samples: int, hints: Sequence[Array] = ()) -> tuple[Array | None, int]:
     m = problem.model
@@ -334,24 +355,13 @@ def _rrt_connect(problem: ClearPathProblem, a: Array, b: Array, deadline: float,
             q = np.clip(near + rng.normal(0.0, LOCAL_SIGMA, m.n) * (m.hi - m.lo), m.lo, m.hi)
         else:
             q = rng.uniform(m.lo, m.hi)
-        i = grow.nearest(q)
-        qn, _ = _steer(w, grow.nodes[i], q)
-        if problem.margin(qn) < 0.0 or not edge_ok(grow.nodes[i], qn):
-            continue
-        new = grow.add(qn, i)
-        # Connect: grow the other tree toward the new node while every step is clear.
-        j = other.nearest(qn)
-        while other.size < cap - 1:
-            qs, reached = _steer(w, other.nodes[j], qn)
-            if not edge_ok(other.nodes[j], qs):
-                break
-            j = other.add(qs, j)
-            if reached:
-                left, right = grow.branch(new), other.branch(j)[1:]
-                chain = left[::-1] + right
-                if it % 2 == 1:
-                    chain = chain[::-1]
-                return np.array(chain), trees[0].size + trees[1].size
+        met = extend_connect(problem, w, grow, other, q, cap, edge_ok)
+        if met is not None:
+            left, right = grow.branch(met[0]), other.branch(met[1])[1:]
+            chain = left[::-1] + right
+            if it % 2 == 1:
+                chain = chain[::-1]
+            return np.array(chain), trees[0].size + trees[1].size
         if grow.size >= cap - 1 or other.size >= cap - 1:
             break
     return None, trees[0].size + trees[1].size

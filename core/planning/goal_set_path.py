@@ -18,7 +18,7 @@ import time
 import numpy as np
 import numpy.typing as npt
 
-from core.planning.clear_path import ClearPathProblem, _shortcut, _steer, _Tree
+from core.planning.clear_path import ClearPathProblem, _shortcut, _Tree, extend_connect
 
 Array = npt.NDArray[np.float64]
 
@@ -80,24 +80,14 @@ def goal_set_path(problem: ClearPathProblem, start: Array, goals: Array, deadlin
                 continue
         else:
             q = rng.uniform(m.lo, m.hi)
-        i = grow.nearest(q)
-        qn, _ = _steer(w, grow.nodes[i], q)
-        if problem.margin(qn) < 0.0 or not edge_ok(grow.nodes[i], qn):
-            continue
-        new = grow.add(qn, i)
-        j = other.nearest(qn)
-        while other.size < cap - 1:
-            qs, reached = _steer(w, other.nodes[j], qn)
-            if not edge_ok(other.nodes[j], qs):
-                break
-            j = other.add(qs, j)
-            if reached:
-                ia, ib = (new, j) if grow is tree_a else (j, new)
-                left, right = tree_a.branch(ia), tree_b.branch(ib)[1:]
-                chain = np.array(left[::-1] + right)
-                root = _root(tree_b, ib)
-                path = _shortcut(problem, chain, samples)
-                return GoalSetPath(path, int(root), tree_a.size + tree_b.size)
+        met = extend_connect(problem, w, grow, other, q, cap, edge_ok)
+        if met is not None:
+            ia, ib = met if grow is tree_a else met[::-1]
+            left, right = tree_a.branch(ia), tree_b.branch(ib)[1:]
+            chain = np.array(left[::-1] + right)
+            root = _root(tree_b, ib)
+            path = _shortcut(problem, chain, samples)
+            return GoalSetPath(path, int(root), tree_a.size + tree_b.size)
         if tree_a.size >= cap - 1 or tree_b.size >= cap - 1:
             break
     return None
