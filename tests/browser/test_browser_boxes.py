@@ -87,8 +87,10 @@ def test_shelf_box_and_a_target_over_its_edge_reached_clear_of_it(
     for axis, value in zip("xyz", TARGET_MM):
         fill(page, f"Target {axis} (mm)", f"{value:g}")
     status = page.locator('[data-testid="target-status"]')
+    aimed = ",".join(f"{v:.1f}" for v in TARGET_MM)   # not a partly typed target's answer
     wait_until("the target solved with the shelf",
-               lambda: status.get_attribute("data-state") in ("reachable", "blocked", "error"),
+               lambda: status.get_attribute("data-target-mm") == aimed
+               and status.get_attribute("data-state") in ("reachable", "blocked", "error"),
                timeout=60, show=status.inner_text)
     assert status.get_attribute("data-state") == "reachable", status.inner_text()
     assert float(status.get_attribute("data-clearance-mm")) >= CLEARANCE_MM

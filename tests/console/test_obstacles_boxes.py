@@ -214,6 +214,7 @@ def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated,
     target.solve(np.array([0.2, 0.0, 0.38]), True, op.client_id, target.worker.generation)
     status = target.status.content
     assert state_of(status) == "reachable", status
+    assert state_of(status, "target-mm") == "200.0,0.0,380.0"   # which target this answers
     assert float(state_of(status, "clearance-mm")) >= 20.0
     goal = app.hold.target()
     assert goal is not None
