@@ -381,7 +381,7 @@ class TargetPanel(Panel):
             body += f"<br><b style='color:#e67700'>⚠ {html.escape(note)}</b>"
         distance = "" if result is None else f"{fmt_mm(result.error, 3)}"
         clear = "" if result is None or not result.nearest_box else fmt_mm(result.clearance, 2)
-        aimed = "" if target is None else ",".join(f"{v * 1e3:.1f}" for v in target)
+        aimed = "" if target is None else ",".join(fmt_mm(v, 1) for v in target)  # never "-0"
         return (f'<div data-testid="target-status" data-state="{state}" '
                 f'data-target-mm="{aimed}" '
                 f'data-motors="{"still" if note else "follow"}" '
