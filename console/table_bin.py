@@ -62,11 +62,17 @@ def locate_bin(robot: Any, x: float, y: float) -> TableBin:
                     float(params.drop_radius_m), right)
 
 
+def box_distance(px: Any, py: Any, x: float, y: float, half: float) -> Any:
+    """Distance (m) from points ``(px, py)`` (scalars or arrays) to the bin's square box of half
+    width ``half`` centred at ``(x, y)``; 0 inside it."""
+    return np.hypot(np.maximum(np.abs(px - x) - half, 0.0), np.maximum(np.abs(py - y) - half, 0.0))
+
+
 def bin_overlap(x: float, y: float, half: float, obstacles: Any) -> str | None:
     """Why the bin's box (half width ``half``, m) cannot stand at ``(x, y)``: it would overlap
     one of ``obstacles`` (disks with ``name``, ``x``, ``y``, ``r``); None when it is clear."""
     for o in obstacles:
-        outside = float(np.hypot(max(abs(o.x - x) - half, 0.0), max(abs(o.y - y) - half, 0.0)))
+        outside = float(box_distance(o.x, o.y, x, y, half))
         if outside < o.r:
             return (f"the bin's box ({2 * half * 1e3:.0f} mm wide) at ({x * 1e3:.0f}, "
                     f"{y * 1e3:.0f}) mm would stand on {o.name} (by {(o.r - outside) * 1e3:.0f} "
@@ -88,8 +94,7 @@ def bin_on_arm(robot: Any, x: float, y: float, half: float) -> str | None:
     pts = np.concatenate([model.base + (tip - model.base) * t, tip + (end - tip) * t])[:, 0]
     width = np.concatenate([np.full(401, float(robot.half_width)),
                             np.full(401, float(robot.gripper.half_width))])
-    outside = np.hypot(np.maximum(np.abs(pts.real - x) - half, 0.0),
-                       np.maximum(np.abs(pts.imag - y) - half, 0.0))
+    outside = box_distance(pts.real, pts.imag, x, y, half)
     depth = float(np.max(width - outside))
     if depth <= 1e-9:  # (touching is clear)
         return None
