@@ -181,6 +181,7 @@ HOGS = ("while True: pass", "while True: pass",
         "import numpy as np\nwhile True:\n    a = np.ones(8_000_000)\n    a *= 2\n    del a\n")
 
 
+@pytest.mark.alone  # its hogs at normal priority would starve the niced parts beside it
 def test_the_default_link_holds_while_moving_under_cpu_hogs():
     """The default console's pair (loop process + emulator on the real-time CPU, as serve.py
     starts them) stays armed for 20 s of back-and-forth moves while two busy loops and a memory
