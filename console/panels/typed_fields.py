@@ -26,7 +26,7 @@ class TypedFields:
     def __init__(self, handles: Sequence[Any], tolerance: float = 0.05) -> None:
         self._handles = list(handles)
         self._tolerance = tolerance
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # (a value written may call back into read())
         self._known = {id(h): float(h.value) for h in self._handles}
 
     def read(self, handles: Iterable[Any] | None = None) -> list[float]:

@@ -36,7 +36,7 @@ from browser_tabs import (
 from robot_files import QUICK_MOTION, robot_copy
 
 # alone: the palm readout follows the drawn arm at the page's frame rate, and the check samples
-# it near the object (two Chromiums on 2 cores halve the rate; conftest's SUITE_PART=serial)
+# it near the object (two Chromiums on 2 cores halve the rate; conftest's SUITE_PART=alone)
 pytestmark = [pytest.mark.browser, pytest.mark.alone]
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
 OBJECT_3 = (-0.08, 0.33)  # spot E
