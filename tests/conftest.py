@@ -240,8 +240,9 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
     config.addinivalue_line(
         "markers", "alone: a browser test with tight wall-clock limits (a 300 ms hold expiry, "
-        "a 1 s answer, the lease) or that samples a readout at the page's frame rate: "
-        "SUITE_PART=serial runs it alone, not with another browser test")
+        "a 1 s answer, the lease) or that samples a readout at the page's frame rate, or a "
+        "test that loads every core on purpose (CPU hogs): SUITE_PART=alone runs it with "
+        "nothing else beside it")
 
 
 def xdist_group_of(nodeid: str) -> str | None:
@@ -255,13 +256,13 @@ def xdist_group_of(nodeid: str) -> str | None:
     return "timing" if path in TIMING_FILES else None
 
 
-SUITE_PARTS = ("parallel", "browser", "serial")
+SUITE_PARTS = ("parallel", "browser", "serial", "timing", "alone")
 
 
 def suite_part_of(item: pytest.Item) -> str:
     """Which part of scripts/test runs ``item``: "parallel" (no group, :func:`xdist_group_of`),
     "browser" (a browser test without the ``alone`` marker: two at a time, a file per worker)
-    or "serial" (``TIMING_FILES`` and the ``alone`` browser tests: one at a time)."""
+    or "serial" (``TIMING_FILES`` and the ``alone`` tests: one at a time)."""
     group = xdist_group_of(item.nodeid)
     if group is None:
         return "parallel"
@@ -270,17 +271,29 @@ def suite_part_of(item: pytest.Item) -> str:
     return "serial"
 
 
+def in_suite_part(item: pytest.Item, part: str) -> bool:
+    """Whether ``SUITE_PART=part`` runs ``item``: a part of :func:`suite_part_of`, or one half
+    of "serial": "alone" (marked ``alone``: nothing else may run beside it) or "timing" (the
+    rest, which scripts/test runs beside the niced browser and parallel parts)."""
+    own = suite_part_of(item)
+    if part in ("timing", "alone"):
+        return own == "serial" and (item.get_closest_marker("alone") is not None) == (
+            part == "alone")
+    return own == part
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """``SUITE_PART=parallel|browser|serial`` keeps only that part's tests
-    (:func:`suite_part_of`): scripts/test runs the first on two workers, the browser tests two
-    at a time (each waits much of its time for the simulated arm or a page's round trips), then
-    the timing tests alone, so no tight wall-clock assertion shares the cores."""
+    """``SUITE_PART=parallel|browser|serial|timing|alone`` keeps only that part's tests
+    (:func:`in_suite_part`). scripts/test runs the timing tests at normal priority beside the
+    browser tests (niced, two at a time: each waits much of its time for the simulated arm or
+    a page's round trips) and the parallel part (niced most, two workers), then the ``alone``
+    tests with nothing beside them."""
     part = os.environ.get("SUITE_PART", "")
     if part not in SUITE_PARTS:
         return
     keep, drop = [], []
     for item in items:
-        (keep if suite_part_of(item) == part else drop).append(item)
+        (keep if in_suite_part(item, part) else drop).append(item)
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep

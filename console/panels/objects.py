@@ -34,6 +34,7 @@ import viser
 from console.panels.base import Panel, operator_only
 from console.panels.obstacle_editor import ObstacleEditor
 from console.panels.planner import SessionView, session_for
+from console.panels.typed_fields import TypedFields
 from console.plan_view import ray_to_table
 from console.table_bin import (BinLocator, TableBin, bin_on_arm, bin_overlap,
                                bin_point_from_scene_json, scene_json_with_bin)
@@ -83,6 +84,7 @@ class ObjectsPanel(Panel):
         self._mirror = False
         self._click_mode = self.click_place.value
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
+        self._typed = TypedFields((self.x, self.y, self.r))  # refresh skips a field just typed
         self.click_place.on_update(self._on_click_mode)
         self.selected.on_update(self._on_select)
         for handle in (self.x, self.y, self.r):
@@ -174,9 +176,9 @@ class ObjectsPanel(Panel):
         name = self.session.view().selected
         if name is None:
             return
+        x, y, r = self._typed.read()  # every field as typed now
         try:
-            self.session.update(name, x=float(self.x.value) / 1e3, y=float(self.y.value) / 1e3,
-                                r=float(self.r.value) / 1e3)
+            self.session.update(name, x=x / 1e3, y=y / 1e3, r=r / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
 
@@ -209,7 +211,7 @@ class ObjectsPanel(Panel):
         elif target is self.selected:
             self.selected.value = self.session.view().selected or "(none)"
         elif target is not None and id(target) in self._fields:
-            target.value = self._fields[id(target)]
+            self._typed.show([self._fields[id(target)]], [target], typed_too=True)
 
     def _on_save(self, event) -> None:
         if event.client is not None:
@@ -246,9 +248,7 @@ class ObjectsPanel(Panel):
                 self.selected.value = want
             obj = next((o for o in view.objects if o.name == view.selected), None)
             if obj is not None:
-                for handle, value in ((self.x, obj.x), (self.y, obj.y), (self.r, obj.r)):
-                    if abs(float(handle.value) - mm(value)) > 0.05:
-                        handle.value = mm(value)
+                self._typed.show([mm(obj.x), mm(obj.y), mm(obj.r)])
         finally:
             self._mirror = False
         count = len(view.objects)

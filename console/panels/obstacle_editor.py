@@ -14,6 +14,7 @@ import html
 from typing import TYPE_CHECKING, Any
 
 from console.panels.base import operator_only
+from console.panels.typed_fields import TypedFields
 from console.plan_view import SessionView
 
 if TYPE_CHECKING:
@@ -50,6 +51,7 @@ class ObstacleEditor:
             self.info = gui.add_html("")
         self._mirror = False
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
+        self._typed = TypedFields((self.x, self.y, self.r))  # refresh skips a field just typed
         self.selected.on_update(operator_only(self._on_select, panel=panel,
                                               action="select an obstacle"))
         for handle in (self.x, self.y, self.r):
@@ -87,8 +89,9 @@ class ObstacleEditor:
             self._fields[id(event.target)] = event.target.value   # r of the next obstacle
             return
         field = "x" if event.target is self.x else "y" if event.target is self.y else "r"
+        value, = self._typed.read([event.target])
         try:
-            self.session.update_obstacle(name, **{field: float(event.target.value) / 1e3})
+            self.session.update_obstacle(name, **{field: value / 1e3})
         except (TypeError, ValueError) as exc:
             self.panel._error(event, str(exc))
             self.restore(event.target)
@@ -107,7 +110,7 @@ class ObstacleEditor:
         elif target is not None and id(target) in self._fields:
             self._mirror = True
             try:
-                target.value = self._fields[id(target)]
+                self._typed.show([self._fields[id(target)]], [target], typed_too=True)
             finally:
                 self._mirror = False
 
@@ -123,9 +126,8 @@ class ObstacleEditor:
                 self.selected.value = want
             obs = next((o for o in view.obstacles if o.name == view.obstacle_selected), None)
             if obs is not None:
-                for handle, value in ((self.x, obs.x), (self.y, obs.y), (self.r, obs.r)):
-                    if abs(float(handle.value) - mm(value)) > 0.05:
-                        handle.value = mm(value)
+                self._typed.show([mm(obs.x), mm(obs.y), mm(obs.r)])
+                for handle in (self.x, self.y, self.r):
                     self._fields[id(handle)] = handle.value
         finally:
             self._mirror = False

@@ -43,13 +43,14 @@ from console.panels.base import Panel, operator_only
 from console.panels.extensible_status import link_summary, worker_pool
 from console.panels.obstacles_boxes import box_scene_of
 from console.panels.target_worker import TargetIKWorker
+from console.panels.typed_fields import TypedFields
 from console.state import ArmState
-from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
 from core.planning.box_routes import ClearReach, reach_clear
 from core.planning.box_scene import BoxScene
 from core.robot_sections import IKSettings
+from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
 
 Array = npt.NDArray[np.float64]
 TARGET_COLOR = (235, 130, 30)
@@ -90,6 +91,7 @@ class TargetPanel(Panel):
         self.status = self.gui.add_html(self._status_html(None, None))
         self._hardware_note = ""  # why the motors will not follow, from the link's health
         self._target = tip.copy()
+        self._typed = TypedFields(self.inputs)  # the echo of an answer skips a field just typed
         self._dragging = False
         self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
         self._legs: tuple[int, list[Array]] = (0, [])  # (client id, route postures still to go)
@@ -135,7 +137,7 @@ class TargetPanel(Panel):
     def _on_typed(self, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own mirror of the target into the inputs
             return
-        target = np.array([float(h.value) for h in self.inputs]) / 1e3
+        target = np.array(self._typed.read()) / 1e3  # every field as typed now
         if not np.all(np.isfinite(target)):
             self.report_error("target must be three finite numbers (mm)")
             return
@@ -152,7 +154,7 @@ class TargetPanel(Panel):
     def on_refused(self, event: Any) -> None:
         """A viewer moved the gizmo or an input: put them back where the target is."""
         self.gizmo.position = tuple(self._target)
-        self._set_inputs(self._target)
+        self._typed.show([mm_value(v) for v in self._target], typed_too=True)
 
     def _reset_to_tip(self) -> None:
         tip = self._tip(self.app.store.command.q)
@@ -319,19 +321,13 @@ class TargetPanel(Panel):
         if n == self._shown and note == self._hardware_note:
             return
         self._shown, self._hardware_note = n, note
-        self._set_inputs(target)
+        self._typed.show([mm_value(v) for v in target])
         self.status.content = self._status_html(result, error, info, target, note)
         if result is not None and not result.reachable and error is None:
             self.miss.points = np.stack([result.tip, target])[None]
             self.miss.visible = True
         else:
             self.miss.visible = False
-
-    def _set_inputs(self, target: Array) -> None:
-        for handle, value in zip(self.inputs, target):
-            shown = mm_value(value)
-            if abs(float(handle.value) - shown) > 0.05:
-                handle.value = shown
 
     def _motors_note(self) -> str:
         """Why the motors will not follow the command, from the link supervisor's health (what

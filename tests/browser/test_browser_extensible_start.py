@@ -27,7 +27,7 @@ from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 
-# alone: a typed target answered within 1.5 s, Preview within 5 s (conftest's SUITE_PART=serial)
+# alone: a typed target answered within 1.5 s, Preview within 5 s (conftest's SUITE_PART=alone)
 pytestmark = [pytest.mark.browser, pytest.mark.alone]
 ROBOT = load("extensible")
 NEGATIVE_ZERO = re.compile(r"(?<![\d.])[-−]0(?:\.0+)?(?![\d.])")

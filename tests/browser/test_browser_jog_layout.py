@@ -17,7 +17,7 @@ from console.hold_to_run import HOLD_SOURCE
 from console.panels.jog import JogPanel
 from core.robots import load
 
-# alone: a held jog ends within 0.6 s of the release (expiry 0.3 s) (conftest's SUITE_PART=serial)
+# alone: a held jog ends within 0.6 s of the release (expiry 0.3 s) (conftest's SUITE_PART=alone)
 pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 

@@ -27,7 +27,7 @@ from test_browser_control import open_control, start_grasp, state_text, wait_pha
 from core.control.trials import paper_locations
 
 # alone: the palm readout follows the drawn arm at the page's frame rate, and the check samples
-# it near the object (two Chromiums on 2 cores halve the rate; conftest's SUITE_PART=serial)
+# it near the object (two Chromiums on 2 cores halve the rate; conftest's SUITE_PART=alone)
 pytestmark = [pytest.mark.browser, pytest.mark.alone]
 
 

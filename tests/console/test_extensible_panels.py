@@ -12,12 +12,12 @@ import re
 import time
 
 import numpy as np
+from fakes import FakeRunner
+from ws_client import wait_for
 
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
-from fakes import FakeRunner
-from ws_client import wait_for
 
 EXT = load("extensible")
 
@@ -148,3 +148,38 @@ def test_unreachable_target_names_the_closest_reachable_tip_without_negative_zer
     assert f"closest reachable tip, ({tip}) mm" in text
     assert f"{result.error * 1e3:.1f} mm</b> from the target" in text
     app.stop()
+
+
+def test_a_typed_field_is_not_overwritten_by_the_echo_of_the_field_typed_before_it(server):
+    """Typing x then y: viser stores y before y's callback runs; the panel's echo of x's answer
+    (target with the old y) came in between in a CI run and wrote the old y back, so y's
+    callback solved for the old y. The echo now leaves a field typed since alone."""
+    from fakes import FakeClient, console_app, user
+
+    from console.access import AccessControl
+    from console.panels.target import TargetPanel
+
+    app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
+                      hardware=FakeHardware("mock"), access=AccessControl("tok"))
+    try:
+        panel = app.add_panel(TargetPanel)
+        solves: list[np.ndarray] = []
+        panel.worker.submit = lambda target, *a: solves.append(np.array(target))
+        op = FakeClient(7)
+        app.access.take(op.client_id, "tok", name="Alice")
+        x_in, y_in, z_in = panel.inputs
+        y0, z0 = float(y_in.value), float(z_in.value)
+        user(x_in, op, 120.0)                         # x typed: solved for (120, y0, z0)
+        np.testing.assert_allclose(solves[-1] * 1e3, (120.0, y0, z0))
+        y_in._impl.value = y0 - 60.0                  # y typed: stored, its callback queued
+        panel._publish(solves[-1], None, None, "x's answer")
+        panel._show()                                 # the echo of x's answer
+        assert float(y_in.value) == y0 - 60.0
+        user(y_in, op)                                # y's callback
+        np.testing.assert_allclose(solves[-1] * 1e3, (120.0, y0 - 60.0, z0))
+        # Fields the panel has shown again follow its answers: back on the tip, all three.
+        user(panel.to_tip, op)
+        tip = dk.tip_position(EXT, np.asarray(app.store.command.q)) * 1e3
+        np.testing.assert_allclose([float(h.value) for h in panel.inputs], tip, atol=0.05)
+    finally:
+        app.stop()

@@ -245,6 +245,9 @@ def test_a_placed_obstacle_is_drawn_and_recorded_before_its_re_plan_ends(gated):
     app.recorder = SimpleNamespace(log=lambda kind, data, *a: logged.append((kind, data)),
                                    action=lambda *a, **k: None)
     release, planning = threading.Event(), threading.Event()
+    # the demo object's plan at start first: held by slow_plan, it would hold the edit behind it
+    # (a loaded run patched the planner before that plan began: "condition not reached")
+    wait_for(lambda: s.view().outcome)
     plan = s.planner.plan
 
     def slow_plan(*args, **kwargs):

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import REPO, TIMING_FILES, suite_part_of, xdist_group_of
+from conftest import REPO, TIMING_FILES, in_suite_part, suite_part_of, xdist_group_of
 
 
 def test_every_timing_file_exists_and_is_grouped() -> None:
@@ -43,3 +43,19 @@ def test_suite_parts_split_the_browser_tests_by_the_alone_marker() -> None:
     timing = f"{sorted(TIMING_FILES)[0]}::test_x"
     assert suite_part_of(_Item(timing)) == "serial"  # type: ignore[arg-type]
     assert suite_part_of(_Item("tests/core/test_units.py::t")) == "parallel"  # type: ignore[arg-type]
+
+
+def test_the_serial_part_splits_into_timing_and_alone() -> None:
+    """SUITE_PART=timing runs beside the niced parts, SUITE_PART=alone with nothing beside it;
+    together they are the serial part, and every test is in exactly one part of the four."""
+    timing = f"{sorted(TIMING_FILES)[0]}::test_x"
+    browser = "tests/browser/test_browser_lab.py::test_x"
+    items = {"timing": _Item(timing), "alone": _Item(timing, "alone"),
+             "browser": _Item(browser, "browser"),
+             "alone browser": _Item(browser, "browser", "alone"),
+             "parallel": _Item("tests/core/test_units.py::t")}
+    parts = {name: [p for p in ("parallel", "browser", "timing", "alone")
+                    if in_suite_part(item, p)] for name, item in items.items()}  # type: ignore[arg-type]
+    assert parts == {"timing": ["timing"], "alone": ["alone"], "browser": ["browser"],
+                     "alone browser": ["alone"], "parallel": ["parallel"]}
+    assert all(in_suite_part(items[n], "serial") for n in ("timing", "alone", "alone browser"))  # type: ignore[arg-type]
