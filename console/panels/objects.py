@@ -173,10 +173,10 @@ class ObjectsPanel(Panel):
         self._fields[id(event.target)] = event.target.value  # accepted (or a mirror)
         if event.client is None or self._mirror:
             return
+        x, y, r = self._typed.read()  # every field as typed now (taken, selection or not)
         name = self.session.view().selected
         if name is None:
             return
-        x, y, r = self._typed.read()  # every field as typed now
         try:
             self.session.update(name, x=x / 1e3, y=y / 1e3, r=r / 1e3)
         except ValueError as exc:

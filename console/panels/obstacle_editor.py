@@ -84,12 +84,12 @@ class ObstacleEditor:
         if event.client is None or self._mirror:
             self._fields[id(event.target)] = event.target.value
             return
+        value, = self._typed.read([event.target])  # taken: the next echo may show another
         name = self.session.view().obstacle_selected
         if name is None:
             self._fields[id(event.target)] = event.target.value   # r of the next obstacle
             return
         field = "x" if event.target is self.x else "y" if event.target is self.y else "r"
-        value, = self._typed.read([event.target])
         try:
             self.session.update_obstacle(name, **{field: value / 1e3})
         except (TypeError, ValueError) as exc:

@@ -75,3 +75,30 @@ def test_obstacle_editor_keeps_a_typed_y_past_the_echo_of_x(gated):
     user(editor.y, op)
     wait_for(lambda: abs(s.view().obstacles[0].y - (obs.y + 0.012)) < 1e-9,
              what="the typed y applied")
+
+
+def test_a_field_typed_with_nothing_selected_still_shows_the_next_selection(gated):
+    """A value typed while nothing is selected is taken (the obstacle editor's r: the next
+    obstacle's radius; the rest: nothing to change), so the next selection's echo shows that
+    one's values, not the typed ones."""
+    from console.panels.objects import ObjectsPanel
+
+    app, s = gated, gated.grasp_session
+    objects, op = app.panel(ObjectsPanel), FakeClient(83)
+    editor = objects.obstacles
+    app.access.take(op.client_id, "tok", name="Alice")
+    wait_for(lambda: s.view().outcome)
+    assert s.view().obstacle_selected is None
+    user(editor.x, op, 123.0)                    # nothing selected: nothing to move
+    user(editor.r, op, 30.0)                     # the next obstacle's radius
+    s.place_obstacle(-0.25, 0.05, r=0.012)       # placed (and selected) by another way
+    wait_for(lambda: editor.r.value == pytest.approx(12.0) and editor.x.value
+             == pytest.approx(-250.0), what="the new obstacle's values shown")
+    name = s.view().selected
+    s.select(None)                               # objects: the same with x typed, none selected
+    wait_for(lambda: s.view().selected is None)
+    user(objects.x, op, 77.0)
+    s.select(name)
+    obj = next(o for o in s.view().objects if o.name == name)
+    wait_for(lambda: objects.x.value == pytest.approx(obj.x * 1e3),
+             what="the selected object's x shown")
