@@ -15,7 +15,7 @@ import json
 import math
 
 from core.planning.arm_model import ArmModel
-from core.planning.obstacles import Obstacle, check_obstacles
+from core.planning.obstacles import Obstacle, check_obstacles, first_overlap
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,13 +43,13 @@ def disk_overlap(what: str, x: float, y: float, r: float, others) -> str | None:
     """Why the disk ``what`` (centre ``(x, y)``, radius ``r``, m) may not be placed: it would
     overlap one of ``others`` (disks with ``name``, ``x``, ``y``, ``r``: objects or obstacles),
     as the planner would refuse it later; None when it is clear of them all."""
-    for o in others:
-        gap = math.hypot(o.x - x, o.y - y) - o.r - r
-        if gap < 0.0:
-            return (f"Not placed: {what} (r {r * 1e3:.1f} mm) at ({x * 1e3:.0f}, {y * 1e3:.0f}) "
-                    f"mm would overlap {o.name} (by {-gap * 1e3:.0f} mm): place it farther "
-                    f"from {o.name}, or move {o.name}")
-    return None
+    hit = first_overlap(x, y, r, others)  # the planner's own test (it refuses the same)
+    if hit is None:
+        return None
+    o, gap = hit
+    return (f"Not placed: {what} (r {r * 1e3:.1f} mm) at ({x * 1e3:.0f}, {y * 1e3:.0f}) "
+            f"mm would overlap {o.name} (by {-gap * 1e3:.0f} mm): place it farther "
+            f"from {o.name}, or move {o.name}")
 
 
 def validate_obstacles(obstacles: list[Obstacle], robot) -> list[Obstacle]:

@@ -45,7 +45,7 @@ from core.planning.feasibility import GraspRefused, seeds_near
 from core.planning.global_approach import connect_final_approach, plan_by_relay, repair
 from core.planning.grasp_shapes import ShapeOutcome, plan_by_shapes
 from core.planning.obstacles import (GripperShape, Obstacle, ObstacleSetup, check_clearance,
-                                     check_obstacles)
+                                     check_obstacles, first_overlap)
 from core.planning.plan_types import GraspPlan
 
 Array = npt.NDArray[np.float64]
@@ -91,13 +91,12 @@ def _check(planner, km: Array, center, radius: float, obstacles: tuple[Obstacle,
                                 planner.config.clearance_margin)
     ctr = np.asarray(center, float)
     if ctr.shape == (2,) and np.isfinite(ctr).all():
-        c = complex(ctr[0], ctr[1])
-        for o in obstacles:
-            gap = abs(c - o.center) - o.r - float(radius)
-            if gap < 0.0:
-                raise ObstacleRefused(
-                    f"The object overlaps {o.name} (by {_mm(-gap)}); move one of them.",
-                    o.name, gap, clearance)
+        hit = first_overlap(float(ctr[0]), float(ctr[1]), float(radius), obstacles)
+        if hit is not None:
+            o, gap = hit
+            raise ObstacleRefused(
+                f"The object overlaps {o.name} (by {_mm(-gap)}); move one of them.",
+                o.name, gap, clearance)
     km = np.asarray(km, float)
     if km.shape == (m.n,) and np.isfinite(km).all() and obstacles:
         gaps = setup.gaps(m, km)

@@ -96,6 +96,17 @@ def check_clearance(clearance: float) -> float:
     return c
 
 
+def first_overlap(x: float, y: float, r: float, disks: Sequence) -> tuple[object, float] | None:
+    """The first of ``disks`` (anything with ``x``, ``y``, ``r``: obstacles, table objects) that
+    a disk of radius ``r`` centred at ``(x, y)`` overlaps, and the gap between them (negative,
+    m); None when it is clear of them all (touching is clear)."""
+    for d in disks:
+        gap = math.hypot(d.x - x, d.y - y) - d.r - r
+        if gap < 0.0:
+            return d, gap
+    return None
+
+
 def check_obstacles(obstacles: Sequence[Obstacle], model: ArmModel,
                     base_keepout: float = 0.03) -> tuple[Obstacle, ...]:
     """Validate every obstacle (ValueError names the first bad one); names must be unique."""

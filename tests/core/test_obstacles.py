@@ -181,3 +181,15 @@ def test_command_line_plans_around_obstacles_and_refuses_naming_them():
     bad = run("--obstacle", "0.3", "0.05", "0.02", "--obstacle", "-0.1", "0.3", "0.02")
     assert bad.returncode == 2
     assert bad.stderr.startswith("refused (obstacle): Obstacle 2 is in the way")
+
+
+def test_first_overlap_is_the_first_disk_closer_than_the_radii_and_touching_is_clear():
+    from core.planning.obstacles import first_overlap
+
+    a, b = Obstacle("A", 0.10, 0.0, 0.02), Obstacle("B", 0.0, 0.05, 0.03)
+    assert first_overlap(0.0, 0.0, 0.02, [a, b]) is None   # B at 50 mm = 30 + 20: touching
+    hit = first_overlap(0.0, 0.0, 0.025, [b, a])          # B 5 mm in; A 55 mm off
+    assert hit is not None and hit[0] is b and hit[1] == pytest.approx(-0.005)
+    hit = first_overlap(0.09, 0.03, 0.02, [a, b])         # both overlap: the first listed
+    assert hit is not None and hit[0] is a
+    assert hit[1] == pytest.approx(math.hypot(0.01, 0.03) - 0.04)
