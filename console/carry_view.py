@@ -96,9 +96,9 @@ class CarryLayer:
         scene = server.scene
         arm = ghost_segments(robot, np.zeros((1, robot.n_segments)), 0.0).shape[1]
         self._ghosts = FixedLines(scene, "/grasp/plan/carry_ghosts", CARRY_GHOST_COLOR, 0.0025,
-                              4 * arm)
+                                  4 * arm)
         self._path = FixedLines(scene, "/grasp/plan/carry_path", CARRY_COLOR, 0.008,
-                            4 * PATH_SAMPLES)
+                                4 * PATH_SAMPLES)
         self.targets = scene.add_point_cloud("/grasp/plan/carry_targets", np.zeros((1, 3)),
                                              CARRY_COLOR, point_size=0.012,
                                              point_shape="circle", visible=False)

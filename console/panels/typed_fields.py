@@ -31,18 +31,19 @@ class TypedFields:
 
     def read(self, handles: Iterable[Any] | None = None) -> list[float]:
         """The values of ``handles`` (default: all), from now on the panel's own (callback)."""
+        chosen = self._handles if handles is None else list(handles)
         with self._lock:
-            values = [float(h.value) for h in (self._handles if handles is None else handles)]
-            for h, v in zip(self._handles if handles is None else handles, values):
-                self._known[id(h)] = v
+            values = [float(h.value) for h in chosen]
+            self._known.update((id(h), v) for h, v in zip(chosen, values))
             return values
 
     def show(self, values: Iterable[float], handles: Iterable[Any] | None = None,
              typed_too: bool = False) -> None:
         """Write ``values`` to ``handles`` (default: all), except a field typed since the panel
         last wrote or read it; ``typed_too``: every field (a refused or bad edit goes back)."""
+        chosen = self._handles if handles is None else list(handles)
         with self._lock:
-            for h, value in zip(self._handles if handles is None else handles, values):
+            for h, value in zip(chosen, values):
                 current = float(h.value)
                 if not typed_too and current != self._known[id(h)]:
                     continue

@@ -3,8 +3,8 @@
 Previous / Next, a slider, play / pause with a speed, and a trail toggle (ghost arms of the
 waypoints already passed). The inspected waypoint is highlighted in the 3D view (orange ghost
 arm, bright circle, palm point, and the capture region at the final one) and listed here with
-its kappa, phi, r_a and gaps to the object and, with obstacles, to them (mm and degrees). "Move arm here" commands the waypoint's
-configuration. Shown from the start, so it and the Grasp planner tell the same plan.
+its kappa, phi, r_a and gaps to the object and, with obstacles, to them (mm and degrees). "Move
+arm here" commands the waypoint's configuration. Shown from the start, so it and the Grasp planner tell the same plan.
 
 Everything here is operator-only, browsing included: the inspected waypoint, playback, speed
 and trail are drawn in the 3D view every browser shares, so a viewer stepping through the
