@@ -273,8 +273,7 @@ def suite_part_of(item: pytest.Item) -> str:
 
 def in_suite_part(item: pytest.Item, part: str) -> bool:
     """Whether ``SUITE_PART=part`` runs ``item``: a part of :func:`suite_part_of`, or one half
-    of "serial": "alone" (marked ``alone``: nothing else may run beside it) or "timing" (the
-    rest, which scripts/test runs beside the niced browser and parallel parts)."""
+    of "serial": "alone" (marked ``alone``) or "timing" (the rest)."""
     own = suite_part_of(item)
     if part in ("timing", "alone"):
         return own == "serial" and (item.get_closest_marker("alone") is not None) == (
@@ -284,10 +283,10 @@ def in_suite_part(item: pytest.Item, part: str) -> bool:
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """``SUITE_PART=parallel|browser|serial|timing|alone`` keeps only that part's tests
-    (:func:`in_suite_part`). scripts/test runs the timing tests at normal priority beside the
-    browser tests (niced, two at a time: each waits much of its time for the simulated arm or
-    a page's round trips) and the parallel part (niced most, two workers), then the ``alone``
-    tests with nothing beside them."""
+    (:func:`in_suite_part`). scripts/test runs them one after another: the parallel part on
+    two workers, the browser tests two at a time (each waits much of its time for the
+    simulated arm or a page's round trips), then the timing tests and the ``alone`` tests one
+    at a time, so no tight wall-clock assertion shares the cores."""
     part = os.environ.get("SUITE_PART", "")
     if part not in SUITE_PARTS:
         return

@@ -46,8 +46,8 @@ def test_suite_parts_split_the_browser_tests_by_the_alone_marker() -> None:
 
 
 def test_the_serial_part_splits_into_timing_and_alone() -> None:
-    """SUITE_PART=timing runs beside the niced parts, SUITE_PART=alone with nothing beside it;
-    together they are the serial part, and every test is in exactly one part of the four."""
+    """SUITE_PART=timing and SUITE_PART=alone are the serial part's two halves, and every test
+    is in exactly one part of the four."""
     timing = f"{sorted(TIMING_FILES)[0]}::test_x"
     browser = "tests/browser/test_browser_lab.py::test_x"
     items = {"timing": _Item(timing), "alone": _Item(timing, "alone"),

@@ -181,7 +181,7 @@ HOGS = ("while True: pass", "while True: pass",
         "import numpy as np\nwhile True:\n    a = np.ones(8_000_000)\n    a *= 2\n    del a\n")
 
 
-@pytest.mark.alone  # its hogs at normal priority would starve the niced parts beside it
+@pytest.mark.alone  # it loads every core on purpose
 def test_under_cpu_hogs_the_default_link_moves_the_arm_and_a_loss_stops_it_with_its_reason():
     """The default console's pair (loop process + emulator on the real-time CPU, as serve.py
     starts them) moves the arm back and forth for 20 s while two busy loops and a memory
