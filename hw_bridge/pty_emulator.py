@@ -184,7 +184,10 @@ class Emulator:
     def _set_host(self, present: bool) -> None:
         if present != self.host_present:
             self.host_present = present
-            self.rx_pending.clear()
+            if present:  # a new host: nothing of the last one's is still on the wire
+                self.rx_pending.clear()
+            # (a host that hung up: what it wrote before, on the wire still, arrives, as on a
+            # UART; the DISARM of a Disconnect was dropped here and the watchdog tripped)
             self.tx_pending.clear()
             self.emit("host_connected" if present else "host_disconnected")
 
