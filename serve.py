@@ -14,7 +14,7 @@ Files: recordings and exports are written only under ``--data-dir`` (default ``.
 
 Hardware: ``--hardware emulator`` (default) starts the device emulator on a pseudo-terminal, so
 the demo runs through the real serial stack; ``--hardware mock`` keeps the device in-process;
-``--port-path PATH`` talks to a real controller (see ``console.hardware_setup``). The Hardware
+``--port-path PATH`` talks to a real controller (see ``console.core.hardware_setup``). The Hardware
 panel (both robots) picks the port, connects, arms the device and shows the link's health.
 
 Lifecycle (``console.serve_lifecycle``): SIGTERM / Ctrl-C while starting exit at once; once
@@ -36,12 +36,12 @@ import traceback
 from pathlib import Path
 from typing import Any
 
-from console.access import AccessControl
+from console.core.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
-from console.model import model_for
+from console.core.model import model_for
 from console.serve_lifecycle import Lifecycle, port_in_use
-from console.services import ConsoleServices
-from console.state import StateStore
+from console.core.services import ConsoleServices
+from console.core.state import StateStore
 from core.robots import RobotFileError, available, load
 
 
@@ -150,16 +150,16 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     """Create the viser server and the console app; returns (server, app, token)."""
     import viser  # after argument checks, so --help and bad input stay fast
 
-    from console import hardware_setup
-    from console.demo_motion import DemoMotion
-    from console.panels.capture import CapturePanel
-    from console.panels.control import ControlPanel
-    from console.panels.extensible_panels import EXTENSIBLE_PANELS
-    from console.panels.hardware import HardwarePanel
-    from console.panels.planner import grasp_panels
-    from console.panels.session import SessionPanel
-    from console.panels.trials import TrialsPanel
-    from console.panels.view import ViewPanel
+    from console.core import hardware_setup
+    from console.core.demo_motion import DemoMotion
+    from console.panels.soft_arm.capture import CapturePanel
+    from console.panels.soft_arm.control import ControlPanel
+    from console.panels.extensible.panel_set import EXTENSIBLE_PANELS
+    from console.panels.common.hardware import HardwarePanel
+    from console.panels.soft_arm.planner import grasp_panels
+    from console.panels.common.session import SessionPanel
+    from console.panels.soft_arm.trials import TrialsPanel
+    from console.panels.common.view import ViewPanel
 
     token = None if args.no_token else secrets.token_urlsafe(9)
     desk = is_loopback(args.host) and not args.lab
@@ -210,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         print("serve.py: --slip needs the extensible arm on the device emulator",
               file=sys.stderr)
         return 2
-    from console.hardware_setup import describe
+    from console.core.hardware_setup import describe
     status = describe(robot, args.hardware, args.port_path)
     print(f"serve.py: hardware: {status}", file=sys.stderr)
 
@@ -252,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"Data folder: {app.data.root}", flush=True)
     bridge = None
     if args.foxglove_port is not None:  # Foxglove / Lichtblick: "Open connection" -> this URL
-        from console.foxglove_bridge import FoxgloveBridge
+        from console.recording.foxglove_bridge import FoxgloveBridge
         bridge = FoxgloveBridge(app.recorder, robot, args.host, args.foxglove_port)
         ws_url = urls(args.host, bridge.port)[0].replace("http://", "ws://").rstrip("/")
         print(f"Foxglove live data (read-only): {ws_url}", flush=True)

@@ -5,7 +5,7 @@
 Runs one grasp-and-place trial of the simulated soft arm headless (``core.control.trials``: the
 controller's measured curvatures, motion-capture noise included), then holds the arm still at a
 bent pose; samples the measured curvatures at the console's 30 Hz publish rate and feeds them to
-an :class:`console.arm_view.ArmView` whose clock is the simulated one. Prints, for the default
+an :class:`console.scene.arm_view.ArmView` whose clock is the simulated one. Prints, for the default
 dead band and a few others, the arm frames sent per second while the arm moves (as
 ``benchmarks/bench_viewers.py`` counts them: intervals between frames of at most 0.25 s) and
 while it holds still: what the band costs in update rate, free of what a loaded machine adds.
@@ -70,8 +70,8 @@ def replay(robot: Any, ts: np.ndarray, kappas: np.ndarray, band: Any) -> np.ndar
     """The (simulated) times the view sent a frame, fed at PUBLISH_HZ."""
     import viser
 
-    import console.arm_view as av
-    from console.model import model_for
+    import console.scene.arm_view as av
+    from console.core.model import model_for
 
     class Clock:
         t = 0.0
@@ -104,7 +104,7 @@ def main() -> int:
     a = p.parse_args()
 
     import bench_viewers as bv
-    from console.dead_band import DeadBand
+    from console.scene.dead_band import DeadBand
     from core.robots import load
 
     robot = load("soft-arm")

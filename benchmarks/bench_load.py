@@ -63,7 +63,7 @@ def _serve_module() -> Any:
 
 def child(a: argparse.Namespace) -> int:
     """Serve the console (``serve.build``) and answer ``mark`` / ``stats`` / ``quit``."""
-    from console.demo_motion import DemoMotion
+    from console.core.demo_motion import DemoMotion
     from core.robots import load
 
     serve = _serve_module()

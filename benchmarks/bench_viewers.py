@@ -13,11 +13,11 @@ like a browser and count what arrives, without decoding or rendering):
   simulated motion capture measures (0.2 mm marker noise: ~0.8 mm / 1.7 deg at the tip); the
   extensible arm stands at a bent pose while a 100 Hz "motion capture" reports it with noise
   (tip ~0.05 mm rms). The console's dead band: 0.5 mm / 0.5 deg on frames averaged while
-  they jitter, 0.1 mm / 0.1 deg while they move steadily (``console.dead_band.DeadBand``);
+  they jitter, 0.1 mm / 0.1 deg while they move steadily (``console.scene.dead_band.DeadBand``);
   ``benchmarks/viewer_messages.py`` lists every message a viewer of a still console gets;
 * moving: the soft arm runs grasp-and-place trials back to back on its control process (the
   100 Hz loop in its own process, which publishes its period error p99); the extensible arm's
-  demo motion (``console.demo_motion``) is reported at 100 Hz with the same noise (its loop is
+  demo motion (``console.core.demo_motion``) is reported at 100 Hz with the same noise (its loop is
   a thread of the console that publishes no p99).
 
 Each child first waits for its start-up overlays (the soft arm's reachability map, printed with
@@ -100,8 +100,8 @@ def mocap_only(app: Any) -> None:
 
 def child(a: argparse.Namespace) -> int:
     """Serve the console; stdin commands: ``still``, ``move``, ``stats``, ``quit``."""
-    from console.arm_view import make_arm_view
-    from console.demo_motion import demo_configuration
+    from console.scene.arm_view import make_arm_view
+    from console.core.demo_motion import demo_configuration
     from core.robots import load
 
     sys.path.insert(0, str(REPO / "benchmarks"))

@@ -151,7 +151,7 @@ def main() -> int:
             rng = np.random.default_rng(0)
 
             def mocap() -> None:
-                from console.demo_motion import demo_configuration
+                from console.core.demo_motion import demo_configuration
                 start = time.monotonic()
                 while not stop.wait(0.01):
                     q = demo_configuration(app.model, time.monotonic() - start) if a.move else q0

@@ -1,16 +1,16 @@
 """The operator console: one viser server, one arm, composable panels and a single render thread.
 
-``ConsoleApp(robot, server)`` sets up the stage (``console.stage``: the theme from
+``ConsoleApp(robot, server)`` sets up the stage (``console.scene.stage``: the theme from
 ``static/theme.toml`` with the share tunnel closed, the table, lights), the arm view and the
 camera, then composes its panels. ``start()`` launches the render thread; ``stop()`` ends it
 (the app is also a context manager).
 
-Data flow (see ``console.state``)::
+Data flow (see ``console.core.state``)::
 
     GUI callback --store.request/edit--> command --(mirror, or hardware bridge)--> display
     render thread: newest display state -> ArmView.update -> panel.on_state  (<= render_hz)
 
-Adding a panel (other engineers): write ``class MyPanel(console.panels.base.Panel)`` in
+Adding a panel (other engineers): write ``class MyPanel(console.panels.common.base.Panel)`` in
 ``console/panels/my_panel.py`` with ``title``, ``order``, optional ``kinds = ("planar",)``,
 ``build()`` creating widgets with thin callbacks that call ``self.app.store.request(q, "me")``,
 and ``on_state(state)`` for display updates. Then add it to the :data:`DEFAULT_PANELS` tuple
@@ -20,18 +20,18 @@ below (``kinds`` keeps it off the other robot), pass ``panels=`` to the construc
 Plugging in hardware: build the app with ``mirror_commands=False``; the bridge's control thread
 reads ``app.store.wait_command(seq, timeout)`` and reports measurements with
 ``app.store.report(q, "hardware")``; the view then draws what the robot measured. The loops and
-links the panels use come in one typed :class:`console.services.ConsoleServices`
+links the panels use come in one typed :class:`console.core.services.ConsoleServices`
 (``services=``, built by ``serve.py``; a loop that needs the console's store before the app
 exists gets it from ``store=``); panels read ``app.services.<name>``.
 
-Sharing the console (issue 6): ``app.access`` is the operator lock (``console.access``): gate
-every callback that moves the arm with ``console.panels.base.operator_only`` (or
+Sharing the console (issue 6): ``app.access`` is the operator lock (``console.core.access``): gate
+every callback that moves the arm with ``console.panels.common.base.operator_only`` (or
 ``app.access.check(event.client, "jog")``). ``app.stop_motion(reason, client)`` is STOP: it
 calls every hook registered with ``app.add_stop_hook(fn)`` (``fn(reason)``; the control loop
 registers its controlled stop there) and ends all jogging (``app.hold``, hold-to-run with speed
-caps, ``console.hold_to_run``). It also runs when the operator's lease is lost, control is
+caps, ``console.core.hold_to_run``). It also runs when the operator's lease is lost, control is
 released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
-recording (``console.recording``); files live under ``app.data`` (``console.datadir``).
+recording (``console.recording.recorder``); files live under ``app.data`` (``console.core.datadir``).
 ``app.guard`` (``console.client_guard``) checks every message a browser sends before viser
 stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
 calls ``allow_viewers(handle)``, per-client rate and size limits.
@@ -49,28 +49,28 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
-from console.access import AccessControl, NotOperator, Operator
-from console.arm_view import ArmView, make_arm_view
+from console.core.access import AccessControl, NotOperator, Operator
+from console.scene.arm_view import ArmView, make_arm_view
 from console.client_guard import ClientGuard
-from console.datadir import DataDir
+from console.core.datadir import DataDir
 from console.guarded_receive import install as _install_client_guard
 from console.header import ConsoleHeader
-from console.hold_to_run import HoldToRun
+from console.core.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
-from console.model import ArmModel, model_for
-from console.panels.base import Panel
-from console.panels.jog import JogPanel
-from console.panels.readout import ReadoutPanel
-from console.recording import Recorder
-from console.services import ConsoleServices
-from console.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
-from console.state import ArmState, StateStore
+from console.core.model import ArmModel, model_for
+from console.panels.common.base import Panel
+from console.panels.common.jog import JogPanel
+from console.panels.common.readout import ReadoutPanel
+from console.recording.recorder import Recorder
+from console.core.services import ConsoleServices
+from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
+from console.core.state import ArmState, StateStore
 from console.tabs import ConsoleTabs
 from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot
 
 if TYPE_CHECKING:
-    from console.grasp_session import GraspSession
+    from console.core.grasp_session import GraspSession
 
 _install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
 _install_client_guard()  # every browser message is checked before viser stores it (the module)
@@ -150,7 +150,7 @@ class ConsoleApp:
             self.add_stop_hook(self.services.demo.stop)
         server.on_client_connect(self.access.grant_if_free)
 
-        self.theme = setup_theme(server, robot.name)  # (console.stage) no share tunnel either
+        self.theme = setup_theme(server, robot.name)  # (console.scene.stage) no share tunnel either
         self.status = server.gui.add_markdown(f"<small>{status}</small>", order=0.3)
         self.header = ConsoleHeader(self)  # STOP, control, phase, link: above every tab
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
@@ -352,13 +352,13 @@ class ConsoleApp:
             # render takes (5-25 ms on a busy machine) came on top and 30 Hz became ~20 Hz.
             next_frame = started + self.render_period
 
-    # -- the stage (console.stage) ----------------------------------------------------------
+    # -- the stage (console.scene.stage) ----------------------------------------------------------
 
     def _span(self) -> float:
-        """Largest distance of any arm point from the base (:func:`console.stage.arm_span`)."""
+        """Largest distance of any arm point from the base (:func:`console.scene.stage.arm_span`)."""
         return arm_span(self.robot, self.model.kind)
 
     def _table_extent(self) -> tuple[float, float, float, float]:
         """Table rectangle (x0, x1, y0, y1) around the arm's workspace
-        (:func:`console.stage.table_extent`)."""
+        (:func:`console.scene.stage.table_extent`)."""
         return table_extent(self.robot, self.model.kind)

@@ -1,6 +1,6 @@
 """The operator lease's heartbeat: probe the operator's tab, revoke control when it goes silent.
 
-:class:`LeaseMonitor` is the viser side of ``console.access.AccessControl``: it needs a live
+:class:`LeaseMonitor` is the viser side of ``console.core.access.AccessControl``: it needs a live
 server and its clients, while the lock itself stays testable without a browser.
 """
 
@@ -13,8 +13,8 @@ from typing import Any, Callable
 
 import viser
 
-from console.access import AccessControl
-from console.lease_limits import LeaseStatus
+from console.core.access import AccessControl
+from console.core.lease_limits import LeaseStatus
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +101,7 @@ class LeaseMonitor:
     ``warn_s`` of silence on shows the operator a :class:`SilenceWarning` (an unanswered probe
     is re-sent at that moment; answers come in order, so nothing is lost); the answers are also
     the heartbeats that keep a set-point jog moving (it holds when the last one is over 300 ms
-    old, see ``console.hold_to_run``), so while ``busy()`` (a jog is running) the tab is probed
+    old, see ``console.core.hold_to_run``), so while ``busy()`` (a jog is running) the tab is probed
     every ``probe_period`` s (0.1), otherwise every ``idle_period`` s (1.0): each probe makes
     viser's client draw the 3D scene for a quarter of a second (a message that is not GUI-only
     opens its render window, and the answer is sent from the next frame), so probing a still

@@ -1,7 +1,7 @@
 """Lets one tool take a browser's clicks on the 3D scene for a while, so other panels skip them.
 
 Several panels act on a click on the table (Objects places an object, Control's "Click to
-grasp" runs a grasp). When a browser starts a measurement (``console.panels.view``) its next
+grasp" runs a grasp). When a browser starts a measurement (``console.panels.common.view``) its next
 clicks must measure and do nothing else, while every other browser's clicks act as before.
 viser 1.1.1 calls every registered scene-click callback for every click and has no way to stop
 the others, so :class:`ClickClaims` wraps the click callbacks registered so far (again whenever

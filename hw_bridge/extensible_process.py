@@ -176,7 +176,7 @@ class ExtensibleProcess(LoopProcess):
 
     Args:
         robot: The extensible arm (its ``source`` file is loaded in the child).
-        store: The console's :class:`console.state.StateStore`: its commands are followed while
+        store: The console's :class:`console.core.state.StateStore`: its commands are followed while
             idle (``follow``: at once on connect), the measured posture is reported there
             (always when the store does not mirror commands, else while a job runs).
         kind: ``"mock"`` (an in-process MockHardware in the child) or ``"port"`` (a

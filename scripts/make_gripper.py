@@ -8,7 +8,7 @@ holds a channel; inflated, the pleats push apart and the finger curls toward the
 mesh is drawn straight (open), in the gripper-root frame of ``core.control.gripper``: x along
 the gripper from its root, y to the left (the closing side), z up; metres, sized from the robot
 file (``[gripper] length, half_width`` and ``[sim.gripper] palm_length``). The console scales it
-to the robot it draws and bends it for the closed state (``console.gripper_mesh``), so one
+to the robot it draws and bends it for the closed state (``console.scene.gripper_mesh``), so one
 asset serves every soft-arm robot file.
 """
 

@@ -2,7 +2,7 @@
 
 ``python scripts/make_reach_cache.py [--robot soft-arm] [--check]`` computes the map the console
 asks for at start (the table rectangle of ``ConsoleApp._table_extent``, the robot's nominal
-object radius, ``console.reach_job.REACH_STEP`` and ``DEFAULT_LEVELS``), writes it to
+object radius, ``console.core.reach_job.REACH_STEP`` and ``DEFAULT_LEVELS``), writes it to
 ``data/reach_cache/`` under its key and removes the other files there. Run it after a change to
 the robot file, the planner or :data:`core.planning.reachability.ALGORITHM_VERSION`. With
 ``--check`` it only says whether the shipped file is a hit (exit 1 if not).
@@ -17,7 +17,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from console.reach_job import REACH_STEP, SHIPPED_CACHE, ReachCache, ReachRequest  # noqa: E402
+from console.core.reach_job import REACH_STEP, SHIPPED_CACHE, ReachCache, ReachRequest  # noqa: E402
 from core import robots  # noqa: E402
 from core.planning.reachability import DEFAULT_LEVELS, reachability_map  # noqa: E402
 

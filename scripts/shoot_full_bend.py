@@ -45,8 +45,8 @@ def shoot(robot_name: str, q: np.ndarray, offset: tuple[float, float, float],
           stem: str, browser) -> list[Path]:  # noqa: ANN001 - a Playwright browser
     import viser
 
-    from console.arm_view import make_arm_view
-    from console.model import model_for
+    from console.scene.arm_view import make_arm_view
+    from console.core.model import model_for
     from core.robots import load
 
     robot = load(robot_name)
@@ -108,7 +108,7 @@ def main() -> int:
     from playwright.sync_api import sync_playwright
 
     from conftest import CHROMIUM, CHROMIUM_ARGS
-    from console.model import model_for
+    from console.core.model import model_for
     from core.robots import load
 
     k = load("soft-arm").kappa_max

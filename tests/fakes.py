@@ -93,10 +93,10 @@ def console_app(robot: Any, server: Any, *, soft_control: Any = None,
     created: a service left out is None, as in production.
     """
     from console.app import ConsoleApp
-    from console.demo_motion import DemoMotion
-    from console.model import model_for
-    from console.services import ConsoleServices
-    from console.state import StateStore
+    from console.core.demo_motion import DemoMotion
+    from console.core.model import model_for
+    from console.core.services import ConsoleServices
+    from console.core.state import StateStore
 
     if soft_control == "process":
         from hw_bridge.soft_arm_process import ControlProcess

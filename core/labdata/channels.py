@@ -1,7 +1,7 @@
 """The lab channels and the pure mapping from console records to channel messages (and back).
 
 A console record is a dict with ``kind`` and ``t`` (s since the recording started), as
-``console.recording.Recorder`` builds it; :func:`messages_for` turns one into ``(topic, message)``
+``console.recording.recorder.Recorder`` builds it; :func:`messages_for` turns one into ``(topic, message)``
 pairs, :func:`record_from_message` turns a message of a record-carrying channel back into the
 record (``/arm/configuration`` -> ``state``, ``/operator/actions`` -> ``action``, ``/objects`` ->
 ``objects`` ...). Derived channels (the 3D scene, tip pose, ``foxglove.Log``) are for the lab

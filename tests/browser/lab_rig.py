@@ -129,7 +129,7 @@ def lab_app(tmp_path: Path, **services: Any) -> tuple[Any, Any, str]:
 
     import viser
 
-    from console.access import AccessControl
+    from console.core.access import AccessControl
     from fakes import console_app
 
     token = secrets.token_urlsafe(9)
@@ -146,8 +146,8 @@ def lab(browser, tmp_path: Path) -> Iterator[Lab]:
     process), Session -- rather than all of them: the full console takes twice as long to load
     in software-rendered Chromium, and the other panels play no part here."""
     from console.app import DEFAULT_PANELS
-    from console.panels.control import ControlPanel
-    from console.panels.session import SessionPanel
+    from console.panels.soft_arm.control import ControlPanel
+    from console.panels.common.session import SessionPanel
 
     server, app, token = lab_app(tmp_path, soft_control="process", demo=True)
     for panel_cls in (*DEFAULT_PANELS, ControlPanel, SessionPanel):

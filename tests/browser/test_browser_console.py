@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from browser_tabs import open_console, wait_until
 
-from console.model import DeltaModel
+from console.core.model import DeltaModel
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import load

@@ -33,7 +33,7 @@ SPOT = "E"  # (-0.08, 0.33): the quickest of the five (about 9 s approach, 9 s r
 # the shipped speed; a third of that on the QUICK_MOTION copy)
 # What the test reads after STOP is the drawn arm: the readout and the kappa table show the
 # frame the 3D view last sent, and the view sends a held arm's frame only when the drawn frames,
-# averaged over up to 2 s, leave a 0.5 mm band (console.dead_band). So a held arm's readout
+# averaged over up to 2 s, leave a 0.5 mm band (console.scene.dead_band). So a held arm's readout
 # stays on one frame for seconds, then jumps to a newer single frame, each carrying the
 # measurement's noise (0.2 mm marker noise -> fitted tip ~0.5 mm per axis, kappa 0.04 (segment
 # 1) to 0.34 1/m (segment 6) per frame): two windows on either side of such a jump differ by

@@ -23,7 +23,7 @@ import pytest
 from browser_tabs import open_console, open_tab, wait_until
 from robot_files import robot_copy
 
-from console.model import DeltaModel
+from console.core.model import DeltaModel
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.planning.paths import build_path

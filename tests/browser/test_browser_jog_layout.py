@@ -13,8 +13,8 @@ import pytest
 
 from browser_tabs import open_tab
 from console.app import DEFAULT_PANELS, ConsoleApp
-from console.hold_to_run import HOLD_SOURCE
-from console.panels.jog import JogPanel
+from console.core.hold_to_run import HOLD_SOURCE
+from console.panels.common.jog import JogPanel
 from core.robots import load
 
 # alone: a held jog ends within 0.6 s of the release (expiry 0.3 s) (conftest's SUITE_PART=alone)

@@ -18,7 +18,7 @@ from typing import Iterator
 
 import pytest
 
-from console.hold_to_run import HOLD_SOURCE
+from console.core.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
 from browser_tabs import open_tab  # noqa: E402
@@ -137,7 +137,7 @@ def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(l
     assert app.access.holder is not None and app.lease.probes > 0
     n_stops = len(lab.stops)
     frozen = time.monotonic()
-    lease_s = app.access.lease_s  # 7 s (console.access.LEASE_S: measured browsers x 2)
+    lease_s = app.access.lease_s  # 7 s (console.core.access.LEASE_S: measured browsers x 2)
     carol.evaluate("s => { const end = Date.now() + s * 1000; while (Date.now() < end) {} }",
                    lease_s + 1.5)
     wait_for(lambda: len(lab.stops) > n_stops, timeout=2.0)
@@ -151,10 +151,10 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     """A lab console with the grasp panels (Objects, Grasp planner, Waypoints), the Hardware
     panel on queued bridge controls (nothing drains them here) and Session; no reachability
     map (CPU), no control process."""
-    from console.hardware_setup import HardwareAttachment
-    from console.panels import planner
-    from console.panels.hardware import HardwarePanel
-    from console.panels.session import SessionPanel
+    from console.core.hardware_setup import HardwareAttachment
+    from console.panels.soft_arm import planner
+    from console.panels.common.hardware import HardwarePanel
+    from console.panels.common.session import SessionPanel
     from hw_bridge.controls import QueuedBridgeControls
 
     planner.GraspSession.compute_reach = False

@@ -121,7 +121,7 @@ def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -
     assert app.store.command.source == "stop"  # replay never commands the arm
 
     # Markers (started recording, the demo, STOP, ...): from the end, back two and on one.
-    from console.replay_markers import current_marker, next_marker, previous_marker
+    from console.playback.replay_markers import current_marker, next_marker, previous_marker
     wait_for(lambda: not session.playing, timeout=15.0)  # the replay ran to its end
     markers = session.markers
     assert len(markers) >= 3 and any(m.category == "stop" for m in markers)

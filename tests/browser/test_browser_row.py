@@ -42,10 +42,10 @@ def row_console(tmp_path: Path) -> Iterator[tuple[Any, str]]:
     lease would STOP the row)."""
     import viser
 
-    from console.access import AccessControl
-    from console.panels import planner
-    from console.panels.control import ControlPanel
-    from console.panels.objects import ObjectsPanel
+    from console.core.access import AccessControl
+    from console.panels.soft_arm import planner
+    from console.panels.soft_arm.control import ControlPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
     from core.robots import load
     from fakes import console_app
 
@@ -94,7 +94,7 @@ def objects_info(n: int) -> str:
 
 def test_three_objects_are_cleared_into_a_clicked_bin(page, row_console,
                                                       artifacts_dir: Path) -> None:
-    from console.panels.control import ControlPanel
+    from console.panels.soft_arm.control import ControlPanel
 
     app, url = row_console
     control = app.panel(ControlPanel)

@@ -22,7 +22,7 @@ import pytest
 from browser_tabs import close_notices, open_tab
 from console.app import ConsoleApp
 from tests.ws_client import wait_for
-from console.panels.objects import ObjectsPanel
+from console.panels.soft_arm.objects import ObjectsPanel
 from core.kinematics import planar
 from core.planning.grasp import plan_grasp
 from core.robots import load
@@ -63,10 +63,10 @@ def wait_until(what: str, fn, timeout: float) -> Any:
 
 @pytest.fixture
 def grasp_page(browser: Any, server: Any) -> Iterator[tuple[Any, ConsoleApp]]:
-    from console.panels import planner
+    from console.panels.soft_arm import planner
 
     planner.GraspSession.compute_reach = False   # the shading is not what is tested here
-    from console.access import AccessControl
+    from console.core.access import AccessControl
 
     # The lease is not what is tested: on a machine loaded far past its cores a software-
     # rendered tab went silent past the 7 s lease between taking control and clicking.

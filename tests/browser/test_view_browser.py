@@ -76,7 +76,7 @@ def table_point(cam: Any, px: float, py: float, width: float, height: float) -> 
 
 def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
         page, soft_console, artifacts_dir: Path) -> None:
-    from console.panels.view import ViewPanel
+    from console.panels.common.view import ViewPanel
 
     server, app, url = soft_console
     view = app.panel(ViewPanel)

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import viser
 
-from console.arm_view import make_arm_view
-from console.dead_band import DeadBand
-from console.delta_arm_view import DeltaArmView
-from console.model import model_for
-from console.planar_arm_view import PlanarArmView
-from console.skin import TubeSkin, bspline_weights
+from console.scene.arm_view import make_arm_view
+from console.scene.dead_band import DeadBand
+from console.scene.extensible_arm_view import DeltaArmView
+from console.core.model import model_for
+from console.scene.soft_arm_view import PlanarArmView
+from console.scene.skin import TubeSkin, bspline_weights
 from core.robots import load
 
 SOFT = load("soft-arm")
@@ -164,7 +164,7 @@ def test_averaged_dead_band_holds_a_noisy_still_arm_and_follows_a_move(server, m
     """Noise that crosses the band frame by frame (the soft arm's mocap in the simulator:
     ~0.8 mm and ~1.7 deg at the tip) averages out; a clean move is drawn frame by frame; a
     state held back is drawn exactly when the display goes idle."""
-    import console.arm_view as arm_view
+    import console.scene.arm_view as arm_view
 
     clock = [100.0]
     monkeypatch.setattr(arm_view.time, "monotonic", lambda: clock[0])
@@ -266,7 +266,7 @@ def test_tubes_posed_together_get_each_tube_s_own_bone_poses(server) -> None:
 def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_idle(
         server) -> None:
     from console.app import ConsoleApp
-    from console.panels.readout import READOUT_HZ, ReadoutPanel
+    from console.panels.common.readout import READOUT_HZ, ReadoutPanel
 
     app = ConsoleApp(SOFT, server)
     readout = app.panel(ReadoutPanel)
@@ -295,7 +295,7 @@ def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_id
 
 
 def test_plot_columns_are_thinned_to_float32_keeping_the_newest_sample() -> None:
-    from console.panels.plot_data import thin
+    from console.panels.common.plot_data import thin
 
     t = np.arange(1000) * 0.01
     y = np.sin(t)

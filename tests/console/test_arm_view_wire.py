@@ -11,9 +11,9 @@ import pytest
 from viser import _messages
 from viser.infra import _messages as infra_messages
 
-from console.arm_view import make_arm_view
-from console.model import model_for
-from console.skin import bspline_weights
+from console.scene.arm_view import make_arm_view
+from console.core.model import model_for
+from console.scene.skin import bspline_weights
 from console.viser_fixes import install
 from core.kinematics import planar as pk
 from core.robots import load

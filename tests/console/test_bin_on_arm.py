@@ -10,7 +10,7 @@ import time
 import pytest
 from test_row_console import SOFT, rig, wait_for  # noqa: F401
 
-from console.table_bin import bin_on_arm, locate_bin
+from console.core.table_bin import bin_on_arm, locate_bin
 from fakes import click_at, user
 
 HALF = SOFT.bin.drop_radius_m

@@ -10,7 +10,7 @@ import time
 import pytest
 from test_row_console import BIN_XY, SOFT, rig, wait_for  # noqa: F401
 
-from console.table_bin import bin_overlap, locate_bin
+from console.core.table_bin import bin_overlap, locate_bin
 from core.planning.obstacles import Obstacle
 from fakes import click_at, user
 

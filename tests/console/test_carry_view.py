@@ -10,11 +10,11 @@ import time
 import numpy as np
 import pytest
 
-from console.carry_view import PATH_SAMPLES
-from console.planning_clock import PlanningClock
-from console.plan_view import outcome_html
-from console.table_bin import locate_bin
-from console.table_scene import TableObject
+from console.scene.carry_view import PATH_SAMPLES
+from console.core.planning_clock import PlanningClock
+from console.scene.plan_view import outcome_html
+from console.core.table_bin import locate_bin
+from console.core.table_scene import TableObject
 from core.kinematics import planar as pk
 from core.planning.feasibility import GraspRefused
 from core.planning.obstacles import Obstacle
@@ -69,7 +69,7 @@ def _drawn(layer) -> bool:
 
 
 def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replace_it(gated):
-    from console.panels.planner import PlannerPanel
+    from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
     pp, layer = app.panel(PlannerPanel), gated.grasp_session.carry_layer
@@ -99,7 +99,7 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
     vias = len(plan.carry) - 1
     wait_for(lambda: f"carry to the bin: {vias} via shape" in pp.summary.content,
              what="the summary's vias")
-    from console.panels.view import legend_html
+    from console.panels.common.view import legend_html
     assert "Carry to the bin" in legend_html("planar")
 
     # Replanned with the obstacle out of the way: the straight carry replaces the detour.
@@ -135,7 +135,7 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
 
 
 def test_a_carry_that_is_refused_keeps_the_grasp_and_says_why(gated):
-    from console.panels.planner import PlannerPanel
+    from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
     pp, layer = app.panel(PlannerPanel), s.carry_layer
@@ -176,7 +176,7 @@ def test_the_planning_clock_reports_only_plans_longer_than_its_delay_and_none_af
 
 
 def test_a_slow_plan_shows_planning_with_the_button_disabled_then_the_refusal(gated):
-    from console.panels.planner import PlannerPanel
+    from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
     pp = app.panel(PlannerPanel)
@@ -211,8 +211,8 @@ def test_execute_and_click_to_grasp_show_the_machines_planning_then_its_refusal(
     """Execute without a plan and Click to grasp plan on the machine (its planning process):
     its phase "planning" is the header's busy field and the Control panel's state line while
     it runs, and the refusal is the state line's reason when it ends."""
-    from console.panels.control_text import execute_target, header_phase, state_html
-    from console.plan_view import SessionView
+    from console.panels.soft_arm.control_text import execute_target, header_phase, state_html
+    from console.scene.plan_view import SessionView
     from core.control.stack import Telemetry
     from hw_bridge.loop import LoopSnapshot, LoopStats
     from hw_bridge.soft_arm_process import ControlView

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from viser import _messages
 
-from console.panels.control import ControlPanel
-from console.panels.session import SessionPanel
+from console.panels.soft_arm.control import ControlPanel
+from console.panels.common.session import SessionPanel
 from fakes import FakeClient
 from tests.ws_client import RawClient, wait_for
 
@@ -324,7 +324,7 @@ def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) ->
     panel has no object fields of its own.)"""
     import dataclasses
 
-    from console.panels.objects import ObjectsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
 
     server, app, _ = console
     if app.robot.kind != "planar":

@@ -18,11 +18,11 @@ import pytest
 import viser
 from viser import _messages
 
-from console.access import AccessControl
+from console.core.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
 from console.client_guard import GuardLimits
-from console.panels.jog import JogPanel
-from console.panels.session import SessionPanel
+from console.panels.common.jog import JogPanel
+from console.panels.common.session import SessionPanel
 from core.robots import load
 from tests.ws_client import CAMERA, RawClient, wait_for
 

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from console.app import ConsoleApp
-from console.arm_view import make_arm_view
-from console.delta_arm_view import DeltaArmView
-from console.planar_arm_view import PlanarArmView
-from console.panels.base import Panel
-from console.panels.jog import JogPanel
-from console.panels.readout import ReadoutPanel
-from console.state import ArmState
+from console.scene.arm_view import make_arm_view
+from console.scene.extensible_arm_view import DeltaArmView
+from console.scene.soft_arm_view import PlanarArmView
+from console.panels.common.base import Panel
+from console.panels.common.jog import JogPanel
+from console.panels.common.readout import ReadoutPanel
+from console.core.state import ArmState
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import load
@@ -216,8 +216,8 @@ def test_panels_plug_in_by_class_and_a_broken_panel_does_not_stop_drawing(server
 
 
 def test_services_come_in_typed_and_nothing_is_made_behind_the_callers_back(server) -> None:
-    from console.panels.control import ControlPanel
-    from console.panels.paths import PathsPanel
+    from console.panels.soft_arm.control import ControlPanel
+    from console.panels.extensible.paths import PathsPanel
     from fakes import console_app
 
     app = console_app(SOFT, server, panels=(), demo=True)

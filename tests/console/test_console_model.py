@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from console.model import DeltaModel, PlanarModel, model_for
-from console.state import StateStore
+from console.core.model import DeltaModel, PlanarModel, model_for
+from console.core.state import StateStore
 from core.kinematics import delta as dk
 from core.robots import load
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from console.app import ConsoleApp
-from console.theme import THEME_FILE, load_theme
+from console.scene.theme import THEME_FILE, load_theme
 from core.robots import load
 
 REPO = Path(__file__).resolve().parents[2]

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from console.tube import TubeTopology, frames_from_matrices, planar_frames
+from console.scene.tube import TubeTopology, frames_from_matrices, planar_frames
 
 
 def helix_frames(m: int, pitch: float = 0.1, radius: float = 0.2):

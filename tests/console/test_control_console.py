@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import viser
 
-from console.panels.capture import merge
-from console.panels.control import ControlPanel, table_point
+from console.panels.soft_arm.capture import merge
+from console.panels.soft_arm.control import ControlPanel, table_point
 from hw_bridge.link_supervisor import DISCONNECTED
 from hw_bridge.soft_arm_process import ControlView
-from console.panels.trials import results_markdown
+from console.panels.soft_arm.trials import results_markdown
 from core.control.capture import characterise
 from core.control.stack import Telemetry
 from core.control.trials import TrialResult

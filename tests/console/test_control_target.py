@@ -9,15 +9,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from console.panels.control_plots import MIN_ERROR_RANGE, error_range, tracking_error
-from console.panels.control_text import (
+from console.panels.soft_arm.control_plots import MIN_ERROR_RANGE, error_range, tracking_error
+from console.panels.soft_arm.control_text import (
     execute_target,
     header_phase,
     state_html,
     waypoint_text,
 )
-from console.plan_view import Outcome, SessionView
-from console.table_scene import TableObject
+from console.scene.plan_view import Outcome, SessionView
+from console.core.table_scene import TableObject
 from core.planning.grasp import plan_grasp
 from core.robots import load
 

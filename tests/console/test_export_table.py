@@ -14,17 +14,17 @@ import numpy as np
 import pytest
 import viser
 
-from console.datadir import DataDir
-from console.export import external_urls, recording_html, scene_html
-from console.lab_feed import feed_grasp
-from console.model import model_for
-from console.panels import planner
-from console.panels.objects import ObjectsPanel
-from console.plan_view import SessionView
-from console.recording import Recorder, load_recording
-from console.state import StateStore
-from console.table_bin import TableBin
-from console.table_scene import TableObject
+from console.core.datadir import DataDir
+from console.playback.export import external_urls, recording_html, scene_html
+from console.recording.lab_feed import feed_grasp
+from console.core.model import model_for
+from console.panels.soft_arm import planner
+from console.panels.soft_arm.objects import ObjectsPanel
+from console.scene.plan_view import SessionView
+from console.recording.recorder import Recorder, load_recording
+from console.core.state import StateStore
+from console.core.table_bin import TableBin
+from console.core.table_scene import TableObject
 from core.planning.obstacles import Obstacle
 from core.robots import load
 from tests.console.test_lab_export import decode_embedded

@@ -66,7 +66,7 @@ def status_of(html: str) -> str:
 def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, monkeypatch):
     from fakes import console_app
 
-    from console.panels import paths
+    from console.panels.extensible import paths
 
     monkeypatch.setattr(paths, "PLAN_TIMEOUT_S", 1.0)
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
@@ -101,9 +101,9 @@ def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, m
 def test_hardware_line_is_the_link_supervisors_health_and_phase_follows_stop(server):
     from fakes import console_app
 
-    from console.panels.extensible_status import link_summary
-    from console.panels.hardware import header_link
-    from console.panels.paths import PathsPanel
+    from console.panels.extensible.status import link_summary
+    from console.panels.common.hardware import header_link
+    from console.panels.extensible.paths import PathsPanel
 
     controls = FakeControls(FakeHealth(fault="link lost: no valid STATE for 48 ms"))
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
@@ -133,7 +133,7 @@ def test_hardware_line_is_the_link_supervisors_health_and_phase_follows_stop(ser
 def test_unreachable_target_names_the_closest_reachable_tip_without_negative_zero(server):
     from fakes import console_app
 
-    from console.panels.target import TargetPanel
+    from console.panels.extensible.target import TargetPanel
 
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
                       hardware=FakeHardware("mock"))
@@ -156,8 +156,8 @@ def test_a_typed_field_is_not_overwritten_by_the_echo_of_the_field_typed_before_
     callback solved for the old y. The echo now leaves a field typed since alone."""
     from fakes import FakeClient, console_app, user
 
-    from console.access import AccessControl
-    from console.panels.target import TargetPanel
+    from console.core.access import AccessControl
+    from console.panels.extensible.target import TargetPanel
 
     app = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),
                       hardware=FakeHardware("mock"), access=AccessControl("tok"))

@@ -21,7 +21,7 @@ import viser
 from websockets.sync.client import ClientConnection, connect
 
 from console.app import ConsoleApp
-from console.foxglove_bridge import FoxgloveBridge
+from console.recording.foxglove_bridge import FoxgloveBridge
 from core.labdata.channels import CHANNELS
 from core.robots import load
 

@@ -8,10 +8,10 @@ import dataclasses
 import numpy as np
 import trimesh
 
-from console.arm_view import make_arm_view
-from console.gripper_mesh import (ASSET, NEUTRAL_Y, GripperShape, bend, fit, gripper_vertices,
+from console.scene.arm_view import make_arm_view
+from console.scene.gripper_mesh import (ASSET, NEUTRAL_Y, GripperShape, bend, fit, gripper_vertices,
                                   load_asset)
-from console.model import model_for
+from console.core.model import model_for
 from core.control.gripper import GripperGeometry
 from core.robots import load
 
@@ -20,7 +20,7 @@ SOFT = load("soft-arm")
 
 def test_asset_loads_and_spans_the_robot_files_gripper() -> None:
     g = SOFT.gripper
-    mesh = trimesh.load(ASSET, force="mesh")  # read independently of console.gripper_mesh
+    mesh = trimesh.load(ASSET, force="mesh")  # read independently of console.scene.gripper_mesh
     assert len(mesh.faces) > 100
     np.testing.assert_allclose(mesh.bounds, [[0.0, -g.half_width, -g.half_width],
                                              [g.length, g.half_width, g.half_width]], atol=1e-6)

@@ -7,10 +7,10 @@ from typing import Any
 import pytest
 
 from console.header import FIELDS
-from console.panels.base import Panel
-from console.panels.jog import JogPanel
-from console.panels.readout import ReadoutPanel
-from console.panels.session import SessionPanel
+from console.panels.common.base import Panel
+from console.panels.common.jog import JogPanel
+from console.panels.common.readout import ReadoutPanel
+from console.panels.common.session import SessionPanel
 from console.tabs import TAB_ORDER
 from core.robots import load
 from tests.fakes import FakeClient, console_app

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import viser
 
-from console.access import AccessControl
-from console.hardware_setup import HardwareAttachment, attach
-from console.panels.hardware import (OTHER, FaultTracker, HardwarePanel, format_health,
+from console.core.access import AccessControl
+from console.core.hardware_setup import HardwareAttachment, attach
+from console.panels.common.hardware import (OTHER, FaultTracker, HardwarePanel, format_health,
                                      no_controls_text)
 from core.robots import load
 from hw_bridge.controls import QueuedBridgeControls

@@ -14,11 +14,11 @@ import pytest
 import viser
 from viser import _messages
 
-from console.access import AccessControl
+from console.core.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
-from console.hold_to_run import HOLD_SOURCE
-from console.panels.jog import HOLD_HZ, JogPanel
-from console.panels.session import SessionPanel
+from console.core.hold_to_run import HOLD_SOURCE
+from console.panels.common.jog import HOLD_HZ, JogPanel
+from console.panels.common.session import SessionPanel
 from core.robots import load
 from tests.ws_client import RawClient, wait_for
 

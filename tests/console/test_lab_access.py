@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import viser
 
-from console.access import AccessControl, NotOperator
+from console.core.access import AccessControl, NotOperator
 from console.app import ConsoleApp
-from console.panels.base import Panel, operator_only
-from console.panels.jog import JogPanel
+from console.panels.common.base import Panel, operator_only
+from console.panels.common.jog import JogPanel
 from core.robots import load
 from fakes import FakeClient, FakeClock
 
@@ -310,8 +310,8 @@ def test_share_tunnel_request_from_the_wire_is_ignored(monkeypatch, server) -> N
 def test_every_callback_of_the_shared_scene_panels_is_operator_only(server, monkeypatch) -> None:
     """Objects, Grasp planner, Waypoints and Hardware: every widget callback that changes what
     everyone sees or drives the hardware is gated (only "Save scene", a download, is not)."""
-    from console.panels import planner
-    from console.panels.hardware import HardwarePanel
+    from console.panels.soft_arm import planner
+    from console.panels.common.hardware import HardwarePanel
 
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     app = ConsoleApp(SOFT, server, panels=(*planner.grasp_panels(), HardwarePanel),

@@ -13,14 +13,14 @@ from types import SimpleNamespace
 import numpy as np
 from mcap.reader import make_reader
 
-from console.datadir import DataDir
-from console.lab_feed import ControlFeed, feed_grasp
-from console.model import model_for
+from console.core.datadir import DataDir
+from console.recording.lab_feed import ControlFeed, feed_grasp
+from console.core.model import model_for
 from hw_bridge.soft_arm_process import ControlView
-from console.plan_view import Outcome, SessionView
-from console.recording import Recorder, load_recording
-from console.state import StateStore
-from console.table_scene import TableObject
+from console.scene.plan_view import Outcome, SessionView
+from console.recording.recorder import Recorder, load_recording
+from console.core.state import StateStore
+from console.core.table_scene import TableObject
 from core.control.stack import Telemetry
 from core.planning.grasp import plan_grasp
 from core.robots import load
@@ -133,7 +133,7 @@ def test_a_planned_tip_path_becomes_a_plan_record_with_its_waypoints(tmp_path) -
     rec = Recorder(DataDir(tmp_path), model)
     out = rec.start("path")
     rec.on_state(StateStore(model).request(q0, "jog"))
-    from console.lab_feed import path_plan_record
+    from console.recording.lab_feed import path_plan_record
     rec.log("plan", path_plan_record(req, waypoints, path))
     rec.stop()
     got = topics(out)

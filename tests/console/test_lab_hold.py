@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from fakes import FakeClock
-from console.hold_to_run import HoldToRun
-from console.model import model_for
-from console.state import StateStore
+from console.core.hold_to_run import HoldToRun
+from console.core.model import model_for
+from console.core.state import StateStore
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import load

@@ -19,9 +19,9 @@ import viser
 from viser import _messages
 from websockets.sync.client import connect
 
-from console.access import AccessControl
+from console.core.access import AccessControl
 from console.app import ConsoleApp
-from console.panels.session import SessionPanel
+from console.panels.common.session import SessionPanel
 from console.viser_fixes import LoopSafeEvent, install
 from core.robots import load
 

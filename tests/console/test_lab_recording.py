@@ -11,10 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from console.datadir import BadFileName, DataDir
-from console.model import model_for
-from console.recording import SUFFIX, Recorder, load_recording
-from console.state import StateStore
+from console.core.datadir import BadFileName, DataDir
+from console.core.model import model_for
+from console.recording.recorder import SUFFIX, Recorder, load_recording
+from console.core.state import StateStore
 from core.robots import load
 
 SOFT = load("soft-arm")

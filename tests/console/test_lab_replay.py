@@ -13,8 +13,8 @@ import viser
 
 from fakes import ScopedClient, console_app
 from console.app import ConsoleApp
-from console.recording import Recorder
-from console.replay import ReplaySession
+from console.recording.recorder import Recorder
+from console.playback.replay import ReplaySession
 from core.kinematics import planar as pk
 from core.robots import load
 

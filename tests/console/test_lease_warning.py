@@ -9,9 +9,9 @@ from typing import Any
 import pytest
 from fakes import FakeClock, console_app
 
-from console.access import AccessControl
+from console.core.access import AccessControl
 from console.lease import LeaseMonitor
-from console.lease_limits import FIRST_ANSWER_S, LEASE_S, WARN_S
+from console.core.lease_limits import FIRST_ANSWER_S, LEASE_S, WARN_S
 from core.robots import load
 
 
@@ -95,7 +95,7 @@ def settle(monitor: LeaseMonitor, clock: FakeClock, seconds: float, period: floa
 
 
 def test_the_limits_leave_the_measured_browsers_a_margin() -> None:
-    """benchmarks/lease_gaps.py (table in console/access.py): worst gap 3.4 s (desktop + 2 busy loops) and
+    """benchmarks/lease_gaps.py (table in console/core/access.py): worst gap 3.4 s (desktop + 2 busy loops) and
     3.2 s (tablet, 4x throttled); first answer of a throttled tablet 9.7 s. The old limits
     (2 s, 10 s) lapsed on both; the new ones are at least twice the worst measured."""
     assert LEASE_S >= 2 * 3.4 and FIRST_ANSWER_S >= 2 * 9.7

@@ -238,7 +238,7 @@ def test_control_panel_shows_a_dead_control_process_and_tells_every_browser_once
     """The panel's pump (driven here) notices the death: no stale state, one notification."""
     import viser
 
-    from console.panels.control import ControlPanel
+    from console.panels.soft_arm.control import ControlPanel
     from core.robots import load
     from fakes import console_app
     from fakes import FakeClient

@@ -9,7 +9,7 @@ from __future__ import annotations
 import pytest
 from test_row_console import rig  # noqa: F401
 
-from console.table_scene import TableObject, disk_overlap
+from console.core.table_scene import TableObject, disk_overlap
 from core.planning.obstacles import Obstacle
 from fakes import click_at, user
 

@@ -48,8 +48,8 @@ class SyncPool:
 def gated(server):
     from fakes import console_app
 
-    from console.access import AccessControl
-    from console.panels.extensible_panels import EXTENSIBLE_PANELS
+    from console.core.access import AccessControl
+    from console.panels.extensible.panel_set import EXTENSIBLE_PANELS
 
     app = console_app(EXT, server, panels=EXTENSIBLE_PANELS, extensible_runner=FakeRunner(),
                       access=AccessControl("tok"))
@@ -66,7 +66,7 @@ def state_of(html: str, key: str = "state") -> str:
 def test_operator_places_edits_and_removes_boxes_and_bad_input_changes_nothing(gated):
     from fakes import FakeClient
 
-    from console.panels.obstacles_boxes import BoxObstaclesPanel, box_scene_of
+    from console.panels.extensible.obstacles_boxes import BoxObstaclesPanel, box_scene_of
 
     app = gated
     panel = app.panel(BoxObstaclesPanel)
@@ -116,7 +116,7 @@ def test_operator_places_edits_and_removes_boxes_and_bad_input_changes_nothing(g
 def test_the_panel_checks_boxes_at_the_base_with_the_robot_body(gated, tmp_path):
     from fakes import FakeClient
 
-    from console.panels.obstacles_boxes import BoxObstaclesPanel, box_scene_of
+    from console.panels.extensible.obstacles_boxes import BoxObstaclesPanel, box_scene_of
 
     app = gated
     panel = app.panel(BoxObstaclesPanel)
@@ -146,7 +146,7 @@ def test_viewers_change_nothing_and_scene_files_round_trip(gated):
     import viser
     from fakes import FakeClient, ScopedClient
 
-    from console.panels.obstacles_boxes import BoxObstaclesPanel, box_scene_of
+    from console.panels.extensible.obstacles_boxes import BoxObstaclesPanel, box_scene_of
 
     app = gated
     panel = app.panel(BoxObstaclesPanel)
@@ -187,9 +187,9 @@ def test_viewers_change_nothing_and_scene_files_round_trip(gated):
 def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated, monkeypatch):
     from fakes import FakeClient
 
-    from console.panels.obstacles_boxes import BoxObstaclesPanel
-    from console.panels.paths import PathsPanel
-    from console.panels.target import TargetPanel
+    from console.panels.extensible.obstacles_boxes import BoxObstaclesPanel
+    from console.panels.extensible.paths import PathsPanel
+    from console.panels.extensible.target import TargetPanel
 
     app = gated
     obstacles, target, paths = (app.panel(BoxObstaclesPanel), app.panel(TargetPanel),
@@ -242,7 +242,7 @@ def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated,
 def test_a_route_leg_starts_only_for_the_operator_and_a_refusal_moves_nothing(gated):
     from fakes import FakeClient
 
-    from console.panels.target import TargetPanel
+    from console.panels.extensible.target import TargetPanel
 
     app = gated
     target = app.panel(TargetPanel)
@@ -267,7 +267,7 @@ def test_boxes_are_recorded_and_read_back_with_the_mcap_reader(gated, tmp_path):
     from fakes import FakeClient
     from mcap.reader import make_reader
 
-    from console.panels.obstacles_boxes import BoxObstaclesPanel
+    from console.panels.extensible.obstacles_boxes import BoxObstaclesPanel
 
     app = gated
     panel = app.panel(BoxObstaclesPanel)

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from console.datadir import DataDir
-from console.lab_feed import feed_grasp
-from console.model import model_for
-from console.obstacle_view import hatch_segments, obstacle_geometry
-from console.plan_view import outcome_html
-from console.recording import Recorder, load_recording
-from console.state import StateStore
-from console.table_scene import TableObject, parse_scene, scene_from_json, scene_to_json
+from console.core.datadir import DataDir
+from console.recording.lab_feed import feed_grasp
+from console.core.model import model_for
+from console.scene.obstacle_view import hatch_segments, obstacle_geometry
+from console.scene.plan_view import outcome_html
+from console.recording.recorder import Recorder, load_recording
+from console.core.state import StateStore
+from console.core.table_scene import TableObject, parse_scene, scene_from_json, scene_to_json
 from core.planning.obstacles import Obstacle
 from core.robots import load
 from fakes import FakeClient
@@ -63,8 +63,8 @@ def test_obstacle_drawing_hatches_inside_the_disk_and_rings_at_the_clearance():
 
 
 def test_operator_places_an_obstacle_by_click_and_the_plan_keeps_the_clearance(gated):
-    from console.panels.objects import ObjectsPanel
-    from console.panels.planner import PlannerPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
     op, pp = app.panel(ObjectsPanel), app.panel(PlannerPanel)
@@ -98,8 +98,8 @@ def test_operator_places_an_obstacle_by_click_and_the_plan_keeps_the_clearance(g
 
 
 def test_bad_obstacle_input_is_refused_with_a_message_and_changes_nothing(gated):
-    from console.panels.objects import ObjectsPanel
-    from console.panels.planner import PlannerPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
     op, pp = app.panel(ObjectsPanel), app.panel(PlannerPanel)
@@ -123,8 +123,8 @@ def test_bad_obstacle_input_is_refused_with_a_message_and_changes_nothing(gated)
 
 
 def test_viewers_cannot_place_change_or_remove_obstacles(gated):
-    from console.panels.objects import ObjectsPanel
-    from console.panels.planner import PlannerPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
     op, pp = app.panel(ObjectsPanel), app.panel(PlannerPanel)
@@ -148,8 +148,8 @@ def test_viewers_cannot_place_change_or_remove_obstacles(gated):
 
 
 def test_the_session_records_obstacles_and_a_replay_shows_them(gated, tmp_path):
-    from console.panels.objects import ObjectsPanel
-    from console.replay import ReplaySession  # noqa: F401 (the replay draws what this reads)
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.playback.replay import ReplaySession  # noqa: F401 (the replay draws what this reads)
 
     app, s = gated, gated.grasp_session
     model = model_for(ROBOT)
@@ -189,8 +189,8 @@ def test_the_session_records_obstacles_and_a_replay_shows_them(gated, tmp_path):
 
 
 def test_execute_needs_the_plan_around_the_obstacles():
-    from console.panels.control_text import execute_target
-    from console.plan_view import Outcome, SessionView
+    from console.panels.soft_arm.control_text import execute_target
+    from console.scene.plan_view import Outcome, SessionView
     from core.planning.grasp import plan_grasp
 
     obj = TableObject("Object 1", CUP.x, CUP.y, CUP.r)
@@ -213,7 +213,7 @@ def test_execute_needs_the_plan_around_the_obstacles():
 def test_a_replay_draws_the_recorded_obstacles_and_skips_bad_entries():
     import viser
 
-    from console.obstacle_view import draw_recorded_obstacles
+    from console.scene.obstacle_view import draw_recorded_obstacles
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
@@ -238,7 +238,7 @@ def test_a_placed_obstacle_is_drawn_and_recorded_before_its_re_plan_ends(gated):
     shows and is recorded at once, not after that plan (it used to wait for it)."""
     import threading
 
-    from console.panels.objects import ObjectsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
 
     app, s = gated, gated.grasp_session
     logged = []

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from console.app import ConsoleApp
-from console.model import model_for
-from console.panels.capture import CapturePanel, summary_markdown
-from console.panels.readout import delta_readout_html, planar_readout_html
-from console.panels.trials import TrialsPanel, results_markdown
+from console.core.model import model_for
+from console.panels.soft_arm.capture import CapturePanel, summary_markdown
+from console.panels.common.readout import delta_readout_html, planar_readout_html
+from console.panels.soft_arm.trials import TrialsPanel, results_markdown
 from core.control.capture import characterise
 from core.control.trials import TrialResult, paper_locations
 from core.kinematics import planar as pk

@@ -3,7 +3,7 @@ different lengths.
 
 viser sends a node's new points and new colours as two messages; a browser that draws between
 them (the two may fall in different websocket windows) draws per-vertex colours of the wrong
-length, seen as white lines at random (console/carry_view.py first). Here every scene message
+length, seen as white lines at random (console/scene/carry_view.py first). Here every scene message
 the plan layer queues is recorded and replayed onto each node's state as a browser would apply
 it: after every single message, a node's colours are one uniform colour or as many as its
 points. Plans of several objects in a row (different numbers of approach circles and
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from viser import _messages
 
-from console.plan_view import (
+from console.scene.plan_view import (
     CIRCLE_SEL_COLOR,
     GHOST_SEL_COLOR,
     PALM_COLOR,
@@ -139,8 +139,8 @@ def test_carries_of_every_length_and_a_growing_node_keep_points_and_colours_toge
     made again, larger, with colours of its own: the same rule, message by message."""
     import dataclasses
 
-    from console.carry_view import CarryLayer, carry_geometry
-    from console.line_nodes import FixedLines
+    from console.scene.carry_view import CarryLayer, carry_geometry
+    from console.scene.line_nodes import FixedLines
 
     plan = plan_grasp(ROBOT, np.zeros(ROBOT.n_segments), *OBJECTS[0])
     carry_layer = CarryLayer(server, ROBOT)

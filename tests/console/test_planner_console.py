@@ -12,9 +12,9 @@ import time
 import numpy as np
 import pytest
 
-from console.plan_view import (circle_segments, ghost_segments, object_mesh, plan_geometry,
+from console.scene.plan_view import (circle_segments, ghost_segments, object_mesh, plan_geometry,
                                ray_to_table, reach_mesh)
-from console.table_scene import TableObject, scene_from_json, scene_to_json
+from console.core.table_scene import TableObject, scene_from_json, scene_to_json
 from core.kinematics import planar as pk
 from core.planning.sides import plan_grasp_sided
 from core.planning.reachability import PLANNABLE, from_json, reachability_map, to_json
@@ -101,7 +101,7 @@ def console():
     import viser
 
     from console.app import ConsoleApp
-    from console.panels import planner
+    from console.panels.soft_arm import planner
 
     with pytest.MonkeyPatch.context() as patch:  # (module scope: no monkeypatch fixture)
         patch.setattr(planner.GraspSession, "compute_reach", False)
@@ -117,8 +117,8 @@ def console():
 
 
 def test_session_plans_refuses_inspects_and_plays(console):
-    from console.panels.planner import PlannerPanel, outcome_html
-    from console.panels.waypoints import WaypointsPanel
+    from console.panels.soft_arm.planner import PlannerPanel, outcome_html
+    from console.panels.soft_arm.waypoints import WaypointsPanel
 
     s = console.grasp_session
     first = wait_for(lambda: s.view().outcome)            # the demo object, planned at start
@@ -186,9 +186,9 @@ def gated(monkeypatch):
     """A console with the grasp panels, an operator token and its own session."""
     import viser
 
-    from console.access import AccessControl
+    from console.core.access import AccessControl
     from console.app import ConsoleApp
-    from console.panels import planner
+    from console.panels.soft_arm import planner
 
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
@@ -204,9 +204,9 @@ def gated(monkeypatch):
 def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
     import viser
 
-    from console.panels.objects import ObjectsPanel
-    from console.panels.planner import PlannerPanel
-    from console.panels.waypoints import WaypointsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.panels.soft_arm.planner import PlannerPanel
+    from console.panels.soft_arm.waypoints import WaypointsPanel
 
     app, s = gated, gated.grasp_session
     op, pp, wp = app.panel(ObjectsPanel), app.panel(PlannerPanel), app.panel(WaypointsPanel)
@@ -273,9 +273,9 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
 def test_the_operator_changes_objects_plan_and_waypoints(gated):
     import viser
 
-    from console.panels.objects import ObjectsPanel
-    from console.panels.planner import PlannerPanel
-    from console.panels.waypoints import WaypointsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.panels.soft_arm.planner import PlannerPanel
+    from console.panels.soft_arm.waypoints import WaypointsPanel
 
     app, s = gated, gated.grasp_session
     op, pp, wp = app.panel(ObjectsPanel), app.panel(PlannerPanel), app.panel(WaypointsPanel)

@@ -11,8 +11,9 @@ import time
 import numpy as np
 import pytest
 
-from console import grasp_session, reach_job
-from console.reach_job import ReachCache, ReachOutcome, ReachRequest, start_reach_map
+from console.core import grasp_session
+from console.core import reach_job
+from console.core.reach_job import ReachCache, ReachOutcome, ReachRequest, start_reach_map
 from core import robots
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap, grid_axis
 
@@ -75,7 +76,7 @@ def test_corrupt_or_mismatched_file_is_ignored_with_a_log_line(tmp_path, robot_f
         data = json.loads(text)
         data["map"]["status"] = data["map"]["status"][:-1]
         path.write_text(json.dumps(data))
-    with caplog.at_level(logging.WARNING, logger="console.reach_job"):
+    with caplog.at_level(logging.WARNING, logger="console.core.reach_job"):
         assert cache.load(request) is None
     assert any("ignoring reachability cache" in r.message for r in caplog.records)
 
@@ -120,7 +121,7 @@ def test_planner_panel_shows_progress_then_time_then_from_cache(tmp_path, monkey
     import viser
 
     from console.app import ConsoleApp
-    from console.panels import planner
+    from console.panels.soft_arm import planner
 
     monkeypatch.setattr(reach_job, "_MEMORY", {})
     monkeypatch.setattr(planner.GraspSession, "reach_step", 0.08)

@@ -9,7 +9,7 @@ calls reachable and never the same place twice.
 import numpy as np
 import pytest
 
-from console.reach_shading import shading_meshes
+from console.scene.reach_shading import shading_meshes
 from core.planning.reachability import FAILS, PLANNABLE, UNREACHABLE, ReachMap
 
 
@@ -75,7 +75,7 @@ def test_shading_edge_follows_the_disc(draw):
     """The green edge stays within 8 mm of the disc's circle everywhere (covers it 8 mm inside,
     not 6 mm outside); the old one square per cell (``reach_mesh``, a staircase of 2 cm
     steps) does not."""
-    from console.plan_view import reach_mesh
+    from console.scene.plan_view import reach_mesh
 
     reach = disc_map()
     mesh = shading_meshes(reach, None)[PLANNABLE] if draw == "smooth" else reach_mesh(

@@ -21,10 +21,10 @@ import pytest
 import viser
 
 from console.app import ConsoleApp
-from console.recording import FORMAT, SUFFIX, ReadBudget, Recorder, load_recording
-from console.replay import ReplaySession
-from console.state import StateStore
-from console.model import model_for
+from console.recording.recorder import FORMAT, SUFFIX, ReadBudget, Recorder, load_recording
+from console.playback.replay import ReplaySession
+from console.core.state import StateStore
+from console.core.model import model_for
 from core.robots import load
 
 SOFT = load("soft-arm")

@@ -10,8 +10,8 @@ from typing import Any
 import pytest
 from test_recording_budget import GB, SOFT, header, max_rss_mb, write_gzip
 
-from console.model import model_for
-from console.recording import load_recording
+from console.core.model import model_for
+from console.recording.recorder import load_recording
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from console.panels.repeatability import RepeatabilityPanel, run_repeatability
-from console.panels.repeatability_view import Comparison, RepeatabilityResult, comparison_html
+from console.panels.extensible.repeatability import RepeatabilityPanel, run_repeatability
+from console.panels.extensible.repeatability_view import Comparison, RepeatabilityResult, comparison_html
 from core.robots import load
 from fakes import console_app
 

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from console.access import AccessControl
-from console.panels.repeatability import TIP_SAMPLES, RepeatabilityPanel, run_comparison
-from console.panels.repeatability_view import error_plot_svg
+from console.core.access import AccessControl
+from console.panels.extensible.repeatability import TIP_SAMPLES, RepeatabilityPanel, run_comparison
+from console.panels.extensible.repeatability_view import error_plot_svg
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
@@ -194,7 +194,7 @@ def test_run_comparison_refuses_an_unreachable_point_before_moving() -> None:
 
 
 def test_error_plot_scales_to_the_largest_error() -> None:
-    from console.panels.repeatability_view import Comparison, RepeatabilityResult
+    from console.panels.extensible.repeatability_view import Comparison, RepeatabilityResult
     tips = POINT + np.array([[0.0, 0.0, -0.012], [0.0, 0.0, -0.018]])
     c = Comparison(POINT, 2, 2, True, open=RepeatabilityResult(POINT, tips, 2))
     svg = error_plot_svg(c)
@@ -203,7 +203,7 @@ def test_error_plot_scales_to_the_largest_error() -> None:
 
 
 def test_a_request_older_than_the_newest_stop_moves_nothing(server) -> None:
-    from console.panels.repeatability import RunRequest
+    from console.panels.extensible.repeatability import RunRequest
     fake = SlippingRunner()
     panel = panel_with(server, fake)
     req = RunRequest(POINT, 2, panel._stops)  # clicked ...

@@ -8,7 +8,7 @@ from typing import Any
 
 from test_repeatability_compare import POINT, SlippingRunner, panel_with
 
-from console.panels.repeatability import RunRequest
+from console.panels.extensible.repeatability import RunRequest
 
 
 def test_a_new_run_does_not_show_the_last_runs_reason_while_it_moves(server: Any) -> None:

@@ -15,8 +15,8 @@ import viser
 
 from fakes import ScopedClient, console_app
 from console.app import ConsoleApp
-from console.recording import Recorder
-from console.replay import ReplaySession
+from console.recording.recorder import Recorder
+from console.playback.replay import ReplaySession
 from core.robots import load
 from test_lab_export import decode_embedded
 

@@ -15,16 +15,16 @@ import numpy as np
 import pytest
 import viser
 
-from console.access import AccessControl
-from console.lab_feed import feed_grasp
-from console.panels import planner
-from console.panels.control import ControlPanel
-from console.panels.control_row import NO_BIN, NO_OBJECTS
-from console.panels.objects import ObjectsPanel
-from console.plan_view import SessionView
-from console.table_bin import (BIN_HEIGHT, TableBin, bin_point_from_scene_json, locate_bin,
+from console.core.access import AccessControl
+from console.recording.lab_feed import feed_grasp
+from console.panels.soft_arm import planner
+from console.panels.soft_arm.control import ControlPanel
+from console.panels.soft_arm.control_row import NO_BIN, NO_OBJECTS
+from console.panels.soft_arm.objects import ObjectsPanel
+from console.scene.plan_view import SessionView
+from console.core.table_bin import (BIN_HEIGHT, TableBin, bin_point_from_scene_json, locate_bin,
                                open_box_mesh, scene_json_with_bin)
-from console.table_scene import TableObject, scene_from_json, scene_to_json
+from console.core.table_scene import TableObject, scene_from_json, scene_to_json
 from core.control.row import ObjectOutcome, RowObject, bin_at
 from core.control.row_stack import RowReport
 from core.robots import load
@@ -144,7 +144,7 @@ def test_a_click_places_the_bin_the_arm_can_hold_an_object_over(rig):
     box = app.grasp_session.bin_view
     wait_for(lambda: box.shown == table_bin)
     assert box.label.visible and tuple(box.box.position[:2]) == pytest.approx(BIN_XY)
-    from console.panels.view import legend_html
+    from console.panels.common.view import legend_html
     assert "Bin: where" in legend_html("planar") and "Clear table into bin" in legend_html("planar")
     wait_for(lambda: 'data-bin="150,250"' in objects_panel.info.content)
     # Out of reach: refused with the reason, the bin stays where it was.

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from console.app import ConsoleApp
-from console.gripper_mesh import GripperShape, gripper_vertices
-from console.panels.capture import CapturePanel
-from console.panels.trials import TrialsPanel, sides_html
-from console.plan_view import plan_geometry
-from console.reach_job import SHIPPED_CACHE, ReachCache, ReachRequest
+from console.scene.gripper_mesh import GripperShape, gripper_vertices
+from console.panels.soft_arm.capture import CapturePanel
+from console.panels.soft_arm.trials import TrialsPanel, sides_html
+from console.scene.plan_view import plan_geometry
+from console.core.reach_job import SHIPPED_CACHE, ReachCache, ReachRequest
 from core.control.trials import TrialResult, paper_locations
 from core.planning.reachability import PLANNABLE
 from core.planning.sides import plan_grasp_sided

@@ -13,7 +13,7 @@ import pytest
 from fakes import FakeClient
 from test_planner_console import gated, user, wait_for  # noqa: F401 (fixture)
 
-from console.panels.typed_fields import TypedFields
+from console.panels.common.typed_fields import TypedFields
 
 
 class Field:
@@ -40,7 +40,7 @@ def test_show_skips_a_typed_field_until_read_and_typed_too_restores_it():
 
 
 def test_objects_panel_keeps_a_typed_y_past_the_echo_of_x(gated):
-    from console.panels.objects import ObjectsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
 
     app, s = gated, gated.grasp_session
     op_panel, op = app.panel(ObjectsPanel), FakeClient(81)
@@ -58,7 +58,7 @@ def test_objects_panel_keeps_a_typed_y_past_the_echo_of_x(gated):
 
 
 def test_obstacle_editor_keeps_a_typed_y_past_the_echo_of_x(gated):
-    from console.panels.objects import ObjectsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
 
     app, s = gated, gated.grasp_session
     editor, op = app.panel(ObjectsPanel).obstacles, FakeClient(82)
@@ -81,7 +81,7 @@ def test_a_field_typed_with_nothing_selected_still_shows_the_next_selection(gate
     """A value typed while nothing is selected is taken (the obstacle editor's r: the next
     obstacle's radius; the rest: nothing to change), so the next selection's echo shows that
     one's values, not the typed ones."""
-    from console.panels.objects import ObjectsPanel
+    from console.panels.soft_arm.objects import ObjectsPanel
 
     app, s = gated, gated.grasp_session
     objects, op = app.panel(ObjectsPanel), FakeClient(83)

@@ -9,10 +9,10 @@ import time
 import numpy as np
 import pytest
 
-from console import camera
-from console.measure import Measurement, NotOnTable, table_hit
-from console.panels.path_scene import trail_tail
-from console.plan_view import (GHOST_COLOR, TABLE_TINT, TRAIL_WAYPOINTS, plan_geometry,
+from console.scene import camera
+from console.scene.measure import Measurement, NotOnTable, table_hit
+from console.panels.extensible.path_scene import trail_tail
+from console.scene.plan_view import (GHOST_COLOR, TABLE_TINT, TRAIL_WAYPOINTS, plan_geometry,
                                plan_labels, trail_colors, trail_mask)
 from core.planning.grasp import plan_grasp
 from core.robots import load
@@ -106,7 +106,7 @@ def test_presets_look_at_the_table_and_keep_the_arm_left_of_the_panel(robot, asp
                 x, y = ndc(pose, c, aspect)
                 assert -1 <= x <= 1 - 2 * (1 - free) + 1e-9 and -1 <= y <= 1, (pose.name, c)
     else:
-        from console.model import DeltaModel
+        from console.core.model import DeltaModel
         from core.kinematics import delta as dk
         start = tuple(dk.tip_position(robot, DeltaModel(robot).initial()))  # the start pose's tip
         rest = (0.0, 0.0, robot.n_segments * robot.rack_min)       # the retracted arm's top
@@ -200,8 +200,8 @@ def click(server, client, ray_origin, ray_direction) -> None:
 
 @pytest.fixture
 def planar_console(server, monkeypatch):
-    from console.panels import planner
-    from console.panels.view import ViewPanel
+    from console.panels.soft_arm import planner
+    from console.panels.common.view import ViewPanel
     from tests.fakes import console_app
 
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
@@ -214,7 +214,7 @@ def planar_console(server, monkeypatch):
 
 
 def test_measuring_clicks_measure_and_place_nothing_other_browsers_still_place(planar_console):
-    from console.panels.view import ViewPanel
+    from console.panels.common.view import ViewPanel
 
     app = planar_console
     view, session = app.panel(ViewPanel), app.grasp_session
@@ -255,7 +255,7 @@ def test_measuring_clicks_measure_and_place_nothing_other_browsers_still_place(p
 def test_clear_trails_is_the_operators_and_clears_the_plan_trail(planar_console):
     import viser
 
-    from console.panels.view import ViewPanel
+    from console.panels.common.view import ViewPanel
 
     app = planar_console
     view, session = app.panel(ViewPanel), app.grasp_session
@@ -279,7 +279,7 @@ def test_clear_trails_is_the_operators_and_clears_the_plan_trail(planar_console)
 
 
 def test_view_panel_for_the_extensible_arm_has_its_presets_and_legend(server):
-    from console.panels.view import ViewPanel, legend_html
+    from console.panels.common.view import ViewPanel, legend_html
     from tests.fakes import console_app
 
     app = console_app(EXT, server, panels=(ViewPanel,))

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import viser
 
-from console.panels import control_plots as cp
-from console.panels import hardware as hwp
-from console.hardware_setup import HardwareAttachment
-from console.panels.control import ControlPanel
-from console.panels.plot_data import PlotPacer, axis_top
+from console.panels.soft_arm import control_plots as cp
+from console.panels.common import hardware as hwp
+from console.core.hardware_setup import HardwareAttachment
+from console.panels.soft_arm.control import ControlPanel
+from console.panels.common.plot_data import PlotPacer, axis_top
 from console.viser_fixes import install
 from core.robots import load
 from hw_bridge.interface import LinkHealth
@@ -279,10 +279,10 @@ def test_a_slow_steady_move_is_drawn_every_frame_and_noise_still_is_not(server, 
     arm's 0.5 mm band for several frames, so it was drawn at ~10 frames/s. Moving steadily, the
     band is 0.1 mm: every frame of a 6 mm/s move (0.2 mm per frame at 30 Hz) is drawn once the
     steadiness has been measured over ``moving_steps`` frames; noise is never steady."""
-    import console.arm_view as arm_view
-    from console.arm_view import make_arm_view
-    from console.dead_band import DeadBand
-    from console.model import model_for
+    import console.scene.arm_view as arm_view
+    from console.scene.arm_view import make_arm_view
+    from console.scene.dead_band import DeadBand
+    from console.core.model import model_for
 
     clock = FakeClock()
     monkeypatch.setattr(arm_view.time, "monotonic", clock)

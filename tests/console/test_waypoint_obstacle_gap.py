@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from console.panels.waypoints import waypoint_html
-from console.plan_view import Outcome, SessionView
-from console.table_scene import TableObject
+from console.panels.soft_arm.waypoints import waypoint_html
+from console.scene.plan_view import Outcome, SessionView
+from console.core.table_scene import TableObject
 from core.kinematics import planar
 from core.planning.obstacles import Obstacle
 from core.planning.sides import plan_grasp_sided

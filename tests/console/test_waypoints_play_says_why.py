@@ -12,7 +12,7 @@ from ws_client import wait_for
 
 
 def test_play_without_a_plan_to_play_tells_the_operator(gated) -> None:
-    from console.panels.waypoints import WaypointsPanel
+    from console.panels.soft_arm.waypoints import WaypointsPanel
 
     app, s = gated, gated.grasp_session
     wp = app.panel(WaypointsPanel)

@@ -283,7 +283,7 @@ def test_console_jogs_every_segment_of_the_file(name):
     import viser
 
     from console.app import ConsoleApp
-    from console.panels.jog import JogPanel
+    from console.panels.common.jog import JogPanel
     arm = load(name)
     n = arm.n_segments
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from console.hold_to_run import HoldToRun
-from console.model import DeltaModel
-from console.state import StateStore
+from console.core.hold_to_run import HoldToRun
+from console.core.model import DeltaModel
+from console.core.state import StateStore
 from core.robots import load
 
 EXT = load("extensible")

@@ -17,10 +17,10 @@ import pytest
 from mcap.reader import make_reader
 from scipy.spatial.transform import Rotation
 
-from console.datadir import DataDir
-from console.model import model_for
-from console.recording import SUFFIX, Recorder, load_recording
-from console.state import StateStore
+from console.core.datadir import DataDir
+from console.core.model import model_for
+from console.recording.recorder import SUFFIX, Recorder, load_recording
+from console.core.state import StateStore
 from core.labdata import __main__ as labdata_cli
 from core.labdata.channels import ArmGeometry, quaternion
 from core.labdata.mcap_file import McapLog
@@ -304,8 +304,8 @@ def test_an_mcap_past_the_replay_budget_is_refused_before_its_messages_are_read(
     reader here) decide before any message is decompressed; a file within the budget loads."""
     from mcap.reader import make_reader
 
-    from console.recording import ReadBudget
-    from console.recording_mcap import load_mcap
+    from console.recording.recorder import ReadBudget
+    from console.recording.mcap_format import load_mcap
 
     path, _, _ = record_session(tmp_path)
     with open(path, "rb") as f:

@@ -79,9 +79,9 @@ def test_trials_csv_and_recording_agree_with_the_json(tmp_path, capsys) -> None:
     assert np.hypot(objects[-1]["x"] - final[0], objects[-1]["y"] - final[1]) < 0.01
     assert np.hypot(*(final - np.array([-0.22, 0.20]))) > 0.05  # it really moved to the bin
 
-    from console.model import model_for  # the console replays it, with its markers
-    from console.recording import load_recording
-    from console.replay_markers import markers_of
+    from console.core.model import model_for  # the console replays it, with its markers
+    from console.recording.recorder import load_recording
+    from console.playback.replay_markers import markers_of
     rec = load_recording(out_mcap, model_for(SOFT))
     assert len(rec.times) == len(configs) and rec.duration == pytest.approx(span, abs=0.2)
     cats = [m.category for m in markers_of(rec)]

@@ -89,7 +89,7 @@ def test_unreachable_target_moves_nothing(slipping, runner_on) -> None:
 
 
 def test_repeatability_run_open_vs_closed_loop_on_the_tip_sensor(slipping, runner_on) -> None:
-    from console.panels.repeatability import run_repeatability
+    from console.panels.extensible.repeatability import run_repeatability
     port, rx = slipping
     runner = runner_on(serial_to(port))
     tip = TipSensor(rx)

@@ -11,8 +11,8 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-from console.model import model_for
-from console.state import StateStore
+from console.core.model import model_for
+from console.core.state import StateStore
 from core.kinematics import delta as dk
 from core.robots import load
 from hw_bridge.extensible_process import ExtensibleProcess

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from console.panels.repeatability import run_repeatability
+from console.panels.extensible.repeatability import run_repeatability
 from core.kinematics import delta as dk
 
 pytest.register_assert_rewrite("extensible_rig")  # before its import: it holds fixtures

@@ -11,7 +11,7 @@ first, then a finer cell only where the coarser cells around it disagree (elsewh
 their common status), so mainly the boundaries between outcomes are planned at full
 resolution. Pure and single-threaded; ``python -m core.planning.reachability``
 (:mod:`core.planning.reachability.__main__`) prints a map as JSON (the console runs that in a low-priority child process, once per robot file, and caches
-it on disk: :mod:`console.reach_job`).
+it on disk: :mod:`console.core.reach_job`).
 """
 
 from __future__ import annotations

@@ -1,0 +1,170 @@
+"""Attach the console to hardware: the device emulator (default), an in-process mock, or a port.
+
+``serve.py --hardware emulator`` (the default) starts ``python -m hw_bridge.emulator`` on a
+pseudo-terminal so every demo runs through the real serial stack; ``--hardware mock`` keeps the
+device in-process (no serial); ``--port-path PATH`` talks to a real controller. The soft arm's
+100 Hz loop runs in :class:`hw_bridge.soft_arm_process.ControlProcess` (its own process,
+which starts the emulator itself); the extensible arm's loop is
+:class:`hw_bridge.extensible_process.ExtensibleProcess` (its own process too) on a
+:class:`hw_bridge.interface.SerialHardware` to the emulator's pty or the controller (or, with
+``--hardware mock``, on an in-process MockHardware in that process, started by the first
+Execute).
+
+:func:`attach` returns the :class:`console.core.services.ConsoleServices` the app is built with: the
+loop, and its :class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm /
+health, all enqueue-only) for the Hardware panel (``console.panels.common.hardware``), or None when
+there is no serial link to manage (the extensible arm's in-process mock).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+from console.core.services import ConsoleServices
+
+if TYPE_CHECKING:
+    from console.core.state import StateStore
+    from hw_bridge.cpu_partition import CpuPartition
+
+HardwareMode = Literal["emulator", "mock"]
+LinkKind = Literal["emulator", "mock", "port"]
+
+
+@dataclasses.dataclass
+class HardwareAttachment:
+    """What :func:`attach` started, so :meth:`close` can stop it in order.
+
+    Attributes:
+        description: One line for the status bar and the terminal.
+        kind: ``"emulator"`` (device emulator on a pty), ``"mock"`` (in-process device, no
+            serial) or ``"port"`` (a real controller).
+        port_path: The serial device the console uses, when known here: ``--port-path``, or the
+            extensible arm's emulator pty. None for the soft arm's emulator (its control process
+            starts it; the Hardware panel takes the path from the link health) and for the mock.
+        baud: The link's baud rate (``[bridge] baud`` of the robot file).
+    """
+
+    description: str
+    kind: LinkKind = "mock"
+    port_path: str | None = None
+    baud: int = 1_000_000
+    closers: list[Any] = dataclasses.field(default_factory=list)
+
+    def close(self) -> None:
+        """Stop loops first, then links and the emulator process."""
+        for close in self.closers:
+            try:
+                close()
+            except Exception:  # noqa: BLE001 - shutting down: keep closing the rest
+                pass
+        self.closers.clear()
+
+
+def describe(robot: Any, mode: HardwareMode, port_path: str | None) -> str:
+    """One line for the console's status and the terminal: where the arm's commands go."""
+    if port_path:
+        return f"Hardware: controller on {port_path} (serial)"
+    if mode == "emulator":
+        return "Hardware: device emulator on a pseudo-terminal (real serial stack, simulated arm)"
+    return "Hardware: in-process mock device (no serial)"
+
+
+def mirrors_commands(robot: Any, mode: HardwareMode, port_path: str | None) -> bool:
+    """Whether the arm view should show commands at once (True) or what the device measures."""
+    return not (robot.kind == "delta" and (mode == "emulator" or port_path))
+
+
+def link_kind(mode: HardwareMode, port_path: str | None) -> LinkKind:
+    """What the link is: a real port (``--port-path`` wins), the emulator, or the mock."""
+    return "port" if port_path else mode
+
+
+def report_device_log(data_root: Path) -> list[str]:
+    """Point the emulator's event log at ``<data-dir>/device-events.jsonl`` and say what it
+    logged after the previous console's last start: a host that died and whether the device
+    watchdog tripped (printed to the terminal; ``serve.py`` adds the last to the status line).
+    Returns those lines."""
+    import os
+    import sys
+
+    from hw_bridge.device_events import (EVENT_LOG_ENV, EVENT_LOG_NAME, describe_loss,
+                                         unreported_host_losses)
+    log = Path(data_root) / EVENT_LOG_NAME
+    os.environ[EVENT_LOG_ENV] = str(log)  # inherited by the control process and the emulator
+    lines = [describe_loss(ev) for ev in unreported_host_losses(log)]
+    for line in lines:
+        print(f"serve.py: device log {log}: {line}", file=sys.stderr, flush=True)
+    return lines
+
+
+def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | None,
+           cpus: CpuPartition | None | Literal["auto"] = "auto",
+           slip: float | None = None) -> ConsoleServices:
+    """Start ``robot``'s control loop on its hardware, before the app and its panels exist.
+
+    Returns the services with ``hardware`` (what to close), ``soft_control`` (soft arm) or
+    ``extensible_runner`` (extensible arm; ``store`` is the console's command/report channel),
+    ``bridge_controls`` (None for the extensible arm's in-process mock) and ``cpu_partition``.
+    ``slip`` (extensible arm on the emulator only): the emulator's racks slip on their pinions
+    by that fraction (``--slip``) and stream the tip, read by ``tip_sensor``.
+
+    Raises:
+        ValueError: ``slip`` for another arm or hardware than the extensible arm's emulator.
+    """
+    if slip is not None and (robot.kind != "delta" or port_path or mode != "emulator"):
+        raise ValueError("--slip needs the extensible arm on the device emulator")
+    from hw_bridge.config import BridgeConfig
+
+    out = HardwareAttachment(describe(robot, mode, port_path), kind=link_kind(mode, port_path),
+                             port_path=port_path or None,
+                             baud=BridgeConfig.from_robot(robot).baud)
+    if robot.kind == "planar":
+        from hw_bridge import soft_arm_process
+
+        device = "emulator" if port_path or mode == "emulator" else "mock"
+        ctl = soft_arm_process.ControlProcess(robot, device=device, port_path=port_path, cpus=cpus)
+        out.closers.append(ctl.close)
+        return ConsoleServices(hardware=out, soft_control=ctl, bridge_controls=ctl.bridge_controls,
+                               cpu_partition=None if cpus == "auto" else cpus)
+    from hw_bridge import extensible_process
+    from hw_bridge.cpu_partition import CpuPartition, format_cpus
+
+    part = CpuPartition.default() if cpus == "auto" else cpus
+    if mode == "mock" and not port_path:
+        # A MockHardware in the runner's process: no serial link for the Hardware panel to
+        # manage; the runner connects on the first Execute (as it always did).
+        runner = extensible_process.ExtensibleProcess(robot, store, "mock", cpus=part)
+        out.closers.insert(0, runner.close)
+        return ConsoleServices(hardware=out, extensible_runner=runner, cpu_partition=part)
+    path = port_path
+    tip_sensor = None  # serve.py --slip: the emulator's tip stream
+    if path is None:
+        from hw_bridge import soft_arm_link
+
+        on_cpus = () if part is None else ("--cpus", format_cpus(part.realtime))
+        slip_args: tuple[str, ...] = ()
+        if slip is not None:
+            from hw_bridge.extensible_closed_loop import TipSensor
+            from hw_bridge.mocap import UdpMocapReceiver
+            receiver = UdpMocapReceiver(0)
+            receiver.start()
+            out.closers.append(receiver.stop)
+            tip_sensor = TipSensor(receiver)
+            slip_args = ("--slip", str(slip), "--tip-port", str(receiver.addr[1]))
+        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus,
+                                                  *slip_args])
+        out.closers.append(emulator.stop)
+        path = emulator.path
+        out.port_path = path
+    # The emulator's arm powers up retracted (every rack at rack_min: no room to bend); it moves
+    # to the console's start pose (console.core.model.DeltaModel.initial) on connect. A real
+    # controller is never moved by connecting: the console's command becomes where it is.
+    runner = extensible_process.ExtensibleProcess(robot, store, "port", path,
+                                                  follow=port_path is None, cpus=part)
+    out.closers.insert(0, runner.close)
+    runner.start()
+    return ConsoleServices(hardware=out, extensible_runner=runner,
+                           bridge_controls=runner.bridge_controls, cpu_partition=part,
+                           tip_sensor=tip_sensor)

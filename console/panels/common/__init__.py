@@ -1,0 +1,1 @@
+"""Panels both arms build: jog, readout, hardware, session, view."""

@@ -1,0 +1,1 @@
+"""The extensible arm's panels: tip target, paths, obstacles, repeatability."""

@@ -1,0 +1,388 @@
+"""Tip-target panel: drag a gizmo (or type x, y, z) and the extensible arm's tip follows by IK.
+
+A transform control in the 3D view holds the tip target. While the operator drags it, a worker
+thread (``console.panels.extensible.target_worker``) has the tip IK
+(``core.kinematics.delta_ik.solve_tip_ik``) solved, warm-started from the posture being moved to,
+without restarts, at most ``LIVE_HZ`` times a second on the newest target only; on release (and
+for typed targets) it solves once more with restarts. The solve itself runs in a ``spawn``-ed
+worker process (started on the first solve), never in the console's process: there a CPU-bound
+solve holds the GIL the extensible runner's 100 Hz loop needs (measured: an IK thread next to the
+runner tripped the serial link's write timeout within seconds). The solution
+is a set-point for ``app.hold`` (``console.core.hold_to_run``: speed-capped, stops on STOP or a lost
+lease), like the jog sliders; on arrival the panel re-commands it as ``"target"`` so the Δ jog
+sliders show it. With the hardware runner started, the motors follow the command; when the
+link is not armed (its health, as the Hardware panel shows it) the status says the motors will
+not follow. An unreachable target moves the arm to the closest feasible configuration; the
+panel names that tip, how far it is from the target, and a red line in the view joins them.
+A typed or released target is answered at once ("Solving the IK for (x, y, z) mm…"), then by
+the result or by why nothing moves (IK error, no answer within ``IK_TIMEOUT_S``, a running
+path, control lost, motors not armed): never silence. Only the operator may move the target
+(``operator_only``).
+
+Box obstacles (the Obstacles panel, ``console.panels.extensible.obstacles_boxes``): with boxes placed, the
+worker process solves the IK with them (the arm's body surface keeps the clearance from every
+box) and a route there whose straight rack-space legs -- what the hold-to-run set-point and the
+runner follow -- stay clear too (``core.planning.box_routes.reach_clear``: direct, or through
+straightened / retracted postures, moved through leg by leg). When the boxes leave no
+collision-free posture or route, nothing moves and the status says why: which box, how close
+("blocked").
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import html
+import threading
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import viser
+
+from console.panels.common.base import Panel, operator_only
+from console.panels.extensible.status import link_summary, worker_pool
+from console.panels.extensible.obstacles_boxes import box_scene_of
+from console.panels.extensible.target_worker import TargetIKWorker
+from console.panels.common.typed_fields import TypedFields
+from console.core.state import ArmState
+from core.kinematics import delta as dk
+from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
+from core.planning.box_routes import ClearReach, reach_clear
+from core.planning.box_scene import BoxScene
+from core.robot_sections import IKSettings
+from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
+
+Array = npt.NDArray[np.float64]
+TARGET_COLOR = (235, 130, 30)
+MISS_COLOR = (210, 40, 40)
+IK_TIMEOUT_S = 20.0  # s: a solve takes < 1 s unloaded; past this the worker is restarted
+_AXES = ("x", "y", "z")
+BLOCKED = "Blocked by the boxes: "  # an error message that starts so is shown as "blocked"
+
+
+class TargetPanel(Panel):
+    """Gizmo and typed tip target, solved by the tip IK within the rack and bending limits."""
+
+    title = "Tip target"
+    order = 5.0
+    kinds = ("delta",)
+    _route_len = 1  # postures of the last route moved along (1: straight there)
+
+    def build(self) -> None:
+        self.settings = IKSettings.from_robot(self.app.robot)  # type: ignore[arg-type]
+        tip = self._tip(self.app.store.command.q)
+        scene = self.app.server.scene
+        self.gizmo = scene.add_transform_controls(
+            "/target", scale=0.12, disable_rotations=True, depth_test=False, line_width=3.0,
+            position=tuple(tip))
+        self.ball = scene.add_icosphere("/target/ball", radius=0.012, color=TARGET_COLOR,
+                                        cast_shadow=False)
+        self.miss = scene.add_line_segments("/target_miss", np.zeros((1, 2, 3)), MISS_COLOR,
+                                            thickness=3.0, thickness_units="screen",
+                                            visible=False)
+        self.follow = self.gui.add_checkbox(
+            "Follow while dragging", True,
+            hint="Solve the IK live while the gizmo moves (else only on release).")
+        self.inputs = [self.gui.add_number(f"Target {a} (mm)", mm_value(v), step=0.1,
+                                           hint=f"Tip target {a} in mm; the arm moves on change.")
+                       for a, v in zip(_AXES, tip)]
+        self.to_tip = self.gui.add_button("Target ← current tip",
+                                          hint="Put the target back on the arm's tip.")
+        self.status = self.gui.add_html(self._status_html(None, None))
+        self._hardware_note = ""  # why the motors will not follow, from the link's health
+        self._target = tip.copy()
+        self._typed = TypedFields(self.inputs)  # the echo of an answer skips a field just typed
+        self._dragging = False
+        self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
+        self._legs: tuple[int, list[Array]] = (0, [])  # (client id, route postures still to go)
+        # (n, target, result, error, info): replaced whole by the worker, shown by on_state.
+        self._latest: tuple[int, Array, TipIKResult | None, str | None, str | None] = (
+            0, tip, None, None, None)
+        self._shown = 0
+        self._synced_seq = self.app.store.command.seq
+        self._pool: cf.ProcessPoolExecutor | None = None
+        self._pool_lock = threading.Lock()
+        self.worker = TargetIKWorker(self)
+        self.gizmo.on_update(self._on_gizmo)
+        for handle in self.inputs:
+            handle.on_update(self._on_typed)
+        self.to_tip.on_click(lambda _: self._reset_to_tip())
+        self.app.add_stop_hook(self._on_stop)
+        self.app.server.on_client_connect(lambda _: self._warm_up())
+
+    def _warm_up(self) -> None:
+        """Start the IK worker process when a browser opens (not on the first target: a
+        spawned Python with numpy takes seconds to start on a loaded machine)."""
+        q = np.asarray(self.app.store.command.q, dtype=float)
+        try:  # a solve where the tip already is: cheap, and imports all a solve needs
+            self._ik_pool().submit(solve_tip_ik, self.app.robot, self._tip(q), q,
+                                   restarts=False, settings=self.settings)
+        except RuntimeError:  # shut down (console closing)
+            pass
+
+    # -- callbacks (thin) ------------------------------------------------------------------
+    @operator_only(action="move the tip target")
+    def _on_gizmo(self, event: viser.TransformControlsEvent) -> None:
+        if event.client is None:
+            return
+        target = np.asarray(event.target.position, dtype=float)
+        self._target = target
+        self._dragging = event.phase != "end"
+        if event.phase == "end":
+            self._say_solving(target)
+        if event.phase == "end" or self.follow.value:
+            self.worker.submit(target, event.phase == "end", event.client.client_id)
+
+    @operator_only(action="move the tip target")
+    def _on_typed(self, event: viser.GuiEvent) -> None:
+        if event.client is None:  # our own mirror of the target into the inputs
+            return
+        target = np.array(self._typed.read()) / 1e3  # every field as typed now
+        if not np.all(np.isfinite(target)):
+            self.report_error("target must be three finite numbers (mm)")
+            return
+        self._target = target
+        self.gizmo.position = tuple(target)
+        self._say_solving(target)
+        self.worker.submit(target, True, event.client.client_id)
+
+    def _say_solving(self, target: Array) -> None:
+        """Answer a typed / released target at once: the solve may take a moment."""
+        self._publish(target, None, None, f"Solving the IK for {mm_xyz(target)} mm…")
+        self._show()
+
+    def on_refused(self, event: Any) -> None:
+        """A viewer moved the gizmo or an input: put them back where the target is."""
+        self.gizmo.position = tuple(self._target)
+        self._typed.show([mm_value(v) for v in self._target], typed_too=True)
+
+    def _reset_to_tip(self) -> None:
+        tip = self._tip(self.app.store.command.q)
+        self._target = tip
+        self.gizmo.position = tuple(tip)
+        self._publish(tip, None, None)
+        self._show()  # nothing else changes, so no frame would show it
+
+    def _on_stop(self, reason: str) -> None:
+        """STOP / lost lease: drop pending solves (app.hold stops the motion itself), and say
+        so when that leaves a target unanswered or not reached."""
+        pending = self._latest[4] is not None or self._moving_to is not None
+        self.worker.cancel()
+        self._moving_to = None
+        self._legs = (0, [])
+        if pending:
+            self.report_error(f"Not moved to the target: motion stopped ({reason}).")
+
+    # -- worker ----------------------------------------------------------------------------
+    def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
+        """Worker thread: IK to ``target``, then move there (unless a job runs or STOP came)."""
+        runner = self.app.services.extensible_runner
+        if runner is not None and runner.snapshot.busy:
+            self.report_error("A path is running: stop it before moving the target.")
+            return
+        moving = self.app.hold.target()
+        q0 = np.asarray(self.app.store.command.q if moving is None else moving)
+        scene, _ = box_scene_of(self.app)
+        if scene.boxes:
+            reach = self._solve_clear(target, q0, final, scene)
+            if generation != self.worker.generation:
+                return
+            if reach.refusal or reach.route is None:
+                self._publish(target, reach.result, BLOCKED + (reach.refusal or "no route"))
+                self._show()
+                return
+            result, legs = reach.result, list(reach.route.postures)
+        else:
+            result = self._solve(target, q0, final)
+            legs = [result.delta]
+            if generation != self.worker.generation:
+                return
+        self._route_len = len(legs)
+        self._publish(target, result, None)
+        if self._start_leg(client_id, legs, "Not moved: you no longer hold control."):
+            self._show()
+
+    def _start_leg(self, client_id: int, legs: list[Array], refused: str) -> bool:
+        """Move to the first of ``legs`` (the rest follow on arrival, :meth:`check_arrival`);
+        False after reporting ``refused`` when ``client_id`` no longer holds control."""
+        # Set before the move starts: a frame of the move ("jog") must not read as someone
+        # else's command, which would put the target back on the tip and clear this status.
+        self._legs = (client_id, legs[1:])
+        self._moving_to = legs[0]
+        if self.app.hold.move_to(client_id, legs[0]):
+            return True
+        self._moving_to = None
+        self._legs = (0, [])
+        self.report_error(refused)
+        return False
+
+    def _ik_pool(self) -> cf.ProcessPoolExecutor:
+        with self._pool_lock:
+            if self._pool is None:
+                self._pool = worker_pool()
+            return self._pool
+
+    def _solve(self, target: Array, q0: Array, final: bool) -> TipIKResult:
+        """Worker thread: the IK in the worker process (this thread waits without the GIL)."""
+        return self._in_pool(solve_tip_ik, self.app.robot, target, q0, restarts=final,
+                             settings=self.settings)
+
+    def _solve_clear(self, target: Array, q0: Array, final: bool,
+                     scene: BoxScene) -> ClearReach:
+        """Worker thread: the IK with the boxes and a clear route there, in the worker process."""
+        return self._in_pool(reach_clear, self.app.robot, target, q0, restarts=final,
+                             settings=self.settings, boxes=scene.boxes,
+                             clearance=scene.clearance)
+
+    def _in_pool(self, fn: Any, *args: Any, **kwargs: Any) -> Any:
+        pool = self._ik_pool()
+        try:
+            return pool.submit(fn, *args, **kwargs).result(timeout=IK_TIMEOUT_S)
+        except cf.process.BrokenProcessPool:
+            self._drop_pool(pool)
+            raise RuntimeError("the IK worker process stopped; try again") from None
+        except cf.TimeoutError:
+            self._drop_pool(pool)
+            raise RuntimeError(f"the IK gave no answer within {IK_TIMEOUT_S:.0f} s (machine "
+                               "busy?); not moved; try again") from None
+
+    def _drop_pool(self, pool: cf.ProcessPoolExecutor) -> None:
+        """A broken or stuck worker: a new one next time (the old one is told to stop)."""
+        with self._pool_lock:
+            if self._pool is pool:
+                self._pool = None
+        pool.shutdown(wait=False, cancel_futures=True)
+
+    def close(self) -> None:
+        with self._pool_lock:
+            pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+        super().close()
+
+    def check_arrival(self) -> None:
+        """Worker thread: once ``app.hold`` reached the set-point, command it as ``"target"``
+        (the jog sliders do not mirror ``"jog"`` moves, this makes them show the posture)."""
+        goal = self._moving_to
+        if goal is None or self.app.hold.target() is not None:
+            return
+        command = self.app.store.command
+        arrived = command.source == "jog" and np.allclose(command.q, goal, atol=1e-9)
+        client_id, rest = self._legs
+        if arrived and rest and not self._measured_at(goal):
+            return  # the motors lag the command: the next leg starts from the corner
+        if arrived and rest:  # a route past the boxes: on to its next posture
+            self._start_leg(client_id, rest, "Stopped on the way: you no longer hold control.")
+            return
+        self._legs = (0, [])
+        if arrived:
+            self.app.store.edit(lambda q: q, "target")
+        self._moving_to = None  # after the edit: on_state must not take the arrival for a jog
+
+    def _measured_at(self, goal: Array) -> bool:
+        """Whether the arm as shown (with hardware: measured) is at ``goal``, within 0.5 mm of
+        rack travel, so a route's next leg does not cut the corner behind a lagging arm."""
+        if self.app.store.mirror_commands:
+            return True
+        robot: Any = self.app.robot
+        shown = dk.robot_rack_lengths(robot, np.asarray(self.app.store.display.q))
+        return bool(np.abs(shown - dk.robot_rack_lengths(robot, goal)).max() <= 5e-4)
+
+    def report_error(self, message: str) -> None:
+        """Show ``message`` now (no state change follows that would trigger a frame)."""
+        self._publish(self._target, None, message)
+        self._show()
+
+    def _publish(self, target: Array, result: TipIKResult | None, message: str | None,
+                 info: str | None = None) -> None:
+        """Replace what the panel shows: an error ``message``, or ``info`` (a step under way),
+        or the IK ``result`` (None: idle)."""
+        self._latest = (self._latest[0] + 1, np.asarray(target, dtype=float), result,
+                        message, info)
+
+    # -- display (render thread) -----------------------------------------------------------
+    def on_state(self, state: ArmState) -> None:
+        command = self.app.store.command
+        if command.seq != self._synced_seq:
+            self._synced_seq = command.seq
+            mine = command.source == "target" or (command.source == "jog"
+                                                  and self._moving_to is not None)
+            if not mine and not self._dragging and self._latest[4] is None:
+                # Moved by jog / path / runner / STOP: the target rides on the tip (not while
+                # a typed target is being solved: its answer comes next).
+                self._target = self._tip(command.q)
+                self.gizmo.position = tuple(self._target)
+                self._publish(self._target, None, None)
+        self._show()
+
+    def _show(self) -> None:
+        n, target, result, error, info = self._latest
+        note = self._motors_note()
+        if n == self._shown and note == self._hardware_note:
+            return
+        self._shown, self._hardware_note = n, note
+        self._typed.show([mm_value(v) for v in target])
+        self.status.content = self._status_html(result, error, info, target, note)
+        if result is not None and not result.reachable and error is None:
+            self.miss.points = np.stack([result.tip, target])[None]
+            self.miss.visible = True
+        else:
+            self.miss.visible = False
+
+    def _motors_note(self) -> str:
+        """Why the motors will not follow the command, from the link supervisor's health (what
+        the Hardware panel shows); "" when they follow or there is no link to manage."""
+        if self.app.store.mirror_commands:  # the view shows the command (mock: no serial link)
+            return ""
+        controls = self.app.services.bridge_controls
+        health = None if controls is None else controls.health()
+        if health is not None and health.armed and not health.fault:
+            return ""
+        return (f"The motors do not follow ({link_summary(self.app)}): connect and arm them "
+                "in the Hardware tab.")
+
+    def _status_html(self, result: TipIKResult | None, error: str | None,
+                     info: str | None = None, target: Array | None = None,
+                     note: str = "") -> str:
+        if error is not None and error.startswith(BLOCKED):
+            body = (f"<b style='color:#c92a2a'>⚠ {html.escape(BLOCKED.strip())}</b> "
+                    f"{html.escape(error[len(BLOCKED):])}. Not moved.")
+            state = "blocked"
+        elif error is not None:
+            body, state = f"⚠ {html.escape(error)}", "error"
+        elif info is not None:
+            body, state = html.escape(info), "solving"
+        elif result is None:
+            body, state = "Drag the gizmo (orange ball) or type x, y, z (mm).", "idle"
+        elif result.reachable:
+            body = (f"Target {mm_xyz(result.tip)} mm reachable (IK error "
+                    f"{fmt_mm(result.error, 2)} mm): the tip goes there.")
+            if result.nearest_box:
+                body += (f" The arm keeps {fmt_mm(result.clearance, 1)} mm from box "
+                         f"'{html.escape(result.nearest_box)}'"
+                         + (f", moving via {self._route_len - 1} posture"
+                            f"{'s' if self._route_len > 2 else ''} around the boxes."
+                            if self._route_len > 1 else "."))
+            state = "reachable"
+        else:
+            r: Any = self.app.robot
+            aim = "the target" if target is None else f"{mm_xyz(target)} mm"
+            body = (f"<b style='color:#c92a2a'>⚠ Unreachable:</b> {html.escape(aim)} is beyond "
+                    f"the arm's reach (racks {fmt_mm(r.rack_min, 0)}–{fmt_mm(r.rack_max, 0)} mm, "
+                    f"bend ≤ {fmt_deg(r.theta_max, 0)}° per segment). Moved to the closest reachable "
+                    f"tip, {mm_xyz(result.tip)} mm, <b>{fmt_mm(result.error, 1)} mm</b> from the "
+                    "target (red line to the target).")
+            state = "unreachable"
+        if note:
+            body += f"<br><b style='color:#e67700'>⚠ {html.escape(note)}</b>"
+        distance = "" if result is None else f"{fmt_mm(result.error, 3)}"
+        clear = "" if result is None or not result.nearest_box else fmt_mm(result.clearance, 2)
+        aimed = "" if target is None else ",".join(fmt_mm(v, 1) for v in target)  # never "-0"
+        return (f'<div data-testid="target-status" data-state="{state}" '
+                f'data-target-mm="{aimed}" '
+                f'data-motors="{"still" if note else "follow"}" '
+                f'data-error-mm="{distance}" data-clearance-mm="{clear}" '
+                f'data-route="{self._route_len}" style="font-size:0.85em">{body}</div>')
+
+    def _tip(self, q: npt.ArrayLike) -> Array:
+        return dk.tip_position(self.app.robot, np.asarray(q))  # type: ignore[arg-type]

@@ -1,0 +1,71 @@
+"""The tip target's solving thread: only the newest target is solved, live ones throttled.
+
+The Tip target panel (:class:`console.panels.extensible.target.TargetPanel`) hands every target to a
+:class:`TargetIKWorker`; its one daemon thread solves the newest (a final solve is never
+downgraded by a later live one), at most ``LIVE_HZ`` live solves a second, and between requests
+checks every ``ARRIVAL_POLL_S`` whether the arm arrived (``TargetPanel.check_arrival``).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from console.panels.extensible.target import TargetPanel
+
+Array = npt.NDArray[np.float64]
+LIVE_HZ = 30.0
+ARRIVAL_POLL_S = 0.05
+
+
+class TargetIKWorker:
+    """Latest-value mailbox + one daemon thread: solves only the newest target."""
+
+    def __init__(self, panel: TargetPanel) -> None:
+        self.panel = panel
+        self._cond = threading.Condition()
+        self._request: tuple[Array, bool, int] | None = None
+        self.generation = 0  # bumped by cancel(): results of older requests are dropped
+        threading.Thread(target=self._run, name="target-ik", daemon=True).start()
+
+    def submit(self, target: Array, final: bool, client_id: int) -> None:
+        with self._cond:
+            # A pending final solve is not downgraded by a live one.
+            final = final or (self._request is not None and self._request[1])
+            self._request = (np.array(target, dtype=float), final, client_id)
+            self._cond.notify()
+
+    def cancel(self) -> None:
+        with self._cond:
+            self._request = None
+            self.generation += 1
+
+    def _run(self) -> None:
+        last = 0.0
+        while True:
+            with self._cond:
+                self._cond.wait_for(lambda: self._request is not None, ARRIVAL_POLL_S)
+                request, self._request = self._request, None
+                generation = self.generation
+            self.panel.check_arrival()
+            if request is None:
+                continue
+            target, final, client_id = request
+            if not final:  # throttle live solves; a newer target replaces this one meanwhile
+                wait = last + 1.0 / LIVE_HZ - time.perf_counter()
+                if wait > 0:
+                    time.sleep(wait)
+                    with self._cond:
+                        if self._request is not None:
+                            continue
+            last = time.perf_counter()
+            try:
+                self.panel.solve(target, final, client_id, generation)
+            except Exception as exc:  # noqa: BLE001 - report, keep the worker alive
+                self.panel.report_error(str(exc))
+

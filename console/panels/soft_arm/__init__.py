@@ -1,0 +1,1 @@
+"""The soft arm's panels: objects, grasp planner, waypoints, control, experiments."""

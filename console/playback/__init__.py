@@ -1,0 +1,1 @@
+"""Reading runs back: replay in the console and self-contained HTML exports."""

@@ -1,0 +1,179 @@
+"""A plan or a recorded run as one self-contained HTML file for students (no server, no net).
+
+Both exports use viser's scene serializer (``ViserServer.get_scene_serializer().as_html()``):
+the viewer's client bundle with the scene embedded as base64, opened straight from disk.
+
+* :func:`scene_html` -- the live scene as it is now: table, arm and whatever panels drew into
+  ``server.scene`` (objects, a planned path). Per-client nodes (replay ghosts) are not included.
+* :func:`recording_html` -- a recorded run, animated: a private viser server on 127.0.0.1 (an
+  ephemeral port, stopped again) draws the same scene and steps the arm through the recording's
+  states with ``insert_sleep`` between frames, so the file plays back with viser's timeline.
+  Its markers (phase changes, faults, STOP, operator actions: ``console.playback.replay_markers``) are a
+  label in the scene that changes at each marker's time and a list in the page. The table as the
+  operator set it up -- objects, obstacles with their clearance rings and the bin, from the
+  recording's ``objects`` records (:func:`draw_recorded_table`) -- is drawn as it was at each
+  time, so the file shows what the operator saw.
+
+:func:`external_urls` lists the http(s) URLs in a file, to check it needs nothing online.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import viser
+
+from console.recording.recorder import Recording
+from console.playback.replay_markers import current_marker, markers_html, markers_of
+
+if TYPE_CHECKING:
+    from core.robots import Robot
+
+# Namespace identifiers inside SVG/XML are names, not resources a browser fetches.
+_NAMESPACES = ("http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink",
+               "http://www.w3.org/1999/xhtml", "http://www.w3.org/XML/1998/namespace")
+_URL = re.compile(r"https?://[A-Za-z0-9.\-]+(?::\d+)?[^\s\"'<>)]*")
+
+
+def external_urls(html: str) -> list[str]:
+    """http(s) URLs in ``html`` other than XML namespace names (empty for a standalone file)."""
+    return sorted({u for u in _URL.findall(html) if not u.startswith(_NAMESPACES)})
+
+
+def scene_html(server: viser.ViserServer, dark_mode: bool = False) -> str:
+    """The live scene of ``server`` as a standalone HTML document."""
+    return server.get_scene_serializer().as_html(dark_mode=dark_mode)
+
+
+def draw_overlay(scene: viser.SceneApi, data: dict[str, Any], root: str = "/overlays") -> Any:
+    """Draw an ``overlay`` record (``name``, ``points`` (k, 3), ``color``) as a polyline."""
+    pts = np.asarray(data.get("points", ()), dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < 2 or not np.all(np.isfinite(pts)):
+        return None
+    name = re.sub(r"[^A-Za-z0-9_-]+", "_", str(data.get("name", "overlay")))[:40]
+    color = tuple(int(c) for c in data.get("color", (200, 40, 160)))[:3]
+    segments = np.stack([pts[:-1], pts[1:]], axis=1)
+    return scene.add_line_segments(f"{root}/{name}", segments, color, thickness=0.004)
+
+
+def draw_recorded_table(scene: viser.SceneApi, data: dict[str, Any] | None,
+                        root: str = "/recorded") -> list[Any]:
+    """Draw a recorded ``objects`` record's table under ``root``: the objects (cylinders in the
+    Objects panel's colours), the obstacles (``console.scene.obstacle_view``'s look, clearance rings
+    included) and the bin (an open box with its label). Bad entries are skipped. Returns the
+    nodes (the caller removes them when the record changes)."""
+    from console.scene.obstacle_view import draw_recorded_obstacles, recorded_disk
+    from console.scene.plan_view import OBJECT_COLOR, OBJECT_SEL_COLOR, object_mesh
+    from console.core.table_bin import BIN_COLOR, BIN_HEIGHT, open_box_mesh
+
+    if not data:
+        return []
+    nodes = draw_recorded_obstacles(scene, data, f"{root}/obstacles")
+    for i, o in enumerate(data.get("objects") or []):
+        disk = recorded_disk(o)
+        if disk is None:
+            continue
+        x, y, r = disk
+        v, f = object_mesh(r)
+        color = OBJECT_SEL_COLOR if o.get("name") == data.get("selected") else OBJECT_COLOR
+        nodes.append(scene.add_mesh_simple(f"{root}/objects/body_{i}", v, f, color=color,
+                                           position=(x, y, 0.0), cast_shadow=False))
+    disk = recorded_disk(data.get("bin"))
+    if disk is not None:
+        x, y, r = disk
+        v, f = open_box_mesh(r)
+        nodes.append(scene.add_mesh_simple(f"{root}/bin/box", v, f, color=BIN_COLOR,
+                                           side="double", position=(x, y, 0.0),
+                                           cast_shadow=False))
+        nodes.append(scene.add_label(f"{root}/bin/label", "Bin",
+                                     position=(x, y, BIN_HEIGHT + 0.01), anchor="bottom-center"))
+    return nodes
+
+
+def recorded_table_until(rec: Recording, t: float) -> dict[str, Any] | None:
+    """The newest ``objects`` record (objects, obstacles, clearance, bin) at or before ``t``."""
+    found = None
+    for e in rec.events:
+        if e.t > t:
+            break
+        if e.kind == "objects" and isinstance(e.data, dict):
+            found = e.data
+    return found
+
+
+def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
+                   max_frames: int = 900, dark_mode: bool = False) -> str:
+    """A recorded run as a standalone, animated HTML document.
+
+    Args:
+        robot: The robot the recording is of (its kind and shape match, see load_recording).
+        rec: The loaded recording.
+        fps: Frames per second of the animation (fewer when the run is long).
+        max_frames: Upper bound on animation frames (bounds the file size).
+    """
+    from console.app import ConsoleApp  # the same scene set-up as the live console
+    from console.scene.arm_view import make_arm_view
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        app = ConsoleApp(robot, server, panels=(), status=f"Recording {rec.name}",
+                         initial=rec.qs[0])
+        # A file plays back without a server: keep it to plain meshes (no bone messages).
+        app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
+        serializer = server.get_scene_serializer()
+        duration = rec.duration
+        rate = fps if duration <= 0 else min(fps, max_frames / duration)
+        grid = np.arange(0.0, duration + 1e-9, 1.0 / rate) if duration > 0 else np.zeros(1)
+        markers = markers_of(rec)
+        grid = np.union1d(grid, [m.t for m in markers if 0.0 <= m.t <= duration])
+        grid = np.union1d(grid, [e.t for e in rec.events  # the table changes at its records
+                                 if e.kind == "objects" and 0.0 <= e.t <= duration])
+        label = server.scene.add_label("/markers/label", "", position=(0.0, -0.06, 0.12),
+                                       visible=False)
+        shown = -1
+        last_q: np.ndarray | None = None
+        drawn: dict[str, int] = {}
+        table: dict[str, Any] | None = None
+        table_nodes: list[Any] = []
+        pending = 0.0
+        prev_t = 0.0
+        for t in grid:
+            pending += float(t) - prev_t
+            prev_t = float(t)
+            q = rec.q_at(float(t))
+            overlays = rec.overlays_until(float(t))
+            changed_overlays = {k: v for k, v in overlays.items() if drawn.get(k) != id(v)}
+            found = current_marker(markers, float(t))
+            new_marker = found is not None and found[0] != shown
+            recorded = recorded_table_until(rec, float(t))
+            new_table = recorded is not table
+            if last_q is not None and np.array_equal(q, last_q) and not changed_overlays \
+                    and not new_marker and not new_table:
+                continue
+            if pending > 0:
+                serializer.insert_sleep(pending)
+                pending = 0.0
+            with server.atomic():
+                if new_table:
+                    for node in table_nodes:
+                        node.remove()
+                    table, table_nodes = recorded, draw_recorded_table(server.scene, recorded)
+                app.view.update(q)
+                for name, data in changed_overlays.items():
+                    draw_overlay(server.scene, data)
+                    drawn[name] = id(data)
+                if new_marker and found is not None:
+                    shown = found[0]
+                    label.text = found[1].label
+                    label.visible = True
+            last_q = q
+        if pending > 0:
+            serializer.insert_sleep(pending)
+        page = serializer.as_html(dark_mode=dark_mode)
+        if markers and "</body>" in page:
+            page = page.replace("</body>", markers_html(markers) + "</body>", 1)
+        return page
+    finally:
+        server.stop()

@@ -1,0 +1,303 @@
+"""Per-browser replay of a recording: a ghost arm and a timeline only that browser sees.
+
+Each connected client gets a :class:`ReplaySession` with its own (client-scoped) widgets --
+recording picker, Load, Play/Pause, timeline slider (seek), speed -- and, once a recording is
+loaded, its own translucent ghost arm under ``/replay`` in ``client.scene``. Replaying never
+commands the arm and never changes what other browsers see, so a viewer may replay freely.
+One :class:`ReplayPlayer` thread advances every playing session.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import TYPE_CHECKING
+
+import viser
+from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load)
+
+from console.scene.arm_view import ArmView, make_arm_view
+from console.core.datadir import BadFileName
+from console.playback.export import draw_overlay, recording_html
+from console.scene.obstacle_view import draw_recorded_obstacles
+from console.recording.recorder import SUFFIXES, Recording, load_recording
+from console.playback.replay_markers import (COLORS, Marker, current_marker, markers_of, next_marker,
+                                    previous_marker)
+
+if TYPE_CHECKING:
+    from console.app import ConsoleApp
+
+log = logging.getLogger(__name__)
+GHOST_COLOR = (150, 150, 160)
+GHOST_OPACITY = 0.55
+SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
+NONE = "(no recordings yet)"
+
+
+class ReplaySession:
+    """One client's replay widgets, ghost arm and play position."""
+
+    def __init__(self, app: ConsoleApp, client: viser.ClientHandle, order: float) -> None:
+        self.app = app
+        self.client = client
+        self.rec: Recording | None = None
+        self.ghost: ArmView | None = None
+        self.pos = 0.0
+        self.playing = False
+        self.speed = 1.0
+        self.markers: list[Marker] = []
+        self._obstacles_shown: dict | None = None
+        self._obstacle_nodes: list = []
+        self._lock = threading.Lock()
+        gui = client.gui
+        self.folder = gui.add_folder("Replay", order=order, expand_by_default=False)
+        with self.folder:
+            self.files = gui.add_dropdown("Recording", self._file_options())
+            self.load_btn = gui.add_button("Load recording")
+            self.play_btn = gui.add_button("Play replay", disabled=True)
+            self.timeline = gui.add_slider("Time (s)", min=0.0, max=1.0, step=0.05,
+                                           initial_value=0.0, disabled=True)
+            self.prev_btn = gui.add_button("◀ Previous marker", disabled=True,
+                                           hint="Phase change, fault, STOP or operator action")
+            self.next_btn = gui.add_button("Next marker ▶", disabled=True,
+                                           hint="Phase change, fault, STOP or operator action")
+            self.speed_dd = gui.add_dropdown("Speed", SPEEDS, initial_value="1x")
+            self.info = gui.add_html('<small data-testid="replay-info">nothing loaded</small>')
+            self.export_btn = gui.add_button("Export run (HTML)", disabled=True,
+                                             hint="One file that plays this run offline.")
+        self._loading = False
+        self.load_btn.on_click(lambda e: self.load_in_background(self.files.value))
+        self.play_btn.on_click(lambda e: self.toggle())
+        self.timeline.on_update(self._on_seek)
+        self.speed_dd.on_update(self._on_speed)
+        self.prev_btn.on_click(lambda e: self.jump(-1))
+        self.next_btn.on_click(lambda e: self.jump(+1))
+        self.export_btn.on_click(lambda e: self.export())
+
+    def _file_options(self) -> tuple[str, ...]:
+        names = [n for suffix in SUFFIXES for n in self.app.data.list("recordings", suffix)]
+        return tuple(names) if names else (NONE,)
+
+    def refresh_files(self) -> None:
+        self.files.options = self._file_options()
+
+    def _tell(self, title: str, body: str, color: str = "blue") -> None:
+        self.client.add_notification(title, body, color=color, auto_close_seconds=8.0)
+
+    def load_in_background(self, name: str) -> threading.Thread | None:
+        """:meth:`load` in a thread of its own, so a big file never holds up the callbacks
+        (one load per browser at a time; None when one is already running)."""
+        with self._lock:
+            if self._loading:
+                self._tell("Still loading", "The previous recording is still being read.")
+                return None
+            self._loading = True
+        self.info.content = f'<small data-testid="replay-info">loading {_escape(name)}…</small>'
+
+        def run() -> None:
+            try:
+                self.load(name)
+            finally:
+                self._loading = False
+        t = threading.Thread(target=run, name="replay-load", daemon=True)
+        t.start()
+        return t
+
+    def load(self, name: str) -> bool:
+        """Load recording ``name`` (a file in the data folder's recordings); False on refusal."""
+        if name == NONE:
+            self._tell("Nothing to load", "No recordings yet: the operator records with "
+                       "'Start recording'.")
+            return False
+        try:
+            suffix = next((s for s in SUFFIXES if isinstance(name, str) and name.endswith(s)),
+                          SUFFIXES[0])
+            path = self.app.data.path("recordings", name, suffix)
+            if not path.is_file():
+                raise BadFileName(f"no recording named {name!r}")
+            rec = load_recording(path, self.app.model)
+        except ValueError as exc:  # BadFileName is a ValueError too
+            self._tell("Cannot load recording", str(exc), "red")
+            return False
+        except Exception as exc:  # noqa: BLE001 - whatever went wrong, the browser hears it
+            log.exception("loading recording %s failed", name)
+            self._tell("Cannot load recording", f"{name}: {type(exc).__name__}: {exc}", "red")
+            return False
+        with self._lock:
+            self.rec, self.pos, self.playing = rec, 0.0, False
+            if self.ghost is None:
+                self.ghost = make_arm_view(self.client.scene, self.app.model, root="/replay",
+                                           method="vertices", dead_band=None)  # one browser:
+                # a seek draws exactly the recorded configuration
+                for handle in vars(self.ghost).values():
+                    if hasattr(handle, "opacity") and hasattr(handle, "color"):
+                        handle.color = GHOST_COLOR
+                        handle.opacity = GHOST_OPACITY
+            self.timeline.max = max(rec.duration, 0.05)
+            self.markers = markers_of(rec)
+            self.timeline._marks = tuple(  # viser 1.1.1: the slider's marks prop
+                GuiSliderMark(value=round(m.t, 3), label=None) for m in self.markers[:200])
+            self.prev_btn.disabled = self.next_btn.disabled = not self.markers
+            self.timeline.disabled = False
+            self.play_btn.disabled = False
+            self.export_btn.disabled = False
+            self.play_btn.label = "Play replay"
+        self.draw()
+        return True
+
+    def toggle(self) -> None:
+        with self._lock:
+            if self.rec is None:
+                return
+            if not self.playing and self.pos >= self.rec.duration:
+                self.pos = 0.0
+            self.playing = not self.playing
+            self.play_btn.label = "Pause replay" if self.playing else "Play replay"
+
+    def seek(self, t: float) -> None:
+        with self._lock:
+            if self.rec is None:
+                return
+            self.pos = min(max(float(t), 0.0), self.rec.duration)
+        self.draw(move_slider=False)
+
+    def jump(self, direction: int) -> Marker | None:
+        """Seek to the next (``direction`` > 0) or previous marker; returns it (or None)."""
+        with self._lock:
+            if self.rec is None:
+                return None
+            pick = next_marker if direction > 0 else previous_marker
+            marker = pick(self.markers, self.pos)
+            if marker is None:
+                return None
+            self.pos, self.playing = min(marker.t, self.rec.duration), False
+            self.play_btn.label = "Play replay"
+        self.draw()
+        return marker
+
+    def _on_seek(self, event: viser.GuiEvent) -> None:
+        if event.client is not None:
+            self.seek(self.timeline.value)
+
+    def _on_speed(self, event: viser.GuiEvent) -> None:
+        value = str(self.speed_dd.value)
+        self.speed = float(value.rstrip("x")) if value in SPEEDS else 1.0
+
+    def advance(self, dt: float) -> None:
+        with self._lock:
+            if self.rec is None or not self.playing:
+                return
+            self.pos += dt * self.speed
+            if self.pos >= self.rec.duration:
+                self.pos = self.rec.duration
+                self.playing = False
+                self.play_btn.label = "Play replay"
+        self.draw()
+
+    def draw(self, move_slider: bool = True) -> None:
+        with self._lock:
+            rec, ghost, pos = self.rec, self.ghost, self.pos
+            if rec is None or ghost is None:
+                return
+            with self.client.atomic():
+                ghost.update(rec.q_at(pos))
+                for data in rec.overlays_until(pos).values():
+                    draw_overlay(self.client.scene, data, root="/replay/overlays")
+                obstacles = rec.obstacles_until(pos)
+                if obstacles is not self._obstacles_shown:     # the recorded obstacles
+                    for node in self._obstacle_nodes:
+                        node.remove()
+                    self._obstacles_shown = obstacles
+                    self._obstacle_nodes = draw_recorded_obstacles(
+                        self.client.scene, obstacles, "/replay/obstacles")
+                if move_slider:
+                    self.timeline.value = round(pos, 3)
+                lines = [f"{e.t:7.1f} s · {e.who}: {e.text}" for e in rec.events_until(pos)]
+                found = current_marker(self.markers, pos)
+                marker = "" if found is None else (
+                    f'<br><small data-testid="replay-marker" data-index="{found[0]}" '
+                    f'style="color:{COLORS[found[1].category]}">marker {found[0] + 1}/'
+                    f"{len(self.markers)}: {_escape(found[1].label)}</small>")
+                self.info.content = (
+                    f'<small data-testid="replay-info" data-t="{pos:.3f}">{rec.name} · '
+                    f"{pos:.1f} / {rec.duration:.1f} s · "
+                    f"{'playing' if self.playing else 'paused'} {self.speed:g}x</small>"
+                    + marker
+                    + "".join(f"<br><small>{_escape(line)}</small>" for line in lines))
+
+    def export(self) -> None:
+        rec = self.rec
+        if rec is None:
+            return
+        self._tell("Exporting", f"Building {rec.name} as HTML…")
+        try:
+            html = recording_html(self.app.robot, rec)
+        except Exception as exc:  # report, never crash the callback pool
+            log.exception("export of %s failed", rec.name)
+            self._tell("Export failed", str(exc), "red")
+            return
+        stem = next((rec.name.removesuffix(s) for s in SUFFIXES if rec.name.endswith(s)),
+                    rec.name)
+        name = self.app.data.new_name("exports", stem, ".html")
+        path = self.app.data.path("exports", name, ".html")
+        path.write_text(html, encoding="utf-8")
+        self.app.recorder.action(f"exported run {rec.name} as {name}", self.client)
+        self.client.send_file_download(name, html.encode("utf-8"))
+
+    def close(self) -> None:
+        with self._lock:
+            self.playing = False
+            self.rec = None
+
+
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+class ReplayPlayer:
+    """Advances every playing :class:`ReplaySession` at ``rate_hz`` from one thread."""
+
+    def __init__(self, rate_hz: float = 20.0) -> None:
+        self.period = 1.0 / rate_hz
+        self.sessions: dict[int, ReplaySession] = {}
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def add(self, client_id: int, session: ReplaySession) -> None:
+        with self._lock:
+            self.sessions[client_id] = session
+            if self._thread is None or not self._thread.is_alive():
+                self._stop.clear()
+                self._thread = threading.Thread(target=self._run, name="console-replay",
+                                                daemon=True)
+                self._thread.start()
+
+    def remove(self, client_id: int) -> None:
+        with self._lock:
+            session = self.sessions.pop(client_id, None)
+        if session is not None:
+            session.close()
+
+    def all(self) -> list[ReplaySession]:
+        with self._lock:
+            return list(self.sessions.values())
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _run(self) -> None:
+        last = time.perf_counter()
+        while not self._stop.wait(self.period):
+            now = time.perf_counter()
+            dt, last = now - last, now
+            for session in self.all():
+                if session.playing:
+                    try:
+                        session.advance(dt)
+                    except Exception:  # a client that just left
+                        log.debug("replay advance failed", exc_info=True)
+
+    def __len__(self) -> int:
+        return len(self.sessions)

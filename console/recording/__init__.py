@@ -1,0 +1,1 @@
+"""Lab data out of the console: recordings (MCAP), the live Foxglove feed."""

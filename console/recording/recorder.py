@@ -1,0 +1,225 @@
+"""Session recording and replay, so a lab session can be kept, reviewed and shared.
+
+Recordings live in ``<data-dir>/recordings/``. New ones are MCAP files (``.mcap``: typed
+channels that Foxglove and Lichtblick open, see ``core.labdata`` and ``console.recording.mcap_format``);
+:func:`load_recording` reads those and the older gzip'd JSON-lines files (``.jsonl.gz``), which
+``python -m core.labdata convert`` turns into MCAP. Both hold the same records. In a JSON-lines
+file the first line is a header (robot, configuration shape, who started it, wall-clock start);
+every other line has ``t`` (s since the start), ``kind`` and, for things people did, ``who`` and
+``client``:
+
+* ``state`` -- the displayed configuration once per render tick: ``q``, ``seq``, ``source``
+  (and ``command``, the newest commanded configuration, when the caller passes it).
+* ``action`` -- an operator action or a refusal (``what``), e.g. "took control", "STOP".
+* anything else panels log with ``app.recorder.log(kind, payload, client)`` -- ``plan``,
+  ``objects``, ``telemetry``, ... -- stored as ``data`` (numpy arrays become lists). Records of
+  kind ``overlay`` with ``data = {"name": str, "points": [[x, y, z], ...], "color": [r, g, b]}``
+  are also drawn as polylines when the run is replayed or exported.
+
+:class:`Recorder` is cheap to call from any thread (``log`` only enqueues; a writer thread
+encodes and writes); :func:`load_recording` (:mod:`console.recording.reader`, re-exported here)
+reads a file back into a :class:`Recording` with a timeline for the replay panel and the HTML
+export. It streams within a :class:`ReadBudget` (uncompressed bytes, records, one line's length,
+event bytes) and checks every record as it goes, so a huge or corrupt file is refused quickly
+with the line that is wrong.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gzip
+import json
+import logging
+import queue
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from console.core.datadir import DataDir
+from console.core.model import ArmModel
+from console.recording.reader import (FORMAT, MAX_DECOMPRESSED, MCAP_SUFFIX, SUFFIX, SUFFIXES,
+                                      Event, ReadBudget, Recording, load_recording)
+from console.core.state import ArmState
+
+__all__ = ["FORMAT", "MAX_DECOMPRESSED", "MCAP_SUFFIX", "SUFFIX", "SUFFIXES", "Event",
+           "ReadBudget", "Recorder", "Recording", "load_recording"]
+
+log = logging.getLogger(__name__)
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return dataclasses.asdict(obj)
+    if isinstance(obj, (Path, set, tuple)):
+        return list(obj) if not isinstance(obj, Path) else str(obj)
+    return repr(obj)
+
+
+class Recorder:
+    """Writes one recording at a time (see the module docstring); thread-safe.
+
+    Args:
+        data: The console's data folder (or a function returning it, called on start).
+        model: The arm model (header: robot name, kind, configuration shape).
+        name_of: ``name_of(client)`` -> display name of a viser client (or None).
+        max_queue: Lines buffered for the writer before new ones are dropped (and counted).
+        suffix: ``.mcap`` (default) or ``.jsonl.gz`` (the older format).
+    """
+
+    def __init__(self, data: DataDir | Callable[[], DataDir], model: ArmModel,
+                 name_of: Callable[[Any], str] = lambda c: "server" if c is None else str(c),
+                 max_queue: int = 20000, suffix: str = MCAP_SUFFIX) -> None:
+        if suffix not in SUFFIXES:
+            raise ValueError(f"suffix must be one of {SUFFIXES}, got {suffix!r}")
+        self.suffix = suffix
+        self.taps: list[Callable[[dict[str, Any], int], None]] = []
+        self._start_hooks: list[Callable[[], None]] = []
+        self.data = data
+        self.model = model
+        self.name_of = name_of
+        self.dropped = 0
+        self.lines = 0
+        self._max_queue = max_queue
+        self._lock = threading.Lock()
+        self._queue: queue.Queue[dict[str, Any] | None] | None = None
+        self._thread: threading.Thread | None = None
+        self._t0 = 0.0
+        self._start_ns = 0
+        self.path: Path | None = None
+
+    @property
+    def recording(self) -> bool:
+        return self._queue is not None
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self._t0 if self.recording else 0.0
+
+    def start(self, stem: str = "", client: Any = None) -> Path:
+        """Start a new recording named from ``stem`` (cleaned) and the time; returns its path.
+
+        Raises:
+            RuntimeError: a recording is already running.
+        """
+        with self._lock:
+            if self._queue is not None:
+                name = self.path.name if self.path is not None else "?"
+                raise RuntimeError(f"already recording to {name}")
+            data = self.data if isinstance(self.data, DataDir) else self.data()
+            name = data.new_name("recordings", stem, self.suffix)
+            path = data.path("recordings", name, self.suffix)
+            q: queue.Queue[dict[str, Any] | None] = queue.Queue(self._max_queue)
+            robot = self.model.robot
+            header = {"kind": "header", "format": FORMAT, "robot": robot.name,
+                      "robot_kind": self.model.kind, "shape": list(self.model.shape),
+                      "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                      "by": self.name_of(client), "t": 0.0}
+            self._t0 = time.perf_counter()
+            self._start_ns = time.time_ns()  # log time of t = 0 (the console's clock)
+            if self.suffix == SUFFIX:
+                q.put(header)
+            self.path, self._queue, self.dropped, self.lines = path, q, 0, 0
+            self._thread = threading.Thread(target=self._write, args=(path, q, header),
+                                            name="console-recorder", daemon=True)
+            self._thread.start()
+        for hook in list(self._start_hooks):
+            try:
+                hook()
+            except Exception:  # a panel's hook must never stop a recording from starting
+                log.exception("recording start hook failed")
+        return path
+
+    def add_start_hook(self, fn: Callable[[], None]) -> None:
+        """Call ``fn()`` right after every :meth:`start` (e.g. to log the current obstacle
+        scene, which is otherwise logged only when it changes)."""
+        self._start_hooks.append(fn)
+
+    def stop(self) -> Path | None:
+        """Finish the recording (flushes and closes the file); returns its path."""
+        with self._lock:
+            q, thread, path = self._queue, self._thread, self.path
+            self._queue = self._thread = None
+        if q is None:
+            return None
+        q.put(None)
+        if thread is not None:
+            thread.join(10.0)
+        return path
+
+    def log(self, kind: str, payload: Any = None, client: Any = None) -> None:
+        """Append a record of ``kind`` (no-op when not recording); ``payload`` JSON-able."""
+        if kind in ("header", "state"):
+            raise ValueError(f"kind {kind!r} is reserved")
+        cid = None if client is None else getattr(client, "client_id", client)
+        self._put({"kind": kind, "who": self.name_of(client), "client": cid, "data": payload})
+
+    def action(self, what: str, client: Any = None, **extra: Any) -> None:
+        """Record something a person did (or was refused): ``what`` in words."""
+        cid = None if client is None else getattr(client, "client_id", client)
+        self._put({"kind": "action", "who": self.name_of(client), "client": cid, "what": what,
+                   **extra})
+
+    def on_state(self, state: ArmState, command: ArmState | None = None) -> None:
+        """Record a drawn state (the render thread calls this every frame) and, if given, the
+        newest commanded state (with hardware the drawn one is the measurement)."""
+        if self._queue is not None or self.taps:
+            record: dict[str, Any] = {"kind": "state", "q": np.asarray(state.q).tolist(),
+                                      "seq": state.seq, "source": state.source}
+            if command is not None:
+                record["command"] = np.asarray(command.q).tolist()
+            self._put(record)
+
+    def add_tap(self, fn: Callable[[dict[str, Any], int], None]) -> None:
+        """Also hand every record, recording or not, to ``fn(record, ns)`` (ns: the console's
+        clock, ns since the epoch); ``fn`` runs on the caller's thread and must only enqueue."""
+        self.taps.append(fn)
+
+    def _put(self, record: dict[str, Any]) -> None:
+        for tap in self.taps:
+            try:
+                tap(dict(record), time.time_ns())
+            except Exception:  # a live viewer must never break recording or the caller
+                log.debug("recorder tap failed", exc_info=True)
+        q = self._queue
+        if q is None:
+            return
+        elapsed = time.perf_counter() - self._t0
+        record["t"] = round(elapsed, 4)
+        if self.suffix == MCAP_SUFFIX:  # exact log time (the console's clock, ns)
+            record["ns"] = self._start_ns + int(elapsed * 1e9)
+        try:
+            q.put_nowait(record)
+        except queue.Full:
+            self.dropped += 1
+
+    def _write(self, path: Path, q: queue.Queue[dict[str, Any] | None],
+               header: dict[str, Any]) -> None:
+        if path.name.endswith(MCAP_SUFFIX):
+            from console.recording.mcap_format import write_queue
+            write_queue(path, q, header, self._start_ns, self.model, self._count)
+            return
+        last_flush = time.monotonic()
+        with gzip.open(path, "wt", encoding="utf-8", compresslevel=6) as f:
+            while True:
+                try:
+                    record = q.get(timeout=0.5)
+                except queue.Empty:
+                    record = {}
+                if record is None:
+                    break
+                if record:
+                    f.write(json.dumps(record, default=_json_default, separators=(",", ":")))
+                    f.write("\n")
+                    self._count()
+                if time.monotonic() - last_flush > 1.0:  # a crash loses at most ~1 s
+                    f.flush()
+                    last_flush = time.monotonic()
+
+    def _count(self) -> None:
+        self.lines += 1

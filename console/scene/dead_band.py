@@ -1,0 +1,121 @@
+"""What the arm view leaves unsent: a dead band on the drawn frames, so a still arm costs ~0.
+
+:class:`DeadBand` decides whether the drawn frames left the band around the last frame sent,
+compared on a running average whose time constant shrinks while the frames move steadily
+(:class:`Steadiness`): measurement noise averages out, a real move is drawn at once. Used by
+:class:`console.scene.arm_view.ArmView`; pure numpy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import numpy.typing as npt
+
+Array = npt.NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class DeadBand:
+    """A frame is sent only when what is drawn moved more than this since the last sent frame.
+
+    The comparison uses the drawn frames smoothed over up to ``settle_s`` (an exponential
+    average in time): motion-capture noise of a still arm averages out instead of crossing the
+    band (the soft arm's curvatures from the simulator's 0.2 mm marker noise move its tip by
+    ~0.8 mm and its heading by ~1.7 deg rms: a band below that noise alone would send every
+    frame). The time constant shrinks to 0 as the frames move steadily (:class:`Steadiness`),
+    so a jog or a planned move is drawn at once. What is sent is always the newest frame, never
+    the average; a frame held back is sent once the display goes idle (:meth:`ArmView.flush`).
+    Defaults: 0.5 mm (about a pixel of a 0.5 m arm in an 800 px view) and 0.5 deg.
+
+    While the frames move steadily (steadiness at least ``moving_steadiness``: a jog, a planned
+    move) the band is ``moving_position`` / ``moving_angle`` instead: the 0.5 mm band let a
+    grasp-and-place approach (the soft arm's points move at a few mm/s) through only every 3rd
+    to 4th frame, ~10 frames/s (``benchmarks/arm_frames_replay.py``); a still arm's noise is
+    not steady, so it stays held by the wide band.
+
+    Args:
+        position: Largest unsent translation (m).
+        angle: Largest unsent rotation (rad).
+        settle_s: Time constant of the average (s); 0 compares the newest frames themselves.
+        moving_position: Largest unsent translation while the frames move steadily (m).
+        moving_angle: Largest unsent rotation while the frames move steadily (rad).
+        moving_steadiness: Steadiness (:class:`Steadiness`) from which the frames move.
+        moving_steps: Fewest steps the steadiness must be measured over since it started
+            afresh (after a pause its first steps read as steady, noise included).
+    """
+
+    position: float = 5e-4
+    angle: float = float(np.deg2rad(0.5))
+    settle_s: float = 2.0
+    moving_position: float = 1e-4
+    moving_angle: float = float(np.deg2rad(0.1))
+    moving_steadiness: float = 0.5
+    moving_steps: int = 20
+
+    def moved(self, sent: Array, now: Array, steadiness: float = 0.0) -> bool:
+        """Whether any of the (P, 4, 4) frames ``now`` left the band around ``sent`` (the
+        moving band when ``steadiness`` reaches ``moving_steadiness``)."""
+        if sent.shape != now.shape:
+            return True
+        moving = steadiness >= self.moving_steadiness
+        position = self.moving_position if moving else self.position
+        angle = self.moving_angle if moving else self.angle
+        if np.abs(now[:, :3, 3] - sent[:, :3, 3]).max(initial=0.0) > position:
+            return True
+        # For rotations R_a, R_b: trace(R_a^T R_b) = 1 + 2 cos(angle between them), and
+        # |R|_F = sqrt(3). Scaled by the norms so that averaged (shrunk) rotations compare too.
+        a, b = sent[:, :3, :3], now[:, :3, :3]
+        dot = np.einsum("pij,pij->p", a, b)
+        norms = np.linalg.norm(a, axis=(1, 2)) * np.linalg.norm(b, axis=(1, 2))
+        cos = (3.0 * dot / norms - 1.0) / 2.0
+        return bool(np.any(cos < np.cos(angle)))
+
+    def average(self, mean: Array | None, frames: Array, dt: float, steadiness: float = 0.0,
+                ) -> Array:
+        """The running average of the frames after ``dt`` seconds more of ``frames``.
+
+        ``steadiness`` in [0, 1] (1: the frames move steadily one way, 0: they jitter) shortens
+        the time constant to ``settle_s (1 - steadiness)``, so a real move is not delayed.
+        """
+        tau = self.settle_s * (1.0 - min(max(steadiness, 0.0), 1.0))
+        if mean is None or mean.shape != frames.shape or tau <= 1e-6:
+            return frames.copy()
+        alpha = 1.0 - np.exp(-max(dt, 0.0) / tau)
+        return mean + alpha * (frames - mean)
+
+
+class Steadiness:
+    """How steadily the drawn frames move: |mean step| / mean |step| over ~``tau`` seconds.
+
+    About 1 for a move (every step points the same way), about sqrt(dt / 2 tau) for noise.
+    ``steps``: how many steps it is measured over (a first step alone reads 1: it cannot yet
+    tell a move from noise).
+    """
+
+    def __init__(self, tau: float = 0.25) -> None:
+        self.tau = tau
+        self.steps = 0
+        self._last: Array | None = None
+        self._drift: Array | None = None
+        self._jitter = 0.0
+
+    def update(self, frames: Array, dt: float) -> float:
+        pos = frames[:, :3, 3].ravel()
+        last, self._last = self._last, pos.copy()
+        if last is None or last.shape != pos.shape:
+            self._drift, self._jitter, self.steps = None, 0.0, 0
+            return 1.0
+        step = pos - last
+        alpha = 1.0 - np.exp(-max(dt, 1e-6) / self.tau)
+        if self._drift is None or dt > 5 * self.tau:  # after a pause: start afresh
+            self._drift, self._jitter = step.copy(), float(np.linalg.norm(step))
+            self.steps = 1
+        else:
+            self.steps += 1
+            self._drift += alpha * (step - self._drift)
+            self._jitter += alpha * (float(np.linalg.norm(step)) - self._jitter)
+        if self._jitter <= 1e-12:
+            return 1.0
+        return float(np.linalg.norm(self._drift)) / self._jitter

@@ -1,0 +1,99 @@
+"""The console's stage, set before any panel: theme, table, lights, first camera, no share tunnel.
+
+What every console draws the same way whatever its panels: the theme (``static/theme.toml``:
+brand colour, panel label; no share button or logo), the table (the z = 0 plane around the
+arm's workspace, with a subtle grid), cheap lights for software-rendered WebGL, and the first of
+the robot's camera presets. :class:`console.app.ConsoleApp` builds it in this order; its
+``_span`` and ``_table_extent`` are :func:`arm_span` and :func:`table_extent` of its robot.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import viser
+
+from console.scene.camera import CameraPose
+from console.scene.camera import apply as apply_camera
+from console.scene.camera import presets as camera_presets
+from console.scene.theme import ConsoleTheme, load_theme
+from core.robots import Robot
+
+
+def disable_share_tunnel(server: viser.ViserServer) -> None:
+    """Make viser's share tunnel impossible on ``server``, not only hidden."""
+    # Hiding the share button is not enough: any websocket client can still send viser's
+    # ShareUrlRequest, which would open a public tunnel to the internet. Drop the handlers
+    # and make the method a no-op on this server (viser 1.1.1 internals, checked by tests).
+    from viser import _messages
+
+    handlers = getattr(server._websock_server, "_incoming_handlers", {})
+    for cls in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
+        handlers.pop(cls, None)
+    server.request_share_url = lambda *a, **k: None  # type: ignore[method-assign]
+
+
+def setup_theme(server: viser.ViserServer, robot_name: str) -> ConsoleTheme:
+    """Close the share tunnel, apply ``static/theme.toml`` and the panel label; the theme."""
+    gui = server.gui
+    disable_share_tunnel(server)
+    theme = load_theme()  # static/theme.toml: colours and the panel label
+    gui.configure_theme(show_share_button=False, show_logo=False,
+                        brand_color=theme.brand_color, control_width=theme.control_width)
+    gui.set_panel_label(theme.label_for(robot_name))
+    return theme
+
+
+def arm_span(robot: Any, kind: str) -> float:
+    """Largest distance of any arm point from the base (straight, fully extended)."""
+    if kind == "planar":
+        return robot.n_segments * robot.segment_length + robot.gripper.length
+    return robot.n_segments * robot.rack_max
+
+
+def table_extent(robot: Any, kind: str) -> tuple[float, float, float, float]:
+    """Table rectangle (x0, x1, y0, y1) around the arm's workspace."""
+    span = arm_span(robot, kind)
+    if kind == "planar":
+        return -1.0 * span, 1.0 * span, -0.4 * span, 1.15 * span
+    return -0.75 * span, 0.75 * span, -0.75 * span, 0.75 * span
+
+
+def add_table(scene: viser.SceneApi, theme: ConsoleTheme,
+              extent: tuple[float, float, float, float]) -> tuple[Any, Any]:
+    """The table top and its grid over ``extent`` (x0, x1, y0, y1); hides the world axes."""
+    x0, x1, y0, y1 = extent
+    w, h = x1 - x0, y1 - y0
+    centre = ((x0 + x1) / 2, (y0 + y1) / 2)
+    thickness = 0.02
+    table = scene.add_box("/table/top", color=theme.table_color,
+                          dimensions=(w, h, thickness),
+                          position=(centre[0], centre[1], -thickness / 2),
+                          cast_shadow=False, receive_shadow=True)
+    grid = scene.add_grid("/table/grid", width=w, height=h, plane="xy",
+                          cell_size=0.05, cell_color=theme.grid_cell_color,
+                          section_size=0.25, section_color=theme.grid_section_color,
+                          position=(centre[0], centre[1], 0.0005), shadow_opacity=0.15)
+    scene.world_axes.visible = False
+    return table, grid
+
+
+def add_lights(scene: viser.SceneApi, theme: ConsoleTheme) -> None:
+    """Cheap lighting for software-rendered WebGL."""
+    # Cheap lighting for software-rendered WebGL (lab PCs without a GPU, CI). Measured here
+    # in headless Chromium/SwiftShader: with viser's HDR environment map and shadow maps a
+    # slider step took ~0.4-0.6 s to process, without them ~0.1-0.2 s. A hemisphere light
+    # plus shadowless default lights looks much the same.
+    scene.configure_environment_map(None)
+    scene.configure_default_lights(enabled=True, cast_shadow=False)
+    scene.add_light_hemisphere("/lights/hemisphere", sky_color=theme.sky_color,
+                               ground_color=theme.ground_color, intensity=1.3)
+
+
+def setup_camera(server: viser.ViserServer, robot: Robot, kind: str) -> tuple[CameraPose, ...]:
+    """The robot's camera presets; the first is applied to the initial camera."""
+    # The first of the robot's camera presets (console.scene.camera, also the View panel's
+    # "Reset view"): framed for a wide window with the control panel docked on the right.
+    presets = camera_presets(kind, arm_span(robot, kind), table_extent(robot, kind))
+    apply_camera(server.initial_camera, presets[0])
+    return presets
