@@ -3,12 +3,23 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from core.robot_schema import Section
 
-if TYPE_CHECKING:
-    from core.robots import ExtensibleArm
+
+class ExtensibleSections(Protocol):
+    """The loaded sections ``from_robot`` returns: :class:`core.robots.ExtensibleArm` has them.
+
+    A protocol rather than ``ExtensibleArm`` itself, which is built from these classes (so
+    naming it here would close an import circle with :mod:`core.robots`).
+    """
+
+    @property
+    def ik(self) -> IKSettings: ...
+
+    @property
+    def paths(self) -> PathSettings: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,7 +71,7 @@ class IKSettings:
         return s
 
     @classmethod
-    def from_robot(cls, robot: "ExtensibleArm") -> "IKSettings":
+    def from_robot(cls, robot: ExtensibleSections) -> "IKSettings":
         """The robot file's ``[ik]`` settings (validated when the file was loaded)."""
         return robot.ik
 
@@ -103,7 +114,7 @@ class PathSettings:
         return s
 
     @classmethod
-    def from_robot(cls, robot: "ExtensibleArm") -> "PathSettings":
+    def from_robot(cls, robot: ExtensibleSections) -> "PathSettings":
         """The robot file's ``[paths]`` settings (validated when the file was loaded)."""
         return robot.paths
 

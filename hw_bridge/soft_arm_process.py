@@ -46,7 +46,7 @@ from hw_bridge.cpu_partition import CpuPartition, format_cpus, pin_process
 from hw_bridge.loop import LoopSnapshot, LoopStats, SlowTick
 from hw_bridge.loop_process import (LoopProcess, ProcessBridgeControls, reply_when_done,
                                     serve_commands)
-from hw_bridge.soft_arm_worlds import HardwareWorld, SimWorld
+from hw_bridge.soft_arm_worlds import DeviceOptions, HardwareWorld, SimWorld
 
 
 ARM_FIRST = "Arm first (press Arm): Execute does not arm the arm"
@@ -74,16 +74,6 @@ class ControlView:
     fault: str | None = None
     slow_ticks: tuple[SlowTick, ...] = ()  # the loop's latest late / long ticks
     row: Any = None  # core.control.row_stack.RowReport of the newest row (None before one)
-
-
-@dataclasses.dataclass(frozen=True)
-class DeviceOptions:
-    """Which device the child's loop drives (see :class:`ControlProcess`)."""
-
-    kind: str = "sim"
-    port_path: str | None = None
-    emulator_args: tuple[str, ...] = ()
-    cpus: CpuPartition | None = None  # the loop (and emulator) on .realtime, planner on .other
 
 
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,

@@ -13,17 +13,30 @@ Connect / Arm bring the arm back.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+import dataclasses
+from typing import Any
 
 import numpy as np
 
 from hw_bridge.commands import Arm, BridgeCommand, Connect, Disarm, Disconnect
+from hw_bridge.cpu_partition import CpuPartition
 from hw_bridge.link_supervisor import (DISCONNECTED, NO_SERIAL_LINK, LinkRefused, LinkSupervisor,
                                        open_serial)
 from hw_bridge.realtime import promote_new_threads
 
-if TYPE_CHECKING:
-    from hw_bridge.soft_arm_process import DeviceOptions
+
+@dataclasses.dataclass(frozen=True)
+class DeviceOptions:
+    """Which device the child's loop drives (:class:`hw_bridge.soft_arm_process.ControlProcess`).
+
+    Here, beside the worlds that read it, so this module needs nothing from the process module
+    that imports it (no import circle).
+    """
+
+    kind: str = "sim"
+    port_path: str | None = None
+    emulator_args: tuple[str, ...] = ()
+    cpus: CpuPartition | None = None  # the loop (and emulator) on .realtime, planner on .other
 
 
 def _sim_health(note: str) -> Any:

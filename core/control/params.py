@@ -11,17 +11,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING, Any, Literal, Mapping
+from typing import Any, Literal, Mapping, Protocol
 
 import numpy as np
 import numpy.typing as npt
 
 from core.robot_schema import Section
 
-if TYPE_CHECKING:
-    from core.robots import SoftArm
-
 Array = npt.NDArray[np.float64]
+
+
+class SoftArmSections(Protocol):
+    """The loaded sections ``from_robot`` returns: :class:`core.robots.SoftArm` has them.
+
+    A protocol rather than ``SoftArm`` itself, which is built from these classes (so naming it
+    here would close an import circle with :mod:`core.robots`).
+    """
+
+    @property
+    def controller(self) -> ControllerParams: ...
+
+    @property
+    def trajectory(self) -> TrajectoryParams: ...
+
+    @property
+    def state_machine(self) -> StateMachineParams: ...
+
+    @property
+    def bin(self) -> BinParams: ...
+
+    @property
+    def sim(self) -> SimParams: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,7 +95,7 @@ class ControllerParams:
         return p
 
     @classmethod
-    def from_robot(cls, robot: "SoftArm") -> "ControllerParams":
+    def from_robot(cls, robot: SoftArmSections) -> "ControllerParams":
         """The robot's ``[controller]`` (validated when the file was loaded)."""
         return robot.controller
 
@@ -99,7 +119,7 @@ class TrajectoryParams:
         return cls(synchronization=sync, **lim)  # type: ignore[arg-type]
 
     @classmethod
-    def from_robot(cls, robot: "SoftArm") -> "TrajectoryParams":
+    def from_robot(cls, robot: SoftArmSections) -> "TrajectoryParams":
         """The robot's ``[trajectory]`` (validated when the file was loaded)."""
         return robot.trajectory
 
@@ -141,7 +161,7 @@ class StateMachineParams:
         return cls(**vals)
 
     @classmethod
-    def from_robot(cls, robot: "SoftArm") -> "StateMachineParams":
+    def from_robot(cls, robot: SoftArmSections) -> "StateMachineParams":
         """The robot's ``[state_machine]`` (validated when the file was loaded)."""
         return robot.state_machine
 
@@ -181,7 +201,7 @@ class BinParams:
         return p
 
     @classmethod
-    def from_robot(cls, robot: "SoftArm") -> "BinParams":
+    def from_robot(cls, robot: SoftArmSections) -> "BinParams":
         """The robot's ``[bin]`` (validated when the file was loaded)."""
         return robot.bin
 
@@ -268,7 +288,7 @@ class SimParams:
         return p
 
     @classmethod
-    def from_robot(cls, robot: "SoftArm") -> "SimParams":
+    def from_robot(cls, robot: SoftArmSections) -> "SimParams":
         """The robot's ``[sim]`` (validated when the file was loaded)."""
         return robot.sim
 

@@ -58,22 +58,26 @@ by forward kinematics. Solver settings come from the robot file's optional ``[ik
 Box obstacles. With ``boxes`` the arm's body (every point within the robot file's
 ``body_radius`` of the backbone) must also keep ``clearance`` from every box:
 one more set-based task with priority over the tip, solved in
-:mod:`core.kinematics.delta_ik_boxes` (which imports this module, hence the import inside
-:func:`solve_tip_ik`); the result then carries the clearance and, when no collision-free
-posture reaches the target, the reason (which box, how close).
+:mod:`core.kinematics.delta_ik_boxes`; the result then carries the clearance and, when no
+collision-free posture reaches the target, the reason (which box, how close).
+
+The iteration, the polish and :class:`TipIKResult` live in
+:mod:`core.kinematics.delta_ik_iteration`, which the seeds and the box solver share without
+importing this module (no import circle).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import minimize as _minimize
 
 from core.kinematics import delta as _dk
+from core.kinematics import delta_ik_iteration as _it
+from core.kinematics.delta_ik_boxes import check_boxes, solve_clear
+from core.kinematics.delta_ik_iteration import TipIKResult
 from core.kinematics.delta_ik_seeds import arc_seed as _arc_seed, seeds as _seeds
 from core.robot_sections import IKSettings
 
@@ -82,57 +86,7 @@ if TYPE_CHECKING:
 
 Array = npt.NDArray[np.float64]
 
-_LAMBDA_MIN = 1e-5  # lambda^2 = 1e-10: keeps J P (J P)^T + lambda^2 I well conditioned
-_LAMBDA_MAX = 1e6
-
-
-@dataclasses.dataclass(frozen=True)
-class TipIKResult:
-    """Outcome of :func:`solve_tip_ik`.
-
-    Attributes:
-        delta: (n, 3) postures (dx, dy, dL) per segment.
-        lengths: (n, 3) rack lengths, always within [rack_min, rack_max], and every segment's
-            bend |(dx, dy)| / d within theta_max.
-        tip: (3,) tip position reached, h(delta).
-        error: Distance from ``tip`` to the target (m).
-        iterations: Iterations spent over all starts.
-        reachable: ``error <= tolerance``.
-        starts: Starts iterated: 1 when the warm start converged, otherwise the warm start (if
-            any) plus the batch of seeds.
-        clearance: With boxes: the smallest distance from the arm's body surface (the
-            backbone, sampled every millimetre, minus ``body_radius``) to a box (m; negative
-            when the body reaches into one); ``inf`` without boxes.
-        nearest_box: With boxes: the name of the box that distance is to.
-        clear: ``clearance`` is at least the clearance asked for (always True without boxes).
-        refusal: With boxes: why no collision-free posture reaches the target (which box, how
-            close), "" when one does. ``reachable`` is False then.
-    """
-
-    delta: Array
-    lengths: Array
-    tip: Array
-    error: float
-    iterations: int
-    reachable: bool
-    starts: int
-    clearance: float = math.inf
-    nearest_box: str = ""
-    clear: bool = True
-    refusal: str = ""
-
-
-@dataclasses.dataclass(frozen=True)
-class _Problem:
-    target: Array        # (3,)
-    n: int
-    M: Array             # (3, 3) rack map, Delta_i = M L_i - (0, 0, L0)
-    phi: float
-    L0: float
-    d: float
-    lo: float
-    hi: float
-    bend_max: float      # largest |(dx, dy)| of a segment, d * theta_max
+__all__ = ["TipIKResult", "solve_tip_ik"]
 
 
 def _check_robot(robot: Any) -> None:
@@ -164,136 +118,6 @@ def _check_delta0(delta0: npt.ArrayLike, n: int) -> Array:
     if not np.all(np.isfinite(arr)):
         raise ValueError("delta0 must be finite")
     return arr
-
-
-def _deltas(pb: _Problem, L: Array) -> Array:
-    """(K, 3n) rack lengths -> (K, n, 3) deltas."""
-    out = L.reshape(L.shape[0], pb.n, 3) @ pb.M.T
-    out[..., 2] -= pb.L0
-    return out
-
-
-def _evaluate(pb: _Problem, L: Array) -> tuple[Array, Array, Array]:
-    """Tip error vectors (K, 3), errors (K,) and tip Jacobians in L, (K, 3, 3n)."""
-    p, J_delta = _dk.chain_tip_and_jacobian(_deltas(pb, L), pb.L0, pb.d)
-    J = (J_delta.reshape(-1, 3, pb.n, 3) @ pb.M).reshape(-1, 3, 3 * pb.n)
-    e = pb.target - p
-    return e, np.sqrt(np.einsum("ki,ki->k", e, e)), J
-
-
-def _feasible(pb: _Problem, L: Array) -> Array:
-    """(K, 3n) rack lengths moved into the feasible set (see :func:`delta.limit_rack_lengths`)."""
-    L = np.clip(L, pb.lo, pb.hi)
-    seg = L.reshape(L.shape[0], pb.n, 3)
-    bend = np.linalg.norm(seg @ pb.M[:2].T, axis=-1)  # (K, n)
-    over = bend > pb.bend_max
-    if not over.any():
-        return L
-    # A hair inside the limit, so theta <= theta_max holds after rounding too.
-    scale = np.where(over, pb.bend_max * (1 - 1e-12) / np.where(over, bend, 1.0), 1.0)[..., None]
-    mean = seg.mean(axis=-1, keepdims=True)
-    return (mean + scale * (seg - mean)).reshape(L.shape)
-
-
-def _free_jacobian(pb: _Problem, L: Array, J: Array, grad: Array) -> Array:
-    """J_tip P: the tip Jacobians (K, 3, 3n) restricted to the directions no active limit holds.
-
-    A rack is held at a limit the descent direction -grad pushes it through; a segment at its
-    bending limit is held when -grad would bend it further (its radial bending row a_i, the
-    gradient of |(dx_i, dy_i)| in L, has a_i . grad < 0).
-    """
-    held = ((L <= pb.lo) & (grad > 0)) | ((L >= pb.hi) & (grad < 0))
-    K, n = L.shape[0], pb.n
-    b = L.reshape(K, n, 3) @ pb.M[:2].T  # (K, n, 2) = (dx, dy) per segment
-    bend = np.linalg.norm(b, axis=-1)
-    at_limit = bend >= pb.bend_max * (1.0 - 1e-9)
-    if not at_limit.any():
-        return np.where(held[:, None, :], 0.0, J)
-    rows = (b / np.maximum(bend, 1e-300)[..., None]) @ pb.M[:2]  # (K, n, 3): d|b_i| / dL_i
-    pushed = at_limit & (np.einsum("kij,kij->ki", rows, grad.reshape(K, n, 3)) < 0)
-    if not pushed.any():
-        return np.where(held[:, None, :], 0.0, J)
-    C = np.zeros((K, 3 * n + n, 3 * n))
-    idx = np.arange(3 * n)
-    C[:, idx, idx] = held
-    for i in range(n):
-        C[:, 3 * n + i, 3 * i:3 * i + 3] = np.where(pushed[:, i, None], rows[:, i], 0.0)
-    P = np.eye(3 * n) - np.linalg.pinv(C) @ C
-    return J @ P
-
-
-def _iterate(pb: _Problem, L: Array, s: IKSettings, stop_on_first: bool) -> tuple[Array, Array, int]:
-    """Projected, damped task-priority iteration of eq. (5) on K starts at once.
-
-    Returns the final rack lengths (K, 3n), errors (K,) and the number of batch iterations.
-    """
-    L = _feasible(pb, L)
-    e, err, J = _evaluate(pb, L)
-    lam = np.full(L.shape[0], s.damping)
-    live = err > s.goal_tolerance
-    eye = np.eye(3)
-    it = 0
-    while it < s.max_iterations and live.any():
-        if stop_on_first and (~live & (err <= s.goal_tolerance)).any():
-            break
-        it += 1
-        idx = np.flatnonzero(live)
-        Li, ei, Ji = L[idx], e[idx], J[idx]
-        grad = -np.einsum("kij,ki->kj", Ji, ei)  # gradient of ||e||^2 / 2
-        # Set-based limit tasks: racks and bends at a limit the tip task pushes outward are held.
-        Jf = _free_jacobian(pb, Li, Ji, grad)  # J_tip P
-        A = Jf @ Jf.transpose(0, 2, 1) + (lam[idx] ** 2)[:, None, None] * eye
-        step = np.einsum("kij,ki->kj", Jf, np.linalg.solve(A, ei[..., None])[..., 0])
-        trial = _feasible(pb, Li + step)  # J_set^+ e_set: back onto the limits
-        et, errt, Jt = _evaluate(pb, trial)
-        better = errt < err[idx]
-        gain = err[idx] - errt
-        acc = idx[better]
-        L[acc], e[acc], J[acc] = trial[better], et[better], Jt[better]
-        lam[acc] = np.maximum(lam[acc] / 5.0, _LAMBDA_MIN)
-        rej = idx[~better]
-        lam[rej] = lam[rej] * 10.0
-        err[acc] = errt[better]
-        slow = gain < np.maximum(s.stall_step, s.stall_ratio * err[idx])
-        stalled = (better & slow) | (lam[idx] > _LAMBDA_MAX)
-        live[idx] = ~(stalled | (err[idx] <= s.goal_tolerance))
-    return L, err, it
-
-
-def _polish(pb: _Problem, L: Array, max_iterations: int) -> tuple[Array, float, int]:
-    """SLSQP on problem (4) with the bending constraints, from rack lengths ``L`` (3n,), for a
-    target left out of reach (see "Polish" above; its quasi-Newton Hessian does not creep).
-
-    Returns the feasible lengths, their error and SLSQP's iteration count; a failed run returns
-    ``L`` (moved into the limits) unchanged.
-    """
-    n, Mb = pb.n, pb.M[:2]
-
-    def f(x: Array) -> tuple[float, Array]:
-        e, _, J = _evaluate(pb, x[None])
-        return 0.5 * float(e[0] @ e[0]), -J[0].T @ e[0]
-
-    def bend(x: Array) -> Array:  # >= 0: bend_max^2 - |(dx_i, dy_i)|^2 per segment
-        b = x.reshape(n, 3) @ Mb.T
-        return pb.bend_max ** 2 - np.einsum("ij,ij->i", b, b)
-
-    def bend_jac(x: Array) -> Array:
-        b = x.reshape(n, 3) @ Mb.T
-        return np.kron(np.eye(n), np.ones((1, 3))) * np.tile(-2.0 * b @ Mb, n)
-
-    x0 = _feasible(pb, L[None])[0]
-    _, err0, _ = _evaluate(pb, x0[None])
-    try:
-        res = _minimize(f, x0, jac=True, method="SLSQP", bounds=[(pb.lo, pb.hi)] * (3 * n),
-                        constraints=[{"type": "ineq", "fun": bend, "jac": bend_jac}],
-                        options={"ftol": 1e-12, "maxiter": max_iterations})
-    except (ValueError, ArithmeticError):
-        return x0, float(err0[0]), 0
-    if not np.all(np.isfinite(res.x)):
-        return x0, float(err0[0]), int(res.nit)
-    x = _feasible(pb, res.x[None])
-    err = float(_evaluate(pb, x)[1][0])
-    return (x[0], err, int(res.nit)) if err < err0[0] else (x0, float(err0[0]), int(res.nit))
 
 
 def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
@@ -328,7 +152,6 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
     _check_robot(robot)
     target = _check_target(target_xyz)
     if boxes:
-        from core.kinematics.delta_ik_boxes import check_boxes, solve_clear  # it imports us
         box_list, need = check_boxes(boxes, clearance)
         free = solve_tip_ik(robot, target, delta0, restarts=restarts, settings=settings)
         warm_delta = None if delta0 is None else _check_delta0(delta0, robot.n_segments)
@@ -337,37 +160,37 @@ def solve_tip_ik(robot: "ExtensibleArm", target_xyz: npt.ArrayLike,
     n = robot.n_segments
     s = settings if settings is not None else IKSettings.from_robot(robot)
     M = _dk.rack_matrix(robot.phi)
-    pb = _Problem(target, n, M, robot.phi, robot.L0, robot.d, robot.rack_min, robot.rack_max,
-                  robot.bend_max)
+    pb = _it.Problem(target, n, M, robot.phi, robot.L0, robot.d, robot.rack_min,
+                     robot.rack_max, robot.bend_max)
     warm = None if delta0 is None else _check_delta0(delta0, n)
     iters, starts = 0, 0
     best_L, best_err = np.zeros(3 * n), math.inf
     if warm is not None:
         start = _dk.actuators_from_delta(warm, robot.phi, robot.L0).reshape(1, 3 * n)
-        L, err, iters = _iterate(pb, start, s, stop_on_first=True)
+        L, err, iters = _it.iterate(pb, start, s, stop_on_first=True)
         best_L, best_err, starts = L[0], float(err[0]), 1
     else:  # cold: the single-arc guess alone first (exact whenever its racks and bends fit)
-        arc = _feasible(pb, _dk.actuators_from_delta(_arc_seed(pb, target, n), robot.phi,
-                                                     robot.L0).reshape(1, 3 * n))
-        err = _evaluate(pb, arc)[1]
+        arc = _it.feasible(pb, _dk.actuators_from_delta(_arc_seed(pb, target, n), robot.phi,
+                                                        robot.L0).reshape(1, 3 * n))
+        err = _it.evaluate(pb, arc)[1]
         if err[0] <= s.goal_tolerance:
             best_L, best_err, starts = arc[0], float(err[0]), 1
     if best_err > s.tolerance and (restarts or warm is None):
         seeds = _seeds(pb, s.restart_seeds) if restarts else _dk.actuators_from_delta(
             _arc_seed(pb, target, n), robot.phi, robot.L0).reshape(1, 3 * n)
-        Ls, errs, more = _iterate(pb, seeds, s, stop_on_first=True)
+        Ls, errs, more = _it.iterate(pb, seeds, s, stop_on_first=True)
         iters += more
         starts += len(seeds)
         k = int(np.argmin(errs))
         if errs[k] < best_err:
             best_L, best_err = Ls[k], float(errs[k])
     if best_err > s.tolerance and s.polish_iterations:
-        L, err, more = _polish(pb, best_L, s.polish_iterations)
+        L, err, more = _it.polish(pb, best_L, s.polish_iterations)
         iters += more
         if err < best_err:
             best_L, best_err = L, err
-    lengths = _feasible(pb, best_L.reshape(1, -1)).reshape(n, 3)
-    delta = _deltas(pb, lengths.reshape(1, -1))[0]
+    lengths = _it.feasible(pb, best_L.reshape(1, -1)).reshape(n, 3)
+    delta = _it.deltas(pb, lengths.reshape(1, -1))[0]
     tip = _dk.tip_position(robot, delta)
     error = float(np.linalg.norm(target - tip))
     return TipIKResult(delta=delta, lengths=lengths, tip=tip, error=error, iterations=iters,

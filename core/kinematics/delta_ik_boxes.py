@@ -13,7 +13,8 @@ of the same kind (only the ones at their bound act, the tip task works in the re
 discrete solver we use an active-set SQP (SLSQP) on the racks, whose QP holds exactly the
 active limit and clearance rows in each step:
 
-1. the plain IK (:func:`core.kinematics.delta_ik.solve_tip_ik` without boxes) first; its
+1. the plain IK (:func:`core.kinematics.delta_ik.solve_tip_ik` without boxes, which calls
+   :func:`solve_clear` with its answer) first; its
    posture is kept when a dense check of the whole backbone (every ``DENSE_SPACING``) is clear;
 2. otherwise every seed the plain IK uses is iterated to its own solution branch, the clear
    ones are taken as they are, and the SQP starts from the others (the least penetrating
@@ -37,7 +38,7 @@ from scipy.optimize import minimize as _minimize
 
 from core.kinematics import box_clearance as bc
 from core.kinematics import delta as _dk
-from core.kinematics import delta_ik as _ik
+from core.kinematics import delta_ik_iteration as _it
 from core.kinematics.delta_ik_seeds import seeds as _seeds
 from core.robot_sections import IKSettings
 
@@ -54,12 +55,12 @@ _FD_STEP = 1e-6       # m, central differences of the backbone samples in the ra
 _SCALE = 1.0         # objective in m^2 / 2 (SLSQP starts from an identity Hessian: steps in m)
 
 
-def _points(robot: ExtensibleArm, pb: _ik._Problem, L: Array) -> Array:
+def _points(robot: ExtensibleArm, pb: _it.Problem, L: Array) -> Array:
     """Backbone samples (K, n * SAMPLES, 3) (the base left out) of rack lengths (K, 3n)."""
-    return bc.backbone_points(robot, _ik._deltas(pb, L), SAMPLES)[:, 1:]
+    return bc.backbone_points(robot, _it.deltas(pb, L), SAMPLES)[:, 1:]
 
 
-def _constraints(robot: ExtensibleArm, pb: _ik._Problem, boxes: Sequence[bc.Box],
+def _constraints(robot: ExtensibleArm, pb: _it.Problem, boxes: Sequence[bc.Box],
                  need: float) -> tuple:
     n3 = 3 * pb.n
     steps = np.vstack([np.zeros(n3), _FD_STEP * np.eye(n3), -_FD_STEP * np.eye(n3)])
@@ -86,13 +87,13 @@ def _constraints(robot: ExtensibleArm, pb: _ik._Problem, boxes: Sequence[bc.Box]
     return (lambda x: cached(x)[0]), (lambda x: cached(x)[1])
 
 
-def _sqp(robot: ExtensibleArm, pb: _ik._Problem, x0: Array, boxes: Sequence[bc.Box],
+def _sqp(robot: ExtensibleArm, pb: _it.Problem, x0: Array, boxes: Sequence[bc.Box],
          need: float, iterations: int) -> Array:
     """One SLSQP run from rack lengths ``x0`` (3n,); returns its end (moved into the limits)."""
     n, Mb = pb.n, pb.M[:2]
 
     def f(x: Array) -> tuple[float, Array]:
-        e, _, J = _ik._evaluate(pb, x[None])
+        e, _, J = _it.evaluate(pb, x[None])
         return 0.5 * _SCALE * float(e[0] @ e[0]), -_SCALE * (J[0].T @ e[0])
 
     def bend(x: Array) -> Array:
@@ -112,7 +113,7 @@ def _sqp(robot: ExtensibleArm, pb: _ik._Problem, x0: Array, boxes: Sequence[bc.B
         x = res.x if np.all(np.isfinite(res.x)) else x0
     except (ValueError, ArithmeticError):
         x = x0
-    return _ik._feasible(pb, np.asarray(x, dtype=float)[None])[0]
+    return _it.feasible(pb, np.asarray(x, dtype=float)[None])[0]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -122,24 +123,24 @@ class _Candidate:
     clear: bc.Clearance
 
 
-def _candidate(robot: ExtensibleArm, pb: _ik._Problem, L: Array,
+def _candidate(robot: ExtensibleArm, pb: _it.Problem, L: Array,
                boxes: Sequence[bc.Box]) -> _Candidate:
-    L = _ik._feasible(pb, L[None])[0]
-    err = float(_ik._evaluate(pb, L[None])[1][0])
-    return _Candidate(L, err, bc.clearance_of(robot, _ik._deltas(pb, L[None])[0], boxes))
+    L = _it.feasible(pb, L[None])[0]
+    err = float(_it.evaluate(pb, L[None])[1][0])
+    return _Candidate(L, err, bc.clearance_of(robot, _it.deltas(pb, L[None])[0], boxes))
 
 
 def _mm(x: float) -> str:
     return f"{x * 1e3:.1f} mm"
 
 
-def solve_clear(robot: ExtensibleArm, target: Array, free: _ik.TipIKResult,
+def solve_clear(robot: ExtensibleArm, target: Array, free: _it.TipIKResult,
                 warm: Array | None, boxes: Sequence[bc.Box], clearance: float, restarts: bool,
-                s: IKSettings) -> _ik.TipIKResult:
+                s: IKSettings) -> _it.TipIKResult:
     """The collision-free answer, given the plain IK's answer ``free`` (see the module)."""
     n = robot.n_segments
-    pb = _ik._Problem(target, n, _dk.rack_matrix(robot.phi), robot.phi, robot.L0, robot.d,
-                      robot.rack_min, robot.rack_max, robot.bend_max)
+    pb = _it.Problem(target, n, _dk.rack_matrix(robot.phi), robot.phi, robot.L0, robot.d,
+                     robot.rack_min, robot.rack_max, robot.bend_max)
     first = _candidate(robot, pb, free.lengths.reshape(-1), boxes)
     if first.clear.clear_of(clearance):
         return _result(robot, pb, first, s, clearance, free.iterations, free.starts, "")
@@ -161,7 +162,7 @@ def solve_clear(robot: ExtensibleArm, target: Array, free: _ik.TipIKResult,
     iters, count = free.iterations, free.starts
     if restarts or warm is None:
         seeds = _seeds(pb, max(s.restart_seeds, SEEDS))
-        Ls, _, more = _ik._iterate(pb, seeds, s, stop_on_first=False)
+        Ls, _, more = _it.iterate(pb, seeds, s, stop_on_first=False)
         iters, count = iters + more, count + len(seeds)
         branches = [_candidate(robot, pb, x, boxes) for x in Ls]
         reached = [c for c in branches if c.error <= s.tolerance]
@@ -204,14 +205,14 @@ def solve_clear(robot: ExtensibleArm, target: Array, free: _ik.TipIKResult,
     return _result(robot, pb, best, s, clearance, iters, count, why)
 
 
-def _result(robot: ExtensibleArm, pb: _ik._Problem, cand: _Candidate, s: IKSettings,
-            clearance: float, iterations: int, starts: int, refusal: str) -> _ik.TipIKResult:
+def _result(robot: ExtensibleArm, pb: _it.Problem, cand: _Candidate, s: IKSettings,
+            clearance: float, iterations: int, starts: int, refusal: str) -> _it.TipIKResult:
     lengths = cand.L.reshape(pb.n, 3)
-    delta = _ik._deltas(pb, cand.L[None])[0]
+    delta = _it.deltas(pb, cand.L[None])[0]
     tip = _dk.tip_position(robot, delta)
     error = float(np.linalg.norm(pb.target - tip))
     clear = cand.clear.clear_of(clearance)
-    return _ik.TipIKResult(delta=delta, lengths=lengths, tip=tip, error=error,
+    return _it.TipIKResult(delta=delta, lengths=lengths, tip=tip, error=error,
                            iterations=iterations,
                            reachable=error <= s.tolerance and clear and not refusal,
                            starts=starts, clearance=cand.clear.distance,

@@ -9,20 +9,17 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from core.kinematics import delta as dk
-
-if TYPE_CHECKING:
-    from core.kinematics.delta_ik import _Problem
+from core.kinematics.delta_ik_iteration import Problem
 
 Array = npt.NDArray[np.float64]
 
 
-def arc_seed(pb: "_Problem", rel: Array, n_arc: int) -> Array:
+def arc_seed(pb: Problem, rel: Array, n_arc: int) -> Array:
     """Deltas (n_arc, 3) bending one constant-curvature arc from the origin through ``rel``."""
     x, y, z = rel
     r = math.hypot(x, y)
@@ -58,7 +55,7 @@ def halton(count: int, dim: int) -> Array:
     return out
 
 
-def seeds(pb: "_Problem", restart_seeds: int) -> Array:
+def seeds(pb: Problem, restart_seeds: int) -> Array:
     """Restart seeds as rack lengths (K, 3n)."""
     n = pb.n
     deltas = [arc_seed(pb, pb.target, n)]
