@@ -53,77 +53,77 @@ LAYERS = ("core", "hw_bridge", "console.web", "console.recording", "console.core
 
 #: Import circles (strongly connected modules, every import counted), each a sorted tuple.
 KNOWN_CIRCLES: frozenset[tuple[str, ...]] = frozenset({
-    ("console.access", "console.lease_limits"),
-    ("console.app", "console.grasp_session", "console.header", "console.panels.base",
-     "console.panels.jog", "console.panels.readout"),
-    ("console.arm_view", "console.delta_arm_view", "console.planar_arm_view"),
+    ("console.core.access", "console.core.lease_limits"),
+    ("console.app", "console.core.grasp_session", "console.header", "console.panels.common.base",
+     "console.panels.common.jog", "console.panels.common.readout"),
+    ("console.scene.arm_view", "console.scene.extensible_arm_view", "console.scene.soft_arm_view"),
     ("console.client_guard", "console.client_message_checks"),
-    ("console.hardware_setup", "console.services"),
-    ("console.panels.objects", "console.panels.obstacle_editor", "console.panels.planner",
-     "console.panels.waypoints"),
-    ("console.panels.target", "console.panels.target_worker"),
-    ("console.recording_mcap", "console.recording_reader"),
+    ("console.core.hardware_setup", "console.core.services"),
+    ("console.panels.soft_arm.objects", "console.panels.soft_arm.obstacle_editor", "console.panels.soft_arm.planner",
+     "console.panels.soft_arm.waypoints"),
+    ("console.panels.extensible.target", "console.panels.extensible.target_worker"),
+    ("console.recording.mcap_format", "console.recording.reader"),
 })
 
 #: (importer, imported) pairs that point up the layers of LAYERS. Today: panels (and the flat
-#: console/recording.py, already named like its layer) importing top-level console modules that
-#: have not yet moved into a lower sub-package (console.state, console.plan_view, ...) or that are
+#: console/recording/recorder.py, already named like its layer) importing top-level console modules that
+#: have not yet moved into a lower sub-package (console.core.state, console.scene.plan_view, ...) or that are
 #: the composition itself (console.app, console.header).
 KNOWN_BACK_ARROWS: frozenset[tuple[str, str]] = frozenset({
-    ("console.panels.base", "console.access"),
-    ("console.panels.base", "console.app"),
-    ("console.panels.base", "console.state"),
-    ("console.panels.control", "console.lab_feed"),
-    ("console.panels.control", "console.state"),
-    ("console.panels.control_execute", "console.table_scene"),
-    ("console.panels.control_row", "console.header"),
-    ("console.panels.control_row", "console.table_scene"),
-    ("console.panels.control_text", "console.header"),
-    ("console.panels.extensible_status", "console.header"),
-    ("console.panels.hardware", "console.header"),
-    ("console.panels.hardware", "console.lab_feed"),
-    ("console.panels.hardware", "console.state"),
-    ("console.panels.jog", "console.model"),
-    ("console.panels.jog", "console.state"),
-    ("console.panels.objects", "console.plan_view"),
-    ("console.panels.objects", "console.table_bin"),
-    ("console.panels.objects", "console.table_scene"),
-    ("console.panels.obstacle_editor", "console.plan_view"),
-    ("console.panels.obstacles_boxes", "console.plan_view"),
-    ("console.panels.path_scene", "console.delta_arm_view"),
-    ("console.panels.paths", "console.header"),
-    ("console.panels.paths", "console.lab_feed"),
-    ("console.panels.paths", "console.state"),
-    ("console.panels.planner", "console.grasp_session"),
-    ("console.panels.planner", "console.plan_view"),
-    ("console.panels.readout", "console.arm_view"),
-    ("console.panels.readout", "console.model"),
-    ("console.panels.readout", "console.state"),
-    ("console.panels.repeatability", "console.state"),
-    ("console.panels.session", "console.access"),
-    ("console.panels.session", "console.export"),
-    ("console.panels.session", "console.replay"),
-    ("console.panels.target", "console.state"),
-    ("console.panels.view", "console.arm_view"),
-    ("console.panels.view", "console.camera"),
-    ("console.panels.view", "console.carry_view"),
-    ("console.panels.view", "console.measure"),
-    ("console.panels.view", "console.plan_view"),
-    ("console.panels.view", "console.scene_clicks"),
-    ("console.panels.view", "console.table_bin"),
-    ("console.recording", "console.datadir"),
-    ("console.recording", "console.model"),
-    ("console.recording", "console.recording_mcap"),
-    ("console.recording", "console.recording_reader"),
-    ("console.recording", "console.state"),
+    ("console.panels.common.base", "console.core.access"),
+    ("console.panels.common.base", "console.app"),
+    ("console.panels.common.base", "console.core.state"),
+    ("console.panels.soft_arm.control", "console.recording.lab_feed"),
+    ("console.panels.soft_arm.control", "console.core.state"),
+    ("console.panels.soft_arm.control_execute", "console.core.table_scene"),
+    ("console.panels.soft_arm.control_row", "console.header"),
+    ("console.panels.soft_arm.control_row", "console.core.table_scene"),
+    ("console.panels.soft_arm.control_text", "console.header"),
+    ("console.panels.extensible.status", "console.header"),
+    ("console.panels.common.hardware", "console.header"),
+    ("console.panels.common.hardware", "console.recording.lab_feed"),
+    ("console.panels.common.hardware", "console.core.state"),
+    ("console.panels.common.jog", "console.core.model"),
+    ("console.panels.common.jog", "console.core.state"),
+    ("console.panels.soft_arm.objects", "console.scene.plan_view"),
+    ("console.panels.soft_arm.objects", "console.core.table_bin"),
+    ("console.panels.soft_arm.objects", "console.core.table_scene"),
+    ("console.panels.soft_arm.obstacle_editor", "console.scene.plan_view"),
+    ("console.panels.extensible.obstacles_boxes", "console.scene.plan_view"),
+    ("console.panels.extensible.path_scene", "console.scene.extensible_arm_view"),
+    ("console.panels.extensible.paths", "console.header"),
+    ("console.panels.extensible.paths", "console.recording.lab_feed"),
+    ("console.panels.extensible.paths", "console.core.state"),
+    ("console.panels.soft_arm.planner", "console.core.grasp_session"),
+    ("console.panels.soft_arm.planner", "console.scene.plan_view"),
+    ("console.panels.common.readout", "console.scene.arm_view"),
+    ("console.panels.common.readout", "console.core.model"),
+    ("console.panels.common.readout", "console.core.state"),
+    ("console.panels.extensible.repeatability", "console.core.state"),
+    ("console.panels.common.session", "console.core.access"),
+    ("console.panels.common.session", "console.playback.export"),
+    ("console.panels.common.session", "console.playback.replay"),
+    ("console.panels.extensible.target", "console.core.state"),
+    ("console.panels.common.view", "console.scene.arm_view"),
+    ("console.panels.common.view", "console.scene.camera"),
+    ("console.panels.common.view", "console.scene.carry_view"),
+    ("console.panels.common.view", "console.scene.measure"),
+    ("console.panels.common.view", "console.scene.plan_view"),
+    ("console.panels.common.view", "console.scene_clicks"),
+    ("console.panels.common.view", "console.core.table_bin"),
+    ("console.recording.recorder", "console.core.datadir"),
+    ("console.recording.recorder", "console.core.model"),
+    ("console.recording.recorder", "console.recording.mcap_format"),
+    ("console.recording.recorder", "console.recording.reader"),
+    ("console.recording.recorder", "console.core.state"),
 })
 
 #: (console module, private viser module) imports outside console/web/.
 KNOWN_PRIVATE_VISER: frozenset[tuple[str, str]] = frozenset({
     ("console.client_message_checks", "viser._messages"),
     ("console.guarded_receive", "viser.infra"),
-    ("console.replay", "viser._messages"),
-    ("console.stage", "viser._messages"),
+    ("console.playback.replay", "viser._messages"),
+    ("console.scene.stage", "viser._messages"),
     ("console.viser_fixes", "viser._messages"),
     ("console.viser_fixes", "viser.infra"),
     ("console.viser_windows", "viser.infra"),
@@ -131,27 +131,27 @@ KNOWN_PRIVATE_VISER: frozenset[tuple[str, str]] = frozenset({
 
 #: ``# type: ignore`` comments per file under console/ (a file not listed has none).
 KNOWN_TYPE_IGNORES: dict[str, int] = {
-    "console/access.py": 1,
-    "console/arm_view.py": 1,
+    "console/core/access.py": 1,
+    "console/scene/arm_view.py": 1,
     "console/client_message_checks.py": 1,
-    "console/delta_arm_view.py": 3,
-    "console/demo_motion.py": 2,
-    "console/foxglove_relay.py": 1,
-    "console/grasp_session.py": 1,
-    "console/gripper_mesh.py": 1,
+    "console/scene/extensible_arm_view.py": 3,
+    "console/core/demo_motion.py": 2,
+    "console/recording/foxglove_relay.py": 1,
+    "console/core/grasp_session.py": 1,
+    "console/scene/gripper_mesh.py": 1,
     "console/guarded_receive.py": 1,
-    "console/hold_to_run.py": 2,
-    "console/panels/base.py": 4,
-    "console/panels/obstacles_boxes.py": 1,
-    "console/panels/paths.py": 2,
-    "console/panels/repeatability.py": 1,
-    "console/panels/repeatability_view.py": 1,
-    "console/panels/session.py": 1,
-    "console/panels/target.py": 2,
-    "console/planar_arm_view.py": 3,
+    "console/core/hold_to_run.py": 2,
+    "console/panels/common/base.py": 4,
+    "console/panels/extensible/obstacles_boxes.py": 1,
+    "console/panels/extensible/paths.py": 2,
+    "console/panels/extensible/repeatability.py": 1,
+    "console/panels/extensible/repeatability_view.py": 1,
+    "console/panels/common/session.py": 1,
+    "console/panels/extensible/target.py": 2,
+    "console/scene/soft_arm_view.py": 3,
     "console/scene_clicks.py": 2,
-    "console/stage.py": 1,
-    "console/theme.py": 1,
+    "console/scene/stage.py": 1,
+    "console/scene/theme.py": 1,
     "console/viser_fixes.py": 1,
 }
 
@@ -445,7 +445,7 @@ def test_no_import_circles_beyond_the_known_ones():
 
 def test_layers_are_the_longest_matching_prefix():
     cases = {"core.robots": "core", "hw_bridge.loop": "hw_bridge", "console.web.guard":
-             "console.web", "console.recording": "console.recording", "console.panels.jog":
+             "console.web", "console.recording.recorder": "console.recording.recorder", "console.panels.common.jog":
              "console.panels", "console.panels.soft_arm.jog": "console.panels",
              "console.scene.arm_view": "console.scene", "console.app": "console",
              "console": "console"}
@@ -463,12 +463,12 @@ def test_the_layer_rule_catches_a_back_arrow(tmp_path):
         "hw_bridge/__init__.py": "",
         "hw_bridge/link.py": "from core.geometry import f\n",                    # down: fine
         "console/__init__.py": "",
-        "console/app.py": "from console.panels.jog import Jog\n",                # down: fine
+        "console/app.py": "from console.panels.common.jog import Jog\n",                # down: fine
         "console/scene/__init__.py": "",
         "console/scene/arm.py": ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
-                                 "    from console.panels.jog import Jog\n"),   # up: back
+                                 "    from console.panels.common.jog import Jog\n"),   # up: back
         "console/panels/__init__.py": "",
-        "console/panels/jog.py": ("from console.scene.arm import draw\n"        # down: fine
+        "console/panels/common/jog.py": ("from console.scene.arm import draw\n"        # down: fine
                                   "from console.panels import helpers\n"),      # same layer
         "console/panels/helpers.py": "import console.app\n",                     # up: back
     }
@@ -477,7 +477,7 @@ def test_the_layer_rule_catches_a_back_arrow(tmp_path):
         (tmp_path / rel).write_text(text)
     graph = import_graph(modules("core", "hw_bridge", "console", root=tmp_path))
     assert back_arrows(graph) == {("core.geometry", "hw_bridge.link"),
-                                  ("console.scene.arm", "console.panels.jog"),
+                                  ("console.scene.arm", "console.panels.common.jog"),
                                   ("console.panels.helpers", "console.app")}
 
 
