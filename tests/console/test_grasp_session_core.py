@@ -51,6 +51,24 @@ def test_the_grasp_session_imports_no_viser_and_no_view():
     assert out.stdout.strip() == ""
 
 
+def test_the_console_core_imports_no_viser_and_nothing_above_it():
+    """Every import in console/core/ (module level, in functions, under TYPE_CHECKING): no
+    viser, and from console only console.core (no scene, panels, recording, app)."""
+    import ast
+
+    bad = []
+    for path in sorted((REPO / "console" / "core").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
+                     else [])
+            for name in names:
+                root = name.split(".")[0]
+                if root == "viser" or (root == "console" and not name.startswith("console.core")):
+                    bad.append(f"{path.relative_to(REPO)}:{node.lineno} imports {name}")
+    assert not bad, "\n".join(bad)
+
+
 def test_a_session_without_a_server_plans_an_object_like_the_planner():
     s, told, logged = headless_session()
     try:

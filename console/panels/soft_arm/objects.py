@@ -259,7 +259,7 @@ class ObjectsPanel(Panel):
         text = (f"{count} object{'s' if count != 1 else ''} on the table"
                 + (f"; selected: <b>{html.escape(view.selected)}</b>{where}" if view.selected
                    else ""))
-        table_bin = getattr(view, "bin", None)
+        table_bin = view.bin
         text += f"; {table_bin.describe()}" if table_bin is not None else "; no bin"
         sel = html.escape(view.selected or "", quote=True)
         where_bin = "" if table_bin is None else f"{mm(table_bin.x):.0f},{mm(table_bin.y):.0f}"
