@@ -156,7 +156,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     from console.panels.soft_arm.control import ControlPanel
     from console.panels.extensible.panel_set import EXTENSIBLE_PANELS
     from console.panels.common.hardware import HardwarePanel
-    from console.panels.soft_arm.planner import grasp_panels
+    from console.panels.soft_arm.panel_set import grasp_panels
     from console.panels.common.session import SessionPanel
     from console.panels.soft_arm.trials import TrialsPanel
     from console.panels.common.view import ViewPanel

@@ -43,7 +43,7 @@ import logging
 import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Sequence, TypeVar
+from typing import Any, Callable, Sequence, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -53,6 +53,7 @@ from console.core.access import AccessControl, NotOperator, Operator
 from console.scene.arm_view import ArmView, make_arm_view
 from console.client_guard import ClientGuard
 from console.core.datadir import DataDir
+from console.core.grasp_session import GraspSession
 from console.guarded_receive import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.core.hold_to_run import HoldToRun
@@ -61,16 +62,15 @@ from console.core.model import ArmModel, model_for
 from console.panels.common.base import Panel
 from console.panels.common.jog import JogPanel
 from console.panels.common.readout import ReadoutPanel
+from console.recording.lab_feed import feed_grasp
 from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
+from console.scene.grasp_layers import GraspSceneView
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
 from console.tabs import ConsoleTabs
 from console.viser_fixes import install as _install_viser_fixes
-from core.robots import Robot
-
-if TYPE_CHECKING:
-    from console.core.grasp_session import GraspSession
+from core.robots import Robot, SoftArm
 
 _install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
 _install_client_guard()  # every browser message is checked before viser stores it (the module)
@@ -101,6 +101,9 @@ class ConsoleApp:
             default has none, and panels that need one say so).
         store: The console's state store, when a service built before the app needs it (it
             then carries ``initial`` and ``mirror_commands`` itself).
+        grasp: For a soft arm, make the grasp session (``grasp_session``: the table's objects,
+            obstacles, bin and plans, headless) and its 3D layers (``grasp_scene``), whatever
+            panels are built; False for a scene that shows a recorded table instead (export).
     """
 
     def __init__(self, robot: Robot, server: viser.ViserServer, *,
@@ -109,7 +112,7 @@ class ConsoleApp:
                  status: str = "Kinematic simulation (no hardware connected)",
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
                  data_dir: str | Path | None = None, services: ConsoleServices | None = None,
-                 store: StateStore | None = None) -> None:
+                 store: StateStore | None = None, grasp: bool = True) -> None:
         if render_hz <= 0:
             raise ValueError(f"render_hz must be > 0, got {render_hz}")
         self.robot = robot
@@ -120,7 +123,8 @@ class ConsoleApp:
         self.store = store if store is not None else StateStore(self.model, initial,
                                                                  mirror_commands=mirror_commands)
         self.services = services if services is not None else ConsoleServices()
-        self.grasp_session: GraspSession | None = None  # made by the first grasp panel
+        self.grasp_session: GraspSession | None = None  # the soft arm's table and plan
+        self.grasp_scene: GraspSceneView | None = None  # and its 3D layers
         self.render_period = 1.0 / render_hz
         self.frames_drawn = 0
         self.last_drawn_seq = -1
@@ -157,6 +161,13 @@ class ConsoleApp:
         self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
         add_lights(server.scene, self.theme)
         self.view: ArmView = make_arm_view(server.scene, self.model)
+        if grasp and isinstance(robot, SoftArm):  # the table, its objects and plans
+            self.grasp_session = GraspSession(
+                robot, self._table_extent(), kappa=lambda: self.store.display.q,
+                feed=lambda view, changed: feed_grasp(self.recorder, view, changed),
+                cache_dirs=(self.data_root / "cache",))
+            self.grasp_scene = GraspSceneView(server, robot, self.grasp_session)
+            self.grasp_session.start()
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         for panel_cls in DEFAULT_PANELS if panels is None else panels:
             self.add_panel(panel_cls)
@@ -179,6 +190,19 @@ class ConsoleApp:
                 if isinstance(p, panel_cls):
                     return p
         raise KeyError(f"no {panel_cls.__name__} in this console")
+
+    def soft_arm_grasp(self) -> GraspSession:
+        """The grasp session, for panels that exist on the soft arm only (RuntimeError on an
+        arm without one)."""
+        if self.grasp_session is None:
+            raise RuntimeError(f"{self.robot.name} is not a soft arm: it has no grasp session")
+        return self.grasp_session
+
+    def soft_arm_grasp_scene(self) -> GraspSceneView:
+        """The grasp session's 3D layers (RuntimeError on an arm without a grasp session)."""
+        if self.grasp_scene is None:
+            raise RuntimeError(f"{self.robot.name} is not a soft arm: it has no grasp layers")
+        return self.grasp_scene
 
     @property
     def panels(self) -> tuple[Panel, ...]:
@@ -288,6 +312,8 @@ class ConsoleApp:
         self.lease.stop(timeout)
         self.hold.stop(timeout)
         self.recorder.stop()
+        if self.grasp_session is not None:
+            self.grasp_session.close()
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None

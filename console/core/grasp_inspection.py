@@ -3,13 +3,12 @@ and show or clear the trail of those passed.
 
 A mixin of :class:`console.core.grasp_session.GraspSession` (same lock and worker rules: every method
 takes the session's lock, changes the inspection state and marks ``inspect`` dirty; the session's
-worker steps playback and redraws).
+worker steps playback on the session's clock and tells the views).
 """
 
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -25,6 +24,7 @@ class WaypointInspection:
     _playing: bool
     _speed: float
     _next_tick: float
+    _clock: Callable[[], float]
     _outcome: object
     _n: Callable[[], int]
     _changed: Callable[..., None]
@@ -46,7 +46,7 @@ class WaypointInspection:
             if playing and self._index >= self._n() - 1:
                 self._index = self._trail_from = 0
             self._playing = bool(playing) and self._n() > 1
-            self._next_tick = time.perf_counter() + 1.0 / self._speed
+            self._next_tick = self._clock() + 1.0 / self._speed
             self._changed("inspect")
 
     def set_trail(self, trail: bool) -> None:

@@ -1,18 +1,24 @@
-"""The grasp session: the table objects, planner settings, newest plan and waypoint inspection that
-the Objects, Grasp planner and Waypoints panels share (one per console, ``session_for(app)``).
+"""The grasp session: the table (objects, obstacles, bin), the planner settings, the newest plan and
+its waypoint inspection, kept headless so the console's core owns them and views only render them.
 
-The table also holds obstacles (``core.planning.obstacles.Obstacle``): every plan keeps the arm
-and gripper ``clearance`` (m) from them (drawn by :class:`console.scene.obstacle_view.ObstacleLayer`).
+One per soft-arm console (``ConsoleApp.grasp_session``, made with the console whatever panels it
+has); it knows no viser and no app: it is built from the robot, the table rectangle
+(:func:`console.core.table_area.table_extent`), where the arm is now (``kappa``, for the start
+of a plan), an optional ``feed`` (recordings: :func:`console.recording.lab_feed.feed_grasp`) and
+a clock. Plans keep the arm and gripper ``clearance`` (m) from the obstacles
+(``core.planning.obstacles.Obstacle``).
 
-Callbacks only call :class:`GraspSession` methods, which take a lock, record the request and
-wake one worker thread. The worker plans the newest request with
-:class:`core.planning.sides.SidedPlanner` (while an object is dragged at most ``LIVE_HZ`` plans a
-second, on the newest position only; a final plan with obstacles and a bin also gets its carry
-to the bin, :mod:`console.scene.carry_view`; from 0.5 s on the panels show "Planning… (n s)",
-:mod:`console.core.planning_clock`), steps waypoint playback, redraws the grasp layer
-(:class:`console.scene.plan_view.PlanScene`, of which it is the only writer) and then tells the panels,
-which refresh their widgets. Who may change it is decided by the panels (operator-only
-callbacks); the session itself trusts its callers.
+Threading: callers (GUI callbacks, tests) only call :class:`GraspSession` methods, which take a
+lock, record the request and wake one worker thread (started by :meth:`GraspSession.start`). The
+worker plans the newest request with :class:`core.planning.sides.SidedPlanner` (while an object
+is dragged at most ``LIVE_HZ`` plans a second, on the newest position only; a final plan with
+obstacles and a bin also gets its carry to the bin, :mod:`console.core.grasp_carry`; from 0.5 s
+on listeners are told "planning for n s", :mod:`console.core.planning_clock`), steps waypoint
+playback, and then tells every listener (:meth:`GraspSession.add_listener`) the new snapshot and
+which parts changed (:mod:`console.core.grasp_state`): the 3D layers
+(:class:`console.scene.grasp_layers.GraspSceneView`, subscribed first) redraw, the panels
+refresh their widgets, then ``feed`` records. Who may change it is decided by the panels
+(operator-only callbacks); the session itself trusts its callers.
 """
 
 from __future__ import annotations
@@ -21,53 +27,70 @@ import dataclasses
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
-import viser
+import numpy.typing as npt
 
-from console.core.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
+from console.core.grasp_carry import plan_carry
 from console.core.grasp_inspection import WaypointInspection
-from console.recording.lab_feed import feed_grasp
-from console.scene.carry_view import CarryLayer, plan_carry
-from console.scene.obstacle_view import ObstacleLayer
-from console.scene.plan_view import LIVE_HZ, Outcome, PlanScene, SessionView
+from console.core.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
+from console.core.grasp_state import LIVE_HZ, GraspListener, Outcome, SessionView
 from console.core.planning_clock import PlanningClock
-from console.core.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome, ReachRequest,
-                               start_reach_map)
-from console.core.table_bin import BinView, TableBin
+from console.core.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome,
+                                    ReachRequest, start_reach_map)
+from console.core.table_area import Extent
+from console.core.table_bin import TableBin
 from console.core.table_scene import TableObject, disk_overlap, validate_object
 from core.planning.feasibility import GraspRefused
 from core.planning.obstacles import Obstacle
 from core.planning.reachability import ReachMap
 from core.planning.sides import SidedPlanner
-
-if TYPE_CHECKING:
-    from console.app import ConsoleApp
+from core.robots import SoftArm
 
 log = logging.getLogger(__name__)
 
+PLANNING = frozenset({"planning"})  # what a planning-clock report changes
+
+GraspFeed = Callable[[SessionView, frozenset[str]], None]
+
 
 class GraspSession(ObstacleEdits, WaypointInspection):
-    """Shared grasp state of one console; see the module docstring for the threading rules."""
+    """Shared grasp state of one soft-arm console; see the module docstring for the threads.
+
+    Args:
+        robot: The soft arm.
+        table_extent: The table rectangle (x0, x1, y0, y1), m: the reachability map covers it.
+        kappa: Where the arm is now (its curvatures): the start of every plan.
+        feed: Called after the listeners with the snapshot and the parts that changed (the
+            recorder's :func:`console.recording.lab_feed.feed_grasp`); None records nothing.
+        cache_dirs: Folders for reachability maps, searched before the shipped cache (the first
+            is where a computed map is saved).
+        clock: Monotonic seconds, for live re-plan pacing and waypoint playback.
+        compute_reach: Whether to get the reachability map (None: :attr:`compute_reach`).
+    """
 
     compute_reach = True    # tests switch the (CPU-heavy) reachability map off
     reach_step = REACH_STEP  # cell size of the map (tests use a coarse one)
 
-    def __init__(self, app) -> None:
-        self.app = app
-        robot = app.robot
+    def __init__(self, robot: SoftArm, table_extent: Extent, *,
+                 kappa: Callable[[], npt.ArrayLike],
+                 feed: GraspFeed | None = None, cache_dirs: Sequence[Path | str] = (),
+                 clock: Callable[[], float] = time.perf_counter,
+                 compute_reach: bool | None = None) -> None:
         self.robot = robot
         self.planner = SidedPlanner(robot)  # the side the object lies on (core.planning.sides)
-        self.scene = PlanScene(app.server, robot)
-        self.carry_layer = CarryLayer(app.server, robot)  # a final plan's carry to the bin
-        self.bin_view = BinView(app.server.scene)
-        self._bin: TableBin | None = None  # where "Clear table into bin" takes the objects
-        self.obstacle_layer = ObstacleLayer(app.server)
+        x0, x1, y0, y1 = (float(v) for v in table_extent)
+        self.table_extent: Extent = (x0, x1, y0, y1)
+        self._kappa = kappa
+        self._feed = feed
+        self._cache_dirs = tuple(Path(d) for d in cache_dirs)
+        self._clock = clock
+        self._with_reach = self.compute_reach if compute_reach is None else bool(compute_reach)
         self.default_radius = robot.capture.nominal_object_radius
         self._cond = threading.Condition()
+        self._bin: TableBin | None = None  # where "Clear table into bin" takes the objects
         self._objects = [TableObject("Object 1", -0.20, 0.20, self.default_radius)]
         self._selected: str | None = "Object 1"
         self._count = 1
@@ -84,20 +107,26 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         self._index, self._playing, self._speed, self._trail = 0, False, 2.0, True
         self._trail_from = 0    # "Clear trails": no trail before this waypoint (until re-planned)
         self._dirty = {"objects", "obstacles", "reach"}
-        self._reach: ReachMap | str | None = "computing"
+        self._reach: ReachMap | str | None = "computing" if self._with_reach else "off"
         self._reach_note = ""
-        self.table_extent = _table_extent(app)
-        self._listeners: list[Callable[[SessionView], None]] = []
+        self._listeners: list[GraspListener] = []
         self._stop = False
         self._next_tick = 0.0
-        self.gizmo_handler: Callable[[str, viser.TransformControlsEvent], None] | None = None
-        if not self.compute_reach:
-            self._reach = "off"
-        self.clock = PlanningClock(self._tell_planning)  # "Planning… (n s)" from 0.5 s on
-        self._thread = threading.Thread(target=self._run, name="grasp-session", daemon=True)
+        self.planning_clock: PlanningClock | None = None   # "planning for n s" from 0.5 s on
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> GraspSession:
+        """Start the worker (it plans the first object at once) and ask for the reachability
+        map; subscribe the views first so they are told from the first change on."""
+        with self._cond:
+            if self._thread is not None:
+                return self
+            self.planning_clock = PlanningClock(self._tell_planning)
+            self._thread = threading.Thread(target=self._run, name="grasp-session", daemon=True)
         self._thread.start()
-        if self.compute_reach:
+        if self._with_reach:
             self._start_reach()
+        return self
 
     # -- thread-safe requests (GUI callbacks) ------------------------------------------------
     def view(self) -> SessionView:
@@ -106,9 +135,11 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                                self._playing, self._speed, self._trail, self._reach,
                                self._reach_note, self._trail_from, self._bin,
                                tuple(self._obstacles), self._obstacle_selected,
-                               self.clearance)
+                               self.clearance, show_reach=self.show_reach)
 
-    def add_listener(self, fn: Callable[[SessionView], None]) -> None:
+    def add_listener(self, fn: GraspListener) -> None:
+        """Call ``fn(view, changed)`` on the worker thread after every change (the snapshot
+        and the parts that changed, :mod:`console.core.grasp_state`), in the order added."""
         with self._cond:
             self._listeners.append(fn)
 
@@ -202,10 +233,19 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 self._changed("reach")
 
     def close(self) -> None:
+        """End the worker (it tells nobody anything after its current step); idempotent."""
         with self._cond:
             self._stop = True
             self._cond.notify_all()
-        self.clock.close()
+            planning = self.planning_clock
+        if planning is not None:
+            planning.close()
+
+    def join(self, timeout: float | None = None) -> None:
+        """Wait for the worker to end after :meth:`close` (no drawing after this)."""
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
 
     def _find(self, name: str) -> int:
         for i, o in enumerate(self._objects):
@@ -222,9 +262,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         x0, x1, y0, y1 = self.table_extent
         request = ReachRequest(self.robot.source, self.default_radius, (x0, x1), (y0, y1),
                                self.reach_step)
-        data_root = getattr(self.app, "data_root", None)
-        folders = ([Path(data_root) / "cache"] if data_root is not None else []) + [
-            SHIPPED_CACHE]
+        folders = [*self._cache_dirs, SHIPPED_CACHE]
         start_reach_map(request, ReachCache(*folders), self._on_reach, self._on_reach_progress)
 
     def _on_reach_progress(self, fraction: float) -> None:
@@ -243,18 +281,9 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             self._reach_note = result.note()
             self._changed("reach")
 
-    def on_gizmo(self, name: str, event: viser.TransformControlsEvent) -> None:
-        """An object's gizmo moved: the Objects panel's operator-only ``gizmo_handler`` acts on
-        it; without one, a browser's drag is put back."""
-        handler = self.gizmo_handler
-        if handler is not None:
-            handler(name, event)
-        elif event.client is not None:
-            self.redraw_objects()
-
     def drag(self, name: str, x: float, y: float, *, live: bool) -> None:
         """``name`` dragged to (x, y): selected, re-planned live while dragging and finally on
-        release; a position the object may not have snaps back."""
+        release; a position the object may not have snaps back (views are told ``objects``)."""
         with self._cond:
             if name != self._selected:
                 self._selected = name
@@ -270,13 +299,15 @@ class GraspSession(ObstacleEdits, WaypointInspection):
 
     # -- worker ------------------------------------------------------------------------------
     def _run(self) -> None:
-        last_live = 0.0
+        planning = self.planning_clock
+        assert planning is not None  # made by start() before this thread
+        last_live = -float("inf")
         while True:
             with self._cond:
                 while True:
                     if self._stop:
                         return
-                    now = time.perf_counter()
+                    now = self._clock()
                     tick = self._playing and now >= self._next_tick
                     wait_live = (self._request is True and now - last_live < 1.0 / LIVE_HZ)
                     if (self._request is not None and not wait_live) or self._dirty or tick:
@@ -302,15 +333,15 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                             None if request else self._bin)  # live plans skip the carry
             if request is not None:
                 if dirty:   # what changed on the table is drawn before the plan for it runs
-                    self._draw(dirty)
+                    self._publish(dirty)
                     dirty = set()
                 if request:
-                    last_live = time.perf_counter()
-                self.clock.start()
+                    last_live = self._clock()
+                planning.start()
                 try:
                     outcome = self._plan(objects, selected, settings)
                 finally:
-                    self.clock.stop()
+                    planning.stop()
                 with self._cond:
                     self._outcome = outcome
                     n = self._n()
@@ -319,15 +350,17 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                     if not request:
                         self._playing = False
                 dirty.add("plan")
-            self._draw(dirty)
+            if dirty:
+                self._publish(dirty)
 
-    def _plan(self, objects, selected, settings) -> Outcome:
+    def _plan(self, objects: list[TableObject], selected: str | None,
+              settings: tuple) -> Outcome:
         seq = (self._outcome.seq + 1) if self._outcome else 1
         obj = next((o for o in objects if o.name == selected), None)
         if obj is None:
             return Outcome(None, None, "No object selected: click on the table to place one.",
                            seq)
-        kappa = np.asarray(self.app.store.display.q, dtype=float)
+        kappa = np.asarray(self._kappa(), dtype=float)
         try:
             plan = self.planner.plan(kappa, (obj.x, obj.y), obj.r, delta_d=settings[0],
                                      weights=settings[1], obstacles=settings[2],
@@ -342,56 +375,26 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         return Outcome(obj, plan, None, seq, note)
 
     def _tell_planning(self, seconds: float) -> None:
-        """The planning clock's thread: the panels show that a plan has run ``seconds``."""
+        """The planning clock's thread: listeners show that a plan has run ``seconds``."""
         view = dataclasses.replace(self.view(), planning_s=seconds)
         with self._cond:
             listeners = list(self._listeners)
         for fn in listeners:
-            fn(view)
+            fn(view, PLANNING)
 
-    def _draw(self, dirty: set[str]) -> None:
-        view = self.view()
-        try:
-            with self.app.server.atomic():
-                if "bin" in dirty:
-                    self.bin_view.draw(view.bin)
-                if "objects" in dirty:
-                    self.scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
-                if "obstacles" in dirty:
-                    self.obstacle_layer.sync(view.obstacles, view.obstacle_selected,
-                                             view.clearance)
-                if dirty & {"plan", "inspect"}:
-                    plan = view.outcome.plan if view.outcome else None
-                    self.scene.draw_plan(plan, view.index, view.trail, view.trail_from)
-                    if "plan" in dirty:
-                        self.carry_layer.draw(plan)
-                if "reach" in dirty and isinstance(view.reach, ReachMap):
-                    self.scene.draw_reach(view.reach, self.show_reach, self.table_extent)
-        except Exception:  # a drawing error must not kill the worker
-            log.exception("grasp scene update failed")
+    def _publish(self, dirty: set[str]) -> None:
+        """Tell every listener (views first: they subscribed first) and then ``feed`` what
+        changed; one that raises is logged and the others are still told."""
+        view, changed = self.view(), frozenset(dirty)
         with self._cond:
             listeners = list(self._listeners)
         for fn in listeners:
             try:
-                fn(view)
+                fn(view, changed)
+            except Exception:  # a view's error must not kill the worker
+                log.exception("grasp session listener %r failed", fn)
+        if self._feed is not None:
+            try:
+                self._feed(view, changed)   # objects and plans into recordings and the bridge
             except Exception:
-                log.exception("grasp panel refresh failed")
-        # objects and plans into recordings and the live bridge
-        feed_grasp(self.app.recorder, view, dirty)
-
-
-def _table_extent(app) -> tuple[float, float, float, float]:
-    """The table rectangle (x0, x1, y0, y1) the console draws (``ConsoleApp._table_extent``),
-    which the reachability map covers and its shading is clipped to."""
-    extent = getattr(app, "_table_extent", None)
-    if callable(extent):
-        return tuple(float(v) for v in extent())  # type: ignore[return-value]
-    return (-0.5, 0.5, -0.26, 0.5)
-
-
-def session_for(app: ConsoleApp) -> GraspSession:
-    """The app's grasp session (``app.grasp_session``), created by the first grasp panel that
-    asks for it: it belongs to the console's GUI (scene, store), so it is not a service."""
-    if app.grasp_session is None:
-        app.grasp_session = GraspSession(app)
-    return app.grasp_session
+                log.exception("grasp session feed failed")

@@ -6,7 +6,8 @@ able to hold an object over it, so :func:`locate_bin` turns the point into the c
 second of work, so :class:`BinLocator` runs it on a thread of its own and keeps only the newest
 click's answer). The grasp session keeps the :class:`TableBin` (shared by every browser, saved
 in the scene JSON under an optional ``"bin"`` key and in recordings with the objects);
-:class:`BinView` draws it: an open box on the table in its own colour, labelled "Bin".
+:class:`console.scene.bin_view.BinView` draws it: an open box on the table in its own colour,
+labelled "Bin" (:func:`open_box_mesh`).
 """
 
 from __future__ import annotations
@@ -173,37 +174,3 @@ def _cuboid(cx: float, cy: float, hx: float, hy: float, h: float) -> tuple[Array
     f = np.array([[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
                   [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]])
     return v, f
-
-
-class BinView:
-    """The bin in the 3D scene: an open box (``BIN_COLOR``) with a "Bin" label, or nothing."""
-
-    def __init__(self, scene: Any) -> None:
-        self.scene = scene
-        self.shown: TableBin | None = None
-        self.box: Any = None
-        self._half = 0.0
-        self.label = scene.add_label("/row/bin/label", "Bin", position=(0.0, 0.0, 0.0),
-                                     visible=False, anchor="bottom-center")
-
-    def draw(self, table_bin: TableBin | None) -> None:
-        """Show ``table_bin`` (None hides the bin); does nothing when it did not change."""
-        if table_bin == self.shown:
-            return
-        self.shown = table_bin
-        if table_bin is None:
-            if self.box is not None:
-                self.box.visible = False
-            self.label.visible = False
-            return
-        if self.box is None or self._half != table_bin.drop_radius:
-            if self.box is not None:
-                self.box.remove()
-            self._half = table_bin.drop_radius
-            v, f = open_box_mesh(table_bin.drop_radius)
-            self.box = self.scene.add_mesh_simple("/row/bin/box", v, f, color=BIN_COLOR,
-                                                  side="double", cast_shadow=False)
-        self.box.position = (table_bin.x, table_bin.y, 0.0)
-        self.box.visible = True
-        self.label.position = (table_bin.x, table_bin.y, BIN_HEIGHT + 0.01)
-        self.label.visible = True

@@ -119,7 +119,7 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         app = ConsoleApp(robot, server, panels=(), status=f"Recording {rec.name}",
-                         initial=rec.qs[0])
+                         initial=rec.qs[0], grasp=False)  # the recorded table, not a live one
         # A file plays back without a server: keep it to plain meshes (no bone messages).
         app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
         serializer = server.get_scene_serializer()

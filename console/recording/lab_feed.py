@@ -8,8 +8,8 @@ operator actions; these feeds add the rest, called from the threads that already
   records it.
 * :class:`LinkFeed` -- link health (on change, else once a second); the Hardware panel's
   refresh (both robots) feeds it.
-* :func:`feed_grasp` -- the grasp session's worker after it redrew: objects (with the obstacles
-  and the clearance plans keep from them) and the newest plan
+* :func:`feed_grasp` -- the grasp session's worker after its views redrew: objects (with the
+  obstacles and the clearance plans keep from them) and the newest plan
   (approach circles and waypoints) or the planner's refusal; :func:`path_plan_record` -- the
   Paths panel's planned tip path (extensible arm).
 """

@@ -1,7 +1,8 @@
 """The carry to the bin in the plan view, so the operator sees where the held object will go.
 
 With obstacles and a bin on the table, a final plan (Plan grasp, a release after a drag) also
-gets its certified carry (:func:`plan_carry`, :func:`core.control.carry.with_carry`: via shapes
+gets its certified carry (:func:`console.core.grasp_carry.plan_carry`,
+:func:`core.control.carry.with_carry`: via shapes
 from the grasp pose to the bin pose that keep the arm, gripper and held object clear). Live
 plans while dragging skip it (up to :data:`core.control.carry.CARRY_BUDGET_S` of search).
 
@@ -21,7 +22,7 @@ import numpy.typing as npt
 
 from console.scene.line_nodes import FixedLines
 from console.scene.plan_view import Z_PLAN, ghost_segments
-from core.control.carry import plan_side, with_carry
+from core.control.carry import plan_side
 from core.kinematics import planar as pk
 
 Array = npt.NDArray[np.float64]
@@ -29,32 +30,6 @@ CARRY_COLOR = (0, 135, 145)          # teal: where the object goes, like the bin
 CARRY_GHOST_COLOR = (95, 180, 180)   # lighter and thin: the arm at each carry target
 Z_CARRY = Z_PLAN + 0.002             # over the approach's ghost arms where they cross
 PATH_SAMPLES = 12                    # palm points per certified line of the carry
-
-
-class _CarryRequest:
-    """What :func:`core.control.carry.with_carry` reads of a ``PlanRequest``."""
-
-    def __init__(self, center, radius, obstacles, clearance, table_bin) -> None:
-        self.center = np.asarray(center, float)
-        self.radius = float(radius)
-        self.obstacles = tuple(obstacles)
-        self.clearance = float(clearance)
-        self.bin = table_bin.params()
-
-
-def plan_carry(robot: Any, plan: Any, obj: Any, table_bin: Any, obstacles: Any,
-               clearance: float) -> tuple[Any, str | None]:
-    """``plan`` with its carry to ``table_bin`` around ``obstacles`` for the object ``obj``
-    (``TableObject``), and None; or ``plan`` unchanged and why there is no carry (the grasp
-    itself stays valid). No obstacles, no bin or a failed plan: ``(plan, None)``."""
-    if not obstacles or table_bin is None or plan is None or not plan.success:
-        return plan, None
-    from core.planning.feasibility import GraspRefused
-    try:
-        return with_carry(robot, plan, _CarryRequest((obj.x, obj.y), obj.r, obstacles,
-                                                     clearance, table_bin)), None
-    except GraspRefused as exc:
-        return plan, str(exc)
 
 
 def palm_points(robot: Any, plan: Any, kappas: npt.ArrayLike) -> Array:
@@ -88,8 +63,8 @@ def carry_geometry(robot: Any, plan: Any) -> dict[str, Array] | None:
 
 
 class CarryLayer:
-    """The carry's scene nodes (``/grasp/plan/carry_*``); only the grasp session's worker
-    draws into it."""
+    """The carry's scene nodes (``/grasp/plan/carry_*``); only the grasp layers
+    (:class:`console.scene.grasp_layers.GraspSceneView`) draw into it."""
 
     def __init__(self, server: Any, robot: Any) -> None:
         self.robot = robot

@@ -4,7 +4,7 @@ An obstacle is a dark grey cylinder, taller than the objects, with red hatching 
 a red ring on the table at its radius plus the planner's clearance (where no arm point may
 go); the selected obstacle's ring is thicker. The geometry is pure (:func:`hatch_segments`,
 :func:`obstacle_geometry`) and tested without a server; :class:`ObstacleLayer` owns the scene
-nodes and is drawn by the grasp session's worker only (like ``console.scene.plan_view.PlanScene``).
+nodes and is drawn by the grasp layers only (``console.scene.grasp_layers``, like ``PlanScene``).
 """
 
 from __future__ import annotations

@@ -5,10 +5,10 @@ approach circles (green; a failed radius red; labelled with their radii), ghost 
 waypoints (the inspected one highlighted, a fading trail of the last few passed), numbered palm
 points, the gripper's capture region at the final
 waypoint and the reachability shading. Each line or point node has one colour, or a fixed size
-(:class:`console.scene.line_nodes.FixedLines`), so a browser never holds a node's points and colours
-at different lengths (drawn as white lines). Exactly one thread may draw into it: the grasp session's
-worker (``console.panels.soft_arm.planner.GraspSession``). The shading (where a grasp can be planned from
-the straight arm, :mod:`core.planning.reachability`) comes from a disk cache or a low-priority
+(:class:`console.scene.line_nodes.FixedLines`), so a browser never holds a node's points and
+colours at different lengths (drawn as white lines). Exactly one thread may draw into it: the
+grasp layers (:class:`console.scene.grasp_layers.GraspSceneView`), told by the grasp session's
+worker. The shading (where a grasp can be planned from the straight arm, :mod:`core.planning.reachability`) comes from a disk cache or a low-priority
 child process (:func:`console.core.reach_job.start_reach_map`), so it never holds the GUI's threads
 or the GIL; it is drawn smooth and clipped to the table (:mod:`console.scene.reach_shading`).
 
@@ -16,31 +16,29 @@ Geometry comes from pure functions (``plan_geometry``, ``ghost_segments``, ``obj
 ``reach_mesh``, ``ray_to_table``: :mod:`console.scene.plan_geometry`, re-exported here), tested
 without a server. The table objects themselves, their
 checks and scene JSON are :mod:`console.core.table_scene` (obstacles are drawn by
-:mod:`console.scene.obstacle_view`). :class:`Outcome` / :class:`SessionView` / :func:`outcome_html`
-are what the panels show.
+:mod:`console.scene.obstacle_view`). :func:`outcome_html` / :func:`planning_html` are what the
+planner panel shows of the session's :class:`console.core.grasp_state.Outcome`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import html
 from typing import Any, Callable
 
 import numpy as np
 
+from console.core.grasp_state import Outcome
+from console.core.table_scene import TableObject
 from console.scene.line_nodes import FixedLines
 from console.scene.plan_geometry import (  # noqa: F401 (re-exported: the plan layer's pure pieces)
     CIRCLE_COLOR, FAIL_COLOR, GHOST_COLOR, LABEL_GAP, TABLE_TINT, TRAIL_FADE, TRAIL_WAYPOINTS,
     Z_PLAN, Array, circle_segments, disk_mesh, ghost_segments, object_mesh, plan_geometry,
     plan_labels, ray_to_table, reach_mesh, trail_colors, trail_mask)
-from core.planning.obstacles import Obstacle
 from core.planning.plan_types import GraspPlan
 from console.scene.reach_shading import shading_meshes
-from console.core.table_scene import TableObject
 from core.planning.reachability import FAILS, PLANNABLE, ReachMap
 from core.units import fmt_mm
 
-LIVE_HZ = 20.0
 CIRCLE_SEL_COLOR, GHOST_SEL_COLOR = (10, 230, 60), (245, 120, 20)
 PALM_COLOR, CAPTURE_COLOR = (200, 40, 60), (70, 140, 235)
 OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
@@ -200,38 +198,6 @@ class PlanScene:
             if np.hypot(gizmo.position[0] - o.x, gizmo.position[1] - o.y) > 1e-9:
                 gizmo.position = (o.x, o.y, 0.0)
             body.color = color
-
-
-@dataclasses.dataclass(frozen=True)
-class Outcome:
-    """Result of the newest planning request: a plan, or the refusal in words."""
-
-    obj: TableObject | None
-    plan: GraspPlan | None
-    refusal: str | None
-    seq: int
-    carry_note: str | None = None   # why the plan has no carry to the bin (console.scene.carry_view)
-
-
-@dataclasses.dataclass(frozen=True)
-class SessionView:
-    """Consistent snapshot of a session for the panels."""
-
-    objects: tuple[TableObject, ...]
-    selected: str | None
-    outcome: Outcome | None
-    index: int
-    playing: bool
-    speed: float
-    trail: bool
-    reach: ReachMap | str | None
-    reach_note: str = ""
-    trail_from: int = 0     # the trail shows no waypoint before this one ("Clear trails")
-    bin: Any = None         # console.core.table_bin.TableBin: where a row takes the objects, or None
-    obstacles: tuple[Obstacle, ...] = ()
-    obstacle_selected: str | None = None
-    clearance: float = 0.0  # m, the planner keeps the arm this far from every obstacle
-    planning_s: float | None = None  # s the running plan has taken so far (None: idle)
 
 
 def _carry_words(plan: GraspPlan, note: str | None) -> str:

@@ -4,7 +4,9 @@ What every console draws the same way whatever its panels: the theme (``static/t
 brand colour, panel label; no share button or logo), the table (the z = 0 plane around the
 arm's workspace, with a subtle grid), cheap lights for software-rendered WebGL, and the first of
 the robot's camera presets. :class:`console.app.ConsoleApp` builds it in this order; its
-``_span`` and ``_table_extent`` are :func:`arm_span` and :func:`table_extent` of its robot.
+``_span`` and ``_table_extent`` are :func:`console.core.table_area.arm_span` and
+:func:`console.core.table_area.table_extent` of its robot (pure geometry, shared with the grasp
+session).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from console.scene.camera import CameraPose
 from console.scene.camera import apply as apply_camera
 from console.scene.camera import presets as camera_presets
 from console.scene.theme import ConsoleTheme, load_theme
+from console.core.table_area import arm_span, table_extent  # noqa: F401 (the app's stage)
 from core.robots import Robot
 
 
@@ -42,21 +45,6 @@ def setup_theme(server: viser.ViserServer, robot_name: str) -> ConsoleTheme:
                         brand_color=theme.brand_color, control_width=theme.control_width)
     gui.set_panel_label(theme.label_for(robot_name))
     return theme
-
-
-def arm_span(robot: Any, kind: str) -> float:
-    """Largest distance of any arm point from the base (straight, fully extended)."""
-    if kind == "planar":
-        return robot.n_segments * robot.segment_length + robot.gripper.length
-    return robot.n_segments * robot.rack_max
-
-
-def table_extent(robot: Any, kind: str) -> tuple[float, float, float, float]:
-    """Table rectangle (x0, x1, y0, y1) around the arm's workspace."""
-    span = arm_span(robot, kind)
-    if kind == "planar":
-        return -1.0 * span, 1.0 * span, -0.4 * span, 1.15 * span
-    return -0.75 * span, 0.75 * span, -0.75 * span, 0.75 * span
 
 
 def add_table(scene: viser.SceneApi, theme: ConsoleTheme,

@@ -152,7 +152,7 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     panel on queued bridge controls (nothing drains them here) and Session; no reachability
     map (CPU), no control process."""
     from console.core.hardware_setup import HardwareAttachment
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
     from console.panels.common.hardware import HardwarePanel
     from console.panels.common.session import SessionPanel
     from hw_bridge.controls import QueuedBridgeControls
@@ -161,7 +161,7 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     server, app, token = lab_app(
         tmp_path, bridge_controls=QueuedBridgeControls(),
         hardware=HardwareAttachment("test", kind="emulator", port_path="/dev/pts/99"))
-    for panel_cls in (*planner.grasp_panels(), HardwarePanel, SessionPanel):
+    for panel_cls in (*panel_set.grasp_panels(), HardwarePanel, SessionPanel):
         app.add_panel(panel_cls)
     app.start()
     lab = Lab(server, app, token, browser)

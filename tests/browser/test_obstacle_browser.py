@@ -63,7 +63,7 @@ def wait_until(what: str, fn, timeout: float) -> Any:
 
 @pytest.fixture
 def grasp_page(browser: Any, server: Any) -> Iterator[tuple[Any, ConsoleApp]]:
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
 
     planner.GraspSession.compute_reach = False   # the shading is not what is tested here
     from console.core.access import AccessControl
@@ -71,7 +71,7 @@ def grasp_page(browser: Any, server: Any) -> Iterator[tuple[Any, ConsoleApp]]:
     # The lease is not what is tested: on a machine loaded far past its cores a software-
     # rendered tab went silent past the 7 s lease between taking control and clicking.
     access = AccessControl(None, lease_s=60.0, first_answer_s=120.0)
-    app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels(), access=access)
+    app = ConsoleApp(ROBOT, server, panels=panel_set.grasp_panels(), access=access)
     app.start()
     context = browser.new_context(viewport={"width": 1400, "height": 1000})
     try:

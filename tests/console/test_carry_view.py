@@ -72,7 +72,7 @@ def test_a_plan_around_an_obstacle_to_the_bin_draws_its_carry_and_replans_replac
     from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
-    pp, layer = app.panel(PlannerPanel), gated.grasp_session.carry_layer
+    pp, layer = app.panel(PlannerPanel), gated.grasp_scene.carry_layer
     operator = _operator(app, 51)
     s.set_clearance(0.010)
     s.set_bin(locate_bin(ROBOT, *BIN_XY))
@@ -138,7 +138,7 @@ def test_a_carry_that_is_refused_keeps_the_grasp_and_says_why(gated):
     from console.panels.soft_arm.planner import PlannerPanel
 
     app, s = gated, gated.grasp_session
-    pp, layer = app.panel(PlannerPanel), s.carry_layer
+    pp, layer = app.panel(PlannerPanel), app.grasp_scene.carry_layer
     operator = _operator(app, 52)
     table_bin = locate_bin(ROBOT, *BIN_XY)
     tip = pk.forward_kinematics(np.asarray(table_bin.kappa), ROBOT.lengths, ROBOT.base_pose)[-1]
@@ -212,7 +212,7 @@ def test_execute_and_click_to_grasp_show_the_machines_planning_then_its_refusal(
     its phase "planning" is the header's busy field and the Control panel's state line while
     it runs, and the refusal is the state line's reason when it ends."""
     from console.panels.soft_arm.control_text import execute_target, header_phase, state_html
-    from console.scene.plan_view import SessionView
+    from console.core.grasp_state import SessionView
     from core.control.stack import Telemetry
     from hw_bridge.loop import LoopSnapshot, LoopStats
     from hw_bridge.soft_arm_process import ControlView

@@ -16,7 +16,7 @@ from console.panels.soft_arm.control_text import (
     state_html,
     waypoint_text,
 )
-from console.scene.plan_view import Outcome, SessionView
+from console.core.grasp_state import Outcome, SessionView
 from console.core.table_scene import TableObject
 from core.planning.grasp import plan_grasp
 from core.robots import load

@@ -20,7 +20,7 @@ from console.recording.lab_feed import feed_grasp
 from console.core.model import model_for
 from console.panels.soft_arm import planner
 from console.panels.soft_arm.objects import ObjectsPanel
-from console.scene.plan_view import SessionView
+from console.core.grasp_state import SessionView
 from console.recording.recorder import Recorder, load_recording
 from console.core.state import StateStore
 from console.core.table_bin import TableBin
@@ -112,7 +112,8 @@ def test_the_live_scene_export_has_the_obstacles_and_the_bin(monkeypatch):
         s.place_obstacle(POST.x, POST.y, POST.r)
         s.set_clearance(CLEARANCE)
         s.set_bin(BIN)
-        wait_for(lambda: s.obstacle_layer.bodies and s.bin_view.shown == BIN, 30.0,
+        layers = app.grasp_scene
+        wait_for(lambda: layers.obstacle_layer.bodies and layers.bin_view.shown == BIN, 30.0,
                  "obstacle and bin drawn")
         payload, buffers = decode_embedded(scene_html(srv))
         names = {m.get("name") for _, m in payload["messages"]}

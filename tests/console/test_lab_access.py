@@ -310,11 +310,11 @@ def test_share_tunnel_request_from_the_wire_is_ignored(monkeypatch, server) -> N
 def test_every_callback_of_the_shared_scene_panels_is_operator_only(server, monkeypatch) -> None:
     """Objects, Grasp planner, Waypoints and Hardware: every widget callback that changes what
     everyone sees or drives the hardware is gated (only "Save scene", a download, is not)."""
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
     from console.panels.common.hardware import HardwarePanel
 
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
-    app = ConsoleApp(SOFT, server, panels=(*planner.grasp_panels(), HardwarePanel),
+    app = ConsoleApp(SOFT, server, panels=(*panel_set.grasp_panels(), HardwarePanel),
                      access=AccessControl("tok"))
     try:
         objects = app.panels[0]
@@ -329,8 +329,7 @@ def test_every_callback_of_the_shared_scene_panels_is_operator_only(server, monk
                     assert getattr(cb, "operator_only", None), (type(panel).__name__, handle)
                     checked += 1
         assert checked >= 25
-        session = app.grasp_session  # type: ignore[attr-defined]
-        assert session.gizmo_handler.operator_only == "move an object"
+        assert app.grasp_scene.gizmo_handler.operator_only == "move an object"
         assert objects._place_at.operator_only == "place or select an object"
     finally:
         app.panel(HardwarePanel).close()

@@ -108,6 +108,9 @@ def test_recorded_run_export_animates_the_recorded_configurations() -> None:
     # One frame per 0.1 s while moving (initial mesh + updates), none while resting.
     assert 14 <= len(frames) <= 18
     assert stamps[-1] <= 1.6 + 1e-9
+    # The recorded table only: no live grasp session's objects, plan or shading in the file.
+    assert not [m.get("name") for _, m in payload["messages"]
+                if str(m.get("name", "")).startswith("/grasp/")]
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         view_app = ConsoleApp(SOFT, srv, panels=())

@@ -17,7 +17,7 @@ from console.core.datadir import DataDir
 from console.recording.lab_feed import ControlFeed, feed_grasp
 from console.core.model import model_for
 from hw_bridge.soft_arm_process import ControlView
-from console.scene.plan_view import Outcome, SessionView
+from console.core.grasp_state import Outcome, SessionView
 from console.recording.recorder import Recorder, load_recording
 from console.core.state import StateStore
 from console.core.table_scene import TableObject

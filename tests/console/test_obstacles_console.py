@@ -86,7 +86,7 @@ def test_operator_places_an_obstacle_by_click_and_the_plan_keeps_the_clearance(g
     assert np.all(out.plan.obstacle_path_clearance >= 0.010)
     assert 'data-obstacle-mm="' in outcome_html(out)
     # Drawn: one obstacle body, hatching and a ring at r + clearance.
-    layer = s.obstacle_layer
+    layer = app.grasp_scene.obstacle_layer
     wait_for(lambda: len(layer.bodies) == 1 and layer.rings is not None)
     ring = np.hypot(layer.rings.points[..., 0] - POST.x, layer.rings.points[..., 1] - POST.y)
     np.testing.assert_allclose(ring, 0.015 + 0.010, atol=1e-6)   # float32 in viser
@@ -190,7 +190,7 @@ def test_the_session_records_obstacles_and_a_replay_shows_them(gated, tmp_path):
 
 def test_execute_needs_the_plan_around_the_obstacles():
     from console.panels.soft_arm.control_text import execute_target
-    from console.scene.plan_view import Outcome, SessionView
+    from console.core.grasp_state import Outcome, SessionView
     from core.planning.grasp import plan_grasp
 
     obj = TableObject("Object 1", CUP.x, CUP.y, CUP.r)

@@ -101,7 +101,7 @@ def console():
     import viser
 
     from console.app import ConsoleApp
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
 
     with pytest.MonkeyPatch.context() as patch:  # (module scope: no monkeypatch fixture)
         patch.setattr(planner.GraspSession, "compute_reach", False)
@@ -109,7 +109,7 @@ def console():
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
-        app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels()).start()
+        app = ConsoleApp(ROBOT, server, panels=panel_set.grasp_panels()).start()
         yield app
         app.grasp_session.close()
         app.stop()
@@ -133,7 +133,7 @@ def test_session_plans_refuses_inspects_and_plays(console):
     out = wait_for(lambda: (o := s.view().outcome) and o.seq > seq and o)    # and re-plans it
     wait_for(lambda: 'data-state="ok"' in console.panel(PlannerPanel).summary.content)
     # Scene: one circle outline per waypoint, ghost of the inspected waypoint.
-    scene = s.scene
+    scene = console.grasp_scene.plan_scene
     assert len(scene.circles.points) % out.plan.n == 0 and scene.circles.visible
 
     s.inspect(step=+10)
@@ -172,13 +172,14 @@ def test_live_replanning_is_throttled_to_the_newest_position(console):
 
 # -- sharing: only the operator changes the objects, the plan and the inspected waypoint ------
 
-def drag(session, name: str, client, x: float, y: float, phase: str = "end") -> None:
+def drag(app, name: str, client, x: float, y: float, phase: str = "end") -> None:
     """What viser does with a browser's gizmo drag: store the pose, then call back."""
     import viser
 
-    gizmo = wait_for(lambda: session.scene.objects.get(name))[0]  # drawn by the worker
+    layers = app.grasp_scene
+    gizmo = wait_for(lambda: layers.plan_scene.objects.get(name))[0]  # drawn by the worker
     gizmo._impl.position = np.array([x, y, 0.0])
-    session.on_gizmo(name, viser.TransformControlsEvent(client, client.client_id, gizmo, phase))
+    layers.on_gizmo(name, viser.TransformControlsEvent(client, client.client_id, gizmo, phase))
 
 
 @pytest.fixture
@@ -188,11 +189,11 @@ def gated(monkeypatch):
 
     from console.core.access import AccessControl
     from console.app import ConsoleApp
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
 
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels(), access=AccessControl("tok"))
+    app = ConsoleApp(ROBOT, server, panels=panel_set.grasp_panels(), access=AccessControl("tok"))
     try:
         yield app
     finally:
@@ -232,7 +233,7 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
     user(op.click_place, viewer, "Nothing")   # #17.1: a dropdown (Object | Obstacle | Nothing)
     user(op.load_button, viewer, viser.UploadedFile("cup.json", scene))
     click_at(op, viewer, -0.1, 0.3)
-    drag(s, "Object 1", viewer, 0.0, 0.35, phase="update")
+    drag(app, "Object 1", viewer, 0.0, 0.35, phase="update")
     user(pp.plan_button, viewer)
     user(pp.delta_d, viewer, 50.0)
     user(pp.weights, viewer, "1, 1, 1, 1, 1, 1")
@@ -257,7 +258,7 @@ def test_a_viewer_changes_nothing_and_edits_snap_back(gated):
     assert pp.delta_d.value == round(s.delta_d * 1e3, 1) and pp.live.value and pp.reach.value
     assert pp.weights.value == ", ".join(f"{w:g}" for w in s.weights)
     assert wp.slider.value == before.index + 1 and wp.speed.value == 2.0 and wp.trail.value
-    gizmo = s.scene.objects["Object 1"][0]
+    gizmo = app.grasp_scene.plan_scene.objects["Object 1"][0]
     wait_for(lambda: np.allclose(gizmo.position[:2], (obj.x, obj.y)))
     refused = {body.split(" — ")[0].removeprefix("Only the operator can ")
                for title, body in viewer.notes if title == "Not allowed"}
@@ -286,7 +287,7 @@ def test_the_operator_changes_objects_plan_and_waypoints(gated):
     wait_for(lambda: [o.name for o in s.view().objects] == ["Object 1", "Object 2"])
     placed = s.view().objects[1]
     assert (placed.x, placed.y) == pytest.approx((-0.12, 0.28))
-    drag(s, "Object 2", operator, -0.15, 0.25)
+    drag(app, "Object 2", operator, -0.15, 0.25)
     wait_for(lambda: s.view().objects[1].x == pytest.approx(-0.15))
     wait_for(lambda: (op.x.value, op.y.value) == (-150.0, 250.0))  # mirrored into the fields (mm)
     user(op.r, operator, 20.0)

@@ -121,7 +121,7 @@ def test_planner_panel_shows_progress_then_time_then_from_cache(tmp_path, monkey
     import viser
 
     from console.app import ConsoleApp
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
 
     monkeypatch.setattr(reach_job, "_MEMORY", {})
     monkeypatch.setattr(planner.GraspSession, "reach_step", 0.08)
@@ -135,7 +135,7 @@ def test_planner_panel_shows_progress_then_time_then_from_cache(tmp_path, monkey
             port = s.getsockname()[1]
         server = viser.ViserServer(host="127.0.0.1", port=port, verbose=False)
         t0 = time.monotonic()
-        app = ConsoleApp(ROBOT, server, panels=planner.grasp_panels(), data_dir=tmp_path)
+        app = ConsoleApp(ROBOT, server, panels=panel_set.grasp_panels(), data_dir=tmp_path)
         app.start()
         try:
             panel = next(p for p in app.panels if isinstance(p, planner.PlannerPanel))

@@ -21,7 +21,7 @@ from console.panels.soft_arm import planner
 from console.panels.soft_arm.control import ControlPanel
 from console.panels.soft_arm.control_row import NO_BIN, NO_OBJECTS
 from console.panels.soft_arm.objects import ObjectsPanel
-from console.scene.plan_view import SessionView
+from console.core.grasp_state import SessionView
 from console.core.table_bin import (BIN_HEIGHT, TableBin, bin_point_from_scene_json, locate_bin,
                                open_box_mesh, scene_json_with_bin)
 from console.core.table_scene import TableObject, scene_from_json, scene_to_json
@@ -141,7 +141,7 @@ def test_a_click_places_the_bin_the_arm_can_hold_an_object_over(rig):
     assert (back.kappa_right is None) == (expected.kappa_right is None)
     if expected.kappa_right is not None:
         np.testing.assert_allclose(back.kappa_right, expected.kappa_right, atol=1e-9)
-    box = app.grasp_session.bin_view
+    box = app.grasp_scene.bin_view
     wait_for(lambda: box.shown == table_bin)
     assert box.label.visible and tuple(box.box.position[:2]) == pytest.approx(BIN_XY)
     from console.panels.common.view import legend_html

@@ -200,12 +200,12 @@ def click(server, client, ray_origin, ray_direction) -> None:
 
 @pytest.fixture
 def planar_console(server, monkeypatch):
-    from console.panels.soft_arm import planner
+    from console.panels.soft_arm import panel_set, planner
     from console.panels.common.view import ViewPanel
     from tests.fakes import console_app
 
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)
-    app = console_app(SOFT, server, panels=(*planner.grasp_panels(), ViewPanel))
+    app = console_app(SOFT, server, panels=(*panel_set.grasp_panels(), ViewPanel))
     try:
         yield app
     finally:
@@ -273,9 +273,9 @@ def test_clear_trails_is_the_operators_and_clears_the_plan_trail(planar_console)
     assert session.view().trail_from == 0 and viewer.notes              # refused
     press(operator)
     assert session.view().trail_from == 3
-    wait_for(lambda: not session.scene.ghosts.visible)
+    wait_for(lambda: not app.grasp_scene.plan_scene.ghosts.visible)
     session.inspect(step=1)
-    wait_for(lambda: session.scene.ghosts.visible)                   # it grows again
+    wait_for(lambda: app.grasp_scene.plan_scene.ghosts.visible)                   # it grows again
 
 
 def test_view_panel_for_the_extensible_arm_has_its_presets_and_legend(server):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from console.panels.soft_arm.waypoints import waypoint_html
-from console.scene.plan_view import Outcome, SessionView
+from console.core.grasp_state import Outcome, SessionView
 from console.core.table_scene import TableObject
 from core.kinematics import planar
 from core.planning.obstacles import Obstacle

@@ -89,16 +89,12 @@ class ExecuteControls:
         panel.app.server.scene.on_click()(self._on_scene_click)
         self.target: ExecuteTarget | None = None  # what the last Execute acts on
         self.sent: SentGrasp | None = None  # taken off the table once the arm released it
-        if self.app.grasp_session is not None:
-            self.app.grasp_session.add_listener(lambda _view: self._show_target())
+        self.app.soft_arm_grasp().add_listener(lambda _view, _changed: self._show_target())
 
     def _target_html(self) -> str:
         """Which object Execute would act on now (the Objects panel's selection)."""
-        session = self.app.grasp_session
         try:
-            if session is None:
-                raise ValueError("No Objects panel: no object to grasp.")
-            view = session.view()
+            view = self.app.soft_arm_grasp().view()
             target = execute_target(view)
             text = html.escape(f"Execute acts on {target.describe()}; "
                                f"{bin_sentence(self.app.robot, view.bin, target.r)}")
@@ -117,11 +113,8 @@ class ExecuteControls:
         if self.panel._disarmed():  # arming is the operator's own act (issue 19.3)
             self.panel._refuse(event, "Arm first", ARM_FIRST)
             return None
-        session = self.app.grasp_session
         try:
-            if session is None:
-                raise ValueError("No Objects panel: no object to grasp.")
-            target = execute_target(session.view())
+            target = execute_target(self.app.soft_arm_grasp().view())
             validate_object(target_object(target), self.app.robot)
         except ValueError as exc:
             self.panel._refuse(event, "Refused", str(exc))
@@ -133,16 +126,14 @@ class ExecuteControls:
         self.panel._stopped = False
         self.target = target
         sent = self.sent = SentGrasp(target.name, target.x, target.y)
-        session = self.app.grasp_session
-        view = None if session is None else session.view()
-        table_bin = getattr(view, "bin", None)  # a placed bin; None: the robot file's
+        view = self.app.soft_arm_grasp().view()
+        table_bin = view.bin  # a placed bin; None: the robot file's
         if target.plan is not None:
             fut = self.panel.ctl.execute(target.plan, target.x, target.y, target.r,
                                          bin_params=table_bin)
         else:
             fut = self.panel.ctl.grasp_at(target.x, target.y, target.r,
-                                          tuple(getattr(view, "obstacles", ())),
-                                          float(getattr(view, "clearance", 0.0)),
+                                          view.obstacles, view.clearance,
                                           bin_params=table_bin)
         fut.add_done_callback(lambda f: self._report(event, f, sent))
         client = getattr(event, "client", None)
@@ -174,8 +165,8 @@ class ExecuteControls:
         if not sent.started:
             return
         self.sent = None
-        session = self.app.grasp_session
-        if c.phase != "released" or session is None:
+        session = self.app.soft_arm_grasp()
+        if c.phase != "released":
             return
         for o in session.view().objects:
             if o.name == sent.name and np.hypot(o.x - sent.x, o.y - sent.y) <= o.r:
@@ -203,10 +194,7 @@ class ExecuteControls:
         if self.panel._disarmed():
             self.panel._refuse(event, "Arm first", ARM_FIRST)
             return
-        session = self.app.grasp_session
-        if session is None:
-            self.panel._refuse(event, "Refused", "No Objects panel: no object to grasp.")
-            return
+        session = self.app.soft_arm_grasp()
         try:  # the Objects panel's object there (selected), or a new one
             session.place(p[0], p[1])
         except ValueError as exc:

@@ -121,11 +121,7 @@ class RowControls:
         if self.panel._disarmed():  # arming is the operator's own act (issue 19.3)
             self.panel._refuse(event, "Arm first", ROW_ARM_FIRST)
             return
-        session = self.app.grasp_session
-        if session is None:
-            self.panel._refuse(event, "Refused", "No Objects panel: no objects and no bin.")
-            return
-        view = session.view()
+        view = self.app.soft_arm_grasp().view()
         if view.bin is None:
             self.panel._refuse(event, "Place a bin first", NO_BIN)
             return
@@ -200,8 +196,8 @@ class RowControls:
 
     def _take_off_released(self, report: Any) -> None:
         """Remove every object this console sent that the row released from the table."""
-        sent, session = self.sent_for(report), self.app.grasp_session
-        if report is None or sent is None or sent.row_id != report.row_id or session is None:
+        sent, session = self.sent_for(report), self.app.soft_arm_grasp()
+        if report is None or sent is None or sent.row_id != report.row_id:
             return
         names = {o.name for o in session.view().objects}
         for o in report.outcomes:

@@ -5,8 +5,9 @@ and load them.
 selects the object under it or places a new one there, *Obstacle* the same for obstacles (the
 panel's "Obstacles" folder, :mod:`console.panels.soft_arm.obstacle_editor`, lists and edits them), *Bin*
 places the bin that "Clear table into bin" (Control panel) takes every object to, *Nothing*
-leaves the table alone. Objects: each object carries a transform gizmo in the 3D view to drag it in x and y (the
-planner re-plans live while it moves, see ``console.panels.soft_arm.planner``). The number boxes show and
+leaves the table alone. Objects: each object carries a transform gizmo in the 3D view
+(:mod:`console.scene.grasp_layers`) to drag it in x and y (the planner re-plans live while it
+moves, see ``console.panels.soft_arm.planner``). The number boxes show and
 edit the selected object, in mm (SI inside: the session keeps metres); "Add object" places one
 at the typed x, y, r. The scene (objects and obstacles) is saved as a JSON download and loaded
 from an uploaded file (``console.core.table_scene.parse_scene``; a bad file is refused with its reason
@@ -31,10 +32,10 @@ from typing import Any
 
 import viser
 
+from console.core.grasp_state import SessionView
 from console.panels.common.base import Panel, operator_only
-from console.panels.soft_arm.obstacle_editor import ObstacleEditor
-from console.panels.soft_arm.planner import SessionView, session_for
 from console.panels.common.typed_fields import TypedFields
+from console.panels.soft_arm.obstacle_editor import ObstacleEditor
 from console.scene.plan_view import ray_to_table
 from console.core.table_bin import (BinLocator, TableBin, bin_on_arm, bin_overlap,
                                bin_point_from_scene_json, scene_json_with_bin)
@@ -58,7 +59,7 @@ class ObjectsPanel(Panel):
     kinds = ("planar",)
 
     def build(self) -> None:
-        self.session = session_for(self.app)
+        self.session = self.app.soft_arm_grasp()
         view = self.session.view()
         first = view.objects[0] if view.objects else None
         self.click_place = self.gui.add_dropdown(
@@ -80,7 +81,7 @@ class ObjectsPanel(Panel):
         self.load_button = self.gui.add_upload_button("Load scene", mime_type="application/json",
                                                       hint="Upload a scene JSON file.")
         self.info = self.gui.add_html("")
-        self.obstacles = ObstacleEditor(self)
+        self.obstacles = ObstacleEditor(self, self.session, self._error)
         self._mirror = False
         self._click_mode = self.click_place.value
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
@@ -95,8 +96,8 @@ class ObjectsPanel(Panel):
         self.allow_viewers(self.save_button)  # a download for the one who asks
         self.load_button.on_upload(self._on_load)
         self.app.server.scene.on_click()(self._on_scene_click)
-        self.session.gizmo_handler = self._on_gizmo
-        self.session.add_listener(self.refresh)
+        self.app.soft_arm_grasp_scene().gizmo_handler = self._on_gizmo  # drags, operator-only
+        self.session.add_listener(lambda view, _changed: self.refresh(view))
 
     # -- callbacks (thin) ------------------------------------------------------------------
     def _error(self, event, message: str) -> None:
@@ -258,7 +259,7 @@ class ObjectsPanel(Panel):
         text = (f"{count} object{'s' if count != 1 else ''} on the table"
                 + (f"; selected: <b>{html.escape(view.selected)}</b>{where}" if view.selected
                    else ""))
-        table_bin = getattr(view, "bin", None)
+        table_bin = view.bin
         text += f"; {table_bin.describe()}" if table_bin is not None else "; no bin"
         sel = html.escape(view.selected or "", quote=True)
         where_bin = "" if table_bin is None else f"{mm(table_bin.x):.0f},{mm(table_bin.y):.0f}"

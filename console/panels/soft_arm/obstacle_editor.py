@@ -11,14 +11,13 @@ the arm's base) is refused with its reason and changes nothing. The session
 from __future__ import annotations
 
 import html
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import Any
 
-from console.panels.common.base import operator_only
+from console.core.grasp_session import GraspSession
+from console.core.grasp_state import SessionView
+from console.panels.common.base import Panel, operator_only
 from console.panels.common.typed_fields import TypedFields
-from console.scene.plan_view import SessionView
-
-if TYPE_CHECKING:
-    from console.panels.soft_arm.objects import ObjectsPanel
 
 NONE = "(none)"
 
@@ -29,11 +28,19 @@ def mm(metres: float) -> float:
 
 
 class ObstacleEditor:
-    """Obstacle widgets inside the Objects panel (built in its folder; the panel owns us)."""
+    """Obstacle widgets inside the Objects panel (built in its folder; the panel owns us).
 
-    def __init__(self, panel: ObjectsPanel) -> None:
+    Args:
+        panel: The panel whose folder the widgets go in (and whose operator gate they use).
+        session: The grasp session that keeps the obstacles.
+        error: Tells a browser's event why its edit was refused (``error(event, message)``).
+    """
+
+    def __init__(self, panel: Panel, session: GraspSession,
+                 error: Callable[[Any, str], None]) -> None:
         self.panel = panel
-        self.session = panel.session
+        self.session = session
+        self._error = error
         gui = panel.gui
         view = self.session.view()
         self.folder = gui.add_folder("Obstacles", expand_by_default=True)
@@ -70,7 +77,7 @@ class ObstacleEditor:
         try:
             self.session.place_obstacle(*hit, r=float(self.r.value) / 1e3)
         except ValueError as exc:
-            self.panel._error(event, str(exc))
+            self._error(event, str(exc))
 
     def _on_select(self, event) -> None:
         if event.client is None or self.selected.value == NONE:
@@ -78,7 +85,7 @@ class ObstacleEditor:
         try:
             self.session.select_obstacle(self.selected.value)
         except ValueError as exc:
-            self.panel._error(event, str(exc))
+            self._error(event, str(exc))
 
     def _on_typed(self, event) -> None:
         if event.client is None or self._mirror:
@@ -93,7 +100,7 @@ class ObstacleEditor:
         try:
             self.session.update_obstacle(name, **{field: value / 1e3})
         except (TypeError, ValueError) as exc:
-            self.panel._error(event, str(exc))
+            self._error(event, str(exc))
             self.restore(event.target)
             return
         self._fields[id(event.target)] = event.target.value

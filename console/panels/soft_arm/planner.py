@@ -1,7 +1,7 @@
 """Planner panel: "Plan grasp", the planner's settings and the outcome in plain words.
 
-The panel works on the console's :class:`console.core.grasp_session.GraspSession` (shared with the
-Objects and Waypoints panels; ``GraspSession``, ``session_for`` and ``SessionView`` are
+The panel works on the console's :class:`console.core.grasp_session.GraspSession`
+(``app.soft_arm_grasp()``, shared with the Objects and Waypoints panels; ``GraspSession`` is
 re-exported here): "Plan grasp", delta_d (mm; metres inside) and weight inputs, the clearance (mm) every plan keeps
 between the arm (gripper included) and every obstacle, live re-plan
 and shading toggles, and the outcome ("5 waypoints, 1.3 ms", or why not). The panel shows the
@@ -11,21 +11,20 @@ Sharing: the plan and its settings are the same for every browser, so Plan grasp
 settings change is operator-only (a viewer's edit snaps back); so are the Objects and Waypoints
 panels' changes (see there).
 
-``grasp_panels()`` lists the three grasp panels (Objects, Grasp planner, Waypoints) for
-``ConsoleApp`` (e.g. ``DEFAULT_PANELS + tuple(grasp_panels())``).
+``console.panels.soft_arm.panel_set.grasp_panels()`` lists the three grasp panels.
 """
 
 from __future__ import annotations
 
 import html
 
-from console.core.grasp_session import GraspSession, session_for
+from console.core.grasp_session import GraspSession
+from console.core.grasp_state import SessionView
 from console.panels.common.base import Panel, operator_only
-from console.scene.plan_view import SessionView, outcome_html, planning_html
+from console.scene.plan_view import outcome_html, planning_html
 from core.planning.reachability import ReachMap
 
-__all__ = ["GraspSession", "PlannerPanel", "SessionView", "grasp_panels", "outcome_html",
-           "session_for"]
+__all__ = ["GraspSession", "PlannerPanel", "outcome_html"]
 
 
 class PlannerPanel(Panel):
@@ -36,7 +35,7 @@ class PlannerPanel(Panel):
     kinds = ("planar",)
 
     def build(self) -> None:
-        self.session = session_for(self.app)
+        self.session = self.app.soft_arm_grasp()
         s = self.session
         self.plan_button = self.gui.add_button(
             "Plan grasp", hint="Plan the approach to the selected object (Algorithm 1).")
@@ -66,7 +65,7 @@ class PlannerPanel(Panel):
             lambda e: e.client and s.configure(show_reach=self.reach.value),
             "change the shading"))
         self._shown = None
-        s.add_listener(self.refresh)
+        s.add_listener(lambda view, _changed: self.refresh(view))
         self.refresh(s.view())  # a plan finished before the listener was added is shown too
 
     def _notify(self, event, message: str) -> None:
@@ -149,15 +148,3 @@ class PlannerPanel(Panel):
         if note != getattr(self, "_note", None):
             self._note = note
             self.reach_note.content = note
-
-    def close(self) -> None:
-        self.session.close()
-        super().close()
-
-
-def grasp_panels() -> list[type[Panel]]:
-    """The grasp panels in display order (Objects, Grasp planner, Waypoints)."""
-    from console.panels.soft_arm.objects import ObjectsPanel
-    from console.panels.soft_arm.waypoints import WaypointsPanel
-
-    return [ObjectsPanel, PlannerPanel, WaypointsPanel]

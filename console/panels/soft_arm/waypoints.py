@@ -17,8 +17,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from console.core.grasp_state import SessionView
 from console.panels.common.base import Panel, operator_only
-from console.panels.soft_arm.planner import SessionView, session_for
 
 
 def obstacle_rows(plan: Any, k: int) -> list[tuple[str, str]]:
@@ -69,7 +69,7 @@ class WaypointsPanel(Panel):
     kinds = ("planar",)
 
     def build(self) -> None:
-        self.session = session_for(self.app)
+        self.session = self.app.soft_arm_grasp()
         s = self.session
         self.prev_button = self.gui.add_button("Previous waypoint")
         self.next_button = self.gui.add_button("Next waypoint")
@@ -95,7 +95,7 @@ class WaypointsPanel(Panel):
             lambda e: e.client and s.set_trail(self.trail.value), "change the trail"))
         self.move_button.on_click(self._on_move)
         self._shown: tuple | None = None
-        s.add_listener(self.refresh)
+        s.add_listener(lambda view, _changed: self.refresh(view))
         self.refresh(s.view())
 
     @operator_only(action="step through the waypoints")

@@ -1,0 +1,89 @@
+"""The grasp layers of the 3D view, so the headless grasp session is drawn: they render what the
+session tells them changed, and turn a browser's gizmo drag into a plain session call.
+
+:class:`GraspSceneView` subscribes to a :class:`console.core.grasp_session.GraspSession` (first,
+so every other listener sees a scene already drawn) and, on the session's worker thread (the
+only thread that draws into these layers), redraws from the parts that changed
+(:mod:`console.core.grasp_state`): the bin (:class:`console.scene.bin_view.BinView`), the
+objects with their drag gizmos and the plan with its inspected waypoint and the reachability
+shading (:class:`console.scene.plan_view.PlanScene`), the obstacles
+(:class:`console.scene.obstacle_view.ObstacleLayer`) and a final plan's carry to the bin
+(:class:`console.scene.carry_view.CarryLayer`), all in one ``server.atomic()`` change.
+
+A gizmo event goes to :attr:`GraspSceneView.gizmo_handler` (the Objects panel's operator-only
+handler, which calls ``session.drag(name, x, y, live=...)``); without one a browser's drag is
+put back (the session redraws the objects where it has them).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+import viser
+
+from console.core.grasp_session import GraspSession
+from console.core.grasp_state import SessionView
+from console.scene.bin_view import BinView
+from console.scene.carry_view import CarryLayer
+from console.scene.obstacle_view import ObstacleLayer
+from console.scene.plan_view import PlanScene
+from core.planning.reachability import ReachMap
+from core.robots import SoftArm
+
+log = logging.getLogger(__name__)
+
+GizmoHandler = Callable[[str, viser.TransformControlsEvent], None]
+
+
+class GraspSceneView:
+    """The grasp session's 3D layers (see the module docstring).
+
+    Args:
+        server: The viser server to draw into.
+        robot: The soft arm (ghost arms, capture region, carry).
+        session: The session to render; the view subscribes to it at once.
+    """
+
+    def __init__(self, server: viser.ViserServer, robot: SoftArm,
+                 session: GraspSession) -> None:
+        self.server = server
+        self.session = session
+        self.plan_scene = PlanScene(server, robot)
+        self.carry_layer = CarryLayer(server, robot)  # a final plan's carry to the bin
+        self.bin_view = BinView(server.scene)
+        self.obstacle_layer = ObstacleLayer(server)
+        self.gizmo_handler: GizmoHandler | None = None
+        session.add_listener(self.on_change)
+
+    def on_change(self, view: SessionView, changed: frozenset[str]) -> None:
+        """The session's worker: redraw the layers whose parts changed."""
+        try:
+            with self.server.atomic():
+                self._draw(view, changed)
+        except Exception:  # a drawing error must not stop the panels from being told
+            log.exception("grasp scene update failed")
+
+    def _draw(self, view: SessionView, changed: frozenset[str]) -> None:
+        if "bin" in changed:
+            self.bin_view.draw(view.bin)
+        if "objects" in changed:
+            self.plan_scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
+        if "obstacles" in changed:
+            self.obstacle_layer.sync(view.obstacles, view.obstacle_selected, view.clearance)
+        if changed & {"plan", "inspect"}:
+            plan = view.outcome.plan if view.outcome else None
+            self.plan_scene.draw_plan(plan, view.index, view.trail, view.trail_from)
+            if "plan" in changed:
+                self.carry_layer.draw(plan)
+        if "reach" in changed and isinstance(view.reach, ReachMap):
+            self.plan_scene.draw_reach(view.reach, view.show_reach, self.session.table_extent)
+
+    def on_gizmo(self, name: str, event: viser.TransformControlsEvent) -> None:
+        """An object's gizmo moved: :attr:`gizmo_handler` acts on it; without one, a browser's
+        drag is put back."""
+        handler = self.gizmo_handler
+        if handler is not None:
+            handler(name, event)
+        elif event.client is not None:
+            self.session.redraw_objects()
