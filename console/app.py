@@ -50,7 +50,8 @@ import numpy.typing as npt
 import viser
 
 from console.core.access import AccessControl, NotOperator, Operator
-from console.scene.arm_view import ArmView, make_arm_view
+from console.scene.arm_view import ArmView
+from console.scene.arm_view_factory import make_arm_view
 from console.client_guard import ClientGuard
 from console.core.datadir import DataDir
 from console.guarded_receive import install as _install_client_guard
@@ -156,7 +157,7 @@ class ConsoleApp:
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
         self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
         add_lights(server.scene, self.theme)
-        self.view: ArmView = make_arm_view(server.scene, self.model)
+        self.view: ArmView[ArmModel] = make_arm_view(server.scene, self.model)
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         for panel_cls in DEFAULT_PANELS if panels is None else panels:
             self.add_panel(panel_cls)

@@ -159,7 +159,7 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
         path = emulator.path
         out.port_path = path
     # The emulator's arm powers up retracted (every rack at rack_min: no room to bend); it moves
-    # to the console's start pose (console.core.model.DeltaModel.initial) on connect. A real
+    # to the console's start pose (console.core.model.ExtensibleModel.initial) on connect. A real
     # controller is never moved by connecting: the console's command becomes where it is.
     runner = extensible_process.ExtensibleProcess(robot, store, "port", path,
                                                   follow=port_path is None, cpus=part)

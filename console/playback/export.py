@@ -114,7 +114,7 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
         max_frames: Upper bound on animation frames (bounds the file size).
     """
     from console.app import ConsoleApp  # the same scene set-up as the live console
-    from console.scene.arm_view import make_arm_view
+    from console.scene.arm_view_factory import make_arm_view
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:

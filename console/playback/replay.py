@@ -17,7 +17,9 @@ from typing import TYPE_CHECKING
 import viser
 from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load)
 
-from console.scene.arm_view import ArmView, make_arm_view
+from console.core.model import ArmModel
+from console.scene.arm_view import ArmView
+from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import BadFileName
 from console.playback.export import draw_overlay, recording_html
 from console.scene.obstacle_view import draw_recorded_obstacles
@@ -42,7 +44,7 @@ class ReplaySession:
         self.app = app
         self.client = client
         self.rec: Recording | None = None
-        self.ghost: ArmView | None = None
+        self.ghost: ArmView[ArmModel] | None = None
         self.pos = 0.0
         self.playing = False
         self.speed = 1.0
