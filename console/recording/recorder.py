@@ -40,8 +40,9 @@ import numpy as np
 
 from console.core.datadir import DataDir
 from console.core.model import ArmModel
-from console.recording.reader import (FORMAT, MAX_DECOMPRESSED, MCAP_SUFFIX, SUFFIX, SUFFIXES,
-                                      Event, ReadBudget, Recording, load_recording)
+from console.recording.reader import load_recording
+from console.recording.timeline import (FORMAT, MAX_DECOMPRESSED, MCAP_SUFFIX, SUFFIX, SUFFIXES,
+                                        Event, ReadBudget, Recording)
 from console.core.state import ArmState
 
 __all__ = ["FORMAT", "MAX_DECOMPRESSED", "MCAP_SUFFIX", "SUFFIX", "SUFFIXES", "Event",

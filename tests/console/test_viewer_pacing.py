@@ -16,7 +16,7 @@ import viser
 
 from console.panels.soft_arm import control_plots as cp
 from console.panels.common import hardware as hwp
-from console.core.hardware_setup import HardwareAttachment
+from console.core.hardware_attachment import HardwareAttachment
 from console.panels.soft_arm.control import ControlPanel
 from console.panels.common.plot_data import PlotPacer, axis_top
 from console.viser_fixes import install

@@ -20,7 +20,8 @@ from typing import Any
 
 import viser
 
-from console.core.access import NotOperator, Operator
+from console.core.access import NotOperator
+from console.core.operator import Operator
 from console.playback.export import scene_html
 from console.panels.common.base import Panel, operator_only
 from console.playback.replay import ReplayPlayer, ReplaySession
