@@ -107,6 +107,7 @@ class SoftArmModel(ArmModel):
     """Soft arm (planar): q = curvatures (N,) in 1/m, each within +-kappa_max."""
 
     kind = "planar"
+    robot: SoftArm
 
     def __init__(self, robot: SoftArm) -> None:
         self.robot = robot
@@ -148,6 +149,7 @@ class ExtensibleModel(ArmModel):
     every segment's bend within theta_max."""
 
     kind = "delta"
+    robot: ExtensibleArm
 
     def __init__(self, robot: ExtensibleArm) -> None:
         self.robot = robot
