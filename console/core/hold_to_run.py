@@ -246,7 +246,7 @@ class HoldToRun:
             if h is None and m is None:
                 self._last_tick = None
                 return None
-            if h is None and not self._heard_recently(m, now):  # type: ignore[arg-type]
+            if h is None and m is not None and not self._heard_recently(m, now):
                 self._last_tick = None  # hold here; the next answer resumes from rest
                 return None
             dt = self.period if self._last_tick is None else min(now - self._last_tick,
@@ -263,7 +263,8 @@ class HoldToRun:
                     goal, note = self.model.set_coordinate(
                         q, c, float(q[c.index]) + h.direction * rate * dt)
                 else:
-                    goal, note = m.target, None  # type: ignore[union-attr]
+                    assert m is not None  # a hold or a move: both None returned above
+                    goal, note = m.target, None
                 new = limit_step(self.model, q, goal, max_disp)
                 done = m is not None and bool(np.allclose(new, goal, atol=1e-12, rtol=0))
                 return new, note

@@ -46,6 +46,7 @@ import viser
 from console.core.model import Coordinate, subscript
 from console.panels.common.base import Panel, operator_only
 from console.core.state import ArmState
+from console.panels.common.events import target_of
 from core.units import MM_PER_M, fmt_deg
 
 HOLD_HZ = 20.0
@@ -225,7 +226,7 @@ class JogPanel(Panel):
 
     def on_refused(self, event: Any) -> None:
         # viser already showed the viewer's slider value to everyone: put the arm's back.
-        if isinstance(getattr(event, "target", None), viser.GuiSliderHandle):
+        if isinstance(target_of(event), viser.GuiSliderHandle):
             self._sync_sliders(self._base())
 
     def _sync_sliders(self, q: np.ndarray | None) -> None:

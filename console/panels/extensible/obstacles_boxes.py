@@ -31,6 +31,7 @@ import viser
 from console.panels.common.base import Panel, operator_only
 from console.panels.extensible.status import extensible_arm
 from console.scene.plan_view import ray_to_table
+from console.panels.common.events import target_of
 from core.kinematics import box_clearance as bc
 from core.planning.box_scene import (
     BoxScene,
@@ -233,7 +234,7 @@ class BoxObstaclesPanel(Panel):
 
     def on_refused(self, event: Any) -> None:
         """Undo what a refused viewer's edit shows everyone."""
-        target = getattr(event, "target", None)
+        target = target_of(event)
         if target is self.click_place:
             self.click_place.value = self._click_mode
         elif target is self.selected:

@@ -196,7 +196,8 @@ class PathsPanel(Panel):
 
         def show() -> None:
             try:
-                future.result(timeout=10.0)  # type: ignore[union-attr]
+                if future is not None:  # None: another thread's start() is connecting
+                    future.result(timeout=10.0)
                 time.sleep(3 * runner.period_s)  # the snapshot trails by a tick
             finally:
                 self.hardware.content = hardware_html(self.app)

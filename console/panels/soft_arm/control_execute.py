@@ -27,6 +27,7 @@ import viser
 from console.panels.common.base import operator_only
 from console.panels.soft_arm.control_text import IDLE_PHASES, ExecuteTarget, execute_target, table_point
 from console.core.table_scene import validate_object
+from console.panels.common.events import client_of
 from hw_bridge.soft_arm_process import ARM_FIRST
 
 
@@ -135,17 +136,17 @@ class ExecuteControls:
         sent = self.sent = SentGrasp(target.name, target.x, target.y)
         session = self.app.grasp_session
         view = None if session is None else session.view()
-        table_bin = getattr(view, "bin", None)  # a placed bin; None: the robot file's
+        table_bin = None if view is None else view.bin  # a placed bin; None: the robot file's
         if target.plan is not None:
             fut = self.panel.ctl.execute(target.plan, target.x, target.y, target.r,
                                          bin_params=table_bin)
         else:
             fut = self.panel.ctl.grasp_at(target.x, target.y, target.r,
-                                          tuple(getattr(view, "obstacles", ())),
-                                          float(getattr(view, "clearance", 0.0)),
+                                          () if view is None else tuple(view.obstacles),
+                                          0.0 if view is None else float(view.clearance),
                                           bin_params=table_bin)
         fut.add_done_callback(lambda f: self._report(event, f, sent))
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if client is not None:
             where = bin_sentence(self.app.robot, table_bin, target.r)
             client.add_notification("Grasp-and-place", f"{target.describe()}; {where}",
