@@ -1,4 +1,4 @@
-"""Who holds control of the arm, apart from the lock that grants it: shared by the lock and its lease.
+"""Who holds control of the arm, apart from the lock that grants it: the lock's and lease's.
 
 :class:`Operator` is what :class:`console.core.access.AccessControl` grants and what a
 :class:`console.core.lease_limits.LeaseStatus` names as its holder; it lives below both so

@@ -7,7 +7,7 @@ the viewer's client bundle with the scene embedded as base64, opened straight fr
   ``server.scene`` (objects, a planned path). Per-client nodes (replay ghosts) are not included.
 * :func:`recording_html` -- a recorded run, animated: the console's stage and the arm
   (:func:`draw_stage`: theme, table, lights, first camera, the arm as plain meshes -- the scene
-  layers themselves, no console app) are drawn into a private, headless scene, and the arm is
+  layers themselves, no console app) are drawn into a private scene, and the arm is
   stepped through the recording's states with ``insert_sleep`` between frames, so the file plays
   back with viser's timeline. viser 1.1.1 makes a scene and its serializer only with a
   ``ViserServer``, so that scene is a private one on 127.0.0.1 (an ephemeral port no browser is

@@ -95,7 +95,8 @@ class ExtensibleArmView(ArmView[ExtensibleModel]):
         """Frames of rack ``j``'s centre line: the backbone's, moved out to radius d."""
         out = frames.copy()
         b = self.beta[j]
-        out[:, :3, 3] += self.model.robot.d * (np.cos(b) * frames[:, :3, 0] + np.sin(b) * frames[:, :3, 1])
+        out[:, :3, 3] += self.model.robot.d * (np.cos(b) * frames[:, :3, 0]
+                                               + np.sin(b) * frames[:, :3, 1])
         return out
 
     def rack_bone_poses(self, frames: Array, j: int) -> Array:

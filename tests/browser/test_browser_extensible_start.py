@@ -2,8 +2,8 @@
 the arm or says why not, promptly.
 
 serve.py runs in a subprocess (conftest's ``console_server``, the in-process mock device). From
-the start pose (``console.core.model.ExtensibleModel.initial``: straight, racks at mid-range) a held bend
-jog moves the tip; a typed tip target (z = 250 mm) is answered within 1 s and reached (the
+the start pose (``console.core.model.ExtensibleModel.initial``: straight, racks at mid-range) a
+held bend jog moves the tip; a typed tip target (z = 250 mm) is answered within 1 s and reached (the
 test's own IK says it is reachable); Preview draws the requested path or says why within 5 s
 and ends in a planned preview; after a clamp (Retract, then bend: every rack at rack_min) the
 page shows the clamp note, and no text on the page reads "-0". The header's Phase field says

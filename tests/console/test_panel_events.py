@@ -17,7 +17,7 @@ def test_client_and_target_of_gui_gizmo_click_and_no_event(server) -> None:
     gizmo = server.scene.add_transform_controls("/g")
     drag = viser.TransformControlsEvent(client=None, client_id=None, target=gizmo, phase="end")
     assert client_of(drag) is None and target_of(drag) is gizmo
-    click = viser.SceneClickEvent(client, 7, (0.0, 0.0, 1.0), (0.0, 0.0, -1.0),  # type: ignore[arg-type]
-                                  (0.5, 0.5), None)
+    click = viser.SceneClickEvent(client, 7, (0.0, 0.0, 1.0),  # type: ignore[arg-type]
+                                  (0.0, 0.0, -1.0), (0.5, 0.5), None)
     assert client_of(click) is client and target_of(click) is None
     assert client_of(None) is None and target_of(None) is None

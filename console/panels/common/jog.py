@@ -5,8 +5,8 @@ bend angle θᵢ = κᵢ·Lᵢ in degrees. Extensible arm: Δx, Δy, δL per seg
 panel converts), one folder per segment; a move that would push a rack outside
 [rack_min, rack_max], or bend a segment beyond theta_max (theta = |(dx, dy)| / d; robot file
 ``segments.theta_max``), is clamped to the feasible interval of that coordinate
-(``console.core.model.ExtensibleModel.set_coordinate``), the slider snaps to the value applied and the
-panel says which rack hit which limit, or that the segment is at its bending limit. The Δx / Δy
+(``console.core.model.ExtensibleModel.set_coordinate``), the slider snaps to the value applied
+and the panel says which rack hit which limit, or that the segment is at its bending limit. The Δx / Δy
 sliders span what the racks and the bending limit allow. "Straighten" removes all bending; on
 the extensible arm "Retract" returns to delta = 0.
 

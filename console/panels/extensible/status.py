@@ -5,7 +5,8 @@ Link field do (``console.panels.common.hardware.header_link``); :func:`runner_ph
 Phase field (idle, moving to target, running path t/T s, holding after STOP, fault), pushed by
 the Paths panel; :func:`hardware_html` is the Paths panel's "Hardware:" line (that link and
 the runner's state); :func:`extensible_runner` is the runner the Paths and Repeatability panels
-drive and :func:`extensible_arm` the robot they are built for, typed. The worker process they plan and solve in: :mod:`console.panels.extensible.worker_pool`.
+drive and :func:`extensible_arm` the robot they are built for, typed. The worker process they
+plan and solve in: :mod:`console.panels.extensible.worker_pool`.
 """
 
 from __future__ import annotations
