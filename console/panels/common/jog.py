@@ -6,9 +6,9 @@ panel converts), one folder per segment; a move that would push a rack outside
 [rack_min, rack_max], or bend a segment beyond theta_max (theta = |(dx, dy)| / d; robot file
 ``segments.theta_max``), is clamped to the feasible interval of that coordinate
 (``console.core.model.ExtensibleModel.set_coordinate``), the slider snaps to the value applied
-and the panel says which rack hit which limit, or that the segment is at its bending limit. The Δx / Δy
-sliders span what the racks and the bending limit allow. "Straighten" removes all bending; on
-the extensible arm "Retract" returns to delta = 0.
+and the panel says which rack hit which limit, or that the segment is at its bending limit.
+The Δx / Δy sliders span what the racks and the bending limit allow. "Straighten" removes all
+bending; on the extensible arm "Retract" returns to delta = 0.
 
 Layout: viser 1.1.1 stacks every widget on its own full-width row and has no row container
 (a button group sends clicks only, no hold events). The panel keeps real hold buttons and lays
