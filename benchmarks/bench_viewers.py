@@ -100,7 +100,7 @@ def mocap_only(app: Any) -> None:
 
 def child(a: argparse.Namespace) -> int:
     """Serve the console; stdin commands: ``still``, ``move``, ``stats``, ``quit``."""
-    from console.scene.arm_view import make_arm_view
+    from console.scene.arm_view_factory import make_arm_view
     from console.core.demo_motion import demo_configuration
     from core.robots import load
 

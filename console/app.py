@@ -50,7 +50,8 @@ import numpy.typing as npt
 import viser
 
 from console.core.access import AccessControl, NotOperator, Operator
-from console.scene.arm_view import ArmView, make_arm_view
+from console.scene.arm_view import ArmView
+from console.scene.arm_view_factory import make_arm_view
 from console.client_guard import ClientGuard
 from console.core.datadir import DataDir
 from console.core.grasp_session import GraspSession
@@ -101,9 +102,6 @@ class ConsoleApp:
             default has none, and panels that need one say so).
         store: The console's state store, when a service built before the app needs it (it
             then carries ``initial`` and ``mirror_commands`` itself).
-        grasp: For a soft arm, make the grasp session (``grasp_session``: the table's objects,
-            obstacles, bin and plans, headless) and its 3D layers (``grasp_scene``), whatever
-            panels are built; False for a scene that shows a recorded table instead (export).
     """
 
     def __init__(self, robot: Robot, server: viser.ViserServer, *,
@@ -112,7 +110,7 @@ class ConsoleApp:
                  status: str = "Kinematic simulation (no hardware connected)",
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
                  data_dir: str | Path | None = None, services: ConsoleServices | None = None,
-                 store: StateStore | None = None, grasp: bool = True) -> None:
+                 store: StateStore | None = None) -> None:
         if render_hz <= 0:
             raise ValueError(f"render_hz must be > 0, got {render_hz}")
         self.robot = robot
@@ -160,8 +158,8 @@ class ConsoleApp:
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
         self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
         add_lights(server.scene, self.theme)
-        self.view: ArmView = make_arm_view(server.scene, self.model)
-        if grasp and isinstance(robot, SoftArm):  # the table, its objects and plans
+        self.view: ArmView[ArmModel] = make_arm_view(server.scene, self.model)
+        if isinstance(robot, SoftArm):  # the table, its objects and plans
             self.grasp_session = GraspSession(
                 robot, self._table_extent(), kappa=lambda: self.store.display.q,
                 feed=lambda view, changed: feed_grasp(self.recorder, view, changed),

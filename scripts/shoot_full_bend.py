@@ -27,7 +27,7 @@ sys.path.insert(0, str(REPO / "tests"))
 sys.path.insert(0, str(REPO / "tests" / "browser"))
 
 
-def extensible_full_bend(model) -> np.ndarray:  # noqa: ANN001 - a DeltaModel
+def extensible_full_bend(model) -> np.ndarray:  # noqa: ANN001 - a ExtensibleModel
     """Each segment bent as far as its racks and its bend limit allow: the first along +x, the
     second along -x (an S), at mid extension."""
     r = model.robot
@@ -45,7 +45,7 @@ def shoot(robot_name: str, q: np.ndarray, offset: tuple[float, float, float],
           stem: str, browser) -> list[Path]:  # noqa: ANN001 - a Playwright browser
     import viser
 
-    from console.scene.arm_view import make_arm_view
+    from console.scene.arm_view_factory import make_arm_view
     from console.core.model import model_for
     from core.robots import load
 

@@ -30,6 +30,7 @@ import time
 from typing import Any, Callable
 
 from console.core.lease_limits import FIRST_ANSWER_S, LEASE_S, WARN_S, LeaseStatus
+from console.core.operator import Operator
 
 log = logging.getLogger(__name__)
 
@@ -43,15 +44,6 @@ class NotOperator(PermissionError):
     def __init__(self, reason: str) -> None:
         super().__init__(reason)
         self.reason = reason
-
-
-@dataclasses.dataclass(frozen=True)
-class Operator:
-    """Who holds control: the viser client id, the name they gave, and since when (epoch s)."""
-
-    client_id: int
-    name: str
-    since: float
 
 
 # listener(new holder, previous holder, reason: a sentence naming who did what)
@@ -301,8 +293,10 @@ class AccessControl:
     def forget(self, client: Any) -> None:
         """Drop what is known about a disconnected client (its name)."""
         cid = client_id_of(client)
+        if cid is None:  # the server itself: nothing known about it
+            return
         with self._lock:
-            self._names.pop(cid, None)  # type: ignore[arg-type]
+            self._names.pop(cid, None)
             if self._lapsed == cid:
                 self._lapsed = None
 

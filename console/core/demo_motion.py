@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from console.core.hold_to_run import limit_step
-from console.core.model import ArmModel
+from console.core.model import ArmModel, ExtensibleModel, SoftArmModel
 from console.core.state import StateStore
 
 Array = npt.NDArray[np.float64]
@@ -27,14 +27,16 @@ SOURCE = "demo"
 def demo_configuration(model: ArmModel, t: float, period: float = 10.0) -> Array:
     """The demo configuration at time ``t`` (s): a travelling bend, inside the limits."""
     w = 2 * np.pi / period
-    if model.kind == "planar":
-        k = 0.3 * model.robot.kappa_max  # type: ignore[attr-defined]
+    if isinstance(model, SoftArmModel):
+        k = 0.3 * model.robot.kappa_max
         i = np.arange(model.shape[0])
         return k * np.sin(w * t - 0.6 * i) * np.sin(0.5 * w * t + 0.3)
+    if not isinstance(model, ExtensibleModel):
+        raise TypeError(f"no demo motion for {type(model).__name__}")
     r = model.robot
     n = model.shape[0]
     q = np.zeros(model.shape)
-    mid = 0.5 * (r.rack_min + r.rack_max) - r.L0  # type: ignore[attr-defined]
+    mid = 0.5 * (r.rack_min + r.rack_max) - r.L0
     for i in range(n):
         q[i, 2] = mid + 0.3 * mid * np.sin(w * t + i)
         q[i, 0] = 0.02 * np.sin(w * t - 0.8 * i)

@@ -18,10 +18,10 @@ there is no serial link to manage (the extensible arm's in-process mock).
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from console.core.hardware_attachment import HardwareAttachment, LinkKind
 from console.core.services import ConsoleServices
 
 if TYPE_CHECKING:
@@ -29,37 +29,6 @@ if TYPE_CHECKING:
     from hw_bridge.cpu_partition import CpuPartition
 
 HardwareMode = Literal["emulator", "mock"]
-LinkKind = Literal["emulator", "mock", "port"]
-
-
-@dataclasses.dataclass
-class HardwareAttachment:
-    """What :func:`attach` started, so :meth:`close` can stop it in order.
-
-    Attributes:
-        description: One line for the status bar and the terminal.
-        kind: ``"emulator"`` (device emulator on a pty), ``"mock"`` (in-process device, no
-            serial) or ``"port"`` (a real controller).
-        port_path: The serial device the console uses, when known here: ``--port-path``, or the
-            extensible arm's emulator pty. None for the soft arm's emulator (its control process
-            starts it; the Hardware panel takes the path from the link health) and for the mock.
-        baud: The link's baud rate (``[bridge] baud`` of the robot file).
-    """
-
-    description: str
-    kind: LinkKind = "mock"
-    port_path: str | None = None
-    baud: int = 1_000_000
-    closers: list[Any] = dataclasses.field(default_factory=list)
-
-    def close(self) -> None:
-        """Stop loops first, then links and the emulator process."""
-        for close in self.closers:
-            try:
-                close()
-            except Exception:  # noqa: BLE001 - shutting down: keep closing the rest
-                pass
-        self.closers.clear()
 
 
 def describe(robot: Any, mode: HardwareMode, port_path: str | None) -> str:
@@ -159,7 +128,7 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
         path = emulator.path
         out.port_path = path
     # The emulator's arm powers up retracted (every rack at rack_min: no room to bend); it moves
-    # to the console's start pose (console.core.model.DeltaModel.initial) on connect. A real
+    # to the console's start pose (console.core.model.ExtensibleModel.initial) on connect. A real
     # controller is never moved by connecting: the console's command becomes where it is.
     runner = extensible_process.ExtensibleProcess(robot, store, "port", path,
                                                   follow=port_path is None, cpus=part)

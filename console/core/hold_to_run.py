@@ -34,7 +34,7 @@ from typing import Callable
 import numpy as np
 import numpy.typing as npt
 
-from console.core.model import ArmModel, Coordinate, DeltaModel, PlanarModel
+from console.core.model import ArmModel, Coordinate, ExtensibleModel, SoftArmModel
 from console.core.state import ArmState, StateStore
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
@@ -48,7 +48,7 @@ STOP_SOURCE = "stop"
 def arm_points(model: ArmModel, q: npt.ArrayLike) -> Array:
     """Points whose speed is capped, (..., k, 3): segment ends (+ gripper far end), metres."""
     q = np.asarray(q, dtype=float)
-    if isinstance(model, PlanarModel):
+    if isinstance(model, SoftArmModel):
         r = model.robot
         poses = pk.forward_kinematics(q, r.lengths, r.base_pose)  # (..., N+1, 3)
         tip = poses[..., -1, :]
@@ -56,7 +56,7 @@ def arm_points(model: ArmModel, q: npt.ArrayLike) -> Array:
                                                           np.sin(tip[..., 2])], axis=-1)
         xy = np.concatenate([poses[..., 1:, :2], far[..., None, :]], axis=-2)
         return np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], axis=-1)
-    if isinstance(model, DeltaModel):
+    if isinstance(model, ExtensibleModel):
         r = model.robot
         return dk.forward_kinematics(q, r.L0, r.d)[..., 1:, :3, 3]
     raise TypeError(f"no arm points for {type(model).__name__}")
@@ -246,7 +246,7 @@ class HoldToRun:
             if h is None and m is None:
                 self._last_tick = None
                 return None
-            if h is None and not self._heard_recently(m, now):  # type: ignore[arg-type]
+            if h is None and m is not None and not self._heard_recently(m, now):
                 self._last_tick = None  # hold here; the next answer resumes from rest
                 return None
             dt = self.period if self._last_tick is None else min(now - self._last_tick,
@@ -263,7 +263,8 @@ class HoldToRun:
                     goal, note = self.model.set_coordinate(
                         q, c, float(q[c.index]) + h.direction * rate * dt)
                 else:
-                    goal, note = m.target, None  # type: ignore[union-attr]
+                    assert m is not None  # a hold or a move: both None returned above
+                    goal, note = m.target, None
                 new = limit_step(self.model, q, goal, max_disp)
                 done = m is not None and bool(np.allclose(new, goal, atol=1e-12, rtol=0))
                 return new, note

@@ -9,10 +9,8 @@ The limits of the operator lock's lease (``console.core.access.AccessControl``: 
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from console.core.access import Operator
+from console.core.operator import Operator
 
 # The lease's limits, from benchmarks/lease_gaps.py (headless Chromium 1280x800 or a tablet:
 # 820x1180 touch viewport with 4x CPU throttling; software rendering; the console streaming a

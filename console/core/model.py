@@ -1,12 +1,12 @@
 """Robot-specific configuration rules for the console, so panels never branch on the robot kind.
 
-An :class:`ArmModel` knows the configuration ``q`` of one robot (planar: curvatures (N,);
+An :class:`ArmModel` knows the configuration ``q`` of one robot (soft arm: curvatures (N,);
 extensible: deltas (n, 3)), its jog coordinates with their slider ranges, how to validate a
 request (bad input raises ``ValueError`` with a clear message and moves nothing) and how to keep
 it inside the robot's limits (curvature bounds; rack lengths within [rack_min, rack_max] and each
 segment's bend theta = |(dx, dy)| / d within theta_max), reporting every clamp in words.
 
-Rack feasibility of a Delta segment is linear: rack j has length
+Rack feasibility of an extensible segment is linear: rack j has length
 ``L0 + dL - dx cos(beta_j) - dy sin(beta_j)`` (see ``core.kinematics.delta``), so moving one
 coordinate with the others fixed keeps the racks feasible on an interval; the bending limit
 |(dx, dy)| <= d theta_max is a disc, so it too leaves an interval for dx (or dy). Scaling the
@@ -67,7 +67,7 @@ class ArmModel(ABC):
 
     def initial(self) -> Array:
         """Where the console starts (the store's first command): the zero configuration unless
-        the robot needs room to move (see :meth:`DeltaModel.initial`)."""
+        the robot needs room to move (see :meth:`ExtensibleModel.initial`)."""
         return self.zero()
 
     def validate(self, q: npt.ArrayLike) -> Array:
@@ -103,10 +103,11 @@ class ArmModel(ABC):
         """``q`` without bending (extension kept for the extensible arm)."""
 
 
-class PlanarModel(ArmModel):
-    """Soft planar arm: q = curvatures (N,) in 1/m, each within +-kappa_max."""
+class SoftArmModel(ArmModel):
+    """Soft arm (planar): q = curvatures (N,) in 1/m, each within +-kappa_max."""
 
     kind = "planar"
+    robot: SoftArm
 
     def __init__(self, robot: SoftArm) -> None:
         self.robot = robot
@@ -143,11 +144,12 @@ class PlanarModel(ArmModel):
         return pk.point_in_frame(tip_pose, self.robot.gripper.w_off)
 
 
-class DeltaModel(ArmModel):
+class ExtensibleModel(ArmModel):
     """Extensible arm: q = deltas (n, 3) = (dx, dy, dL) per segment, racks within limits and
     every segment's bend within theta_max."""
 
     kind = "delta"
+    robot: ExtensibleArm
 
     def __init__(self, robot: ExtensibleArm) -> None:
         self.robot = robot
@@ -298,7 +300,7 @@ class DeltaModel(ArmModel):
 def model_for(robot: Robot) -> ArmModel:
     """The console model of a loaded robot description."""
     if isinstance(robot, SoftArm):
-        return PlanarModel(robot)
+        return SoftArmModel(robot)
     if isinstance(robot, ExtensibleArm):
-        return DeltaModel(robot)
+        return ExtensibleModel(robot)
     raise TypeError(f"no console model for {type(robot).__name__}")

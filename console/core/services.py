@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from console.core.demo_motion import DemoMotion
-    from console.core.hardware_setup import HardwareAttachment
+    from console.core.hardware_attachment import HardwareAttachment
     from hw_bridge.controls import BridgeControls
     from hw_bridge.cpu_partition import CpuPartition
     from hw_bridge.extensible_closed_loop import TipSensor

@@ -36,7 +36,7 @@ class ArmState:
     """One immutable configuration snapshot.
 
     Attributes:
-        q: Configuration (planar: curvatures (N,); extensible: deltas (n, 3)); read-only.
+        q: Configuration (soft arm: curvatures (N,); extensible: deltas (n, 3)); read-only.
         seq: Increasing sequence number across all states of a store.
         source: Who set it ("init", "jog", "straighten", "planner", "hardware", ...).
         notes: Human-readable clamp messages produced while applying the request.

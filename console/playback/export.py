@@ -5,9 +5,13 @@ the viewer's client bundle with the scene embedded as base64, opened straight fr
 
 * :func:`scene_html` -- the live scene as it is now: table, arm and whatever panels drew into
   ``server.scene`` (objects, a planned path). Per-client nodes (replay ghosts) are not included.
-* :func:`recording_html` -- a recorded run, animated: a private viser server on 127.0.0.1 (an
-  ephemeral port, stopped again) draws the same scene and steps the arm through the recording's
-  states with ``insert_sleep`` between frames, so the file plays back with viser's timeline.
+* :func:`recording_html` -- a recorded run, animated: the console's stage and the arm
+  (:func:`draw_stage`: theme, table, lights, first camera, the arm as plain meshes -- the scene
+  layers themselves, no console app) are drawn into a private scene, and the arm is
+  stepped through the recording's states with ``insert_sleep`` between frames, so the file plays
+  back with viser's timeline. viser 1.1.1 makes a scene and its serializer only with a
+  ``ViserServer``, so that scene is a private one on 127.0.0.1 (an ephemeral port no browser is
+  told of, stopped again); the console's own server and its browsers never see it.
   Its markers (phase changes, faults, STOP, operator actions: ``console.playback.replay_markers``) are a
   label in the scene that changes at each marker's time and a list in the page. The table as the
   operator set it up -- objects, obstacles with their clearance rings and the bin, from the
@@ -20,16 +24,21 @@ the viewer's client bundle with the scene embedded as base64, opened straight fr
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import viser
 
-from console.recording.recorder import Recording
+from console.core.model import ArmModel, model_for
+from console.core.table_bin import BIN_COLOR, BIN_HEIGHT, open_box_mesh
 from console.playback.replay_markers import current_marker, markers_html, markers_of
-
-if TYPE_CHECKING:
-    from core.robots import Robot
+from console.recording.recorder import Recording
+from console.scene.arm_view import ArmView
+from console.scene.arm_view_factory import make_arm_view
+from console.scene.obstacle_view import draw_recorded_obstacles, recorded_disk
+from console.scene.plan_view import OBJECT_COLOR, OBJECT_SEL_COLOR, object_mesh
+from console.scene.stage import add_lights, add_table, setup_camera, setup_theme, table_extent
+from core.robots import Robot
 
 # Namespace identifiers inside SVG/XML are names, not resources a browser fetches.
 _NAMESPACES = ("http://www.w3.org/2000/svg", "http://www.w3.org/1999/xlink",
@@ -64,10 +73,6 @@ def draw_recorded_table(scene: viser.SceneApi, data: dict[str, Any] | None,
     Objects panel's colours), the obstacles (``console.scene.obstacle_view``'s look, clearance rings
     included) and the bin (an open box with its label). Bad entries are skipped. Returns the
     nodes (the caller removes them when the record changes)."""
-    from console.scene.obstacle_view import draw_recorded_obstacles, recorded_disk
-    from console.scene.plan_view import OBJECT_COLOR, OBJECT_SEL_COLOR, object_mesh
-    from console.core.table_bin import BIN_COLOR, BIN_HEIGHT, open_box_mesh
-
     if not data:
         return []
     nodes = draw_recorded_obstacles(scene, data, f"{root}/obstacles")
@@ -103,6 +108,18 @@ def recorded_table_until(rec: Recording, t: float) -> dict[str, Any] | None:
     return found
 
 
+def draw_stage(server: viser.ViserServer, robot: Robot) -> ArmView[ArmModel]:
+    """What the live console draws before any panel (``console.scene.stage``: theme, table,
+    lights, first camera) and the arm as plain meshes (``"vertices"``: a file plays back
+    without bone messages; no dead band: every frame given is drawn); returns the arm's view."""
+    model = model_for(robot)
+    theme = setup_theme(server, robot.name)
+    add_table(server.scene, theme, table_extent(robot, model.kind))
+    add_lights(server.scene, theme)
+    setup_camera(server, robot, model.kind)
+    return make_arm_view(server.scene, model, method="vertices", dead_band=None)
+
+
 def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
                    max_frames: int = 900, dark_mode: bool = False) -> str:
     """A recorded run as a standalone, animated HTML document.
@@ -113,15 +130,9 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
         fps: Frames per second of the animation (fewer when the run is long).
         max_frames: Upper bound on animation frames (bounds the file size).
     """
-    from console.app import ConsoleApp  # the same scene set-up as the live console
-    from console.scene.arm_view import make_arm_view
-
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
-        app = ConsoleApp(robot, server, panels=(), status=f"Recording {rec.name}",
-                         initial=rec.qs[0], grasp=False)  # the recorded table, not a live one
-        # A file plays back without a server: keep it to plain meshes (no bone messages).
-        app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
+        view = draw_stage(server, robot)
         serializer = server.get_scene_serializer()
         duration = rec.duration
         rate = fps if duration <= 0 else min(fps, max_frames / duration)
@@ -160,7 +171,7 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
                     for node in table_nodes:
                         node.remove()
                     table, table_nodes = recorded, draw_recorded_table(server.scene, recorded)
-                app.view.update(q)
+                view.update(q)
                 for name, data in changed_overlays.items():
                     draw_overlay(server.scene, data)
                     drawn[name] = id(data)

@@ -12,21 +12,21 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import viser
 from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load)
 
-from console.scene.arm_view import ArmView, make_arm_view
-from console.core.datadir import BadFileName
+from console.core.model import ArmModel
+from console.scene.arm_view import ArmView
+from console.scene.arm_view_factory import make_arm_view
+from console.core.datadir import BadFileName, DataDir
 from console.playback.export import draw_overlay, recording_html
 from console.scene.obstacle_view import draw_recorded_obstacles
-from console.recording.recorder import SUFFIXES, Recording, load_recording
-from console.playback.replay_markers import (COLORS, Marker, current_marker, markers_of, next_marker,
-                                    previous_marker)
-
-if TYPE_CHECKING:
-    from console.app import ConsoleApp
+from console.recording.recorder import SUFFIXES, Recorder, Recording, load_recording
+from console.playback.replay_markers import (COLORS, Marker, current_marker, markers_of,
+                                             next_marker, previous_marker)
+from core.robots import Robot
 
 log = logging.getLogger(__name__)
 GHOST_COLOR = (150, 150, 160)
@@ -35,14 +35,31 @@ SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 NONE = "(no recordings yet)"
 
 
+class ReplayHost(Protocol):
+    """What a replay reads of the console (``console.app.ConsoleApp`` is one): where the
+    recordings are, the arm they are of, and the recorder that logs an export."""
+
+    @property
+    def data(self) -> DataDir: ...
+
+    @property
+    def model(self) -> ArmModel: ...
+
+    @property
+    def robot(self) -> Robot: ...
+
+    @property
+    def recorder(self) -> Recorder: ...
+
+
 class ReplaySession:
     """One client's replay widgets, ghost arm and play position."""
 
-    def __init__(self, app: ConsoleApp, client: viser.ClientHandle, order: float) -> None:
+    def __init__(self, app: ReplayHost, client: viser.ClientHandle, order: float) -> None:
         self.app = app
         self.client = client
         self.rec: Recording | None = None
-        self.ghost: ArmView | None = None
+        self.ghost: ArmView[ArmModel] | None = None
         self.pos = 0.0
         self.playing = False
         self.speed = 1.0

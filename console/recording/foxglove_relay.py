@@ -18,10 +18,11 @@ from typing import Any
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 from websockets.sync.server import ServerConnection, serve
+from websockets.typing import Subprotocol
 
 log = logging.getLogger(__name__)
 SDK_SUBPROTOCOL = "foxglove.sdk.v1"
-SUBPROTOCOLS = (SDK_SUBPROTOCOL, "foxglove.websocket.v1")
+SUBPROTOCOLS = (Subprotocol(SDK_SUBPROTOCOL), Subprotocol("foxglove.websocket.v1"))
 MAX_FRAME = 64 << 20
 
 
@@ -60,7 +61,7 @@ class SubprotocolRelay:
 
     def _handle(self, client: ServerConnection) -> None:
         try:
-            upstream = connect(self.upstream, subprotocols=[SDK_SUBPROTOCOL],  # type: ignore[list-item]
+            upstream = connect(self.upstream, subprotocols=[SUBPROTOCOLS[0]],
                                compression=None, max_size=MAX_FRAME, open_timeout=5)
         except (OSError, TimeoutError, ConnectionClosed) as exc:
             log.warning("foxglove relay: SDK server unreachable (%s)", exc)

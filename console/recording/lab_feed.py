@@ -18,11 +18,15 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from console.core.table_bin import TableBin
+from console.core.table_scene import TableObject
 from core.labdata.telemetry import LoopRecords
+from core.planning.obstacles import Obstacle
+from core.planning.plan_types import GraspPlan
 
 LINK_PERIOD_S = 1.0
 
@@ -71,11 +75,44 @@ class ControlFeed:
             self._link.on_health(view.device, view.link)
 
 
-def plan_record(outcome: Any) -> dict[str, Any]:
+class GraspOutcome(Protocol):
+    """A grasp planning result as recorded (``console.scene.plan_view.Outcome``)."""
+
+    @property
+    def plan(self) -> GraspPlan | None: ...
+
+    @property
+    def refusal(self) -> str | None: ...
+
+
+class GraspView(Protocol):
+    """What :func:`feed_grasp` records of the grasp session's view
+    (``console.scene.plan_view.SessionView``)."""
+
+    @property
+    def objects(self) -> tuple[TableObject, ...]: ...
+
+    @property
+    def selected(self) -> str | None: ...
+
+    @property
+    def obstacles(self) -> tuple[Obstacle, ...]: ...
+
+    @property
+    def clearance(self) -> float: ...
+
+    @property
+    def bin(self) -> TableBin | None: ...
+
+    @property
+    def outcome(self) -> GraspOutcome | None: ...
+
+
+def plan_record(outcome: GraspOutcome) -> dict[str, Any]:
     """A grasp planner outcome as ``plan`` record data (circles, waypoints; or the refusal)."""
-    plan = getattr(outcome, "plan", None)
+    plan = outcome.plan
     if plan is None:
-        return {"refusal": getattr(outcome, "refusal", None), "circles": [], "waypoints": []}
+        return {"refusal": outcome.refusal, "circles": [], "waypoints": []}
     cx, cy = (float(v) for v in np.asarray(plan.center)[:2])
     return {"refusal": None, "center": [cx, cy], "radius": float(plan.radius),
             "circles": [{"x": cx, "y": cy, "r": float(r)} for r in np.asarray(plan.radii)],
@@ -94,15 +131,14 @@ def path_plan_record(req: Any, waypoints: Any, path: Any) -> dict[str, Any]:
             "duration_s": float(path.duration), "max_error_m": float(path.max_error)}
 
 
-def feed_grasp(recorder: Any, view: Any, dirty: set[str]) -> None:
+def feed_grasp(recorder: Any, view: GraspView, dirty: set[str]) -> None:
     """Record the grasp session's objects and plan when they changed (``dirty``)."""
     if dirty & {"objects", "obstacles"}:
-        table_bin = getattr(view, "bin", None)
+        table_bin = view.bin
         recorder.log("objects", {"objects": [dataclasses.asdict(o) for o in view.objects],
                                  "selected": view.selected,
-                                 "obstacles": [dataclasses.asdict(o)
-                                               for o in getattr(view, "obstacles", ())],
-                                 "clearance": float(getattr(view, "clearance", 0.0)),
+                                 "obstacles": [dataclasses.asdict(o) for o in view.obstacles],
+                                 "clearance": float(view.clearance),
                                  **({} if table_bin is None else {"bin": table_bin.record()})})
     if "plan" in dirty and view.outcome is not None:
         recorder.log("plan", plan_record(view.outcome))

@@ -18,8 +18,8 @@ from typing import Any, Callable
 import numpy as np
 
 from console.core.model import ArmModel
-from console.recording.reader import (MAX_DECOMPRESSED, Event, ReadBudget, Recording,
-                                      describe_record)
+from console.recording.timeline import (MAX_DECOMPRESSED, Event, ReadBudget, Recording,
+                                        describe_record)
 from core.labdata.channels import ArmGeometry, record_from_message
 from core.labdata.mcap_file import McapLog, iter_messages, read_header, stored_size
 

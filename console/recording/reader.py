@@ -1,17 +1,17 @@
 """Reads a session recording back for the replay panel and the HTML export, within a budget.
 
-:func:`load_recording` reads a recording (:mod:`console.recording.recorder` has the format; ``.mcap`` goes
-through :func:`console.recording.mcap_format.load_mcap`) into a :class:`Recording` with a timeline. It
-streams within a :class:`ReadBudget` (uncompressed bytes, records, one line's length, event bytes)
-and checks every record as it goes, so a huge or corrupt file is refused quickly with the line
-that is wrong. The file-format constants live here so the writer and both readers share them;
+:func:`load_recording` reads a recording (:mod:`console.recording.recorder` has the format;
+``.mcap`` goes through :func:`console.recording.mcap_format.load_mcap`) into a
+:class:`~console.recording.timeline.Recording` with a timeline. It streams within a
+:class:`~console.recording.timeline.ReadBudget` (uncompressed bytes, records, one line's length,
+event bytes) and checks every record as it goes, so a huge or corrupt file is refused quickly
+with the line that is wrong. What both readers return and the file-format constants the writer
+and both readers share live in :mod:`console.recording.timeline`;
 ``console.recording.recorder`` re-exports every public name.
 """
 
 from __future__ import annotations
 
-import bisect
-import dataclasses
 import gzip
 import json
 import zlib
@@ -19,99 +19,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from console.core.model import ArmModel
-
-Array = npt.NDArray[np.float64]
-SUFFIX = ".jsonl.gz"  # the older format (still read, and written with suffix=SUFFIX)
-MCAP_SUFFIX = ".mcap"
-SUFFIXES = (MCAP_SUFFIX, SUFFIX)
-FORMAT = "softarm-console-recording/1"
-MAX_DECOMPRESSED = 256 * 1024 * 1024
-
-
-@dataclasses.dataclass(frozen=True)
-class ReadBudget:
-    """What :func:`load_recording` reads at most before refusing a file.
-
-    A recording stores one state per render tick (about 150 bytes at 30 Hz: 16 MB and 110 000
-    records an hour), so the defaults hold about 9 hours; a longer session is several files.
-    """
-
-    max_bytes: int = MAX_DECOMPRESSED       # uncompressed bytes
-    max_records: int = 1_000_000
-    max_line_bytes: int = 1024 * 1024       # one record (a plan overlay is a few kB)
-    max_event_bytes: int = 64 * 1024 * 1024  # non-state records, kept as parsed JSON
-
-
-@dataclasses.dataclass(frozen=True)
-class Event:
-    """A non-state record of a recording, at time ``t``."""
-
-    t: float
-    kind: str
-    who: str
-    text: str
-    data: Any = None
-
-
-@dataclasses.dataclass
-class Recording:
-    """A loaded recording: the configuration timeline plus events and overlays."""
-
-    name: str
-    header: dict[str, Any]
-    times: Array
-    qs: Array
-    sources: list[str]
-    events: list[Event]
-
-    @property
-    def duration(self) -> float:
-        return float(self.times[-1]) if len(self.times) else 0.0
-
-    def index_at(self, t: float) -> int:
-        """Index of the last state at or before ``t`` (0 before the first)."""
-        return max(0, int(np.searchsorted(self.times, t, side="right")) - 1)
-
-    def q_at(self, t: float) -> Array:
-        return self.qs[self.index_at(t)]
-
-    def events_until(self, t: float, k: int = 5) -> list[Event]:
-        """The last ``k`` events at or before ``t``."""
-        i = bisect.bisect_right([e.t for e in self.events], t)
-        return self.events[max(0, i - k):i]
-
-    def obstacles_until(self, t: float) -> dict[str, Any] | None:
-        """The newest ``objects`` record at or before ``t`` that lists obstacles (its data:
-        ``obstacles`` [{name, x, y, r}] and ``clearance``), or None before any."""
-        found = None
-        for e in self.events:
-            if e.t > t:
-                break
-            if e.kind == "objects" and isinstance(e.data, dict) and "obstacles" in e.data:
-                found = e.data
-        return found
-
-    def overlays_until(self, t: float) -> dict[str, dict[str, Any]]:
-        """Newest ``overlay`` record per name at or before ``t``."""
-        out: dict[str, dict[str, Any]] = {}
-        for e in self.events:
-            if e.t > t:
-                break
-            if e.kind == "overlay" and isinstance(e.data, dict) and "name" in e.data:
-                out[str(e.data["name"])] = e.data
-        return out
-
-
-def describe_record(rec: dict[str, Any]) -> str:
-    """A non-state record in a few words for the replay's event list (at most 80 characters)."""
-    if rec.get("kind") == "action":
-        return str(rec.get("what", ""))
-    data = rec.get("data")
-    text = json.dumps(data, default=str) if data is not None else ""
-    return text if len(text) <= 80 else text[:77] + "..."
+from console.recording.mcap_format import load_mcap
+from console.recording.timeline import (FORMAT, MCAP_SUFFIX, Array, Event, ReadBudget, Recording,
+                                        describe_record)
 
 
 def _finite_time(rec: dict[str, Any], where: str) -> float:
@@ -169,7 +81,6 @@ def load_recording(path: Path, model: ArmModel, budget: ReadBudget | None = None
             the budget; the message says which.
     """
     if path.name.endswith(MCAP_SUFFIX):
-        from console.recording.mcap_format import load_mcap
         return load_mcap(path, model)
     budget = budget or ReadBudget()
     shape = tuple(model.shape)

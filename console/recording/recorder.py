@@ -38,10 +38,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from console.core.access import client_id_of
 from console.core.datadir import DataDir
 from console.core.model import ArmModel
-from console.recording.reader import (FORMAT, MAX_DECOMPRESSED, MCAP_SUFFIX, SUFFIX, SUFFIXES,
-                                      Event, ReadBudget, Recording, load_recording)
+from console.recording.reader import load_recording
+from console.recording.timeline import (FORMAT, MAX_DECOMPRESSED, MCAP_SUFFIX, SUFFIX, SUFFIXES,
+                                        Event, ReadBudget, Recording)
 from console.core.state import ArmState
 
 __all__ = ["FORMAT", "MAX_DECOMPRESSED", "MCAP_SUFFIX", "SUFFIX", "SUFFIXES", "Event",
@@ -156,12 +158,12 @@ class Recorder:
         """Append a record of ``kind`` (no-op when not recording); ``payload`` JSON-able."""
         if kind in ("header", "state"):
             raise ValueError(f"kind {kind!r} is reserved")
-        cid = None if client is None else getattr(client, "client_id", client)
+        cid = client_id_of(client)
         self._put({"kind": kind, "who": self.name_of(client), "client": cid, "data": payload})
 
     def action(self, what: str, client: Any = None, **extra: Any) -> None:
         """Record something a person did (or was refused): ``what`` in words."""
-        cid = None if client is None else getattr(client, "client_id", client)
+        cid = client_id_of(client)
         self._put({"kind": "action", "who": self.name_of(client), "client": cid, "what": what,
                    **extra})
 

@@ -18,9 +18,11 @@ nothing and a slow move is still drawn every frame; a held-back frame is sent wh
 goes idle. The geometry itself comes from pure ``geometry(q)`` / ``frames(q)`` methods
 (vectorised numpy, no viser), which tests check against the kinematics without a server.
 
-The arms' own drawings: :mod:`console.scene.soft_arm_view` (soft planar arm) and
-:mod:`console.scene.extensible_arm_view` (extensible arm); this module holds what they share and
-:func:`make_arm_view`, which picks one by the model's kind.
+The arms' own drawings: :mod:`console.scene.soft_arm_view` (soft arm) and
+:mod:`console.scene.extensible_arm_view` (extensible arm); this module holds what they share.
+:func:`console.scene.arm_view_factory.make_arm_view` picks one by the model's kind. ``ArmView``
+is generic in its model (``ArmView[SoftArmModel]``, ``ArmView[ExtensibleModel]``), so a view's
+``model`` has its arm's type and a caller holding any ``ArmView`` needs no test of the kind.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from __future__ import annotations
 import collections
 import time
 from abc import ABC, abstractmethod
-from typing import Any, Literal
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -36,7 +38,7 @@ import viser
 import viser.transforms as vtf
 
 from console.scene.dead_band import DeadBand, Steadiness
-from console.core.model import ArmModel, DeltaModel, PlanarModel
+from console.core.model import ArmModel
 from console.scene.skin import TubeSkin
 from console.scene.tube import TubeTopology
 from console.viser_fixes import set_bone_poses
@@ -45,6 +47,9 @@ Array = npt.NDArray[np.float64]
 Geometry = dict[str, Any]
 Method = Literal["skinned", "vertices"]
 METHODS: tuple[Method, ...] = ("skinned", "vertices")
+Rgb = tuple[int, int, int]
+# The arm's model; covariant: a SoftArmView is an ArmView[ArmModel] too (the model is only read).
+ModelT = TypeVar("ModelT", bound=ArmModel, covariant=True)
 
 BODY_COLOR = (96, 178, 204)
 RING_COLOR = (45, 62, 80)
@@ -56,13 +61,24 @@ PLATFORM_COLOR = (150, 160, 176)
 BACKBONE_COLOR = (150, 160, 172)
 
 
-def batched_color(rgb: tuple[int, int, int]) -> tuple[int, int, int]:
+def merge_meshes(parts: list[tuple[Array, npt.NDArray[Any]]]) -> tuple[Array, Array]:
+    """(vertices, faces) pairs as one mesh: stacked vertices, faces re-indexed, uint32."""
+    verts, faces, offset = [], [], 0
+    for v, f in parts:
+        verts.append(v)
+        faces.append(f + offset)
+        offset += len(v)
+    return np.vstack(verts), np.vstack(faces).astype(np.uint32)
+
+
+def batched_color(rgb: Rgb) -> Rgb:
     """``rgb`` (sRGB, as every other colour here) for viser 1.1.1's batched meshes, whose client
     reads ``batched_colors`` as linear RGB (``new THREE.Color(r, g, b)``): without this the
     segment rings and platforms are drawn much lighter than the same colour on a mesh."""
     c = np.asarray(rgb, dtype=float) / 255.0
     linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    return tuple(int(v) for v in np.round(linear * 255.0))  # type: ignore[return-value]
+    r, g, b = (int(v) for v in np.round(linear * 255.0))
+    return r, g, b
 
 
 def wxyzs(frames: Array) -> Array:
@@ -104,7 +120,7 @@ def pose_bones(handle: viser.MeshSkinnedHandle, poses: Array) -> None:
     set_bone_poses(handle, quantize(wxyzs(poses)), quantize(poses[:, :3, 3]))
 
 
-class ArmView(ABC):
+class ArmView(ABC, Generic[ModelT]):
     """Scene nodes of one arm under ``root``; call :meth:`update` from one thread only.
 
     Args:
@@ -115,12 +131,12 @@ class ArmView(ABC):
         dead_band: Skip frames that moved less than this; None draws every frame.
     """
 
-    def __init__(self, scene: viser.SceneApi, model: ArmModel, root: str = "/arm",
+    def __init__(self, scene: viser.SceneApi, model: ModelT, root: str = "/arm",
                  method: Method = "skinned", dead_band: DeadBand | None = DeadBand()) -> None:
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         self.scene = scene
-        self.model = model
+        self.model: ModelT = model
         self.root = root
         self.method: Method = method
         self.dead_band = dead_band
@@ -146,6 +162,11 @@ class ArmView(ABC):
     @abstractmethod
     def frames(self, q: Array) -> Array:
         """(P, 4, 4) frames of everything drawn at ``q`` (pure): what the dead band compares."""
+
+    @abstractmethod
+    def ghost_mesh(self, q: Array) -> tuple[Array, Array]:
+        """The arm at ``q`` as one static mesh (vertices, uint32 faces): a translucent "ghost"
+        along a planned path (pure)."""
 
     @abstractmethod
     def _send(self, q: Array, frames: Array) -> None:
@@ -199,17 +220,3 @@ class ArmView(ABC):
         self.frames_sent += 1
         self.sent_at.append(time.monotonic())
 
-
-def make_arm_view(scene: viser.SceneApi, model: ArmModel, root: str = "/arm",
-                  method: Method = "skinned",
-                  dead_band: DeadBand | None = DeadBand()) -> ArmView:
-    """The view class matching the model's robot kind."""
-    # Imported here: both views subclass ArmView, so they import this module.
-    from console.scene.extensible_arm_view import DeltaArmView
-    from console.scene.soft_arm_view import PlanarArmView
-
-    if isinstance(model, PlanarModel):
-        return PlanarArmView(scene, model, root, method, dead_band)
-    if isinstance(model, DeltaModel):
-        return DeltaArmView(scene, model, root, method, dead_band)
-    raise TypeError(f"no arm view for {type(model).__name__}")

@@ -1,7 +1,7 @@
 """Camera presets as data, so the first view and every "View" button frame the arm the same way.
 
 A :class:`CameraPose` is where a camera stands, what it looks at and its field of view.
-:func:`presets` gives each robot kind's named poses (planar arm: *Perspective* and *Top-down*;
+:func:`presets` gives each robot kind's named poses (soft arm: *Perspective* and *Top-down*;
 extensible arm: *Perspective*, *Front* and *Side*); the first one is the console's initial
 camera (``console.scene.stage.setup_camera``) and *Reset view* goes back to it. Poses are computed from
 the robot's reach (``span``, m) and the table rectangle, for a canvas of a given aspect ratio,

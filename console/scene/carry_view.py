@@ -23,6 +23,7 @@ import numpy.typing as npt
 from console.scene.line_nodes import FixedLines
 from console.scene.plan_view import Z_PLAN, ghost_segments
 from core.control.carry import plan_side
+from core.planning.plan_types import GraspPlan
 from core.kinematics import planar as pk
 
 Array = npt.NDArray[np.float64]
@@ -32,23 +33,23 @@ Z_CARRY = Z_PLAN + 0.002             # over the approach's ghost arms where they
 PATH_SAMPLES = 12                    # palm points per certified line of the carry
 
 
-def palm_points(robot: Any, plan: Any, kappas: npt.ArrayLike) -> Array:
+def palm_points(robot: Any, plan: GraspPlan, kappas: npt.ArrayLike) -> Array:
     """Palm points (k, 2) of configurations ``kappas`` (k, N) with the gripper straight, on
     the plan's closing side (the point the plan's ``palm_poses`` hold)."""
     k = np.atleast_2d(np.asarray(kappas, float))
     tip = pk.forward_kinematics(k, robot.lengths, robot.base_pose)[:, -1]
     g = robot.gripper
-    side = -1.0 if plan_side(plan, getattr(plan, "center", None)) == "right" else 1.0
+    side = -1.0 if plan_side(plan, plan.center) == "right" else 1.0
     return pk.point_in_frame(tip, (g.w_off_along, side * g.g_off))
 
 
-def carry_geometry(robot: Any, plan: Any) -> dict[str, Array] | None:
+def carry_geometry(robot: Any, plan: GraspPlan | None) -> dict[str, Array] | None:
     """What :class:`CarryLayer` draws for ``plan`` (None: no carry): ``targets`` (m, 3) the
     palm at each carry target, ``path`` (S, 2, 3) the palm's path from the grasp pose along
     the certified lines, ``ghosts`` (G, 2, 3) the arm at each target."""
-    carry = getattr(plan, "carry", None)
-    if plan is None or carry is None or len(carry) == 0:
+    if plan is None or plan.carry is None or len(plan.carry) == 0:
         return None
+    carry = plan.carry
     carry = np.atleast_2d(np.asarray(carry, float))
     shapes = np.vstack([np.asarray(plan.kappas, float)[-1:], carry])      # grasp, then targets
     t = np.linspace(0.0, 1.0, PATH_SAMPLES + 1)[1:, None, None]
@@ -86,7 +87,7 @@ class CarryLayer:
     def path(self) -> Any:
         return self._path.handle
 
-    def draw(self, plan: Any) -> None:
+    def draw(self, plan: GraspPlan | None) -> None:
         """Show ``plan``'s carry; hide the layer when it has none (or ``plan`` is None)."""
         g = carry_geometry(self.robot, plan)
         if g is None:

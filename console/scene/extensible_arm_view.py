@@ -4,8 +4,9 @@
   every segment as tubes on their constant-curvature offset arcs (one colour per rack, matching
   the readout), platform discs at the base and every segment end, and a tip frame.
 
-:func:`console.scene.arm_view.make_arm_view` builds it for a :class:`console.core.model.DeltaModel`; how it
-is drawn and paced (``"skinned"`` / ``"vertices"``, the dead band): :mod:`console.scene.arm_view`.
+:func:`console.scene.arm_view_factory.make_arm_view` builds it for a
+:class:`console.core.model.ExtensibleModel`; how it is drawn and
+paced (``"skinned"`` / ``"vertices"``, the dead band): :mod:`console.scene.arm_view`.
 """
 
 from __future__ import annotations
@@ -15,16 +16,17 @@ import viser
 import viser.transforms as vtf
 
 from console.scene.arm_view import (BACKBONE_COLOR, PLATFORM_COLOR, RACK_COLORS, ArmView, Array,
-                              Geometry, Method, add_skinned_tube, batched_color, quantize, wxyzs)
+                                    Geometry, Method, add_skinned_tube, batched_color,
+                                    merge_meshes, quantize, wxyzs)
 from console.scene.dead_band import DeadBand
-from console.core.model import DeltaModel
+from console.core.model import ExtensibleModel
 from console.scene.skin import TubeSkin
 from console.scene.tube import TubeTopology, frames_from_matrices
 from console.viser_fixes import set_bone_poses
 from core.kinematics import delta as dk
 
 
-class DeltaArmView(ArmView):
+class ExtensibleArmView(ArmView[ExtensibleModel]):
     """Extensible tri-rack arm standing on the table."""
 
     samples_per_segment = 32
@@ -35,7 +37,7 @@ class DeltaArmView(ArmView):
 
     bone_stride = 8  # samples between bones: 4 bones per segment
 
-    def __init__(self, scene: viser.SceneApi, model: DeltaModel, root: str = "/arm",
+    def __init__(self, scene: viser.SceneApi, model: ExtensibleModel, root: str = "/arm",
                  method: Method = "skinned", dead_band: DeadBand | None = DeadBand()) -> None:
         super().__init__(scene, model, root, method, dead_band)
         r = model.robot
@@ -91,10 +93,10 @@ class DeltaArmView(ArmView):
 
     def rack_frames(self, frames: Array, j: int) -> Array:
         """Frames of rack ``j``'s centre line: the backbone's, moved out to radius d."""
-        m: DeltaModel = self.model  # type: ignore[assignment]
         out = frames.copy()
         b = self.beta[j]
-        out[:, :3, 3] += m.robot.d * (np.cos(b) * frames[:, :3, 0] + np.sin(b) * frames[:, :3, 1])
+        out[:, :3, 3] += self.model.robot.d * (np.cos(b) * frames[:, :3, 0]
+                                               + np.sin(b) * frames[:, :3, 1])
         return out
 
     def rack_bone_poses(self, frames: Array, j: int) -> Array:
@@ -109,7 +111,7 @@ class DeltaArmView(ArmView):
 
     def sample_frames(self, q: Array) -> Array:
         """Backbone frames (n, S+1, 4, 4): each segment sampled evenly in arc length."""
-        m: DeltaModel = self.model  # type: ignore[assignment]
+        m = self.model
         r = m.robot
         ends = m.frames(q)  # (n+1, 4, 4)
         s = np.linspace(0.0, 1.0, self.samples_per_segment + 1)  # (S+1,)
@@ -123,7 +125,7 @@ class DeltaArmView(ArmView):
         return np.einsum("nij,nsjk->nsik", ends[:-1], local)
 
     def geometry(self, q: Array) -> Geometry:
-        m: DeltaModel = self.model  # type: ignore[assignment]
+        m = self.model
         r = m.robot
         frames = self.sample_frames(q)
         c, x, y = frames_from_matrices(frames)  # each (n, S+1, 3)
@@ -149,6 +151,14 @@ class DeltaArmView(ArmView):
         return {"backbone": backbone, "racks": racks, "platforms": platforms,
                 "rack_centres": centres,
                 "tip_position": tip[:3, 3], "tip_wxyz": vtf.SO3.from_matrix(tip[:3, :3]).wxyz}
+
+    def ghost_mesh(self, q: Array) -> tuple[Array, Array]:
+        """Backbone, racks and platforms at ``q`` as one mesh."""
+        g = self.geometry(q)
+        parts = [(g["backbone"], self.backbone_topology.faces)]
+        parts += [(r, self.rack_topology.faces) for r in g["racks"]]
+        parts.append((g["platforms"], self.platform_topology.faces))
+        return merge_meshes(parts)
 
     def _send(self, q: Array, frames: Array) -> None:
         if self.method == "vertices":

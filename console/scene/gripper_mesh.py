@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from core.robots import SoftArm
+
 Array = npt.NDArray[np.float64]
 
 ASSET = Path(__file__).resolve().parents[2] / "static" / "gripper.stl"
@@ -39,9 +41,9 @@ class GripperShape:
     fingers: str = "left"     # "left" (the paper's) or "both" (two stacked fingers)
 
     @classmethod
-    def of(cls, robot: object) -> "GripperShape":
-        """The soft-arm robot's gripper (``[gripper]`` and ``[sim.gripper]``)."""
-        g, sim = robot.gripper, robot.sim.gripper  # type: ignore[attr-defined]
+    def of(cls, robot: SoftArm) -> GripperShape:
+        """The soft arm's gripper (``[gripper]`` and ``[sim.gripper]``)."""
+        g, sim = robot.gripper, robot.sim.gripper
         return cls(float(g.length), float(g.half_width), float(sim.palm_length),
                    float(sim.closed_turn), str(g.fingers))
 

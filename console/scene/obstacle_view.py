@@ -13,6 +13,7 @@ from typing import Any, Sequence
 
 import numpy as np
 import numpy.typing as npt
+import viser
 
 from console.scene.plan_view import circle_segments, object_mesh
 from core.planning.obstacles import Obstacle
@@ -50,12 +51,26 @@ def obstacle_geometry(obstacles: Sequence[Obstacle], clearance: float) -> dict[s
             "rings": np.concatenate(rings) if rings else empty}
 
 
+def _lines_anew(scene: viser.SceneApi, old: viser.LineSegmentsHandle | None, name: str,
+                segments: npt.NDArray[np.float64], color: tuple[int, int, int],
+                width: float) -> viser.LineSegmentsHandle | None:
+    """``old`` removed and ``segments`` drawn as ``/grasp/obstacles/<name>`` (None: none)."""
+    if old is not None:
+        old.remove()
+    if not len(segments):
+        return None
+    return scene.add_line_segments(f"/grasp/obstacles/{name}", segments, color, thickness=width)
+
+
 class ObstacleLayer:
     """Scene nodes of the obstacles (one body per obstacle; hatching and rings batched)."""
 
     def __init__(self, server) -> None:
         self.server = server
-        self.hatch = self.rings = self.ring_sel = None   # line nodes, made by sync
+        # Line nodes, made by sync.
+        self.hatch: viser.LineSegmentsHandle | None = None
+        self.rings: viser.LineSegmentsHandle | None = None
+        self.ring_sel: viser.LineSegmentsHandle | None = None
         self.bodies: dict[str, tuple[Any, Obstacle]] = {}
         self._made = 0
 
@@ -81,14 +96,10 @@ class ObstacleLayer:
                     if sel is not None else np.zeros((0, 2, 3)))
         # Line nodes are made anew with their colours (a points update before its colours
         # reach the browser drew the lines white, and these change rarely).
-        for attr, segs, color, width in (("hatch", g["hatch"], HATCH_COLOR, 0.0025),
-                                         ("rings", g["rings"], RING_COLOR, 0.003),
-                                         ("ring_sel", ring_sel, RING_COLOR, 0.007)):
-            old = getattr(self, attr)
-            if old is not None:
-                old.remove()
-            setattr(self, attr, None if not len(segs) else scene.add_line_segments(
-                f"/grasp/obstacles/{attr}", segs, color, thickness=width))
+        self.hatch = _lines_anew(scene, self.hatch, "hatch", g["hatch"], HATCH_COLOR, 0.0025)
+        self.rings = _lines_anew(scene, self.rings, "rings", g["rings"], RING_COLOR, 0.003)
+        self.ring_sel = _lines_anew(scene, self.ring_sel, "ring_sel", ring_sel, RING_COLOR,
+                                    0.007)
 
 
 def recorded_disk(entry: Any) -> tuple[float, float, float] | None:

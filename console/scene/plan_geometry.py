@@ -135,7 +135,7 @@ def plan_geometry(robot, plan: GraspPlan, index: int, trail: bool,
     final = plan.palm_poses[-1]
     # The capture region is on the closing finger's side: the gripper's left, or its right
     # for a plan of the right finger (core.planning.sides).
-    side = -1.0 if getattr(plan, "side", "left") == "right" else 1.0
+    side = -1.0 if plan.side == "right" else 1.0
     left = np.array([-math.sin(final[2]), math.cos(final[2])])
     aim = final[:2] + side * left * (robot.gripper.g_off + robot.capture.nominal_object_radius)
     ghost_colors = np.repeat(trail_colors(shown, index), ghosts.shape[1], 0)

@@ -1,11 +1,12 @@
-"""The soft planar arm's drawing, apart from the pacing and the tubes every arm view shares.
+"""The soft arm's drawing, apart from the pacing and the tubes every arm view shares.
 
-* Soft planar arm: the backbone as a tube lying on the table (z = half-width), dark rings at the
+* Soft arm (planar): the backbone as a tube lying on the table (z = half-width), dark rings at the
   segment boundaries, the pleated gripper in a contrasting colour (a plain rod in the
   ``"vertices"`` drawing) and the palm point w_t.
 
-:func:`console.scene.arm_view.make_arm_view` builds it for a :class:`console.core.model.PlanarModel`; how it
-is drawn and paced (``"skinned"`` / ``"vertices"``, the dead band): :mod:`console.scene.arm_view`.
+:func:`console.scene.arm_view_factory.make_arm_view` builds it for a
+:class:`console.core.model.SoftArmModel`; how it is drawn and
+paced (``"skinned"`` / ``"vertices"``, the dead band): :mod:`console.scene.arm_view`.
 """
 
 from __future__ import annotations
@@ -14,26 +15,27 @@ import numpy as np
 import viser
 import viser.transforms as vtf
 
-from console.scene.arm_view import (BODY_COLOR, GRIPPER_COLOR, MOUNT_COLOR, PALM_COLOR, RING_COLOR,
-                              ArmView, Array, Geometry, Method, add_skinned_tube, batched_color,
-                              pose_bones, wxyzs)
+from console.scene.arm_view import (BODY_COLOR, GRIPPER_COLOR, MOUNT_COLOR, PALM_COLOR,
+                                    RING_COLOR, ArmView, Array, Geometry, Method,
+                                    add_skinned_tube, batched_color, merge_meshes, pose_bones,
+                                    wxyzs)
 from console.scene.dead_band import DeadBand
 from console.scene.gripper_mesh import GripperShape, gripper_vertices, load_asset
-from console.core.model import PlanarModel
+from console.core.model import SoftArmModel
 from console.scene.skin import TubeSkin, planar_matrices
 from console.scene.tube import TubeTopology, planar_frames
 from core.kinematics import planar as pk
 
 
-class PlanarArmView(ArmView):
-    """Soft planar arm lying on the table plane."""
+class SoftArmView(ArmView[SoftArmModel]):
+    """Soft arm lying on the table plane."""
 
     samples_per_segment = 16
     sides = 20
     bone_stride = 4  # samples between bones: 4 bones per segment, 27 in all
     ring_half_length = 0.003
 
-    def __init__(self, scene: viser.SceneApi, model: PlanarModel, root: str = "/arm",
+    def __init__(self, scene: viser.SceneApi, model: SoftArmModel, root: str = "/arm",
                  method: Method = "skinned", dead_band: DeadBand | None = DeadBand()) -> None:
         super().__init__(scene, model, root, method, dead_band)
         r = model.robot
@@ -44,6 +46,8 @@ class PlanarArmView(ArmView):
         self.ring_topology = TubeTopology(2, self.sides, n_tubes=r.n_segments)
         self.gripper_topology = TubeTopology(2, self.sides)
         self.gripper_closed = False
+        # The pleated gripper open and closed ("skinned"); the "vertices" drawing has a rod.
+        self.gripper_shapes: dict[bool, viser.MeshHandle] = {}
         self.skin = TubeSkin(n_rings, self.bone_stride,
                              float(np.mean(r.lengths)) / self.samples_per_segment
                              * self.bone_stride)
@@ -93,9 +97,9 @@ class PlanarArmView(ArmView):
     def set_gripper_closed(self, closed: bool) -> None:
         """Show the pleated gripper curled (closed) or straight (open): two visibility
         messages on a change, nothing otherwise; any thread (``"vertices"`` draws a rod)."""
-        shapes = getattr(self, "gripper_shapes", None)
+        shapes = self.gripper_shapes
         closed = bool(closed)
-        if shapes is None or closed == self.gripper_closed:
+        if not shapes or closed == self.gripper_closed:
             return
         self.gripper_closed = closed
         shapes[closed].visible = True
@@ -106,13 +110,12 @@ class PlanarArmView(ArmView):
 
     def frames(self, q: Array) -> Array:
         """(n S + 1, 4, 4) backbone frames at the table height (tangent = local z)."""
-        m: PlanarModel = self.model  # type: ignore[assignment]
-        r = m.robot
+        r = self.model.robot
         backbone = pk.sample_backbone(q, r.lengths, self.samples_per_segment, r.base_pose)
         return planar_matrices(backbone, self.z)
 
     def geometry(self, q: Array) -> Geometry:
-        m: PlanarModel = self.model  # type: ignore[assignment]
+        m = self.model
         r = m.robot
         backbone = pk.sample_backbone(q, r.lengths, self.samples_per_segment, r.base_pose)
         body = self.body_topology.vertices(*planar_frames(backbone, self.z), self.radius)
@@ -132,10 +135,16 @@ class PlanarArmView(ArmView):
         return {"body": body, "rings": rings, "gripper": gripper, "tip": tip,
                 "palm": np.array([palm_xy[0], palm_xy[1], self.z + 0.004])}
 
+    def ghost_mesh(self, q: Array) -> tuple[Array, Array]:
+        """Body, segment rings and gripper rod at ``q`` as one mesh."""
+        g = self.geometry(q)
+        return merge_meshes([(g["body"], self.body_topology.faces),
+                             (g["rings"], self.ring_topology.faces),
+                             (g["gripper"], self.gripper_topology.faces)])
+
     def _palm(self, tip_frame: Array) -> Array:
-        m: PlanarModel = self.model  # type: ignore[assignment]
         heading = np.arctan2(tip_frame[1, 2], tip_frame[0, 2])
-        palm_xy = m.palm_point(np.array([tip_frame[0, 3], tip_frame[1, 3], heading]))
+        palm_xy = self.model.palm_point(np.array([tip_frame[0, 3], tip_frame[1, 3], heading]))
         return np.array([palm_xy[0], palm_xy[1], self.z + 0.004])
 
     def _send(self, q: Array, frames: Array) -> None:

@@ -7,13 +7,14 @@ into a frozen :class:`ConsoleTheme`; :class:`console.app.ConsoleApp` reads it wh
 from __future__ import annotations
 
 import dataclasses
+import sys
 from pathlib import Path
 from typing import Any, Literal
 
-try:
+if sys.version_info >= (3, 11):
     import tomllib
-except ModuleNotFoundError:  # Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+else:  # Python 3.10
+    import tomli as tomllib
 
 STATIC_DIR = Path(__file__).resolve().parents[2] / "static"
 THEME_FILE = STATIC_DIR / "theme.toml"

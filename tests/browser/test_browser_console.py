@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from browser_tabs import open_console, wait_until
 
-from console.core.model import DeltaModel
+from console.core.model import ExtensibleModel
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import load
@@ -130,7 +130,7 @@ def test_extensible_jog_moves_tip_and_clamps_at_rack_limits(
     robot = load("extensible")
     open_console(page, console_server("extensible"), "Readout", '[data-testid="tip-readout"]')
     # It starts straight with every rack at mid-range (issue 19.5: room to bend both ways).
-    start = DeltaModel(robot).initial()
+    start = ExtensibleModel(robot).initial()
     assert np.all(start[:, :2] == 0.0)
     wait_for_readout(page, {"tip-0": 0.0, "tip-1": 0.0,
                             "tip-2": dk.tip_position(robot, start)[2] * 1e3})

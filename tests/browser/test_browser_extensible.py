@@ -23,7 +23,7 @@ import pytest
 from browser_tabs import open_console, open_tab, wait_until
 from robot_files import robot_copy
 
-from console.core.model import DeltaModel
+from console.core.model import ExtensibleModel
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.planning.paths import build_path
@@ -179,7 +179,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     # straight up towards the console's start pose (racks at mid-range); the operator's
     # Connect stops it wherever it got to, and Arm holds there.
     retracted = ROBOT.n_segments * ROBOT.L0 * 1e3
-    initial = dk.tip_position(ROBOT, DeltaModel(ROBOT).initial()) * 1e3
+    initial = dk.tip_position(ROBOT, ExtensibleModel(ROBOT).initial()) * 1e3
     seen = [readout_tip(page)]
 
     def still() -> bool:

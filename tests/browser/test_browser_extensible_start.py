@@ -2,8 +2,8 @@
 the arm or says why not, promptly.
 
 serve.py runs in a subprocess (conftest's ``console_server``, the in-process mock device). From
-the start pose (``console.core.model.DeltaModel.initial``: straight, racks at mid-range) a held bend
-jog moves the tip; a typed tip target (z = 250 mm) is answered within 1 s and reached (the
+the start pose (``console.core.model.ExtensibleModel.initial``: straight, racks at mid-range) a
+held bend jog moves the tip; a typed tip target (z = 250 mm) is answered within 1 s and reached (the
 test's own IK says it is reachable); Preview draws the requested path or says why within 5 s
 and ends in a planned preview; after a clamp (Retract, then bend: every rack at rack_min) the
 page shows the clamp note, and no text on the page reads "-0". The header's Phase field says
@@ -22,7 +22,7 @@ import pytest
 from browser_tabs import open_console, wait_until
 from lab_rig import jog_button
 
-from console.core.model import DeltaModel
+from console.core.model import ExtensibleModel
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
@@ -57,7 +57,7 @@ def hold(page, label: str, sign: str, seconds: float) -> None:
 def test_every_action_moves_or_says_why_from_the_start_pose(
         page, console_server: Callable[..., str], artifacts_dir: Path) -> None:
     open_console(page, console_server("extensible"), "Tip target", '[data-testid="tip-readout"]')
-    start = dk.tip_position(ROBOT, DeltaModel(ROBOT).initial()) * 1e3  # mid-range, straight
+    start = dk.tip_position(ROBOT, ExtensibleModel(ROBOT).initial()) * 1e3  # mid-range, straight
     wait_until("the readout at the start pose", lambda: np.abs(readout_tip(page) - start).max()
                <= 0.5, 20, show=lambda: str(readout_tip(page)))
     header = page.locator('[data-testid="console-header"]')

@@ -151,7 +151,7 @@ def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
     """A lab console with the grasp panels (Objects, Grasp planner, Waypoints), the Hardware
     panel on queued bridge controls (nothing drains them here) and Session; no reachability
     map (CPU), no control process."""
-    from console.core.hardware_setup import HardwareAttachment
+    from console.core.hardware_attachment import HardwareAttachment
     from console.panels.soft_arm import panel_set, planner
     from console.panels.common.hardware import HardwarePanel
     from console.panels.common.session import SessionPanel

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import viser
 
-from console.scene.arm_view import make_arm_view
+from console.scene.arm_view_factory import make_arm_view
 from console.scene.dead_band import DeadBand
-from console.scene.extensible_arm_view import DeltaArmView
+from console.scene.extensible_arm_view import ExtensibleArmView
 from console.core.model import model_for
-from console.scene.soft_arm_view import PlanarArmView
+from console.scene.soft_arm_view import SoftArmView
 from console.scene.skin import TubeSkin, bspline_weights
 from core.robots import load
 
@@ -48,7 +48,7 @@ def test_bspline_weights_are_a_partition_of_unity_and_reproduce_linear_functions
                                    np.array([KMAX, -KMAX, KMAX, -KMAX, KMAX, -KMAX])])
 def test_soft_arm_skinned_body_matches_the_vertex_mesh_at_full_bend(server, kappa) -> None:
     view = make_arm_view(server.scene, model_for(SOFT))
-    assert isinstance(view, PlanarArmView) and view.method == "skinned"
+    assert isinstance(view, SoftArmView) and view.method == "skinned"
     assert view.update(kappa)
     want = view.geometry(kappa)["body"].astype(float)
     got = skinned(view.body, *view.skin.bind(view.body_topology, [0], view.radius),
@@ -80,7 +80,7 @@ def test_soft_arm_skinned_body_matches_the_vertex_mesh_at_full_bend(server, kapp
 ])
 def test_extensible_arm_skinned_backbone_and_racks_match_the_vertex_mesh(server, q) -> None:
     view = make_arm_view(server.scene, model_for(EXT))
-    assert isinstance(view, DeltaArmView)
+    assert isinstance(view, ExtensibleArmView)
     assert np.allclose(np.linalg.norm(q[:, :2], axis=1) / EXT.d, np.pi / 2)  # full bend
     view.update(q)
     g = view.geometry(q)
@@ -228,7 +228,7 @@ def test_console_renders_the_skinned_arm_by_moving_the_same_bones(server) -> Non
 
     app = ConsoleApp(EXT, server)
     view = app.view
-    assert isinstance(view, DeltaArmView) and view.method == "skinned"
+    assert isinstance(view, ExtensibleArmView) and view.method == "skinned"
     handles = (view.backbone, *view.racks, view.platforms, view.tip)
     vertices = view.backbone.vertices.copy()  # the bind pose, sent once
     with app:

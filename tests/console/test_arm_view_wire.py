@@ -11,7 +11,7 @@ import pytest
 from viser import _messages
 from viser.infra import _messages as infra_messages
 
-from console.scene.arm_view import make_arm_view
+from console.scene.arm_view_factory import make_arm_view
 from console.core.model import model_for
 from console.scene.skin import bspline_weights
 from console.viser_fixes import install

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from console.app import ConsoleApp
-from console.scene.arm_view import make_arm_view
-from console.scene.extensible_arm_view import DeltaArmView
-from console.scene.soft_arm_view import PlanarArmView
+from console.scene.arm_view_factory import make_arm_view
+from console.scene.extensible_arm_view import ExtensibleArmView
+from console.scene.soft_arm_view import SoftArmView
 from console.panels.common.base import Panel
 from console.panels.common.jog import JogPanel
 from console.panels.common.readout import ReadoutPanel
@@ -34,7 +34,7 @@ def wait_until(predicate, timeout: float = 3.0) -> None:
         time.sleep(0.01)
 
 
-def ring_centres(view: PlanarArmView, vertices: np.ndarray) -> np.ndarray:
+def ring_centres(view: SoftArmView, vertices: np.ndarray) -> np.ndarray:
     k, m = view.body_topology.sides, view.body_topology.n_rings
     return vertices[: m * k].reshape(m, k, 3).astype(float).mean(axis=1)
 
@@ -42,7 +42,7 @@ def ring_centres(view: PlanarArmView, vertices: np.ndarray) -> np.ndarray:
 def test_planar_tube_follows_the_backbone_and_gripper_and_palm_sit_on_the_tip(server) -> None:
     app = ConsoleApp(SOFT, server)
     view = app.view
-    assert isinstance(view, PlanarArmView)
+    assert isinstance(view, SoftArmView)
     kappa = np.array([5.0, -3.0, 16.7, 0.0, -10.0, 2.0])
     g = view.geometry(kappa)
     backbone = pk.sample_backbone(kappa, SOFT.lengths, view.samples_per_segment, SOFT.base_pose)
@@ -74,7 +74,7 @@ def polyline_length(points: np.ndarray) -> np.ndarray:
 def test_extensible_racks_are_drawn_with_their_commanded_lengths(server) -> None:
     app = ConsoleApp(EXT, server)
     view = app.view
-    assert isinstance(view, DeltaArmView)
+    assert isinstance(view, ExtensibleArmView)
     q = np.array([[0.03, -0.02, 0.2], [-0.01, 0.025, 0.12]])  # about 1.2 and 0.9 rad of bend
     g = view.geometry(q)
     beta = -EXT.phi + 2 * np.pi * np.arange(3) / 3

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from console.core.model import DeltaModel, PlanarModel, model_for
+from console.core.model import ExtensibleModel, SoftArmModel, model_for
 from console.core.state import StateStore
 from core.kinematics import delta as dk
 from core.robots import load
@@ -47,7 +47,7 @@ feasible_q = st.lists(rack_lengths, min_size=6, max_size=6).map(
 @settings(max_examples=200, deadline=None)
 @given(q=feasible_q, which=st.integers(0, 5), value=st.floats(-0.5, 0.5))
 def test_jogging_one_coordinate_keeps_racks_feasible_and_clamps_maximally(q, which, value):
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     coord = model.coordinates[which]
     out, note = model.set_coordinate(q, coord, value)
     assert feasible(out)
@@ -69,7 +69,7 @@ def test_jogging_one_coordinate_keeps_racks_feasible_and_clamps_maximally(q, whi
 @given(q=st.lists(st.floats(-0.6, 0.6), min_size=6, max_size=6).map(
     lambda v: np.reshape(v, (2, 3))))
 def test_clamp_returns_feasible_configurations_and_keeps_feasible_ones(q):
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     out, notes = model.clamp(q)
     assert feasible(out)
     if feasible(q, tol=-1e-9):  # strictly inside the limits: untouched
@@ -85,7 +85,7 @@ def test_clamp_returns_feasible_configurations_and_keeps_feasible_ones(q):
 
 
 def test_bending_slider_range_is_exactly_what_some_extension_allows():
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     dl = np.linspace(0.0, EXT.rack_max - EXT.L0, 3601)
     for coord in model.coordinates:
         seg, axis = coord.index
@@ -101,7 +101,7 @@ def test_bending_slider_range_is_exactly_what_some_extension_allows():
 
 
 def test_bending_a_retracted_segment_says_to_extend_first():
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     out, note = model.set_coordinate(model.zero(), model.coordinates[0], 0.05)
     np.testing.assert_array_equal(out, model.zero())
     assert note is not None and "extend δL₁ first" in note
@@ -114,7 +114,7 @@ def test_the_extensible_arm_starts_straight_at_mid_range_with_room_to_bend_both_
     """Issue #19.5: retracted, every rack sits at rack_min and every bend is refused. The
     console's first command is the straight arm with every rack at mid-range (the store's
     default), so every bending coordinate can move both ways by a full slider step."""
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     q0 = StateStore(model).command.q
     np.testing.assert_array_equal(q0, model.initial())
     mid = (EXT.rack_min + EXT.rack_max) / 2
@@ -129,7 +129,7 @@ def test_the_extensible_arm_starts_straight_at_mid_range_with_room_to_bend_both_
 
 
 def test_planar_curvature_is_clipped_to_kappa_max_with_a_note():
-    model = PlanarModel(SOFT)
+    model = SoftArmModel(SOFT)
     out, note = model.set_coordinate(model.zero(), model.coordinates[2], 40.0)
     assert out[2] == SOFT.kappa_max and np.count_nonzero(out) == 1
     assert note is not None and "κ₃" in note
@@ -149,7 +149,7 @@ def test_bad_configurations_are_refused_with_a_clear_message(robot, bad, message
 
 
 def test_straightening_keeps_extension_and_removes_bending():
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     q = np.array([[0.02, -0.01, 0.1], [0.0, 0.03, 0.2]])
     np.testing.assert_array_equal(model.straightened(q), [[0, 0, 0.1], [0, 0, 0.2]])
-    np.testing.assert_array_equal(PlanarModel(SOFT).straightened(np.ones(6)), np.zeros(6))
+    np.testing.assert_array_equal(SoftArmModel(SOFT).straightened(np.ones(6)), np.zeros(6))

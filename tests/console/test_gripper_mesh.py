@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 import trimesh
 
-from console.scene.arm_view import make_arm_view
+from console.scene.arm_view_factory import make_arm_view
 from console.scene.gripper_mesh import (ASSET, NEUTRAL_Y, GripperShape, bend, fit, gripper_vertices,
                                   load_asset)
 from console.core.model import model_for

@@ -14,7 +14,8 @@ import pytest
 import viser
 
 from console.core.access import AccessControl
-from console.core.hardware_setup import HardwareAttachment, attach
+from console.core.hardware_attachment import HardwareAttachment
+from console.core.hardware_setup import attach
 from console.panels.common.hardware import (OTHER, FaultTracker, HardwarePanel, format_health,
                                      no_controls_text)
 from core.robots import load

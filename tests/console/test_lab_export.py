@@ -16,7 +16,7 @@ import viser
 import zstandard
 
 from console.app import ConsoleApp
-from console.scene.arm_view import make_arm_view
+from console.scene.arm_view_factory import make_arm_view
 from console.playback.export import draw_overlay, external_urls, recording_html, scene_html
 from console.recording.recorder import Event, Recording
 from core.kinematics import planar as pk

@@ -12,7 +12,7 @@ import pytest
 from console.app import ConsoleApp
 from console.core.model import model_for
 from console.panels.soft_arm.capture import CapturePanel, summary_markdown
-from console.panels.common.readout import delta_readout_html, planar_readout_html
+from console.panels.common.readout import extensible_readout_html, soft_arm_readout_html
 from console.panels.soft_arm.trials import TrialsPanel, results_markdown
 from core.control.capture import characterise
 from core.control.trials import TrialResult, paper_locations
@@ -70,13 +70,13 @@ def test_readout_cells_are_mm_and_degrees_with_fixed_decimals_and_no_minus_zero(
     model = model_for(SOFT)
     q = np.zeros(SOFT.n_segments)
     q[0] = -1e-7  # a hair off straight: x rounds to zero and must read +0.0, not -0.0
-    cells = _cells(planar_readout_html(model, q))
+    cells = _cells(soft_arm_readout_html(model, q))
     tip = pk.forward_kinematics(q, SOFT.lengths, SOFT.base_pose)[-1]
     assert cells["tip-0"] == "+0.0"
     assert cells["tip-1"] == f"{tip[1] * 1e3:+.1f}" and cells["tip-2"] == "+90.0"
-    html = planar_readout_html(model, q)
+    html = soft_arm_readout_html(model, q)
     assert "x (mm)" in html and "θ (°)" in html
-    ext = delta_readout_html(model_for(EXT), np.zeros((EXT.n_segments, 3)))
+    ext = extensible_readout_html(model_for(EXT), np.zeros((EXT.n_segments, 3)))
     cells = _cells(ext)
     assert cells["tip-3"] == "0.0"  # tilt (°) of the straight arm
     assert cells["rack-1-1"].startswith(f"{EXT.rack_min * 1e3:.1f}")

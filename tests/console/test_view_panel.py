@@ -106,9 +106,9 @@ def test_presets_look_at_the_table_and_keep_the_arm_left_of_the_panel(robot, asp
                 x, y = ndc(pose, c, aspect)
                 assert -1 <= x <= 1 - 2 * (1 - free) + 1e-9 and -1 <= y <= 1, (pose.name, c)
     else:
-        from console.core.model import DeltaModel
+        from console.core.model import ExtensibleModel
         from core.kinematics import delta as dk
-        start = tuple(dk.tip_position(robot, DeltaModel(robot).initial()))  # the start pose's tip
+        start = tuple(dk.tip_position(robot, ExtensibleModel(robot).initial()))  # start pose's tip
         rest = (0.0, 0.0, robot.n_segments * robot.rack_min)       # the retracted arm's top
         for pose in poses:
             for p in ((0.0, 0.0, 0.0), rest, start, (0.1, 0.1, 0.3 * span),

@@ -16,7 +16,7 @@ import viser
 
 from console.panels.soft_arm import control_plots as cp
 from console.panels.common import hardware as hwp
-from console.core.hardware_setup import HardwareAttachment
+from console.core.hardware_attachment import HardwareAttachment
 from console.panels.soft_arm.control import ControlPanel
 from console.panels.common.plot_data import PlotPacer, axis_top
 from console.viser_fixes import install
@@ -280,7 +280,7 @@ def test_a_slow_steady_move_is_drawn_every_frame_and_noise_still_is_not(server, 
     band is 0.1 mm: every frame of a 6 mm/s move (0.2 mm per frame at 30 Hz) is drawn once the
     steadiness has been measured over ``moving_steps`` frames; noise is never steady."""
     import console.scene.arm_view as arm_view
-    from console.scene.arm_view import make_arm_view
+    from console.scene.arm_view_factory import make_arm_view
     from console.scene.dead_band import DeadBand
     from console.core.model import model_for
 

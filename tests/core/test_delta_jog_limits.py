@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from console.core.hold_to_run import HoldToRun
-from console.core.model import DeltaModel
+from console.core.model import ExtensibleModel
 from console.core.state import StateStore
 from core.robots import load
 
@@ -39,7 +39,7 @@ def test_the_limit_is_ninety_degrees_per_segment() -> None:
 
 
 def test_bending_sliders_span_the_bending_disc() -> None:
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     for coord in model.coordinates:
         if coord.index[1] < 2:  # the racks alone would allow 240 mm
             assert (coord.lo, coord.hi) == pytest.approx((-0.047, 0.047))
@@ -47,7 +47,7 @@ def test_bending_sliders_span_the_bending_disc() -> None:
 
 
 def test_jog_beyond_the_bending_limit_clamps_to_the_disc_with_a_clear_note() -> None:
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     q = np.array([[0.0, 0.02, 0.2], [0.01, 0.0, 0.1]])
     out, note = model.set_coordinate(q, model.coordinates[0], 0.08)  # Δx₁
     expected = math.sqrt(R ** 2 - 0.02 ** 2)  # the disc's edge at Δy₁ = 20 mm
@@ -63,7 +63,7 @@ def test_jog_beyond_the_bending_limit_clamps_to_the_disc_with_a_clear_note() -> 
 
 
 def test_when_the_racks_bind_first_the_note_names_the_rack() -> None:
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     q = np.array([[0.0, 0.0, 0.01], [0.0, 0.0, 0.1]])  # barely extended: racks bind at 20 mm
     out, note = model.set_coordinate(q, model.coordinates[0], 0.04)
     assert out[0, 0] == pytest.approx(0.02, abs=1e-9) and in_limits(out)
@@ -71,7 +71,7 @@ def test_when_the_racks_bind_first_the_note_names_the_rack() -> None:
 
 
 def test_clamp_scales_an_over_bent_segment_onto_the_disc_keeping_its_direction() -> None:
-    model = DeltaModel(EXT)
+    model = ExtensibleModel(EXT)
     q = np.array([[0.06, 0.03, 0.25], [0.0, -0.01, 0.1]])  # segment 1: 2.2 rad, racks fine
     assert np.all(racks(q) >= EXT.rack_min) and np.all(racks(q) <= EXT.rack_max)
     out, notes = model.clamp(q)
@@ -88,7 +88,7 @@ def test_clamp_scales_an_over_bent_segment_onto_the_disc_keeping_its_direction()
 
 
 def test_commanded_configurations_are_clamped_and_bad_ones_refused() -> None:
-    store = StateStore(DeltaModel(EXT))
+    store = StateStore(ExtensibleModel(EXT))
     state = store.request(np.array([[0.09, 0.0, 0.3], [0.0, 0.0, 0.1]]), "jog")
     assert in_limits(np.asarray(state.q)) and any("bending limit" in n for n in state.notes)
     before = store.command
@@ -99,7 +99,7 @@ def test_commanded_configurations_are_clamped_and_bad_ones_refused() -> None:
 
 def test_a_held_bending_jog_stops_at_the_limit() -> None:
     clock = {"t": 0.0}
-    store = StateStore(DeltaModel(EXT), np.array([[0.0, 0.0, 0.2], [0.0, 0.0, 0.1]]))
+    store = StateStore(ExtensibleModel(EXT), np.array([[0.0, 0.0, 0.2], [0.0, 0.0, 0.1]]))
     hold = HoldToRun(store, allowed=lambda cid: True, clock=lambda: clock["t"], rate_hz=50.0)
     coord = hold.model.coordinates[0]  # Δx₁ +
     peak = 0.0

@@ -39,6 +39,7 @@ from console.recording.lab_feed import LinkFeed
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.plot_data import PlotPacer, axis_top, thin
 from console.core.state import ArmState
+from console.panels.common.events import client_of, target_of
 from hw_bridge.controls import BridgeControls
 from hw_bridge.interface import LinkHealth
 from hw_bridge.transport import list_ports
@@ -231,9 +232,9 @@ class HardwarePanel(Panel):
 
     # -- callbacks (thin: enqueue) -----------------------------------------------------------
     def _tell(self, event: Any, message: str) -> None:
-        if getattr(event, "client", None) is not None:
-            event.client.add_notification("Hardware", message, color="orange",
-                                          auto_close_seconds=6.0)
+        client = client_of(event)
+        if client is not None:
+            client.add_notification("Hardware", message, color="orange", auto_close_seconds=6.0)
 
     def _enqueue(self, event: Any, what: str, fn: Any, *args: Any) -> None:
         ctl = self.controls()
@@ -241,7 +242,7 @@ class HardwarePanel(Panel):
             self._tell(event, no_controls_text(self.kind, self.owner).replace("**", ""))
             return
         getattr(ctl, fn)(*args)
-        self.app.recorder.action(f"hardware: {what}", getattr(event, "client", None))
+        self.app.recorder.action(f"hardware: {what}", client_of(event))
 
     @operator_only(action="connect the hardware")
     def _on_connect(self, event: viser.GuiEvent) -> None:
@@ -284,9 +285,10 @@ class HardwarePanel(Panel):
 
     def on_refused(self, event: Any) -> None:
         """A viewer changed the port or baud field: put the operator's value back for all."""
-        target = getattr(event, "target", None)
-        if target is not None and id(target) in self._accepted:
-            target.value = self._accepted[id(target)]
+        target = target_of(event)
+        for handle in self._inputs:  # the refused one of the fields put back
+            if target is handle:
+                handle.value = self._accepted[id(handle)]
 
     # -- display -----------------------------------------------------------------------------
     def on_state(self, state: ArmState) -> None:

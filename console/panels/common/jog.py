@@ -1,14 +1,14 @@
 """Jog panel: one row per coordinate -- its set-point slider with hold-to-jog − / + beside it.
 
-Planar arm: a curvature per segment (+-kappa_max, 1/m), and under the sliders each segment's
+Soft arm: a curvature per segment (+-kappa_max, 1/m), and under the sliders each segment's
 bend angle θᵢ = κᵢ·Lᵢ in degrees. Extensible arm: Δx, Δy, δL per segment in mm (SI inside: the
 panel converts), one folder per segment; a move that would push a rack outside
 [rack_min, rack_max], or bend a segment beyond theta_max (theta = |(dx, dy)| / d; robot file
 ``segments.theta_max``), is clamped to the feasible interval of that coordinate
-(``console.core.model.DeltaModel.set_coordinate``), the slider snaps to the value applied and the
-panel says which rack hit which limit, or that the segment is at its bending limit. The Δx / Δy
-sliders span what the racks and the bending limit allow. "Straighten" removes all bending; on
-the extensible arm "Retract" returns to delta = 0.
+(``console.core.model.ExtensibleModel.set_coordinate``), the slider snaps to the value applied
+and the panel says which rack hit which limit, or that the segment is at its bending limit.
+The Δx / Δy sliders span what the racks and the bending limit allow. "Straighten" removes all
+bending; on the extensible arm "Retract" returns to delta = 0.
 
 Layout: viser 1.1.1 stacks every widget on its own full-width row and has no row container
 (a button group sends clicks only, no hold events). The panel keeps real hold buttons and lays
@@ -46,6 +46,7 @@ import viser
 from console.core.model import Coordinate, subscript
 from console.panels.common.base import Panel, operator_only
 from console.core.state import ArmState
+from console.panels.common.events import target_of
 from core.units import MM_PER_M, fmt_deg
 
 HOLD_HZ = 20.0
@@ -225,7 +226,7 @@ class JogPanel(Panel):
 
     def on_refused(self, event: Any) -> None:
         # viser already showed the viewer's slider value to everyone: put the arm's back.
-        if isinstance(getattr(event, "target", None), viser.GuiSliderHandle):
+        if isinstance(target_of(event), viser.GuiSliderHandle):
             self._sync_sliders(self._base())
 
     def _sync_sliders(self, q: np.ndarray | None) -> None:

@@ -1,7 +1,7 @@
 """Readout panel: the displayed tip pose and, for the extensible arm, rack lengths vs. limits.
 
 Values are computed from the displayed configuration with ``core.kinematics`` and shown in mm
-and degrees. Planar arm: arm tip (gripper root) [x, y, theta] and the palm point w_t. Extensible
+and degrees. Soft arm: arm tip (gripper root) [x, y, theta] and the palm point w_t. Extensible
 arm: tip position, tilt of the tip axis from vertical, and every rack's length as a bar between
 rack_min and rack_max, flagged when within ``NEAR_LIMIT`` of a limit.
 
@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from console.scene.arm_view import RACK_COLORS
-from console.core.model import DeltaModel, PlanarModel
+from console.core.model import ExtensibleModel, SoftArmModel
 from console.panels.common.base import Panel
 from console.core.state import ArmState
 from core.units import fmt_deg, fmt_mm
@@ -41,7 +41,7 @@ def _pose_table(rows: list[tuple[str, str, list[str | None]]], columns: list[str
     return (f'<table style="border-collapse:collapse"><tr><th></th>{head}</tr>{body}</table>')
 
 
-def planar_readout_html(model: PlanarModel, q: np.ndarray) -> str:
+def soft_arm_readout_html(model: SoftArmModel, q: np.ndarray) -> str:
     """HTML for the soft arm: tip pose [x, y, theta] and palm point, in mm / degrees."""
     tip = model.poses(q)[-1]
     palm = model.palm_point(tip)
@@ -71,7 +71,7 @@ def _rack_cell(cell_id: str, length: float, lo: float, hi: float,
         "</div></div></td>")
 
 
-def delta_readout_html(model: DeltaModel, q: np.ndarray) -> str:
+def extensible_readout_html(model: ExtensibleModel, q: np.ndarray) -> str:
     """HTML for the extensible arm: tip position and tilt, rack lengths against their limits."""
     r = model.robot
     tip = model.frames(q)[-1]
@@ -118,10 +118,10 @@ class ReadoutPanel(Panel):
     def _render(self, state: ArmState) -> str:
         model = self.app.model
         q = np.asarray(state.q)
-        if isinstance(model, PlanarModel):
-            return planar_readout_html(model, q)
-        assert isinstance(model, DeltaModel)
-        return delta_readout_html(model, q)
+        if isinstance(model, SoftArmModel):
+            return soft_arm_readout_html(model, q)
+        assert isinstance(model, ExtensibleModel)
+        return extensible_readout_html(model, q)
 
     def on_state(self, state: ArmState) -> None:
         self._pending = state
@@ -133,7 +133,7 @@ class ReadoutPanel(Panel):
 
     def _show(self) -> None:
         state = self._pending
-        frame = getattr(self.app.view, "frames_sent", None)
+        frame = self.app.view.frames_sent
         if state is None or frame == self._frame_shown:
             return  # nothing new, or the drawn arm did not change
         self._pending = None

@@ -20,7 +20,8 @@ from typing import Any
 
 import viser
 
-from console.core.access import NotOperator, Operator
+from console.core.access import NotOperator
+from console.core.operator import Operator
 from console.playback.export import scene_html
 from console.panels.common.base import Panel, operator_only
 from console.playback.replay import ReplayPlayer, ReplaySession
@@ -147,8 +148,11 @@ class SessionPanel(Panel):
 
     @operator_only(action="run the demo motion")
     def _on_demo(self, event: viser.GuiEvent) -> None:
+        demo = self.app.services.demo
+        if demo is None:  # the button exists only with a demo (serve.py --demo)
+            return
         self.app.recorder.action("started the demo motion", event.client)
-        self.app.services.demo.start()  # type: ignore[union-attr]
+        demo.start()
 
     @operator_only(action="start or stop a recording")
     def _on_record(self, event: viser.GuiEvent) -> None:

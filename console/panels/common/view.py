@@ -1,6 +1,6 @@
 """View panel: a 3D view that explains itself -- camera presets, a legend, a measuring tool.
 
-* **Camera**: the robot's presets (``console.scene.camera``: planar arm *Perspective* / *Top-down*;
+* **Camera**: the robot's presets (``console.scene.camera``: soft arm *Perspective* / *Top-down*;
   extensible arm *Perspective* / *Front* / *Side* / *Top-down*) and *Reset view* (the camera the
   console opens with). A preset moves only the camera of the browser that pressed it, fitted to
   that browser's window; viewers may use them (they move nothing but their own view).

@@ -29,7 +29,9 @@ import numpy as np
 import viser
 
 from console.panels.common.base import Panel, operator_only
+from console.panels.extensible.status import extensible_arm
 from console.scene.plan_view import ray_to_table
+from console.panels.common.events import target_of
 from core.kinematics import box_clearance as bc
 from core.planning.box_scene import (
     BoxScene,
@@ -232,7 +234,7 @@ class BoxObstaclesPanel(Panel):
 
     def on_refused(self, event: Any) -> None:
         """Undo what a refused viewer's edit shows everyone."""
-        target = getattr(event, "target", None)
+        target = target_of(event)
         if target is self.click_place:
             self.click_place.value = self._click_mode
         elif target is self.selected:
@@ -301,7 +303,7 @@ class BoxObstaclesPanel(Panel):
                      f"{' × '.join(fmt_mm(v, 0) for v in b.size)} mm")
         if scene.boxes:
             q = np.asarray(self.app.store.command.q, dtype=float)
-            near = bc.clearance_of(self.app.robot, q, scene.boxes)  # type: ignore[arg-type]
+            near = bc.clearance_of(extensible_arm(self.app), q, scene.boxes)
             if not near.clear_of(scene.clearance):
                 text += (f"<br><b style='color:#c92a2a'>⚠ The arm's posture is too close: "
                          f"{html.escape(near.describe())}</b> (move it away: motions must keep "

@@ -12,7 +12,8 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
-from console.scene.extensible_arm_view import DeltaArmView
+from console.core.model import ArmModel
+from console.scene.arm_view import ArmView
 from core.planning.paths import MotionPath
 
 Array = npt.NDArray[np.float64]
@@ -28,20 +29,6 @@ def trail_tail(times: Array, points: Array, seconds: float) -> Array:
     if len(times) == 0:
         return points[:0]
     return points[np.asarray(times) >= times[-1] - seconds]
-
-
-def ghost_vertices(view: DeltaArmView, q: Array) -> tuple[Array, Array]:
-    """One mesh (vertices, faces) of backbone, racks and platforms at ``q`` for a ghost arm."""
-    g = view.geometry(q)
-    parts = [(g["backbone"], view.backbone_topology.faces)]
-    parts += [(r, view.rack_topology.faces) for r in g["racks"]]
-    parts.append((g["platforms"], view.platform_topology.faces))
-    verts, faces, offset = [], [], 0
-    for v, f in parts:
-        verts.append(v)
-        faces.append(f + offset)
-        offset += len(v)
-    return np.vstack(verts), np.vstack(faces).astype(np.uint32)
 
 
 class PathScene:
@@ -75,8 +62,9 @@ class PathScene:
         for ghost in self.ghosts:
             ghost.visible = False
 
-    def draw_preview(self, path: MotionPath, waypoints: Array, view: object) -> None:
-        """The planned tip trace and, on the extensible arm's ``view``, ghost arms along it."""
+    def draw_preview(self, path: MotionPath, waypoints: Array,
+                     view: ArmView[ArmModel]) -> None:
+        """The planned tip trace and ghost arms along it, drawn by the arm's ``view``."""
         self.waypoints.points = np.asarray(waypoints, dtype=np.float32)
         self.waypoints.visible = True
         tips = path.tips
@@ -84,11 +72,9 @@ class PathScene:
             else np.stack([tips, tips], axis=1)
         self.trace.visible = True
         self.measured.visible = False
-        if not isinstance(view, DeltaArmView):
-            return
         picks = np.linspace(0, len(path.times) - 1, N_GHOSTS).round().astype(int)
         for i, k in enumerate(picks):
-            verts, faces = ghost_vertices(view, path.deltas[k])
+            verts, faces = view.ghost_mesh(path.deltas[k])
             if i < len(self.ghosts):
                 self.ghosts[i].vertices = verts
                 self.ghosts[i].visible = True

@@ -24,7 +24,6 @@ clearance away along the whole motion, or says why it cannot ("blocked", naming 
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import html
 import threading
 import time
@@ -39,8 +38,9 @@ import viser.uplot as uplot
 from console.header import Tone
 from console.recording.lab_feed import path_plan_record
 from console.panels.common.base import Panel
-from console.panels.extensible.status import (extensible_runner, hardware_html, runner_phase,
-                                              worker_pool)
+from console.panels.extensible.status import (extensible_arm, extensible_runner, hardware_html,
+                                              runner_phase)
+from console.panels.extensible.worker_pool import WorkerPool
 from console.panels.extensible.obstacles_boxes import box_scene_of
 from console.panels.extensible.path_request import PathRequest, PendingPlan
 from console.panels.extensible.path_scene import PathScene, trail_tail
@@ -68,8 +68,7 @@ class PathsPanel(Panel):
     kinds = ("delta",)
 
     def build(self) -> None:
-        robot = self.app.robot
-        v_max = robot.tip_speed * 1e3  # type: ignore[union-attr]
+        v_max = extensible_arm(self.app).tip_speed * 1e3
         gui = self.gui
         self.kind = gui.add_dropdown(
             "Path", PATH_KINDS, initial_value="linear",
@@ -99,7 +98,7 @@ class PathsPanel(Panel):
             title="Tip distance to the path target", aspect=1.6)
         self.drawing = PathScene(self.app.server.scene)  # trace, waypoints, ghosts, measured
         self._lock = threading.Lock()
-        self._pool: cf.ProcessPoolExecutor | None = None
+        self._pool: WorkerPool | None = None
         self._planned: tuple[PathRequest, MotionPath] | None = None
         self._planning: PendingPlan | None = None
         self._execute_after_plan = False
@@ -197,27 +196,26 @@ class PathsPanel(Panel):
 
         def show() -> None:
             try:
-                future.result(timeout=10.0)  # type: ignore[union-attr]
+                if future is not None:  # None: another thread's start() is connecting
+                    future.result(timeout=10.0)
                 time.sleep(3 * runner.period_s)  # the snapshot trails by a tick
             finally:
                 self.hardware.content = hardware_html(self.app)
         threading.Thread(target=show, daemon=True, name="hw-connect").start()
 
     # -- workers ---------------------------------------------------------------------------
-    def _plan_pool(self) -> cf.ProcessPoolExecutor:
+    def _plan_pool(self) -> WorkerPool:
         with self._lock:
             if self._pool is None:
-                self._pool = worker_pool()
+                self._pool = WorkerPool()
             return self._pool
 
-    def _drop_pool(self, pool: cf.ProcessPoolExecutor) -> None:
+    def _drop_pool(self, pool: WorkerPool) -> None:
         """A broken or stuck worker: a new one on the next request."""
         with self._lock:
             if self._pool is pool:
                 self._pool = None
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            proc.terminate()  # stuck in a plan: shutdown alone would leave it computing
+        pool.terminate()  # stuck in a plan: shutdown alone would leave it computing
 
     def _on_planned(self, planning: PendingPlan) -> None:
         """Worker callback: draw the plan and say what it is, or why there is none."""

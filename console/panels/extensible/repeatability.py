@@ -36,7 +36,7 @@ import numpy.typing as npt
 import viser
 
 from console.panels.common.base import Panel
-from console.panels.extensible.status import extensible_runner
+from console.panels.extensible.status import extensible_arm, extensible_runner
 from console.panels.extensible.repeatability_view import (Comparison, RepeatabilityResult, comparison_html,
                                                error_plot_svg, sensor_note)
 from console.core.state import ArmState
@@ -311,7 +311,7 @@ class RepeatabilityPanel(Panel):
             self.plot.content = error_plot_svg(c)
             self.table.content = comparison_html(c)
         try:
-            run_comparison(gate, self.app.robot, req.point, req.n, tip,  # type: ignore[arg-type]
+            run_comparison(gate, extensible_arm(self.app), req.point, req.n, tip,
                            on_update=show, should_stop=lambda: gate.closed,
                            on_progress=lambda text: self._say(f"Running {text}…"))
         except ValueError as exc:

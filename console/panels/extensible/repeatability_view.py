@@ -174,8 +174,9 @@ def _loop_row(c: Comparison, loop: Loop) -> str:
 def _detail_lines(c: Comparison) -> str:
     """Each loop's +- spread per axis (the table shows their mean) and its time per move."""
     axes, cost = [], []
-    for loop in ("open", "closed"):
-        s = c.stats(loop)  # type: ignore[arg-type]
+    loops: tuple[Loop, ...] = ("open", "closed")
+    for loop in loops:
+        s = c.stats(loop)
         if s is None:
             continue
         axes.append(f'{loop} <span data-testid="rep-{loop}-axes">'

@@ -4,24 +4,21 @@
 Link field do (``console.panels.common.hardware.header_link``); :func:`runner_phase` is the header's
 Phase field (idle, moving to target, running path t/T s, holding after STOP, fault), pushed by
 the Paths panel; :func:`hardware_html` is the Paths panel's "Hardware:" line (that link and
-the runner's state); :func:`worker_pool` is the spawned worker process the Paths and Tip target
-panels plan and solve in, off the console's GIL; :func:`extensible_runner` is the runner the
-Paths and Repeatability panels drive.
+the runner's state); :func:`extensible_runner` is the runner the Paths and Repeatability panels
+drive and :func:`extensible_arm` the robot they are built for, typed. The worker process they
+plan and solve in: :mod:`console.panels.extensible.worker_pool`.
 """
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import html
-import multiprocessing
-import os
 from typing import Any
 
 from console.header import Tone
 from console.panels.common.hardware import extensible_link_health, header_link
+from core.robots import ExtensibleArm
 from hw_bridge.extensible_jobs import RunnerSnapshot
 from hw_bridge.extensible_process import ExtensibleProcess
-from hw_bridge.parent_watch import watch_parent
 
 
 def extensible_runner(app: Any) -> ExtensibleProcess:
@@ -34,15 +31,14 @@ def extensible_runner(app: Any) -> ExtensibleProcess:
     return runner
 
 
-def worker_pool() -> cf.ProcessPoolExecutor:
-    """One ``spawn``-ed worker process for CPU-bound planning / IK, off the console's GIL.
-
-    It leaves when the console process is gone, even SIGKILLed (a spawned worker holds its own
-    queue's write end, so it would wait forever); its initializer lives in ``hw_bridge`` so the
-    worker does not import the console (viser) to start.
-    """
-    return cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=watch_parent, initargs=(os.getpid(),))
+def extensible_arm(app: Any) -> ExtensibleArm:
+    """``app.robot`` as the extensible arm these panels are built for (their ``kinds`` keep them
+    off the soft arm), or a clear error on another robot: the one place the type is checked."""
+    robot = app.robot
+    if not isinstance(robot, ExtensibleArm):
+        raise TypeError(f"the extensible arm's panels need an extensible arm, not "
+                        f"{type(robot).__name__}")
+    return robot
 
 
 def link_summary(app: Any) -> str:

@@ -40,9 +40,10 @@ import numpy.typing as npt
 import viser
 
 from console.panels.common.base import Panel, operator_only
-from console.panels.extensible.status import link_summary, worker_pool
+from console.panels.extensible.status import extensible_arm, link_summary
 from console.panels.extensible.obstacles_boxes import box_scene_of
 from console.panels.extensible.target_worker import TargetIKWorker
+from console.panels.extensible.worker_pool import WorkerPool
 from console.panels.common.typed_fields import TypedFields
 from console.core.state import ArmState
 from core.kinematics import delta as dk
@@ -69,7 +70,8 @@ class TargetPanel(Panel):
     _route_len = 1  # postures of the last route moved along (1: straight there)
 
     def build(self) -> None:
-        self.settings = IKSettings.from_robot(self.app.robot)  # type: ignore[arg-type]
+        self.robot = extensible_arm(self.app)
+        self.settings = IKSettings.from_robot(self.robot)
         tip = self._tip(self.app.store.command.q)
         scene = self.app.server.scene
         self.gizmo = scene.add_transform_controls(
@@ -100,7 +102,7 @@ class TargetPanel(Panel):
             0, tip, None, None, None)
         self._shown = 0
         self._synced_seq = self.app.store.command.seq
-        self._pool: cf.ProcessPoolExecutor | None = None
+        self._pool: WorkerPool | None = None
         self._pool_lock = threading.Lock()
         self.worker = TargetIKWorker(self)
         self.gizmo.on_update(self._on_gizmo)
@@ -216,10 +218,10 @@ class TargetPanel(Panel):
         self.report_error(refused)
         return False
 
-    def _ik_pool(self) -> cf.ProcessPoolExecutor:
+    def _ik_pool(self) -> WorkerPool:
         with self._pool_lock:
             if self._pool is None:
-                self._pool = worker_pool()
+                self._pool = WorkerPool()
             return self._pool
 
     def _solve(self, target: Array, q0: Array, final: bool) -> TipIKResult:
@@ -246,7 +248,7 @@ class TargetPanel(Panel):
             raise RuntimeError(f"the IK gave no answer within {IK_TIMEOUT_S:.0f} s (machine "
                                "busy?); not moved; try again") from None
 
-    def _drop_pool(self, pool: cf.ProcessPoolExecutor) -> None:
+    def _drop_pool(self, pool: WorkerPool) -> None:
         """A broken or stuck worker: a new one next time (the old one is told to stop)."""
         with self._pool_lock:
             if self._pool is pool:
@@ -385,4 +387,4 @@ class TargetPanel(Panel):
                 f'data-route="{self._route_len}" style="font-size:0.85em">{body}</div>')
 
     def _tip(self, q: npt.ArrayLike) -> Array:
-        return dk.tip_position(self.app.robot, np.asarray(q))  # type: ignore[arg-type]
+        return dk.tip_position(self.robot, np.asarray(q))

@@ -1,32 +1,43 @@
 """The tip target's solving thread: only the newest target is solved, live ones throttled.
 
-The Tip target panel (:class:`console.panels.extensible.target.TargetPanel`) hands every target to a
-:class:`TargetIKWorker`; its one daemon thread solves the newest (a final solve is never
+The Tip target panel (:class:`console.panels.extensible.target.TargetPanel`) hands every target
+to a :class:`TargetIKWorker`; its one daemon thread solves the newest (a final solve is never
 downgraded by a later live one), at most ``LIVE_HZ`` live solves a second, and between requests
-checks every ``ARRIVAL_POLL_S`` whether the arm arrived (``TargetPanel.check_arrival``).
+checks every ``ARRIVAL_POLL_S`` whether the arm arrived (``TargetPanel.check_arrival``). The
+worker knows the panel only as a :class:`TargetSolver`, so it does not import the panel back.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
-
-if TYPE_CHECKING:
-    from console.panels.extensible.target import TargetPanel
 
 Array = npt.NDArray[np.float64]
 LIVE_HZ = 30.0
 ARRIVAL_POLL_S = 0.05
 
 
+class TargetSolver(Protocol):
+    """What the worker's thread calls (the Tip target panel implements it)."""
+
+    def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
+        """IK to ``target`` and move there; ``generation`` tells stale requests apart."""
+
+    def check_arrival(self) -> None:
+        """Between requests: whether the arm reached the set-point."""
+
+    def report_error(self, message: str) -> None:
+        """Show ``message`` (a solve raised)."""
+
+
 class TargetIKWorker:
     """Latest-value mailbox + one daemon thread: solves only the newest target."""
 
-    def __init__(self, panel: TargetPanel) -> None:
+    def __init__(self, panel: TargetSolver) -> None:
         self.panel = panel
         self._cond = threading.Condition()
         self._request: tuple[Array, bool, int] | None = None

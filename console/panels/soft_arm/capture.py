@@ -19,6 +19,7 @@ import numpy as np
 import viser
 
 from console.panels.common.base import Panel, operator_only
+from console.panels.common.events import client_of
 from core.control.capture import CaptureMap, characterise, grid_rows, mirror_agreement
 from core.robots import load
 from core.units import MM_PER_M, fmt_mm
@@ -155,6 +156,6 @@ class CapturePanel(Panel):
             path = data.path("exports", data.new_name("exports", stem, ".json"), ".json")
             cmap.save(path)
             paths.append(str(path))
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if client is not None:
             client.add_notification("Saved", ", ".join(paths), auto_close_seconds=6.0)

@@ -46,6 +46,7 @@ from console.panels.soft_arm.control_text import (
     table_point,
 )
 from console.core.state import ArmState
+from console.panels.common.events import client_of
 from hw_bridge.link_supervisor import DISCONNECTED
 from hw_bridge.soft_arm_process import ControlProcess, ControlView
 
@@ -144,7 +145,7 @@ class ControlPanel(Panel):
         fut.add_done_callback(lambda f: self._report(event, f))
 
     def _refuse(self, event: Any, title: str, message: str) -> None:
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if client is not None:
             client.add_notification(title, message, color="red", auto_close_seconds=8.0)
 
@@ -160,7 +161,7 @@ class ControlPanel(Panel):
     @staticmethod
     def _report(event: Any, fut: Any) -> None:
         exc = fut.exception()
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if exc is not None and client is not None:
             client.add_notification("Refused", str(exc), color="red", auto_close_seconds=8.0)
 

@@ -27,6 +27,7 @@ import viser
 from console.panels.common.base import operator_only
 from console.panels.soft_arm.control_text import IDLE_PHASES, ExecuteTarget, execute_target, table_point
 from console.core.table_scene import validate_object
+from console.panels.common.events import client_of
 from hw_bridge.soft_arm_process import ARM_FIRST
 
 
@@ -136,7 +137,7 @@ class ExecuteControls:
                                           view.obstacles, view.clearance,
                                           bin_params=table_bin)
         fut.add_done_callback(lambda f: self._report(event, f, sent))
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if client is not None:
             where = bin_sentence(self.app.robot, table_bin, target.r)
             client.add_notification("Grasp-and-place", f"{target.describe()}; {where}",

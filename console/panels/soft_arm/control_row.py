@@ -28,6 +28,7 @@ from console.header import Tone
 from console.panels.common.base import operator_only
 from console.panels.soft_arm.control_text import IDLE_PHASES
 from console.core.table_scene import validate_object
+from console.panels.common.events import client_of
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST, ControlView
 
 NO_BIN = ("Place a bin first: in the Objects panel choose 'Table click places: Bin' and click "
@@ -157,7 +158,7 @@ class RowControls:
             return
         what = f"{len(sent.names)} object{'s' if len(sent.names) != 1 else ''} into the " \
                f"{sent.bin_text}"
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if client is not None:
             client.add_notification("Clear table into bin", f"Taking {what}, one after another.",
                                     color="blue", auto_close_seconds=6.0)

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from console.header import Tone
+from console.core.grasp_state import SessionView
 from hw_bridge.link_supervisor import DISCONNECTED
 from hw_bridge.soft_arm_process import ControlView
 
@@ -52,7 +53,7 @@ class ExecuteTarget:
         return f"{where} (no Grasp planner plan for it: the controller plans the approach)"
 
 
-def execute_target(session_view: Any) -> ExecuteTarget:
+def execute_target(session_view: SessionView) -> ExecuteTarget:
     """The target of Execute from the grasp session's view (``console.scene.plan_view.SessionView``);
     ValueError (the operator's message) without a selected object."""
     obj = next((o for o in session_view.objects if o.name == session_view.selected), None)
@@ -63,7 +64,7 @@ def execute_target(session_view: Any) -> ExecuteTarget:
     if (out is not None and out.obj == obj and out.plan is not None and out.plan.success
             and out.plan.n > 0):
         plan = out.plan
-    obstacles = tuple(getattr(session_view, "obstacles", ()))
+    obstacles = tuple(session_view.obstacles)
     if obstacles and (plan is None or tuple(plan.obstacles) != obstacles
                       or plan.obstacle_margin != session_view.clearance):
         # Only a plan the operator saw go around them runs (the controller's re-plans then keep
