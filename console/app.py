@@ -32,7 +32,7 @@ registers its controlled stop there) and ends all jogging (``app.hold``, hold-to
 caps, ``console.hold_to_run``). It also runs when the operator's lease is lost, control is
 released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
 recording (``console.recording``); files live under ``app.data`` (``console.datadir``).
-``app.guard`` (``console.client_guard``) checks every message a browser sends before viser
+``app.guard`` (``console.web.client_guard``) checks every message a browser sends before viser
 stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
 calls ``allow_viewers(handle)``, per-client rate and size limits.
 """
@@ -51,9 +51,9 @@ import viser
 
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
-from console.client_guard import ClientGuard
+from console.web.client_guard import ClientGuard
 from console.datadir import DataDir
-from console.guarded_receive import install as _install_client_guard
+from console.web.receive_guard import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
@@ -66,7 +66,7 @@ from console.services import ConsoleServices
 from console.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.state import ArmState, StateStore
 from console.tabs import ConsoleTabs
-from console.viser_fixes import install as _install_viser_fixes
+from console.web.shared_sends import install as _install_viser_fixes
 from core.robots import Robot
 
 if TYPE_CHECKING:

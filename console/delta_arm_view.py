@@ -20,7 +20,7 @@ from console.dead_band import DeadBand
 from console.model import DeltaModel
 from console.skin import TubeSkin
 from console.tube import TubeTopology, frames_from_matrices
-from console.viser_fixes import set_bone_poses
+from console.web.shared_sends import set_bone_poses
 from core.kinematics import delta as dk
 
 

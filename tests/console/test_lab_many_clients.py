@@ -22,7 +22,7 @@ from websockets.sync.client import connect
 from console.access import AccessControl
 from console.app import ConsoleApp
 from console.panels.session import SessionPanel
-from console.viser_fixes import LoopSafeEvent, install
+from console.web.shared_sends import LoopSafeEvent, install
 from core.robots import load
 
 SOFT = load("soft-arm")

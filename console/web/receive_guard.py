@@ -2,10 +2,10 @@
 
 :func:`install` replaces ``viser.infra._infra._message_consumer`` (a module-level function looked
 up per connection, so one patch covers every server) by :func:`_guarded_consumer`: on a server
-with a :class:`~console.client_guard.ClientGuard` attached each frame goes through
-:meth:`~console.client_guard.ClientGuard.admit` before viser decodes and dispatches it (what the
-guard checks and why: ``console.client_guard``); servers without one behave as upstream. Its
-log lines are the guard's (logger ``console.client_guard``).
+with a :class:`~console.web.client_guard.ClientGuard` attached each frame goes through
+:meth:`~console.web.client_guard.ClientGuard.admit` before viser decodes and dispatches it (what the
+guard checks and why: ``console.web.client_guard``); servers without one behave as upstream. Its
+log lines are the guard's (logger ``console.web.client_guard``).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import asyncio
 import functools
 from typing import Any, Callable
 
-from console.client_guard import ClientGuard, _Disconnect, log
-from console.client_values import short
+from console.web.client_guard import ClientGuard, _Disconnect, log
+from console.web.client_values import short
 
 
 async def _guarded_consumer(websocket: Any, handle_message: Callable[[Any], None],

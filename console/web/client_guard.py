@@ -17,7 +17,7 @@ What upstream viser 1.1.1 does with a client's message (checked by ``tests/test_
 * Messages up to 50 MB are accepted; a frame that does not decode closes only its own connection.
 
 The fix sits at the one place every client frame passes before viser decodes and dispatches it:
-``viser.infra._infra._message_consumer``, which ``console.guarded_receive.install`` replaces
+``viser.infra._infra._message_consumer``, which ``console.web.receive_guard.install`` replaces
 (a module-level function looked up per connection, so one patch covers every server). A server
 with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each frame checked by
 :meth:`ClientGuard.admit`; servers without one behave as upstream. Rules, in order:
@@ -39,7 +39,7 @@ with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each fram
 
 Rules 1 and 2 are :meth:`ClientGuard.admit`; rules 3 and 4, per message type, are the
 ``_check_<MessageType>`` methods it inherits from
-:class:`console.client_message_checks.MessageTypeChecks`. The guard runs on viser's event loop;
+:class:`console.web.client_message_checks.MessageTypeChecks`. The guard runs on viser's event loop;
 it only reads GUI state and queues messages.
 """
 
@@ -51,8 +51,8 @@ import logging
 import time
 from typing import Any, Callable
 
-from console.client_message_checks import MessageTypeChecks
-from console.client_values import GuardLimits, Refused, check_fields, short
+from console.web.client_message_checks import MessageTypeChecks
+from console.web.client_values import GuardLimits, Refused, check_fields, short
 
 log = logging.getLogger(__name__)
 

@@ -3,13 +3,13 @@
 Every connected client has a producer that walks the broadcast buffer message by message
 (``AsyncMessageBuffer._window_loop``: a dictionary look-up, a comparison and an append each), so a
 frame of the extensible arm (~115 bone-pose messages) was walked 50 times with 50 viewers: with
-the encoding shared (:mod:`console.viser_fixes`) that walk and the per-client check of which
+the encoding shared (:mod:`console.web.shared_sends`) that walk and the per-client check of which
 frame a window matches were most of the event loop's remaining work per frame.
 
 :func:`install` replaces ``_window_loop`` with :func:`_window_loop`, viser's own loop line for
 line except the inner walk: on a persistent (broadcast) buffer the window for the same range of
 message ids is taken from :func:`shared_window`, which walks the range once and hands every
-client the same list object (so :func:`console.viser_fixes.encode_window` finds its frame by
+client the same list object (so :func:`console.web.shared_sends.encode_window` finds its frame by
 identity). A range holding a message that skips one client (``excluded_self_client``) is walked
 per client, as before; per-client buffers (not persistent: they pop what they take) are too.
 """

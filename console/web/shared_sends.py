@@ -23,7 +23,7 @@ the extensible arm (~115 pose messages per frame: viser's client takes skinned-m
 one message per bone and field, with no batched form) cost a whole core in that walk alone.
 
 What viser 1.1.1 does with what browsers *send* (it trusts them) is fixed in
-``console.client_guard``, which ``ConsoleApp`` installs beside this module.
+``console.web.client_guard``, which ``ConsoleApp`` installs beside this module.
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ def encode_window(buffer: Any, window: Any, zstd: Any) -> bytes:
     from viser.infra import _infra
 
     kept: list[tuple[Any, tuple[Any, ...], bytes]] = buffer.__dict__.setdefault(_FRAMES, [])
-    for source, _, frame in kept:  # the very window object (console.viser_windows shares it)
+    for source, _, frame in kept:  # the very window object (console.web.shared_windows shares it)
         if source is window:
             return frame
     messages = tuple(window)
@@ -208,7 +208,7 @@ def share_frames() -> bool:
 def install() -> bool:
     """Make every viser message buffer created from now on use :class:`LoopSafeEvent`, and
     share messages' wire dicts (:func:`share_wire_dicts`), encoded windows
-    (:func:`share_frames`) and the broadcast windows themselves (``console.viser_windows``)
+    (:func:`share_frames`) and the broadcast windows themselves (``console.web.shared_windows``)
     between clients.
 
     Returns:
@@ -216,11 +216,11 @@ def install() -> bool:
     """
     from viser.infra import _async_message_buffer as amb
 
-    from console import viser_windows
+    from console.web import shared_windows
 
     share_wire_dicts()
     share_frames()
-    viser_windows.install()
+    shared_windows.install()
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_loop_safe_event", False):

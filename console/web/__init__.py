@@ -1,0 +1,1 @@
+"""Every touch of viser's private internals, and the client guard, in one package."""
