@@ -46,12 +46,11 @@ it only reads GUI state and queues messages.
 from __future__ import annotations
 
 import collections
-import dataclasses
 import logging
 import time
 from typing import Any, Callable
 
-from console.web.client_message_checks import MessageTypeChecks
+from console.web.client_message_checks import ClientState, MessageTypeChecks
 from console.web.client_values import GuardLimits, Refused, check_fields, short
 
 log = logging.getLogger(__name__)
@@ -72,16 +71,6 @@ class _Disconnect(Exception):
         super().__init__(reason)
         self.code = code
         self.reason = reason
-
-
-@dataclasses.dataclass
-class ClientState:
-    """Per-connection bookkeeping (event-loop thread only)."""
-
-    tokens: float
-    last: float
-    drops: collections.deque = dataclasses.field(default_factory=collections.deque)
-    uploads: set = dataclasses.field(default_factory=set)
 
 
 class ClientGuard(MessageTypeChecks):

@@ -11,15 +11,24 @@ value out of bounds not stored), or raises :class:`~console.web.client_values.Re
 from __future__ import annotations
 
 import collections
+import dataclasses
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from console.web.client_values import GuardLimits, OutOfBounds, Refused, short, validate_value
 
-if TYPE_CHECKING:
-    from console.web.client_guard import ClientState
-
 _UPLOAD_CHUNK = 512 * 1024  # viser's browser uploads files in parts of this size
+
+
+@dataclasses.dataclass
+class ClientState:
+    """Per-connection bookkeeping (event-loop thread only): the rate bucket, recent drops and
+    the uploads this browser started (kept here, beside the checks that read it)."""
+
+    tokens: float
+    last: float
+    drops: collections.deque = dataclasses.field(default_factory=collections.deque)
+    uploads: set = dataclasses.field(default_factory=set)
 
 
 class MessageTypeChecks:
