@@ -15,7 +15,6 @@ import time
 from typing import TYPE_CHECKING
 
 import viser
-from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load)
 
 from console.arm_view import ArmView, make_arm_view
 from console.datadir import BadFileName
@@ -24,6 +23,7 @@ from console.obstacle_view import draw_recorded_obstacles
 from console.recording import SUFFIXES, Recording, load_recording
 from console.replay_markers import (COLORS, Marker, current_marker, markers_of, next_marker,
                                     previous_marker)
+from console.web.widgets import set_slider_marks
 
 if TYPE_CHECKING:
     from console.app import ConsoleApp
@@ -136,8 +136,7 @@ class ReplaySession:
                         handle.opacity = GHOST_OPACITY
             self.timeline.max = max(rec.duration, 0.05)
             self.markers = markers_of(rec)
-            self.timeline._marks = tuple(  # viser 1.1.1: the slider's marks prop
-                GuiSliderMark(value=round(m.t, 3), label=None) for m in self.markers[:200])
+            set_slider_marks(self.timeline, (round(m.t, 3) for m in self.markers[:200]))
             self.prev_btn.disabled = self.next_btn.disabled = not self.markers
             self.timeline.disabled = False
             self.play_btn.disabled = False
