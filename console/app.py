@@ -32,9 +32,11 @@ registers its controlled stop there) and ends all jogging (``app.hold``, hold-to
 caps, ``console.hold_to_run``). It also runs when the operator's lease is lost, control is
 released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
 recording (``console.recording``); files live under ``app.data`` (``console.datadir``).
-``app.guard`` (``console.web.client_guard``) checks every message a browser sends before viser
-stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
-calls ``allow_viewers(handle)``, per-client rate and size limits.
+A process builds a console only after ``console.web.install()`` (``serve.py`` calls it; the
+constructor raises RuntimeError otherwise). ``app.guard`` (``console.web.client_guard``) checks
+every message a browser sends before viser stores or broadcasts it: only valid values, shared
+inputs for the operator only unless a panel calls ``allow_viewers(handle)``, per-client rate and
+size limits.
 """
 
 from __future__ import annotations
@@ -49,11 +51,10 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
+from console import web
 from console.access import AccessControl, NotOperator, Operator
 from console.arm_view import ArmView, make_arm_view
-from console.web.client_guard import ClientGuard
 from console.datadir import DataDir
-from console.web.receive_guard import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
@@ -66,14 +67,11 @@ from console.services import ConsoleServices
 from console.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.state import ArmState, StateStore
 from console.tabs import ConsoleTabs
-from console.web.shared_sends import install as _install_viser_fixes
+from console.web.client_guard import ClientGuard
 from core.robots import Robot
 
 if TYPE_CHECKING:
     from console.grasp_session import GraspSession
-
-_install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
-_install_client_guard()  # every browser message is checked before viser stores it (the module)
 
 log = logging.getLogger(__name__)
 
@@ -110,6 +108,9 @@ class ConsoleApp:
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
                  data_dir: str | Path | None = None, services: ConsoleServices | None = None,
                  store: StateStore | None = None) -> None:
+        if not web.installed():  # fail closed: no console on an unguarded, unfixed viser
+            raise RuntimeError("call console.web.install() first: viser's patches (the client "
+                               "guard, shared sends) are not installed")
         if render_hz <= 0:
             raise ValueError(f"render_hz must be > 0, got {render_hz}")
         self.robot = robot

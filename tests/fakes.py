@@ -108,3 +108,13 @@ def console_app(robot: Any, server: Any, *, soft_control: Any = None,
                                demo=DemoMotion(store) if demo else None,
                                tip_sensor=tip_sensor)
     return ConsoleApp(robot, server, store=store, services=services, **kwargs)
+
+
+def open_guard(server: Any) -> Any:
+    """A client guard on a bare viser server (no console built on it): every browser counts as
+    the operator, values and rates are still checked. ``console.web`` reads no browser's
+    messages on a server without a guard (fail closed), and a client only registers with viser
+    once its first camera message is read."""
+    from console.web.client_guard import ClientGuard
+
+    return ClientGuard(server, is_operator=lambda cid: True, refuse=lambda c, r, a: None)

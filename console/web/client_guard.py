@@ -20,7 +20,8 @@ The fix sits at the one place every client frame passes before viser decodes and
 ``viser.infra._infra._message_consumer``, which ``console.web.receive_guard.install`` replaces
 (a module-level function looked up per connection, so one patch covers every server). A server
 with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each frame checked by
-:meth:`ClientGuard.admit`; servers without one behave as upstream. Rules, in order:
+:meth:`ClientGuard.admit`; a server without one has every frame refused (failing closed, see
+``console.web.receive_guard``). Rules, in order:
 
 1. Size and rate: frames over ``max_message_bytes`` close that connection (1009); a token bucket
    per client drops messages beyond ``rate`` per second (``burst`` at once), and a client whose
@@ -64,7 +65,16 @@ CLIENT_MESSAGES = frozenset({
     "LocalStorageGetItemResponseMessage"})
 
 
-class _Disconnect(Exception):
+_GUARD = "_console_client_guard"  # where a viser WebsockServer keeps its guard
+
+
+def guard_of(websock_server: Any) -> ClientGuard | None:
+    """The guard attached to a viser ``WebsockServer`` (``server._websock_server``), or None."""
+    guard = getattr(websock_server, _GUARD, None)
+    return guard if isinstance(guard, ClientGuard) else None
+
+
+class Disconnect(Exception):
     """Close this client's connection (``code``, ``reason``)."""
 
     def __init__(self, code: int, reason: str) -> None:
@@ -99,7 +109,7 @@ class ClientGuard(MessageTypeChecks):
         self._clients: dict[int, ClientState] = {}
         self._logged: dict[tuple[int, str], list[float]] = {}
         self.counts: collections.Counter[str] = collections.Counter()
-        server._websock_server._client_guard = self
+        setattr(server._websock_server, _GUARD, self)  # the receive loop's route here
         server.on_client_disconnect(self._forget)
 
     # -- policy ------------------------------------------------------------------------------
@@ -139,7 +149,7 @@ class ClientGuard(MessageTypeChecks):
         """The decoded message if it may go on to viser, else None (dropped and logged).
 
         Raises:
-            _Disconnect: the client is to be disconnected (flood, undecodable frame).
+            Disconnect: the client is to be disconnected (flood, undecodable frame).
         """
         lim = self.limits
         now = self._clock()
@@ -153,13 +163,13 @@ class ClientGuard(MessageTypeChecks):
             return None
         state.tokens -= 1.0
         if not isinstance(raw, (bytes, bytearray)):
-            raise _Disconnect(1003, "text frame (viser speaks binary msgpack)")
+            raise Disconnect(1003, "text frame (viser speaks binary msgpack)")
         if len(raw) > lim.max_message_bytes:
-            raise _Disconnect(1009, f"message of {len(raw)} bytes")
+            raise Disconnect(1009, f"message of {len(raw)} bytes")
         try:
             message = message_class.deserialize(bytes(raw))
         except Exception as exc:  # msgpack, unknown type, wrong fields: never from a browser
-            raise _Disconnect(1008, f"undecodable message ({type(exc).__name__}: "
+            raise Disconnect(1008, f"undecodable message ({type(exc).__name__}: "
                                     f"{short(str(exc))})") from None
         kind = type(message).__name__
         if kind not in CLIENT_MESSAGES:
@@ -199,7 +209,7 @@ class ClientGuard(MessageTypeChecks):
         while drops and now - drops[0] > self.limits.flood_window:
             drops.popleft()
         if len(drops) > self.limits.flood_drops:
-            raise _Disconnect(1008, f"{len(drops)} messages dropped in "
+            raise Disconnect(1008, f"{len(drops)} messages dropped in "
                                     f"{self.limits.flood_window:g} s ({reason}: {detail})")
 
     def log(self, client_id: int, kind: str, detail: str) -> None:

@@ -9,21 +9,23 @@ thread, and worse, when a waiter was being appended the event is left set with t
 woken; ``set()`` is then a no-op, so a per-client buffer (its own single consumer) stops sending
 to that browser for good (pages that never finished loading).
 
-:func:`install` replaces each buffer's ``message_event`` with :class:`LoopSafeEvent`, whose
+:func:`loop_safe_events` replaces each buffer's ``message_event`` with :class:`LoopSafeEvent`, whose
 ``set()`` from any other thread is handed to the event loop (``call_soon_threadsafe``); nothing
 in viser reads the event synchronously (it is only awaited and cleared by the buffer's window
 generator). A set inside an atomic block waits for the block's end (one wake-up per frame), and
 a window holds up to ``WINDOW_MESSAGES`` (viser: 128, less than a frame of the extensible arm).
-Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
+Idempotent; checked against viser 1.1.1 by ``tests/console/test_web_patches.py``.
 
-:func:`install` also makes a message's wire form (``Message.as_serializable_dict``) computed once
+:func:`share_wire_dicts` makes a message's wire form (``Message.as_serializable_dict``) computed once
 and shared by every viewer (:func:`share_wire_dicts`): viser serialises every message again for
 every connected client (a per-client producer walks each field in pure Python), so 50 viewers of
 the extensible arm (~115 pose messages per frame: viser's client takes skinned-mesh bone poses
 one message per bone and field, with no batched form) cost a whole core in that walk alone.
 
 What viser 1.1.1 does with what browsers *send* (it trusts them) is fixed in
-``console.web.client_guard``, which ``ConsoleApp`` installs beside this module.
+``console.web.client_guard``. Nothing here is applied on import: ``console.web.install``
+applies every patch (:func:`loop_safe_events`, :func:`share_wire_dicts`, :func:`share_frames`
+and ``console.web.shared_windows.install``), each with its undo for tests.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ class LoopSafeEvent(asyncio.Event):
 
     With ``buffer`` (the viser message buffer whose event this is), a set() from another
     thread while the buffer is in an atomic block (``server.atomic()``: the render thread's
-    frame) is deferred to the block's end (:func:`install` patches ``atomic_end``): viser's
+    frame) is deferred to the block's end (:func:`loop_safe_events` patches ``atomic_end``): viser's
     consumers take no message during the block, so waking them then only made each of 50
     viewers' window loops spin once per burst for nothing, several times a frame.
     """
@@ -122,8 +124,20 @@ def share_wire_dicts() -> bool:
             self.__dict__[_WIRE] = out
         return out
 
-    cls.as_serializable_dict = as_serializable_dict
+    cls.as_serializable_dict = as_serializable_dict  # (functools.wraps: __wrapped__ = viser's)
     cls._shared_wire_dicts = True
+    return True
+
+
+def unshare_wire_dicts() -> bool:
+    """Undo :func:`share_wire_dicts` (tests); True if it was installed."""
+    from viser.infra import _messages as infra_messages
+
+    cls: Any = infra_messages.Message
+    if not getattr(cls, "_shared_wire_dicts", False):
+        return False
+    cls.as_serializable_dict = cls.as_serializable_dict.__wrapped__
+    del cls._shared_wire_dicts
     return True
 
 
@@ -201,26 +215,33 @@ def share_frames() -> bool:
             await window_generator.aclose()  # as viser: its finallys run now, not at GC
 
     _message_producer._shared_frames = True  # type: ignore[attr-defined]
+    _message_producer.upstream = _infra._message_producer  # type: ignore[attr-defined]
     _infra._message_producer = _message_producer
     return True
 
 
-def install() -> bool:
-    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`, and
-    share messages' wire dicts (:func:`share_wire_dicts`), encoded windows
-    (:func:`share_frames`) and the broadcast windows themselves (``console.web.shared_windows``)
-    between clients.
+def unshare_frames() -> bool:
+    """Undo :func:`share_frames` (tests); True if it was installed."""
+    from viser.infra import _infra
+
+    producer: Any = _infra._message_producer
+    if not getattr(producer, "_shared_frames", False):
+        return False
+    _infra._message_producer = producer.upstream
+    return True
+
+
+def loop_safe_events() -> bool:
+    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`.
+
+    Changes upstream viser 1.1.1: ``AsyncMessageBuffer.__init__`` (its ``message_event`` is a
+    :class:`LoopSafeEvent`, its ``max_window_size`` at least :data:`WINDOW_MESSAGES`) and
+    ``AsyncMessageBuffer.atomic_end`` (a set() deferred during the block is cleared at its end).
 
     Returns:
         True if it patched now, False if it was already installed.
     """
     from viser.infra import _async_message_buffer as amb
-
-    from console.web import shared_windows
-
-    share_wire_dicts()
-    share_frames()
-    shared_windows.install()
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_loop_safe_event", False):
@@ -245,6 +266,20 @@ def install() -> bool:
     cls.__init__ = __init__
     cls.atomic_end = atomic_end
     cls._loop_safe_event = True
+    return True
+
+
+def upstream_events() -> bool:
+    """Undo :func:`loop_safe_events` for buffers created from now on (tests); True if it was
+    installed."""
+    from viser.infra import _async_message_buffer as amb
+
+    cls: Any = amb.AsyncMessageBuffer
+    if not getattr(cls, "_loop_safe_event", False):
+        return False
+    cls.__init__ = cls.__init__.__wrapped__
+    cls.atomic_end = cls.atomic_end.__wrapped__
+    del cls._loop_safe_event
     return True
 
 

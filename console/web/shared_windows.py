@@ -122,12 +122,30 @@ async def _window_loop(self: Any, client_id: int, backlog_last_id: int,
 
 
 def install() -> bool:
-    """Replace ``AsyncMessageBuffer._window_loop`` (viser 1.1.1); True if it patched now."""
+    """Replace upstream viser 1.1.1's ``AsyncMessageBuffer._window_loop`` (each client walks the
+    broadcast buffer itself) by :func:`_window_loop` (one walk per range, shared).
+
+    Returns:
+        True if it patched now, False if it was already installed.
+    """
     from viser.infra import _async_message_buffer as amb
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_shared_windows", False):
         return False
+    cls._upstream_window_loop = cls._window_loop
     cls._window_loop = _window_loop
     cls._shared_windows = True
+    return True
+
+
+def uninstall() -> bool:
+    """Put viser's own ``_window_loop`` back (tests); True if it was installed."""
+    from viser.infra import _async_message_buffer as amb
+
+    cls: Any = amb.AsyncMessageBuffer
+    if not getattr(cls, "_shared_windows", False):
+        return False
+    cls._window_loop = cls._upstream_window_loop
+    del cls._shared_windows, cls._upstream_window_loop
     return True

@@ -11,10 +11,11 @@ import pytest
 from viser import _messages
 from viser.infra import _messages as infra_messages
 
+from fakes import open_guard
 from console.arm_view import make_arm_view
 from console.model import model_for
 from console.skin import bspline_weights
-from console.web.shared_sends import install
+from console.web import install
 from core.kinematics import planar as pk
 from core.robots import load
 from tests.ws_client import RawClient
@@ -89,6 +90,7 @@ def pose_matrices(rows: np.ndarray) -> np.ndarray:
 def test_every_viewer_decodes_bone_poses_that_put_the_tube_on_the_kinematics(server,
                                                                               kappa) -> None:
     install()
+    open_guard(server)
     view = make_arm_view(server.scene, model_for(SOFT))
     clients = [RawClient(server) for _ in range(3)]
     try:
@@ -260,6 +262,7 @@ def test_a_frame_in_an_atomic_block_wakes_the_viewers_once_at_its_end(server) ->
         return original(callback, *args, **kwargs)
 
     view = make_arm_view(server.scene, model_for(SOFT), dead_band=None)
+    open_guard(server)
     clients = [RawClient(server) for _ in range(2)]
     try:
         time.sleep(0.5)

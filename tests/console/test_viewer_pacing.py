@@ -19,7 +19,7 @@ from console.panels import hardware as hwp
 from console.hardware_setup import HardwareAttachment
 from console.panels.control import ControlPanel
 from console.panels.plot_data import PlotPacer, axis_top
-from console.web.shared_sends import install
+from console.web import install
 from core.robots import load
 from hw_bridge.interface import LinkHealth
 from fakes import FakeClock
