@@ -1,6 +1,7 @@
 """One gate for everything a browser sends: viser 1.1.1 trusts its clients, a shared console cannot.
 
-What upstream viser 1.1.1 does with a client's message (checked by ``tests/test_client_guard.py``):
+What upstream viser 1.1.1 does with a client's message (checked by
+``tests/console/test_client_guard.py`` and ``tests/console/test_web_patches.py``):
 
 * ``GuiApi._handle_gui_updates`` applies *every* attribute a client names in
   ``GuiUpdateMessage.updates`` with ``setattr`` -- ``removed``, ``update_cb``, ``props`` ... --

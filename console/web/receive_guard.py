@@ -8,11 +8,12 @@ decodes every frame and hands it to ``handle_incoming``, which stores and broadc
 the guard checks and why: ``console.web.client_guard``).
 
 How a connection finds its guard: a :class:`~console.web.client_guard.ClientGuard` attaches
-itself to the server's ``WebsockServer`` (:func:`~console.web.client_guard.guard_of` reads it); the connection's server and client id are
-the free variables ``self`` and ``client_id`` of viser's per-connection ``handle_incoming``
-closure (:data:`ROUTE_NAMES`). :func:`check_route` checks at install time that viser's code
-still has them and :func:`install` refuses to patch when it does not. Failing closed, with one log
-line per connection: frames of a connection that cannot be traced to a server (the names
+itself to the server's ``WebsockServer`` (:func:`~console.web.client_guard.guard_of` reads
+it); the connection's server and client id are the free variables ``self`` and ``client_id``
+of viser's per-connection ``handle_incoming`` closure (:data:`ROUTE_NAMES`).
+:func:`check_route` checks at install time that viser's code still has them and
+:func:`install` refuses to patch when it does not. Failing closed, with one log line per
+connection: frames of a connection that cannot be traced to a server (the names
 changed anyway) are read and dropped; frames sent to a server with no guard attached (yet: a
 browser may connect before the console is built) wait unread until one is. None is ever handed
 to viser unguarded. Log lines are the guard's (logger
@@ -179,6 +180,9 @@ async def _refuse_all(websocket: Any) -> None:
 
 def install() -> bool:
     """Route every viser connection's receive loop through :func:`_guarded_consumer`.
+
+    Changes upstream viser 1.1.1's ``viser.infra._infra._message_consumer`` (decode every frame
+    and hand it to ``handle_incoming``, trusting the browser) for every server of the process.
 
     Raises:
         IncompatibleViser: viser's receive route is not the one :func:`check_route` expects

@@ -16,9 +16,9 @@ generator). A set inside an atomic block waits for the block's end (one wake-up 
 a window holds up to ``WINDOW_MESSAGES`` (viser: 128, less than a frame of the extensible arm).
 Idempotent; checked against viser 1.1.1 by ``tests/console/test_web_patches.py``.
 
-:func:`share_wire_dicts` makes a message's wire form (``Message.as_serializable_dict``) computed once
-and shared by every viewer (:func:`share_wire_dicts`): viser serialises every message again for
-every connected client (a per-client producer walks each field in pure Python), so 50 viewers of
+:func:`share_wire_dicts` makes a message's wire form (``Message.as_serializable_dict``)
+computed once and shared by every viewer: viser serialises every message again for every
+connected client (a per-client producer walks each field in pure Python), so 50 viewers of
 the extensible arm (~115 pose messages per frame: viser's client takes skinned-mesh bone poses
 one message per bone and field, with no batched form) cost a whole core in that walk alone.
 
@@ -96,7 +96,8 @@ _WIRE = "_viser_fixes_wire"  # where a message keeps its shared wire dict (in it
 def share_wire_dicts() -> bool:
     """Serialise each viser message once for all clients, not once per client.
 
-    Patches ``viser.infra.Message.as_serializable_dict``: the first call on a message stores the
+    Patches ``viser.infra.Message.as_serializable_dict`` (upstream 1.1.1: a new dict per call,
+    i.e. per client's producer): the first call on a message stores the
     dict it returns on the message, later calls (the other clients' producers) return that same
     dict. Only messages without numpy arrays are shared: an array travels as a binary buffer
     whose placeholder index depends on the client's window, so those are serialised as before.
@@ -185,7 +186,8 @@ def encode_window(buffer: Any, window: Any, zstd: Any) -> bytes:
 def share_frames() -> bool:
     """Encode each window of messages once for all clients (:func:`encode_window`).
 
-    Replaces ``viser.infra._infra._message_producer`` (looked up when a client connects) with
+    Replaces ``viser.infra._infra._message_producer`` (looked up when a client connects;
+    upstream 1.1.1 encodes and compresses every window per client) with
     the same loop, sending :func:`encode_window`'s frame: with 50 viewers the encoding and
     compression of every frame, 50 times over, was most of the console's CPU. The producers
     all run on the server's event loop, so the per-buffer cache needs no lock.
