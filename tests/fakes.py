@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+from typing import Any, Iterator
 
 
 class FakeClient:
@@ -118,3 +119,22 @@ def open_guard(server: Any) -> Any:
     from console.web.client_guard import ClientGuard
 
     return ClientGuard(server, is_operator=lambda cid: True, refuse=lambda c, r, a: None)
+
+
+@contextlib.contextmanager
+def upstream_viser(*names: str) -> Iterator[None]:
+    """viser without ``console.web``'s patches whose names contain one of ``names`` (all of
+    them without names) inside the block -- what upstream viser 1.1.1 does --, every patch
+    installed again after it."""
+    from console import web
+    from console.web.patches import PATCHES
+
+    chosen = [p for p in PATCHES if not names or any(n in p.name for n in names)]
+    assert chosen, f"no patch named {names}"
+    for p in chosen:
+        p.undo()
+    try:
+        yield
+    finally:
+        web.install()
+        assert web.installed()

@@ -23,6 +23,7 @@ from viser import _messages
 from viser.infra import _infra
 from viser.infra._async_message_buffer import AsyncMessageBuffer
 
+from fakes import upstream_viser as upstream
 from console import web
 from console.web import patches, receive_guard
 from console.web.client_guard import ClientGuard
@@ -30,21 +31,6 @@ from console.web.share_tunnel import disable_share_tunnel, share_handlers
 from console.web.shared_sends import LoopSafeEvent
 
 GUARD_LOG = "console.web.client_guard"
-
-
-@contextlib.contextmanager
-def upstream(*names: str) -> Iterator[None]:
-    """viser without the named patches (all without names) inside the block; all reinstalled
-    after it."""
-    chosen = [p for p in patches.PATCHES if not names or any(n in p.name for n in names)]
-    assert chosen, names
-    for p in chosen:
-        p.undo()
-    try:
-        yield
-    finally:
-        web.install()
-        assert web.installed()
 
 
 def test_install_is_explicit_idempotent_and_reversible() -> None:
