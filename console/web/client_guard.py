@@ -21,8 +21,8 @@ The fix sits at the one place every client frame passes before viser decodes and
 ``viser.infra._infra._message_consumer``, which ``console.web.receive_guard.install`` replaces
 (a module-level function looked up per connection, so one patch covers every server). A server
 with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each frame checked by
-:meth:`ClientGuard.admit`; a server without one has every frame refused (failing closed, see
-``console.web.receive_guard``). Rules, in order:
+:meth:`ClientGuard.admit`; on a server without one no frame is read until one is attached
+(failing closed, see ``console.web.receive_guard``). Rules, in order:
 
 1. Size and rate: frames over ``max_message_bytes`` close that connection (1009); a token bucket
    per client drops messages beyond ``rate`` per second (``burst`` at once), and a client whose
