@@ -28,6 +28,7 @@ import inspect
 import types
 from typing import Any, Callable
 
+from console.web import IncompatibleViser
 from console.web.client_guard import ClientGuard, Disconnect, guard_of, log
 from console.web.client_values import short
 
@@ -35,10 +36,6 @@ from console.web.client_values import short
 ROUTE_NAMES = ("self", "client_id")
 #: viser 1.1.1's ``_message_consumer`` parameters, in order.
 CONSUMER_PARAMS = ("websocket", "handle_message", "message_class")
-
-
-class IncompatibleViser(RuntimeError):
-    """viser's code is not shaped as the patches expect: they refuse to install."""
 
 
 def route_of(handle_message: Callable[..., Any]) -> tuple[Any, int] | None:
@@ -200,6 +197,13 @@ def install() -> bool:
     consumer._client_guard = True
     _infra._message_consumer = consumer
     return True
+
+
+def installed() -> bool:
+    """Whether viser's receive loop is :func:`_guarded_consumer`."""
+    from viser.infra import _infra
+
+    return bool(getattr(_infra._message_consumer, "_client_guard", False))
 
 
 def uninstall() -> bool:

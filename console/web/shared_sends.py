@@ -130,6 +130,13 @@ def share_wire_dicts() -> bool:
     return True
 
 
+def wire_dicts_shared() -> bool:
+    """Whether :func:`share_wire_dicts` is in place."""
+    from viser.infra import _messages as infra_messages
+
+    return bool(getattr(infra_messages.Message, "_shared_wire_dicts", False))
+
+
 def unshare_wire_dicts() -> bool:
     """Undo :func:`share_wire_dicts` (tests); True if it was installed."""
     from viser.infra import _messages as infra_messages
@@ -222,6 +229,13 @@ def share_frames() -> bool:
     return True
 
 
+def frames_shared() -> bool:
+    """Whether :func:`share_frames` is in place."""
+    from viser.infra import _infra
+
+    return bool(getattr(_infra._message_producer, "_shared_frames", False))
+
+
 def unshare_frames() -> bool:
     """Undo :func:`share_frames` (tests); True if it was installed."""
     from viser.infra import _infra
@@ -269,6 +283,13 @@ def loop_safe_events() -> bool:
     cls.atomic_end = atomic_end
     cls._loop_safe_event = True
     return True
+
+
+def events_are_loop_safe() -> bool:
+    """Whether :func:`loop_safe_events` is in place."""
+    from viser.infra import _async_message_buffer as amb
+
+    return bool(getattr(amb.AsyncMessageBuffer, "_loop_safe_event", False))
 
 
 def upstream_events() -> bool:

@@ -139,6 +139,13 @@ def install() -> bool:
     return True
 
 
+def installed() -> bool:
+    """Whether ``AsyncMessageBuffer._window_loop`` is :func:`_window_loop`."""
+    from viser.infra import _async_message_buffer as amb
+
+    return bool(getattr(amb.AsyncMessageBuffer, "_shared_windows", False))
+
+
 def uninstall() -> bool:
     """Put viser's own ``_window_loop`` back (tests); True if it was installed."""
     from viser.infra import _async_message_buffer as amb
