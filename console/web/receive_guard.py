@@ -151,17 +151,19 @@ async def _wait_for_guard(websocket: Any, websock_server: Any, client_id: int) -
     log.warning("client %s: this server has no client guard attached (yet): its messages wait "
                 "unread until one is (console.web fails closed)", client_id)
     wait_closed = getattr(websocket, "wait_closed", None)
-    while guard is None:
-        if wait_closed is None:
-            await asyncio.sleep(GUARD_POLL_S)
-        else:
-            try:
-                await asyncio.wait_for(asyncio.shield(wait_closed()), GUARD_POLL_S)
-            except asyncio.TimeoutError:
-                pass
+    closed = None if wait_closed is None else asyncio.ensure_future(wait_closed())
+    try:
+        while guard is None:
+            if closed is None:
+                await asyncio.sleep(GUARD_POLL_S)
             else:
-                await websocket.recv()  # closed: raises ConnectionClosed, as viser expects
-        guard = guard_of(websock_server)
+                await asyncio.wait({closed}, timeout=GUARD_POLL_S)
+                if closed.done():
+                    await websocket.recv()  # closed: raises ConnectionClosed, as viser expects
+            guard = guard_of(websock_server)
+    finally:
+        if closed is not None:
+            closed.cancel()
     return guard
 
 

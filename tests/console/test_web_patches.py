@@ -218,6 +218,48 @@ def test_a_server_without_a_guard_reads_nothing_until_one_is_attached(caplog) ->
         server.stop()
 
 
+def test_a_browser_leaving_while_waiting_for_a_guard_ends_its_receive_loop() -> None:
+    """Waiting for a guard ends when the connection closes (ConnectionClosed, as viser's own loop
+    ends), and leaves no task behind."""
+    class ClosingSocket(FakeSocket):
+        def __init__(self) -> None:
+            super().__init__([b"never read"])
+            self.gone = asyncio.Event()
+
+        async def wait_closed(self) -> None:
+            await self.gone.wait()
+
+        async def recv(self) -> bytes:
+            if self.gone.is_set():
+                raise websockets.exceptions.ConnectionClosed(None, None)
+            return await super().recv()
+
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        applied: list[Any] = []
+        handle = viser_handle_incoming(server._websock_server, 4, applied)
+
+        async def run() -> tuple[int, str, int]:
+            socket = ClosingSocket()
+            task = asyncio.ensure_future(_infra._message_consumer(socket, handle,
+                                                                  _messages.Message))
+            await asyncio.sleep(5 * receive_guard.GUARD_POLL_S)
+            waiting = len(asyncio.all_tasks()) - 2  # (this one and the receive loop)
+            socket.gone.set()
+            try:
+                await asyncio.wait_for(task, 10.0)
+                ended = "returned"
+            except websockets.exceptions.ConnectionClosed:
+                ended = "ConnectionClosed"
+            await asyncio.sleep(0)
+            return waiting, ended, len(asyncio.all_tasks()) - 1
+
+        assert asyncio.run(run()) == (1, "ConnectionClosed", 0)  # one waiter, not one a look
+        assert applied == []
+    finally:
+        server.stop()
+
+
 def test_install_refuses_a_viser_whose_receive_route_changed(monkeypatch) -> None:
     """viser's ``handle_incoming`` as a later version might name it: the patch is not applied
     (rather than applied and then unable to find any guard)."""
