@@ -11,6 +11,8 @@ ignored). Control: every browser starts as a viewer; "Take control" in the Sessi
 the operator token printed here (``--no-token`` for a closed lab). On a loopback-only console
 (a single desk) the first browser gets control without the token unless ``--lab`` is given.
 Files: recordings and exports are written only under ``--data-dir`` (default ``./runs``).
+viser: ``console.web.install()`` patches viser's internals before any server exists; on a viser
+other than the tested one serve.py says so and exits 2 (``--allow-untested-viser``: warn, go on).
 
 Hardware: ``--hardware emulator`` (default) starts the device emulator on a pseudo-terminal, so
 the demo runs through the real serial stack; ``--hardware mock`` keeps the device in-process;
@@ -36,6 +38,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+from console import web
 from console.core.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
 from console.core.model import model_for
@@ -81,6 +84,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--foxglove-port", type=int, default=None, metavar="P",
                    help="also stream the lab channels live over the Foxglove WebSocket protocol "
                         "on port P, bound like --host (off by default; read-only)")
+    p.add_argument("--allow-untested-viser", action="store_true",
+                   help="patch and serve on a viser other than the tested "
+                        f"{web.TESTED_VISER_VERSION} (a loud warning instead of exit 2)")
     p.add_argument("--slip", type=float, default=None, metavar="F",
                    help="extensible arm on the emulator: its racks slip on their pinions by F "
                         "(0..0.5) of each move's travel, and it streams a noisy tip measurement "
@@ -146,9 +152,30 @@ def pin_console(services: ConsoleServices) -> str:
     return f"CPUs: {part.describe()}"
 
 
+def install_viser_patches(args: argparse.Namespace) -> int | None:
+    """``console.web.install()``: None when viser is patched, 2 (after one line naming both
+    versions) when it is not the tested viser and ``--allow-untested-viser`` was not given."""
+    allow = getattr(args, "allow_untested_viser", False)
+    try:
+        report = web.install(allow_untested=allow)
+    except web.UntestedViser as exc:
+        print(f"serve.py: viser {exc.found} is installed, the console is tested on viser "
+              f"{exc.tested}: install viser=={exc.tested} or give --allow-untested-viser",
+              file=sys.stderr)
+        return 2
+    if not report.tested:
+        print(f"serve.py: WARNING: UNTESTED VISER {report.viser_version} (tested: "
+              f"{web.TESTED_VISER_VERSION}); its internals are patched anyway "
+              "(--allow-untested-viser)", file=sys.stderr, flush=True)
+    return None
+
+
 def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, ConsoleApp, str | None]:
-    """Create the viser server and the console app; returns (server, app, token)."""
+    """Patch viser (``console.web.install``, idempotent), create the viser server and the
+    console app; returns (server, app, token)."""
     import viser  # after argument checks, so --help and bad input stay fast
+
+    web.install(allow_untested=getattr(args, "allow_untested_viser", False))  # before the server
 
     from console.core import hardware_setup
     from console.core.demo_motion import DemoMotion
@@ -191,6 +218,9 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
 def main(argv: list[str] | None = None) -> int:
     """Build the console and serve it until SIGINT/SIGTERM."""
     args = parse_args(argv)
+    refused = install_viser_patches(args)  # before any server: the client guard, shared sends
+    if refused is not None:
+        return refused
     try:
         robot = load(args.robot)
     except RobotFileError as exc:

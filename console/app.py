@@ -32,9 +32,11 @@ registers its controlled stop there) and ends all jogging (``app.hold``, hold-to
 caps, ``console.core.hold_to_run``). It also runs when the operator's lease is lost, control is
 released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
 recording (``console.recording.recorder``); files live under ``app.data`` (``console.core.datadir``).
-``app.guard`` (``console.client_guard``) checks every message a browser sends before viser
-stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
-calls ``allow_viewers(handle)``, per-client rate and size limits.
+A process builds a console only after ``console.web.install()`` (``serve.py`` calls it; the
+constructor raises RuntimeError otherwise). ``app.guard`` (``console.web.client_guard``) checks
+every message a browser sends before viser stores or broadcasts it: only valid values, shared
+inputs for the operator only unless a panel calls ``allow_viewers(handle)``, per-client rate and
+size limits.
 """
 
 from __future__ import annotations
@@ -49,13 +51,12 @@ import numpy as np
 import numpy.typing as npt
 import viser
 
+from console import web
 from console.core.access import AccessControl, NotOperator, Operator
 from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
-from console.client_guard import ClientGuard
 from console.core.datadir import DataDir
 from console.core.grasp_session import GraspSession
-from console.guarded_receive import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.core.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
@@ -70,11 +71,8 @@ from console.scene.grasp_layers import GraspSceneView
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
 from console.tabs import ConsoleTabs
-from console.viser_fixes import install as _install_viser_fixes
 from core.robots import Robot, SoftArm
-
-_install_viser_fixes()  # before any server exists: thread-safe message events (see the module)
-_install_client_guard()  # every browser message is checked before viser stores it (the module)
+from console.web.client_guard import ClientGuard
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +109,9 @@ class ConsoleApp:
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
                  data_dir: str | Path | None = None, services: ConsoleServices | None = None,
                  store: StateStore | None = None) -> None:
+        if not web.installed():  # fail closed: no console on an unguarded, unfixed viser
+            raise RuntimeError("call console.web.install() first: viser's patches (the client "
+                               "guard, shared sends) are not installed")
         if render_hz <= 0:
             raise ValueError(f"render_hz must be > 0, got {render_hz}")
         self.robot = robot

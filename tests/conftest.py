@@ -7,6 +7,7 @@ kills it at teardown). ``module_console_server`` and ``module_page`` are the sam
 of one module, to share one loaded console. Screenshots go to ``artifacts/`` (gitignored) via
 ``artifacts_dir``.
 ``serve_module`` is ``serve.py`` imported as a module (its ``build`` makes an in-process console).
+``viser_patched`` (autouse, session) installs ``console.web``'s patches of viser, as serve.py does.
 """
 
 from __future__ import annotations
@@ -54,6 +55,16 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+@pytest.fixture(scope="session", autouse=True)
+def viser_patched() -> None:
+    """``console.web.install()`` once for the session, as ``serve.py`` does before its server:
+    ``ConsoleApp`` refuses to build without it (tests that look at upstream viser uninstall and
+    reinstall around themselves, ``tests/console/test_web_patches.py``)."""
+    from console import web
+
+    web.install()
 
 
 @pytest.fixture(scope="session")

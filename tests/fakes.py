@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+from typing import Any, Iterator
 
 
 class FakeClient:
@@ -108,3 +109,32 @@ def console_app(robot: Any, server: Any, *, soft_control: Any = None,
                                demo=DemoMotion(store) if demo else None,
                                tip_sensor=tip_sensor)
     return ConsoleApp(robot, server, store=store, services=services, **kwargs)
+
+
+def open_guard(server: Any) -> Any:
+    """A client guard on a bare viser server (no console built on it): every browser counts as
+    the operator, values and rates are still checked. ``console.web`` reads no browser's
+    messages on a server without a guard (fail closed), and a client only registers with viser
+    once its first camera message is read."""
+    from console.web.client_guard import ClientGuard
+
+    return ClientGuard(server, is_operator=lambda cid: True, refuse=lambda c, r, a: None)
+
+
+@contextlib.contextmanager
+def upstream_viser(*names: str) -> Iterator[None]:
+    """viser without ``console.web``'s patches whose names contain one of ``names`` (all of
+    them without names) inside the block -- what upstream viser 1.1.1 does --, every patch
+    installed again after it."""
+    from console import web
+    from console.web.patches import PATCHES
+
+    chosen = [p for p in PATCHES if not names or any(n in p.name for n in names)]
+    assert chosen, f"no patch named {names}"
+    for p in chosen:
+        p.undo()
+    try:
+        yield
+    finally:
+        web.install()
+        assert web.installed()

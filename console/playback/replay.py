@@ -15,7 +15,6 @@ import time
 from typing import Protocol
 
 import viser
-from viser._messages import GuiSliderMark  # viser 1.1.1: slider marks (see load)
 
 from console.core.model import ArmModel
 from console.scene.arm_view import ArmView
@@ -27,6 +26,7 @@ from console.recording.recorder import SUFFIXES, Recorder, Recording, load_recor
 from console.playback.replay_markers import (COLORS, Marker, current_marker, markers_of,
                                              next_marker, previous_marker)
 from core.robots import Robot
+from console.web.widgets import set_slider_marks
 
 log = logging.getLogger(__name__)
 GHOST_COLOR = (150, 150, 160)
@@ -153,8 +153,7 @@ class ReplaySession:
                         handle.opacity = GHOST_OPACITY
             self.timeline.max = max(rec.duration, 0.05)
             self.markers = markers_of(rec)
-            self.timeline._marks = tuple(  # viser 1.1.1: the slider's marks prop
-                GuiSliderMark(value=round(m.t, 3), label=None) for m in self.markers[:200])
+            set_slider_marks(self.timeline, (round(m.t, 3) for m in self.markers[:200]))
             self.prev_btn.disabled = self.next_btn.disabled = not self.markers
             self.timeline.disabled = False
             self.play_btn.disabled = False

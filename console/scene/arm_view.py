@@ -41,7 +41,7 @@ from console.scene.dead_band import DeadBand, Steadiness
 from console.core.model import ArmModel
 from console.scene.skin import TubeSkin
 from console.scene.tube import TubeTopology
-from console.viser_fixes import set_bone_poses
+from console.web.shared_sends import set_bone_poses
 
 Array = npt.NDArray[np.float64]
 Geometry = dict[str, Any]
@@ -116,7 +116,7 @@ def quantize(x: Array, step: float = 2.0**-16) -> Array:
 
 def pose_bones(handle: viser.MeshSkinnedHandle, poses: Array) -> None:
     """Assign (B, 4, 4) bone poses (viser sends only the bones that changed; one vectorised
-    comparison for all of them, ``viser_fixes.set_bone_poses``)."""
+    comparison for all of them, ``shared_sends.set_bone_poses``)."""
     set_bone_poses(handle, quantize(wxyzs(poses)), quantize(poses[:, :3, 3]))
 
 

@@ -22,7 +22,7 @@ from console.scene.dead_band import DeadBand
 from console.core.model import ExtensibleModel
 from console.scene.skin import TubeSkin
 from console.scene.tube import TubeTopology, frames_from_matrices
-from console.viser_fixes import set_bone_poses
+from console.web.shared_sends import set_bone_poses
 from core.kinematics import delta as dk
 
 

@@ -20,20 +20,8 @@ from console.scene.camera import apply as apply_camera
 from console.scene.camera import presets as camera_presets
 from console.scene.theme import ConsoleTheme, load_theme
 from console.core.table_area import arm_span, table_extent  # noqa: F401 (the app's stage)
+from console.web.share_tunnel import disable_share_tunnel
 from core.robots import Robot
-
-
-def disable_share_tunnel(server: viser.ViserServer) -> None:
-    """Make viser's share tunnel impossible on ``server``, not only hidden."""
-    # Hiding the share button is not enough: any websocket client can still send viser's
-    # ShareUrlRequest, which would open a public tunnel to the internet. Drop the handlers
-    # and make the method a no-op on this server (viser 1.1.1 internals, checked by tests).
-    from viser import _messages
-
-    handlers = getattr(server._websock_server, "_incoming_handlers", {})
-    for cls in (_messages.ShareUrlRequest, _messages.ShareUrlDisconnect):
-        handlers.pop(cls, None)
-    server.request_share_url = lambda *a, **k: None  # type: ignore[method-assign]
 
 
 def setup_theme(server: viser.ViserServer, robot_name: str) -> ConsoleTheme:

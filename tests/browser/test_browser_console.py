@@ -37,7 +37,7 @@ def slider(page, label: str):
 
 def type_value(page, label: str, value: float) -> None:
     """Type a value and leave the field, as a person does: the browser clamps an out-of-range
-    number to the slider's range on blur (the server refuses the raw one, console.client_guard)."""
+    number to the slider's range on blur (the server refuses the raw one, console.web.client_guard)."""
     box = slider(page, label)[1]
     box.fill(f"{value:g}")
     box.press("Tab")

@@ -1,6 +1,6 @@
 """What a viewer receives for one arm frame: the bone poses every websocket client decodes put the
 skinned centre line on the arm's forward kinematics, and the message work is shared by all
-clients (``console.viser_fixes.share_wire_dicts``), not repeated per client."""
+clients (``console.web.shared_sends.share_wire_dicts``), not repeated per client."""
 
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ from viser.infra import _messages as infra_messages
 from console.scene.arm_view_factory import make_arm_view
 from console.core.model import model_for
 from console.scene.skin import bspline_weights
-from console.viser_fixes import install
+from fakes import open_guard
+from console.web import install
 from core.kinematics import planar as pk
 from core.robots import load
 from tests.ws_client import RawClient
@@ -89,6 +90,7 @@ def pose_matrices(rows: np.ndarray) -> np.ndarray:
 def test_every_viewer_decodes_bone_poses_that_put_the_tube_on_the_kinematics(server,
                                                                               kappa) -> None:
     install()
+    open_guard(server)
     view = make_arm_view(server.scene, model_for(SOFT))
     clients = [RawClient(server) for _ in range(3)]
     try:
@@ -128,7 +130,7 @@ def test_every_viewer_decodes_bone_poses_that_put_the_tube_on_the_kinematics(ser
 def test_set_bone_poses_queues_what_the_bone_setters_queue(server) -> None:
     """The vectorised assignment sends the same messages as viser's per-bone setters, and
     nothing for bones that did not move."""
-    from console.viser_fixes import set_bone_poses
+    from console.web.shared_sends import set_bone_poses
 
     view_a = make_arm_view(server.scene, model_for(SOFT), root="/a", dead_band=None)
     view_b = make_arm_view(server.scene, model_for(SOFT), root="/b", dead_band=None)
@@ -166,7 +168,7 @@ def test_bone_poses_go_on_the_wire_as_viser_writes_them(server) -> None:
     hints gives the same keys, order and values (the same bytes once encoded)."""
     import msgspec
 
-    from console.viser_fixes import set_bone_poses
+    from console.web.shared_sends import set_bone_poses
 
     install()
     view = make_arm_view(server.scene, model_for(SOFT), root="/w", dead_band=None)
@@ -189,7 +191,7 @@ def test_loop_safe_event_schedules_one_set_for_a_burst_of_messages() -> None:
     """A frame's ~100 pushes from the render thread wake the loop once, not once each."""
     import asyncio
 
-    from console.viser_fixes import LoopSafeEvent
+    from console.web.shared_sends import LoopSafeEvent
 
     import threading
 
@@ -220,7 +222,7 @@ def test_a_window_is_encoded_once_for_every_client() -> None:
     """Producers taking the same window of the broadcast buffer send the same frame."""
     import zstandard
 
-    from console.viser_fixes import encode_window
+    from console.web.shared_sends import encode_window
     from tests.ws_client import decode_frame
 
     class Buffer:  # what encode_window keeps its frames on
@@ -260,6 +262,7 @@ def test_a_frame_in_an_atomic_block_wakes_the_viewers_once_at_its_end(server) ->
         return original(callback, *args, **kwargs)
 
     view = make_arm_view(server.scene, model_for(SOFT), dead_band=None)
+    open_guard(server)
     clients = [RawClient(server) for _ in range(2)]
     try:
         time.sleep(0.5)
@@ -295,7 +298,7 @@ def test_a_broadcast_window_is_collected_once_for_every_client() -> None:
 
     from viser.infra._async_message_buffer import AsyncMessageBuffer
 
-    from console.viser_windows import shared_window
+    from console.web.shared_windows import shared_window
 
     loop = asyncio.new_event_loop()
     try:

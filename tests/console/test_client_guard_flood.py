@@ -20,9 +20,9 @@ from viser import _messages
 
 from console.core.access import AccessControl
 from console.app import DEFAULT_PANELS, ConsoleApp
-from console.client_guard import GuardLimits
 from console.panels.common.jog import JogPanel
 from console.panels.common.session import SessionPanel
+from console.web.client_guard import GuardLimits
 from core.robots import load
 from tests.ws_client import CAMERA, RawClient, wait_for
 
@@ -86,7 +86,7 @@ def test_a_burst_disconnects_only_the_sender_and_the_operator_keeps_control(
         frame = msgspec.msgpack.encode(CAMERA.as_serializable_dict())
         count = 5_000
     lim = GuardLimits()
-    caplog.set_level(logging.WARNING, logger="console.client_guard")
+    caplog.set_level(logging.WARNING, logger="console.web.client_guard")
     t0 = time.monotonic()
     for _ in range(count):
         if not viewer.send(frame):
@@ -120,7 +120,7 @@ def test_a_10_mb_message_disconnects_only_the_sender(lab: tuple,
     _ready(app, watcher, viewer)
     token_field = app.panel(SessionPanel).clients[viewer.client_id].token
     assert token_field is not None
-    caplog.set_level(logging.WARNING, logger="console.client_guard")
+    caplog.set_level(logging.WARNING, logger="console.web.client_guard")
     # 300 kB of text fits a frame but not a text field: refused, the viewer stays.
     viewer.update(token_field._impl.uuid, value="x" * 300_000)
     wait_for(lambda: viewer.received("GuiUpdateMessage",

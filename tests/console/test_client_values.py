@@ -1,5 +1,5 @@
 """The guard's checks on their own, without a browser: its limits, a value against each widget
-kind's bounds and types (``console.client_values.validate_value``) and the first look at any
+kind's bounds and types (``console.web.client_values.validate_value``) and the first look at any
 message's fields (``check_fields``). Moved from ``test_client_guard.py``, whose tests drive a
 full console over raw websockets.
 """
@@ -10,7 +10,7 @@ import math
 
 import pytest
 
-from console.client_guard import GuardLimits
+from console.web.client_guard import GuardLimits
 
 
 def test_guard_limits_are_sane() -> None:
@@ -23,7 +23,7 @@ def test_validate_value_by_widget_kind() -> None:
     """The value check on its own, against each kind's own bounds and types."""
     import viser
 
-    from console.client_values import OutOfBounds, Refused, validate_value
+    from console.web.client_values import OutOfBounds, Refused, validate_value
 
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
@@ -84,7 +84,7 @@ def test_validate_value_by_widget_kind() -> None:
 def test_check_fields_bounds_every_field_of_any_message() -> None:
     """The shape check on its own: finite moderate numbers, bounded strings and containers,
     shallow nesting, bytes only where an upload part carries them."""
-    from console.client_values import Refused, check_fields
+    from console.web.client_values import Refused, check_fields
 
     lim = GuardLimits()
     fields = {"uuid": "abc", "value": [1, 2.5, None, True, {"k": "v"}], "size": lim.max_abs}

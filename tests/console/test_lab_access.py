@@ -10,6 +10,7 @@ import pytest
 import viser
 
 from console.core.access import AccessControl, NotOperator
+from fakes import upstream_viser
 from console.app import ConsoleApp
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.jog import JogPanel
@@ -290,10 +291,11 @@ def test_share_tunnel_request_from_the_wire_is_ignored(monkeypatch, server) -> N
             ws.send(request)
             time.sleep(0.5)
 
-    ask(server)  # a plain viser server opens the tunnel: the probe works
-    deadline = time.monotonic() + 3
-    while not created and time.monotonic() < deadline:
-        time.sleep(0.05)
+    with upstream_viser("client guard"):  # upstream viser reads every browser's messages
+        ask(server)  # a plain viser server opens the tunnel: the probe works
+        deadline = time.monotonic() + 3
+        while not created and time.monotonic() < deadline:
+            time.sleep(0.05)
     assert created, "control: a plain viser server should have tried to open a tunnel"
     created.clear()
     guarded = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)

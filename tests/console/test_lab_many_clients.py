@@ -22,7 +22,8 @@ from websockets.sync.client import connect
 from console.core.access import AccessControl
 from console.app import ConsoleApp
 from console.panels.common.session import SessionPanel
-from console.viser_fixes import LoopSafeEvent, install
+from console.web import installed
+from console.web.shared_sends import LoopSafeEvent
 from core.robots import load
 
 SOFT = load("soft-arm")
@@ -75,7 +76,9 @@ def test_clients_connecting_together_all_get_session_widgets(n_clients: int) -> 
 def test_browsers_connected_before_the_session_panel_is_built_get_their_widgets() -> None:
     """serve.py answers browsers before its panels exist. A browser already connected when the
     Session panel was built crashed serve.py (the panel built its widgets inside its own folder's
-    `with` block: "GuiFolderHandle is already active"); seen in a full browser-test run."""
+    `with` block: "GuiFolderHandle is already active"); seen in a full browser-test run.
+    (A browser's messages are read only once the console's client guard exists, so the console
+    is built first and the panel added after, as ``serve.build`` adds its panels.)"""
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     ready, stop = threading.Barrier(2), threading.Event()
     url = f"ws://127.0.0.1:{server.get_port()}"
@@ -84,12 +87,13 @@ def test_browsers_connected_before_the_session_panel_is_built_get_their_widgets(
     try:
         for th in threads:
             th.start()
+        app = ConsoleApp(SOFT, server, access=AccessControl("tok"), panels=())
         deadline = time.monotonic() + 10.0
         while len(server.get_clients()) < 2 and time.monotonic() < deadline:
             time.sleep(0.02)
         assert len(server.get_clients()) == 2
-        app = ConsoleApp(SOFT, server, access=AccessControl("tok"), panels=(SessionPanel,))
-        session = app.panel(SessionPanel)
+        session = app.add_panel(SessionPanel)
+        assert session is not None
         assert set(session.clients) == set(server.get_clients())
     finally:
         stop.set()
@@ -144,8 +148,9 @@ def test_setting_the_message_event_from_another_thread(event_kind: str) -> None:
 
 
 def test_console_servers_use_loop_safe_message_events() -> None:
-    """Installed by importing console.app: the broadcast buffer and every client's buffer."""
-    assert install() is False  # already installed at import
+    """Installed by console.web.install() (tests/conftest.py, as serve.py): the broadcast buffer
+    and every client's buffer."""
+    assert installed()
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     try:
         ws_server = server._websock_server

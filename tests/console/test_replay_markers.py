@@ -17,6 +17,7 @@ from fakes import ScopedClient, console_app
 from console.app import ConsoleApp
 from console.recording.recorder import Recorder
 from console.playback.replay import ReplaySession
+from console.web.widgets import slider_marks
 from core.robots import load
 from test_lab_export import decode_embedded
 
@@ -60,7 +61,7 @@ def test_markers_jump_and_show_the_recorded_configuration(app) -> None:
     assert cats == [("action", "Bea"), ("phase", "server"), ("fault", "server"),
                     ("stop", "Bea")]
     assert [m.text for m in session.markers][1:3] == ["phase approach", "fault: link lost"]
-    assert [mk.value for mk in session.timeline._marks] == \
+    assert list(slider_marks(session.timeline)) == \
         [round(m.t, 3) for m in session.markers]
     assert not session.next_btn.disabled
     visited = []

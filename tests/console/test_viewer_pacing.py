@@ -19,7 +19,7 @@ from console.panels.common import hardware as hwp
 from console.core.hardware_attachment import HardwareAttachment
 from console.panels.soft_arm.control import ControlPanel
 from console.panels.common.plot_data import PlotPacer, axis_top
-from console.viser_fixes import install
+from console.web import install
 from core.robots import load
 from hw_bridge.interface import LinkHealth
 from fakes import FakeClock

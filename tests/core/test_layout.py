@@ -45,7 +45,7 @@ CLI_MODULES = {"hw_bridge.emulator", "hw_bridge.probe", "hw_bridge.tty_keeper"}
 # lazy and TYPE_CHECKING ones too). A module's layer is the longest entry that is its name or a
 # package above it; "console" holds the composition (app.py, header.py, tabs.py, the serve-side
 # modules) and, until they move into a sub-package, the console's other top-level modules.
-LAYERS = ("core", "hw_bridge", "console.web", "console.core", "console.recording", "console.scene",
+LAYERS = ("core", "hw_bridge", "console.web", "console.core", "console.recording.recorder", "console.scene",
           "console.playback", "console.panels", "console")
 
 
@@ -55,7 +55,6 @@ LAYERS = ("core", "hw_bridge", "console.web", "console.core", "console.recording
 #: Import circles (strongly connected modules, every import counted), each a sorted tuple.
 KNOWN_CIRCLES: frozenset[tuple[str, ...]] = frozenset({
     ('console.app', 'console.header', 'console.panels.common.base', 'console.panels.common.jog', 'console.panels.common.readout'),
-    ('console.client_guard', 'console.client_message_checks'),
 })
 
 #: (importer, imported) pairs that point up the layers of LAYERS. Today: panels (and the flat
@@ -65,34 +64,28 @@ KNOWN_CIRCLES: frozenset[tuple[str, ...]] = frozenset({
 KNOWN_BACK_ARROWS: frozenset[tuple[str, str]] = frozenset({
     ('console.panels.common.base', 'console.app'),
     ('console.panels.common.hardware', 'console.header'),
-    ('console.panels.common.view', 'console.scene_clicks'),
+    ('console.panels.common.hardware', 'console.recording.lab_feed'),
     ('console.panels.extensible.paths', 'console.header'),
+    ('console.panels.extensible.paths', 'console.recording.lab_feed'),
     ('console.panels.extensible.status', 'console.header'),
+    ('console.panels.soft_arm.control', 'console.recording.lab_feed'),
     ('console.panels.soft_arm.control_row', 'console.header'),
     ('console.panels.soft_arm.control_text', 'console.header'),
-    ('console.scene.arm_view', 'console.viser_fixes'),
-    ('console.scene.extensible_arm_view', 'console.viser_fixes'),
+    ('console.recording.recorder', 'console.recording.mcap_format'),
+    ('console.recording.recorder', 'console.recording.reader'),
+    ('console.recording.recorder', 'console.recording.timeline'),
 })
 
 #: (console module, private viser module) imports outside console/web/.
-KNOWN_PRIVATE_VISER: frozenset[tuple[str, str]] = frozenset({
-    ('console.client_message_checks', 'viser._messages'),
-    ('console.guarded_receive', 'viser.infra'),
-    ('console.playback.replay', 'viser._messages'),
-    ('console.scene.stage', 'viser._messages'),
-    ('console.viser_fixes', 'viser._messages'),
-    ('console.viser_fixes', 'viser.infra'),
-    ('console.viser_windows', 'viser.infra'),
-})
+KNOWN_PRIVATE_VISER: frozenset[tuple[str, str]] = frozenset()
 
 #: ``# type: ignore`` comments per file under console/ (a file not listed has none).
 KNOWN_TYPE_IGNORES: dict[str, int] = {
-    'console/client_message_checks.py': 1,
-    'console/guarded_receive.py': 1,
     'console/panels/common/base.py': 4,
-    'console/scene/stage.py': 1,
-    'console/scene_clicks.py': 2,
-    'console/viser_fixes.py': 1,
+    'console/web/client_message_checks.py': 1,
+    'console/web/scene_clicks.py': 2,
+    'console/web/share_tunnel.py': 1,
+    'console/web/shared_sends.py': 2,
 }
 
 
@@ -385,7 +378,7 @@ def test_no_import_circles_beyond_the_known_ones():
 
 def test_layers_are_the_longest_matching_prefix():
     cases = {"core.robots": "core", "hw_bridge.loop": "hw_bridge", "console.web.guard":
-             "console.web", "console.recording.recorder": "console.recording", "console.panels.common.jog":
+             "console.web", "console.recording.recorder": "console.recording.recorder", "console.panels.common.jog":
              "console.panels", "console.panels.soft_arm.jog": "console.panels",
              "console.scene.arm_view": "console.scene", "console.app": "console",
              "console": "console"}

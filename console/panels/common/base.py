@@ -28,7 +28,7 @@ the check cannot be forgotten and is the same everywhere::
         def _on_execute(self, event: viser.GuiEvent) -> None:
             ...  # runs only for the operator's clicks
 
-Below the callbacks, ``console.client_guard`` refuses a viewer's edit of any shared input
+Below the callbacks, ``console.web.client_guard`` refuses a viewer's edit of any shared input
 before viser stores or broadcasts it, unless the panel marked the widget with
 :meth:`Panel.allow_viewers` (STOP, Save scene, exports); a browser's own ``client.gui`` widgets
 are its own. ``operator_only`` stays as the second line (and names the action in the refusal).
@@ -104,7 +104,7 @@ class Panel:
 
     def allow_viewers(self, *handles: Any) -> None:
         """Let viewers use these shared widgets (STOP, downloads); every other shared input is
-        the operator's, refused by ``console.client_guard`` before viser stores it."""
+        the operator's, refused by ``console.web.client_guard`` before viser stores it."""
         self.app.guard.allow_viewers(*handles)
 
     def operator_only(self, callback: F, action: str | None = None) -> F:

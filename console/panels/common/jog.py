@@ -47,6 +47,7 @@ from console.core.model import Coordinate, subscript
 from console.panels.common.base import Panel, operator_only
 from console.core.state import ArmState
 from console.panels.common.events import target_of
+from console.web.widgets import widget_id
 from core.units import MM_PER_M, fmt_deg
 
 HOLD_HZ = 20.0
@@ -91,7 +92,7 @@ def row_css(rows: list[JogRow]) -> str:
     """
     rules = []
     for row in rows:
-        s, m, p = (h._impl.uuid for h in (row.slider, row.minus, row.plus))
+        s, m, p = (widget_id(h) for h in (row.slider, row.minus, row.plus))
         box = f'div:has(> div > button[id="{m}"])'
         rules += [
             f"{box}{{display:grid;grid-template-columns:minmax(0,1fr) auto auto;"

@@ -5,7 +5,7 @@
   console opens with). A preset moves only the camera of the browser that pressed it, fitted to
   that browser's window; viewers may use them (they move nothing but their own view).
 * **Measure distance**: the presser's next two clicks on the table measure instead of doing
-  anything else (no object is placed, no grasp starts: ``console.scene_clicks``); the line and
+  anything else (no object is placed, no grasp starts: ``console.web.scene_clicks``); the line and
   its length ("123.4 mm") are drawn in the scene everyone sees. Viewers may measure. A click
   off the table is refused with the reason and draws nothing. *Clear measurement* removes it.
 * **Clear trails** (operator only: the trails are the operator's inspection, which everyone
@@ -29,7 +29,7 @@ from console.scene.arm_view import (BACKBONE_COLOR, BODY_COLOR, GRIPPER_COLOR, P
                               RACK_COLORS)
 from console.scene.measure import Measurement, NotOnTable, table_hit
 from console.panels.common.base import Panel, operator_only
-from console.scene_clicks import ClickClaims
+from console.web.scene_clicks import ClickClaims
 
 Rgb = tuple[int, int, int]
 MEASURE_COLOR: Rgb = (30, 34, 40)
@@ -138,7 +138,7 @@ class ViewPanel(Panel):
         self.span = app._span()
         self.table = app._table_extent()
         names = [p.name for p in camera.presets(self.kind, self.span, self.table)]
-        # One button per preset (a button group's value is refused by console.client_values,
+        # One button per preset (a button group's value is refused by console.web.client_values,
         # which takes every button-like widget for a plain button).
         self.cameras = {name: gui.add_button(name, icon=viser.Icon.CAMERA,
                                              hint=f"Your camera (only yours) to the {name} view.")

@@ -1,29 +1,38 @@
 """The client guard's checks per message type: the widget, its value, and who may use it.
 
-:class:`console.client_guard.ClientGuard` limits size and rate and decodes a frame (rules 1 and
+:class:`console.web.client_guard.ClientGuard` limits size and rate and decodes a frame (rules 1 and
 2), then calls ``_check_<MessageType>`` of this mixin for it, if there is one: rule 3 (the value,
-via :func:`console.client_values.validate_value`) and rule 4 (the access policy: shared widgets
+via :func:`console.web.client_values.validate_value`) and rule 4 (the access policy: shared widgets
 are the operator's unless marked with ``allow_viewers``). Each returns True to pass the message
 on to viser, False when it was handled here (a viewer's edit refused and its value sent back, a
-value out of bounds not stored), or raises :class:`~console.client_values.Refused` (invalid).
+value out of bounds not stored), or raises :class:`~console.web.client_values.Refused` (invalid).
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from console.client_values import GuardLimits, OutOfBounds, Refused, short, validate_value
-
-if TYPE_CHECKING:
-    from console.client_guard import ClientState
+from console.web.client_values import GuardLimits, OutOfBounds, Refused, short, validate_value
 
 _UPLOAD_CHUNK = 512 * 1024  # viser's browser uploads files in parts of this size
 
 
+@dataclasses.dataclass
+class ClientState:
+    """Per-connection bookkeeping (event-loop thread only): the rate bucket, recent drops and
+    the uploads this browser started (kept here, beside the checks that read it)."""
+
+    tokens: float
+    last: float
+    drops: collections.deque = dataclasses.field(default_factory=collections.deque)
+    uploads: set = dataclasses.field(default_factory=set)
+
+
 class MessageTypeChecks:
-    """``_check_<MessageType>`` for :class:`console.client_guard.ClientGuard` (its base class),
+    """``_check_<MessageType>`` for :class:`console.web.client_guard.ClientGuard` (its base class),
     on the guard's state below (event-loop thread only)."""
 
     server: Any

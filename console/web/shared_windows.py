@@ -3,13 +3,13 @@
 Every connected client has a producer that walks the broadcast buffer message by message
 (``AsyncMessageBuffer._window_loop``: a dictionary look-up, a comparison and an append each), so a
 frame of the extensible arm (~115 bone-pose messages) was walked 50 times with 50 viewers: with
-the encoding shared (:mod:`console.viser_fixes`) that walk and the per-client check of which
+the encoding shared (:mod:`console.web.shared_sends`) that walk and the per-client check of which
 frame a window matches were most of the event loop's remaining work per frame.
 
 :func:`install` replaces ``_window_loop`` with :func:`_window_loop`, viser's own loop line for
 line except the inner walk: on a persistent (broadcast) buffer the window for the same range of
 message ids is taken from :func:`shared_window`, which walks the range once and hands every
-client the same list object (so :func:`console.viser_fixes.encode_window` finds its frame by
+client the same list object (so :func:`console.web.shared_sends.encode_window` finds its frame by
 identity). A range holding a message that skips one client (``excluded_self_client``) is walked
 per client, as before; per-client buffers (not persistent: they pop what they take) are too.
 """
@@ -122,12 +122,37 @@ async def _window_loop(self: Any, client_id: int, backlog_last_id: int,
 
 
 def install() -> bool:
-    """Replace ``AsyncMessageBuffer._window_loop`` (viser 1.1.1); True if it patched now."""
+    """Replace upstream viser 1.1.1's ``AsyncMessageBuffer._window_loop`` (each client walks the
+    broadcast buffer itself) by :func:`_window_loop` (one walk per range, shared).
+
+    Returns:
+        True if it patched now, False if it was already installed.
+    """
     from viser.infra import _async_message_buffer as amb
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_shared_windows", False):
         return False
+    cls._upstream_window_loop = cls._window_loop
     cls._window_loop = _window_loop
     cls._shared_windows = True
+    return True
+
+
+def installed() -> bool:
+    """Whether ``AsyncMessageBuffer._window_loop`` is :func:`_window_loop`."""
+    from viser.infra import _async_message_buffer as amb
+
+    return bool(getattr(amb.AsyncMessageBuffer, "_shared_windows", False))
+
+
+def uninstall() -> bool:
+    """Put viser's own ``_window_loop`` back (tests); True if it was installed."""
+    from viser.infra import _async_message_buffer as amb
+
+    cls: Any = amb.AsyncMessageBuffer
+    if not getattr(cls, "_shared_windows", False):
+        return False
+    cls._window_loop = cls._upstream_window_loop
+    del cls._shared_windows, cls._upstream_window_loop
     return True

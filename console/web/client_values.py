@@ -1,6 +1,6 @@
 """What a browser may store in a widget: the right type, finite, within the widget's bounds.
 
-:func:`validate_value` is the value check of ``console.client_guard`` (see there for where it
+:func:`validate_value` is the value check of ``console.web.client_guard`` (see there for where it
 sits and why), kept apart so it can be read and tested on its own; :func:`check_fields` is the
 guard's first look at any message's fields (numbers finite, sizes and nesting bounded).
 :class:`GuardLimits` holds every limit the guard applies to one browser.

@@ -1,6 +1,7 @@
 """One gate for everything a browser sends: viser 1.1.1 trusts its clients, a shared console cannot.
 
-What upstream viser 1.1.1 does with a client's message (checked by ``tests/test_client_guard.py``):
+What upstream viser 1.1.1 does with a client's message (checked by
+``tests/console/test_client_guard.py`` and ``tests/console/test_web_patches.py``):
 
 * ``GuiApi._handle_gui_updates`` applies *every* attribute a client names in
   ``GuiUpdateMessage.updates`` with ``setattr`` -- ``removed``, ``update_cb``, ``props`` ... --
@@ -17,10 +18,11 @@ What upstream viser 1.1.1 does with a client's message (checked by ``tests/test_
 * Messages up to 50 MB are accepted; a frame that does not decode closes only its own connection.
 
 The fix sits at the one place every client frame passes before viser decodes and dispatches it:
-``viser.infra._infra._message_consumer``, which ``console.guarded_receive.install`` replaces
+``viser.infra._infra._message_consumer``, which ``console.web.receive_guard.install`` replaces
 (a module-level function looked up per connection, so one patch covers every server). A server
 with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each frame checked by
-:meth:`ClientGuard.admit`; servers without one behave as upstream. Rules, in order:
+:meth:`ClientGuard.admit`; on a server without one no frame is read until one is attached
+(failing closed, see ``console.web.receive_guard``). Rules, in order:
 
 1. Size and rate: frames over ``max_message_bytes`` close that connection (1009); a token bucket
    per client drops messages beyond ``rate`` per second (``burst`` at once), and a client whose
@@ -39,20 +41,19 @@ with a :class:`ClientGuard` attached (``ConsoleApp`` attaches one) has each fram
 
 Rules 1 and 2 are :meth:`ClientGuard.admit`; rules 3 and 4, per message type, are the
 ``_check_<MessageType>`` methods it inherits from
-:class:`console.client_message_checks.MessageTypeChecks`. The guard runs on viser's event loop;
+:class:`console.web.client_message_checks.MessageTypeChecks`. The guard runs on viser's event loop;
 it only reads GUI state and queues messages.
 """
 
 from __future__ import annotations
 
 import collections
-import dataclasses
 import logging
 import time
 from typing import Any, Callable
 
-from console.client_message_checks import MessageTypeChecks
-from console.client_values import GuardLimits, Refused, check_fields, short
+from console.web.client_message_checks import ClientState, MessageTypeChecks
+from console.web.client_values import GuardLimits, Refused, check_fields, short
 
 log = logging.getLogger(__name__)
 
@@ -65,23 +66,22 @@ CLIENT_MESSAGES = frozenset({
     "LocalStorageGetItemResponseMessage"})
 
 
-class _Disconnect(Exception):
+_GUARD = "_console_client_guard"  # where a viser WebsockServer keeps its guard
+
+
+def guard_of(websock_server: Any) -> ClientGuard | None:
+    """The guard attached to a viser ``WebsockServer`` (``server._websock_server``), or None."""
+    guard = getattr(websock_server, _GUARD, None)
+    return guard if isinstance(guard, ClientGuard) else None
+
+
+class Disconnect(Exception):
     """Close this client's connection (``code``, ``reason``)."""
 
     def __init__(self, code: int, reason: str) -> None:
         super().__init__(reason)
         self.code = code
         self.reason = reason
-
-
-@dataclasses.dataclass
-class ClientState:
-    """Per-connection bookkeeping (event-loop thread only)."""
-
-    tokens: float
-    last: float
-    drops: collections.deque = dataclasses.field(default_factory=collections.deque)
-    uploads: set = dataclasses.field(default_factory=set)
 
 
 class ClientGuard(MessageTypeChecks):
@@ -110,7 +110,7 @@ class ClientGuard(MessageTypeChecks):
         self._clients: dict[int, ClientState] = {}
         self._logged: dict[tuple[int, str], list[float]] = {}
         self.counts: collections.Counter[str] = collections.Counter()
-        server._websock_server._client_guard = self
+        setattr(server._websock_server, _GUARD, self)  # the receive loop's route here
         server.on_client_disconnect(self._forget)
 
     # -- policy ------------------------------------------------------------------------------
@@ -150,7 +150,7 @@ class ClientGuard(MessageTypeChecks):
         """The decoded message if it may go on to viser, else None (dropped and logged).
 
         Raises:
-            _Disconnect: the client is to be disconnected (flood, undecodable frame).
+            Disconnect: the client is to be disconnected (flood, undecodable frame).
         """
         lim = self.limits
         now = self._clock()
@@ -164,13 +164,13 @@ class ClientGuard(MessageTypeChecks):
             return None
         state.tokens -= 1.0
         if not isinstance(raw, (bytes, bytearray)):
-            raise _Disconnect(1003, "text frame (viser speaks binary msgpack)")
+            raise Disconnect(1003, "text frame (viser speaks binary msgpack)")
         if len(raw) > lim.max_message_bytes:
-            raise _Disconnect(1009, f"message of {len(raw)} bytes")
+            raise Disconnect(1009, f"message of {len(raw)} bytes")
         try:
             message = message_class.deserialize(bytes(raw))
         except Exception as exc:  # msgpack, unknown type, wrong fields: never from a browser
-            raise _Disconnect(1008, f"undecodable message ({type(exc).__name__}: "
+            raise Disconnect(1008, f"undecodable message ({type(exc).__name__}: "
                                     f"{short(str(exc))})") from None
         kind = type(message).__name__
         if kind not in CLIENT_MESSAGES:
@@ -210,7 +210,7 @@ class ClientGuard(MessageTypeChecks):
         while drops and now - drops[0] > self.limits.flood_window:
             drops.popleft()
         if len(drops) > self.limits.flood_drops:
-            raise _Disconnect(1008, f"{len(drops)} messages dropped in "
+            raise Disconnect(1008, f"{len(drops)} messages dropped in "
                                     f"{self.limits.flood_window:g} s ({reason}: {detail})")
 
     def log(self, client_id: int, kind: str, detail: str) -> None:

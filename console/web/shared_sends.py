@@ -9,21 +9,23 @@ thread, and worse, when a waiter was being appended the event is left set with t
 woken; ``set()`` is then a no-op, so a per-client buffer (its own single consumer) stops sending
 to that browser for good (pages that never finished loading).
 
-:func:`install` replaces each buffer's ``message_event`` with :class:`LoopSafeEvent`, whose
+:func:`loop_safe_events` replaces each buffer's ``message_event`` with :class:`LoopSafeEvent`, whose
 ``set()`` from any other thread is handed to the event loop (``call_soon_threadsafe``); nothing
 in viser reads the event synchronously (it is only awaited and cleared by the buffer's window
 generator). A set inside an atomic block waits for the block's end (one wake-up per frame), and
 a window holds up to ``WINDOW_MESSAGES`` (viser: 128, less than a frame of the extensible arm).
-Idempotent; checked against viser 1.1.1 by ``tests/test_lab_many_clients.py``.
+Idempotent; checked against viser 1.1.1 by ``tests/console/test_web_patches.py``.
 
-:func:`install` also makes a message's wire form (``Message.as_serializable_dict``) computed once
-and shared by every viewer (:func:`share_wire_dicts`): viser serialises every message again for
-every connected client (a per-client producer walks each field in pure Python), so 50 viewers of
+:func:`share_wire_dicts` makes a message's wire form (``Message.as_serializable_dict``)
+computed once and shared by every viewer: viser serialises every message again for every
+connected client (a per-client producer walks each field in pure Python), so 50 viewers of
 the extensible arm (~115 pose messages per frame: viser's client takes skinned-mesh bone poses
 one message per bone and field, with no batched form) cost a whole core in that walk alone.
 
 What viser 1.1.1 does with what browsers *send* (it trusts them) is fixed in
-``console.client_guard``, which ``ConsoleApp`` installs beside this module.
+``console.web.client_guard``. Nothing here is applied on import: ``console.web.install``
+applies every patch (:func:`loop_safe_events`, :func:`share_wire_dicts`, :func:`share_frames`
+and ``console.web.shared_windows.install``), each with its undo for tests.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ class LoopSafeEvent(asyncio.Event):
 
     With ``buffer`` (the viser message buffer whose event this is), a set() from another
     thread while the buffer is in an atomic block (``server.atomic()``: the render thread's
-    frame) is deferred to the block's end (:func:`install` patches ``atomic_end``): viser's
+    frame) is deferred to the block's end (:func:`loop_safe_events` patches ``atomic_end``): viser's
     consumers take no message during the block, so waking them then only made each of 50
     viewers' window loops spin once per burst for nothing, several times a frame.
     """
@@ -94,7 +96,8 @@ _WIRE = "_viser_fixes_wire"  # where a message keeps its shared wire dict (in it
 def share_wire_dicts() -> bool:
     """Serialise each viser message once for all clients, not once per client.
 
-    Patches ``viser.infra.Message.as_serializable_dict``: the first call on a message stores the
+    Patches ``viser.infra.Message.as_serializable_dict`` (upstream 1.1.1: a new dict per call,
+    i.e. per client's producer): the first call on a message stores the
     dict it returns on the message, later calls (the other clients' producers) return that same
     dict. Only messages without numpy arrays are shared: an array travels as a binary buffer
     whose placeholder index depends on the client's window, so those are serialised as before.
@@ -122,8 +125,27 @@ def share_wire_dicts() -> bool:
             self.__dict__[_WIRE] = out
         return out
 
-    cls.as_serializable_dict = as_serializable_dict
+    cls.as_serializable_dict = as_serializable_dict  # (functools.wraps: __wrapped__ = viser's)
     cls._shared_wire_dicts = True
+    return True
+
+
+def wire_dicts_shared() -> bool:
+    """Whether :func:`share_wire_dicts` is in place."""
+    from viser.infra import _messages as infra_messages
+
+    return bool(getattr(infra_messages.Message, "_shared_wire_dicts", False))
+
+
+def unshare_wire_dicts() -> bool:
+    """Undo :func:`share_wire_dicts` (tests); True if it was installed."""
+    from viser.infra import _messages as infra_messages
+
+    cls: Any = infra_messages.Message
+    if not getattr(cls, "_shared_wire_dicts", False):
+        return False
+    cls.as_serializable_dict = cls.as_serializable_dict.__wrapped__
+    del cls._shared_wire_dicts
     return True
 
 
@@ -144,7 +166,7 @@ def encode_window(buffer: Any, window: Any, zstd: Any) -> bytes:
     from viser.infra import _infra
 
     kept: list[tuple[Any, tuple[Any, ...], bytes]] = buffer.__dict__.setdefault(_FRAMES, [])
-    for source, _, frame in kept:  # the very window object (console.viser_windows shares it)
+    for source, _, frame in kept:  # the very window object (console.web.shared_windows shares it)
         if source is window:
             return frame
     messages = tuple(window)
@@ -171,7 +193,8 @@ def encode_window(buffer: Any, window: Any, zstd: Any) -> bytes:
 def share_frames() -> bool:
     """Encode each window of messages once for all clients (:func:`encode_window`).
 
-    Replaces ``viser.infra._infra._message_producer`` (looked up when a client connects) with
+    Replaces ``viser.infra._infra._message_producer`` (looked up when a client connects;
+    upstream 1.1.1 encodes and compresses every window per client) with
     the same loop, sending :func:`encode_window`'s frame: with 50 viewers the encoding and
     compression of every frame, 50 times over, was most of the console's CPU. The producers
     all run on the server's event loop, so the per-buffer cache needs no lock.
@@ -201,26 +224,40 @@ def share_frames() -> bool:
             await window_generator.aclose()  # as viser: its finallys run now, not at GC
 
     _message_producer._shared_frames = True  # type: ignore[attr-defined]
+    _message_producer.upstream = _infra._message_producer  # type: ignore[attr-defined]
     _infra._message_producer = _message_producer
     return True
 
 
-def install() -> bool:
-    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`, and
-    share messages' wire dicts (:func:`share_wire_dicts`), encoded windows
-    (:func:`share_frames`) and the broadcast windows themselves (``console.viser_windows``)
-    between clients.
+def frames_shared() -> bool:
+    """Whether :func:`share_frames` is in place."""
+    from viser.infra import _infra
+
+    return bool(getattr(_infra._message_producer, "_shared_frames", False))
+
+
+def unshare_frames() -> bool:
+    """Undo :func:`share_frames` (tests); True if it was installed."""
+    from viser.infra import _infra
+
+    producer: Any = _infra._message_producer
+    if not getattr(producer, "_shared_frames", False):
+        return False
+    _infra._message_producer = producer.upstream
+    return True
+
+
+def loop_safe_events() -> bool:
+    """Make every viser message buffer created from now on use :class:`LoopSafeEvent`.
+
+    Changes upstream viser 1.1.1: ``AsyncMessageBuffer.__init__`` (its ``message_event`` is a
+    :class:`LoopSafeEvent`, its ``max_window_size`` at least :data:`WINDOW_MESSAGES`) and
+    ``AsyncMessageBuffer.atomic_end`` (a set() deferred during the block is cleared at its end).
 
     Returns:
         True if it patched now, False if it was already installed.
     """
     from viser.infra import _async_message_buffer as amb
-
-    from console import viser_windows
-
-    share_wire_dicts()
-    share_frames()
-    viser_windows.install()
 
     cls: Any = amb.AsyncMessageBuffer
     if getattr(cls, "_loop_safe_event", False):
@@ -245,6 +282,27 @@ def install() -> bool:
     cls.__init__ = __init__
     cls.atomic_end = atomic_end
     cls._loop_safe_event = True
+    return True
+
+
+def events_are_loop_safe() -> bool:
+    """Whether :func:`loop_safe_events` is in place."""
+    from viser.infra import _async_message_buffer as amb
+
+    return bool(getattr(amb.AsyncMessageBuffer, "_loop_safe_event", False))
+
+
+def upstream_events() -> bool:
+    """Undo :func:`loop_safe_events` for buffers created from now on (tests); True if it was
+    installed."""
+    from viser.infra import _async_message_buffer as amb
+
+    cls: Any = amb.AsyncMessageBuffer
+    if not getattr(cls, "_loop_safe_event", False):
+        return False
+    cls.__init__ = cls.__init__.__wrapped__
+    cls.atomic_end = cls.atomic_end.__wrapped__
+    del cls._loop_safe_event
     return True
 
 
