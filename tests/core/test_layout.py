@@ -45,7 +45,7 @@ CLI_MODULES = {"hw_bridge.emulator", "hw_bridge.probe", "hw_bridge.tty_keeper"}
 # lazy and TYPE_CHECKING ones too). A module's layer is the longest entry that is its name or a
 # package above it; "console" holds the composition (app.py, header.py, tabs.py, the serve-side
 # modules) and, until they move into a sub-package, the console's other top-level modules.
-LAYERS = ("core", "hw_bridge", "console.web", "console.core", "console.recording.recorder", "console.scene",
+LAYERS = ("core", "hw_bridge", "console.web", "console.core", "console.recording", "console.scene",
           "console.playback", "console.panels", "console")
 
 
@@ -64,16 +64,10 @@ KNOWN_CIRCLES: frozenset[tuple[str, ...]] = frozenset({
 KNOWN_BACK_ARROWS: frozenset[tuple[str, str]] = frozenset({
     ('console.panels.common.base', 'console.app'),
     ('console.panels.common.hardware', 'console.header'),
-    ('console.panels.common.hardware', 'console.recording.lab_feed'),
     ('console.panels.extensible.paths', 'console.header'),
-    ('console.panels.extensible.paths', 'console.recording.lab_feed'),
     ('console.panels.extensible.status', 'console.header'),
-    ('console.panels.soft_arm.control', 'console.recording.lab_feed'),
     ('console.panels.soft_arm.control_row', 'console.header'),
     ('console.panels.soft_arm.control_text', 'console.header'),
-    ('console.recording.recorder', 'console.recording.mcap_format'),
-    ('console.recording.recorder', 'console.recording.reader'),
-    ('console.recording.recorder', 'console.recording.timeline'),
 })
 
 #: (console module, private viser module) imports outside console/web/.
@@ -378,7 +372,7 @@ def test_no_import_circles_beyond_the_known_ones():
 
 def test_layers_are_the_longest_matching_prefix():
     cases = {"core.robots": "core", "hw_bridge.loop": "hw_bridge", "console.web.guard":
-             "console.web", "console.recording.recorder": "console.recording.recorder", "console.panels.common.jog":
+             "console.web", "console.recording.recorder": "console.recording", "console.panels.common.jog":
              "console.panels", "console.panels.soft_arm.jog": "console.panels",
              "console.scene.arm_view": "console.scene", "console.app": "console",
              "console": "console"}
