@@ -61,7 +61,6 @@ class ExtensibleOptions:
     kind: Literal["mock", "port"]
     port_path: str | None = None
     always_report: bool = False
-    follow: bool = True
     publish_hz: float = 30.0
     sched_priority: int | None = 50
     cpus: CpuPartition | None = None
@@ -118,8 +117,7 @@ def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: A
     try:
         factory = _hardware(robot, opts)  # type: ignore[arg-type]
         link = PipeLink(replies, opts.always_report)
-        runner = ExtensibleRunner(robot, factory, link=link, follow=opts.follow,
-                                  on_new_link=promote_new_threads)
+        runner = ExtensibleRunner(robot, factory, link=link, on_new_link=promote_new_threads)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which shows it
         replies.put(("failed", f"{opts.kind} device: {exc}"))
         return
@@ -177,18 +175,20 @@ class ExtensibleProcess(LoopProcess):
     Args:
         robot: The extensible arm (its ``source`` file is loaded in the child).
         store: The console's :class:`console.core.state.StateStore`: its commands are followed while
-            idle (``follow``: at once on connect), the measured posture is reported there
+            armed and idle (from the first one after Arm), the measured posture is reported there
             (always when the store does not mirror commands, else while a job runs).
         kind: ``"mock"`` (an in-process MockHardware in the child) or ``"port"`` (a
             SerialHardware on ``port_path``: a controller or the device emulator's pty).
         cpus: Where the processes run (:mod:`hw_bridge.cpu_partition`): ``"auto"`` the loop on
             the highest CPU, the rest on the others; None: anywhere.
 
-    Not started: :meth:`start` spawns the child and connects (the mock's on the first Execute).
+    Not started: :meth:`start` spawns the child and connects, disarmed (only the operator's Arm,
+    :attr:`bridge_controls`, arms; it holds where the encoders are). :meth:`restart` replaces a
+    dead or silent child by a new one, which connects again, disarmed.
     """
 
     def __init__(self, robot: ExtensibleArm, store: Any, kind: Literal["mock", "port"] = "mock",
-                 port_path: str | None = None, *, follow: bool | None = None,
+                 port_path: str | None = None, *,
                  cpus: CpuPartition | None | Literal["auto"] = "auto",
                  sched_priority: int | None = 50, publish_hz: float = 30.0) -> None:
         from hw_bridge.config import BridgeConfig
@@ -200,9 +200,8 @@ class ExtensibleProcess(LoopProcess):
         always_report = not getattr(store, "mirror_commands", True)
         self.robot = robot
         self.store = store
-        self.follow = (not always_report) if follow is None else follow
         self.period_s = BridgeConfig.from_robot(robot).period_s
-        self.options = ExtensibleOptions(kind, port_path, always_report, self.follow, publish_hz,
+        self.options = ExtensibleOptions(kind, port_path, always_report, publish_hz,
                                          sched_priority, cpus)
         self.view: ExtensibleView | None = None
         self.connecting: cf.Future | None = None
@@ -211,6 +210,7 @@ class ExtensibleProcess(LoopProcess):
         self._done = threading.Condition()
         self._start_lock = threading.Lock()
         self._quit = threading.Event()
+        self._pump_thread: threading.Thread | None = None
 
     # -- lifecycle -------------------------------------------------------------------------
     @property
@@ -223,14 +223,27 @@ class ExtensibleProcess(LoopProcess):
             if self._proc is None:
                 self.spawn(_child, (str(self.robot.source), self.options, self._commands,
                                     self._replies))
-                threading.Thread(target=self._pump, name="extensible-setpoints",
-                                 daemon=True).start()
+                self._start_pump()
                 self.connecting = self.connect()
         return self
 
+    def restart(self, timeout: float = 5.0) -> None:
+        """A new child in place of a dead or silent one (:meth:`LoopProcess.restart`); it
+        connects again, disarmed. Jobs the old child ran end (their :meth:`wait` times out)."""
+        with self._start_lock:
+            super().restart(timeout)
+            self._start_pump()
+            self.connecting = self.connect()
+
+    def _start_pump(self) -> None:
+        if self._pump_thread is None or not self._pump_thread.is_alive():
+            self._pump_thread = threading.Thread(target=self._pump, name="extensible-setpoints",
+                                                 daemon=True)
+            self._pump_thread.start()
+
     def connect(self) -> cf.Future:
-        """(Re)configure and activate the hardware, then hold (or follow the console)."""
-        return self.send(ConnectFactory(self.follow))
+        """(Re)configure the hardware, disarmed (only the operator's Arm arms)."""
+        return self.send(ConnectFactory())
 
     def close(self, timeout: float = 5.0) -> None:
         """Disarm and release the hardware, stop the child."""
