@@ -37,7 +37,8 @@ from pathlib import Path
 from typing import Any
 
 from console.core.access import AccessControl
-from console.app import DEFAULT_PANELS, ConsoleApp
+from console.app import ConsoleApp
+from console.panel_sets import DEFAULT_PANELS
 from console.core.model import model_for
 from console.serve_lifecycle import Lifecycle, port_in_use
 from console.core.services import ConsoleServices

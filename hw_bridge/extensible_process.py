@@ -8,11 +8,12 @@ processes while the loop waits for it. In its own process every thread is real-t
 the loop and pinned to the real-time CPU (:mod:`hw_bridge.loop_process`).
 
 :class:`ExtensibleProcess` offers the console the runner's interface (``start`` / ``connect`` /
-``execute`` / ``move_to`` / ``stop`` / ``wait`` / ``snapshot`` / ``port`` / ``bridge_controls``);
+``execute`` / ``move_to`` / ``stop`` / ``setpoint`` / ``wait`` / ``snapshot`` / ``port`` /
+``bridge_controls``);
 in the child an :class:`~hw_bridge.extensible_runner.ExtensibleRunner` runs every command
 (:mod:`hw_bridge.commands`). The console's command reaches it as
-:class:`~hw_bridge.commands.Setpoint` messages (a pump thread watches the store; the runner's
-own settled commands are not sent back), and the measured posture, settled commands and job
+:class:`~hw_bridge.commands.Setpoint` messages (:meth:`ExtensibleProcess.setpoint`, called by the
+console core for each new command that is not the runner's own), and the measured posture, settled commands and job
 results come back to the store and to :meth:`ExtensibleProcess.wait`.
 """
 
@@ -209,8 +210,6 @@ class ExtensibleProcess(LoopProcess):
         self._results: dict[int, JobResult] = {}
         self._done = threading.Condition()
         self._start_lock = threading.Lock()
-        self._quit = threading.Event()
-        self._pump_thread: threading.Thread | None = None
 
     # -- lifecycle -------------------------------------------------------------------------
     @property
@@ -223,7 +222,6 @@ class ExtensibleProcess(LoopProcess):
             if self._proc is None:
                 self.spawn(_child, (str(self.robot.source), self.options, self._commands,
                                     self._replies))
-                self._start_pump()
                 self.connecting = self.connect()
         return self
 
@@ -232,14 +230,7 @@ class ExtensibleProcess(LoopProcess):
         connects again, disarmed. Jobs the old child ran end (their :meth:`wait` times out)."""
         with self._start_lock:
             super().restart(timeout)
-            self._start_pump()
             self.connecting = self.connect()
-
-    def _start_pump(self) -> None:
-        if self._pump_thread is None or not self._pump_thread.is_alive():
-            self._pump_thread = threading.Thread(target=self._pump, name="extensible-setpoints",
-                                                 daemon=True)
-            self._pump_thread.start()
 
     def connect(self) -> cf.Future:
         """(Re)configure the hardware, disarmed (only the operator's Arm arms)."""
@@ -247,7 +238,6 @@ class ExtensibleProcess(LoopProcess):
 
     def close(self, timeout: float = 5.0) -> None:
         """Disarm and release the hardware, stop the child."""
-        self._quit.set()
         super().close(timeout)
 
     @property
@@ -300,15 +290,11 @@ class ExtensibleProcess(LoopProcess):
         elif kind == "settled":
             self.store.request(payload, SOURCE)
 
-    def _pump(self) -> None:
-        """Send every new console command (not the runner's own) to the child."""
-        seq = -1
-        while not self._quit.is_set() and (self._proc is None or self._proc.is_alive()
-                                           or seq < 0):
-            cmd = self.store.wait_command(seq, timeout=0.5)
-            if cmd is None:
-                continue
-            seq = cmd.seq
-            if cmd.source != SOURCE:
-                delta = tuple(tuple(float(v) for v in row) for row in np.asarray(cmd.q, float))
-                self._commands.put((0, Setpoint(cmd.seq, delta)))
+    def setpoint(self, seq: int, delta: npt.ArrayLike) -> None:
+        """Send the console's commanded posture ``delta`` (n, 3) with its store sequence number
+        ``seq``; the runner follows the newest while armed and idle. The console core calls
+        this for each new command that is not the runner's own (nothing here watches the
+        store)."""
+        rows = tuple(tuple(float(v) for v in row) for row in np.asarray(delta, float))
+        if self.alive:
+            self._commands.put((0, Setpoint(int(seq), rows)))

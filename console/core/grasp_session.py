@@ -23,7 +23,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import viser
@@ -45,9 +45,20 @@ from core.planning.reachability import ReachMap
 from core.planning.sides import SidedPlanner
 
 if TYPE_CHECKING:
-    from console.app import ConsoleApp
+    from console.core.state import StateStore
+    from console.recording.recorder import Recorder
 
 log = logging.getLogger(__name__)
+
+
+class GraspHost(Protocol):
+    """What the grasp session uses of the console (the app satisfies it)."""
+
+    robot: Any
+    server: viser.ViserServer
+    store: StateStore
+    recorder: Recorder
+    grasp_session: GraspSession | None
 
 
 class GraspSession(ObstacleEdits, WaypointInspection):
@@ -389,7 +400,7 @@ def _table_extent(app) -> tuple[float, float, float, float]:
     return (-0.5, 0.5, -0.26, 0.5)
 
 
-def session_for(app: ConsoleApp) -> GraspSession:
+def session_for(app: GraspHost) -> GraspSession:
     """The app's grasp session (``app.grasp_session``), created by the first grasp panel that
     asks for it: it belongs to the console's GUI (scene, store), so it is not a service."""
     if app.grasp_session is None:

@@ -145,7 +145,7 @@ def lab(browser, tmp_path: Path) -> Iterator[Lab]:
     with the panels these tests use -- Jog, Readout, Control (the real Execute and the control
     process), Session -- rather than all of them: the full console takes twice as long to load
     in software-rendered Chromium, and the other panels play no part here."""
-    from console.app import DEFAULT_PANELS
+    from console.panel_sets import DEFAULT_PANELS
     from console.panels.soft_arm.control import ControlPanel
     from console.panels.common.session import SessionPanel
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from browser_tabs import open_tab
-from console.app import DEFAULT_PANELS, ConsoleApp
+from console.app import ConsoleApp
+from console.panel_sets import DEFAULT_PANELS
 from console.core.hold_to_run import HOLD_SOURCE
 from console.panels.common.jog import JogPanel
 from core.robots import load

@@ -206,7 +206,7 @@ def test_a_request_older_than_the_newest_stop_moves_nothing(server) -> None:
     from console.panels.extensible.repeatability import RunRequest
     fake = SlippingRunner()
     panel = panel_with(server, fake)
-    req = RunRequest(POINT, 2, panel._stops)  # clicked ...
+    req = RunRequest(POINT, 2, panel.app.core.stop_generation)  # clicked ...
     panel.app.stop_motion("test")             # ... STOP before the worker took it
     panel._run(req)
     assert fake.jobs == {} and 'data-state="stopped"' in panel.table.content

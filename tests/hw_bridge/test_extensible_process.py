@@ -63,7 +63,8 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     tip = p.snapshot.measured_tip
     assert tip is not None and np.linalg.norm(tip - dk.tip_position(ROBOT, Q0)) < TIP_TOL
 
-    store.request(Q1, "jog")  # the console's newer command: followed while idle
+    q1 = store.request(Q1, "jog")  # the console's newer command (the console core sends it
+    p.setpoint(q1.seq, q1.q)       # on as a set-point, nothing watches the store): followed
     wait_for(lambda: np.linalg.norm(p.snapshot.measured_tip - dk.tip_position(ROBOT, Q1))
              < TIP_TOL, what="following the console")
 
