@@ -212,7 +212,9 @@ class ConsoleCore:
         with self._lock:
             if state.seq <= self._stop_seq or state.source in (self.arm.own_source, STOP_SOURCE):
                 return False
-            return self.arm.forward(state)
+            sent = self.arm.forward(state)
+            self._held = self._held and not sent  # the arm takes a new command: it moves again
+            return sent
 
     # -- the core's thread: forwarding and the watcher ---------------------------------------
 

@@ -36,6 +36,8 @@ class SlippingRunner:
     tip it measured with the repetition it belongs to (a repetition starts with a retract)."""
 
     started = True
+    failure = None
+    view = None
 
     def __init__(self, slip: float = 0.2, jitter: float = 0.05, seed: int = 4,
                  stop_after: int | None = None, on_move: Any = None,
@@ -79,6 +81,9 @@ class SlippingRunner:
 
     def stop(self) -> None:
         self.stops += 1
+
+    def setpoint(self, seq: int, delta: Any) -> None:
+        pass  # the console core forwards commands; this runner only runs moves
 
     def measure(self, samples: int | None = None) -> np.ndarray:
         self.samples.add(samples)
