@@ -179,9 +179,11 @@ class TargetPanel(Panel):
 
     # -- worker ----------------------------------------------------------------------------
     def solve(self, target: Array, final: bool, client_id: int, generation: int,
-              stops: int) -> None:
+              stops: int | None = None) -> None:
         """Worker thread: IK to ``target``, then move there (unless a job runs or STOP came:
-        ``stops`` is the core's stop generation when the target was taken)."""
+        ``stops`` is the core's stop generation when the target was taken; None: now)."""
+        if stops is None:
+            stops = self.app.core.stop_generation
         runner = self.app.services.extensible_runner
         if runner is not None and runner.snapshot.busy:
             self.report_error("A path is running: stop it before moving the target.")
@@ -208,15 +210,18 @@ class TargetPanel(Panel):
         if self._start_leg(client_id, legs, "Not moved: you no longer hold control.", stops):
             self._show()
 
-    def _start_leg(self, client_id: int, legs: list[Array], refused: str, stops: int) -> bool:
+    def _start_leg(self, client_id: int, legs: list[Array], refused: str,
+                   stops: int | None = None) -> bool:
         """Move to the first of ``legs`` (the rest follow on arrival, :meth:`check_arrival`);
         False after reporting ``refused`` when ``client_id`` no longer holds control, or that
-        motion stopped when the core stopped since its generation ``stops``."""
+        motion stopped when the core stopped since its generation ``stops`` (None: now)."""
+        core = self.app.core
+        if stops is None:
+            stops = core.stop_generation
         # Set before the move starts: a frame of the move ("jog") must not read as someone
         # else's command, which would put the target back on the tip and clear this status.
         self._legs = (client_id, legs[1:])
         self._moving_to = legs[0]
-        core = self.app.core
         try:
             if core.run_if_current(stops, lambda: core.hold.move_to(client_id, legs[0])):
                 return True
