@@ -46,7 +46,6 @@ from core.planning.sides import SidedPlanner
 
 if TYPE_CHECKING:
     from console.core.state import StateStore
-    from console.recording.recorder import Recorder
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +56,7 @@ class GraspHost(Protocol):
     robot: Any
     server: viser.ViserServer
     store: StateStore
-    recorder: Recorder
+    recorder: Any  # console.recording.recorder.Recorder
     grasp_session: GraspSession | None
 
 

@@ -21,7 +21,9 @@ ends and, on the soft arm, the gripper's far end) moves faster than ``tip_speed`
 measured with the forward kinematics of ``core.kinematics``. :meth:`HoldToRun.cancel` (STOP, a
 lost lease) ends all motion and latches: a button still held keeps renewing into nothing until
 it is released (its click arrives on mouse-up) and pressed again, or has sent no renewal for
-``latch_gap`` s (a release whose click never arrived).
+``latch_gap`` s (a release whose click never arrived). A held jog that ends because its renewals
+stopped (not a release) is reported to ``on_expired``: the console core
+(``console.core.console_core``) makes it a stop through its one safety route.
 """
 
 from __future__ import annotations

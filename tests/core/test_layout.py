@@ -5,6 +5,9 @@
   command line (``__main__.py``), never in a library module.
 * Library modules under ``core/`` and ``hw_bridge/`` have no ``argparse``, ``print``,
   ``sys.exit`` or ``if __name__ == "__main__"``: those belong to the command-line modules.
+* ``console/core/`` (the console's headless state and its one safety route) imports no
+  ``viser`` and nothing of ``console`` outside ``console.core``, not even lazily or for type
+  checking: the views import the core, never the other way round.
 * No import circle: the module-level imports form no cycle, and every module of ``core``,
   ``console`` and ``hw_bridge`` imports when it is the first one imported, each in a fresh
   interpreter (so no module depends on another having been imported before it).
@@ -96,6 +99,24 @@ def test_core_imports_nothing_from_hw_bridge_console_or_io():
             if root in CORE_FORBIDDEN or (root in CORE_CLI_ONLY and not is_cli(name)):
                 bad.append(f"{path.relative_to(REPO)}:{line} imports {imported}")
     assert not bad, "\n".join(sorted(set(bad)))
+
+
+# Still drawing in the headless room: GraspSession's scene layers move out (issue #27, item 3).
+CONSOLE_CORE_PENDING = {"console.core.grasp_session"}
+
+
+def test_the_console_core_imports_no_viser_and_no_view():
+    bad = []
+    for name, path in modules("console").items():
+        if not name.startswith("console.core") or name in CONSOLE_CORE_PENDING:
+            continue
+        for line, imported in imported_names(name, ast.parse(path.read_text()), path):
+            parts = imported.split(".")
+            if parts[0] == "viser" or (parts[0] == "console" and len(parts) > 1
+                                       and parts[1] != "core"):
+                bad.append(f"{path.relative_to(REPO)}:{line} imports {imported}")
+    assert not bad, "\n".join(sorted(set(bad)))
+    assert "console.core.console_core" in modules("console")  # the rule has something to check
 
 
 def test_the_rule_catches_a_forbidden_import(tmp_path):
