@@ -33,8 +33,9 @@ Panels never wire safety: they render state and call the core.
 
 Sharing the console (issue 6): ``app.access`` is the operator lock (``console.core.access``): gate
 every callback that moves the arm with ``console.panels.common.base.operator_only`` (or
-``app.access.check(event.client, "jog")``). ``app.recorder.log(kind, payload, client)`` adds to a running
-recording (``console.recording.recorder``); files live under ``app.data`` (``console.core.datadir``).
+``app.access.check(event.client, "jog")``). ``app.recorder.log(kind, payload, client)`` adds to
+a running recording (``console.recording.recorder``); files live under ``app.data``
+(``console.core.datadir``).
 ``app.guard`` (``console.client_guard``) checks every message a browser sends before viser
 stores or broadcasts it: only valid values, shared inputs for the operator only unless a panel
 calls ``allow_viewers(handle)``, per-client rate and size limits.

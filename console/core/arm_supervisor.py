@@ -85,7 +85,8 @@ class ArmSupervisor(Protocol):
 
 
 class SoftArmLoop(Protocol):
-    """What :class:`SoftArmSupervisor` uses of :class:`hw_bridge.soft_arm_process.ControlProcess`."""
+    """What :class:`SoftArmSupervisor` uses of
+    :class:`hw_bridge.soft_arm_process.ControlProcess`."""
 
     view: Any
     failure: str | None

@@ -16,8 +16,8 @@ each slider and its − / + out on one grid row with a small style sheet (:func:
 HTML widget of the panel) keyed on the widgets' ids. A browser without CSS ``:has()`` shows
 the same buttons stacked under their slider: the same row order, only taller.
 
-All motion goes through ``app.core.hold`` (``console.core.hold_to_run.HoldToRun``), capped at 250 mm/s
-for every arm point and clamped to the soft limits:
+All motion goes through ``app.core.hold`` (``console.core.hold_to_run.HoldToRun``), capped at
+250 mm/s for every arm point and clamped to the soft limits:
 
 * The − / + buttons hold to jog: the arm moves only while the button is held
   (viser's ``on_hold`` renews the jog 20 times a second; a jog expires 300 ms after its last
