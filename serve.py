@@ -269,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _shutdown_steps(app: Any, server: Any) -> list[tuple[str, Any]]:
     """What shutting down does, in order (:meth:`Lifecycle.shutdown` bounds it)."""
-    return [("STOP", lambda: app.stop_motion("console shutting down")),
+    return [("STOP", lambda: app.core.stop_motion("console shutting down")),
             ("hardware", app.services.close),
             ("console threads", app.stop),
             ("web server", server.stop)]

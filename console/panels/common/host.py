@@ -19,7 +19,6 @@ if TYPE_CHECKING:
     from console.core.console_core import ConsoleCore
     from console.core.datadir import DataDir
     from console.core.grasp_session import GraspSession
-    from console.core.hold_to_run import HoldToRun
     from console.core.model import ArmModel
     from console.core.services import ConsoleServices
     from console.core.state import StateStore
@@ -50,11 +49,6 @@ class PanelHost(Protocol):
     data_root: Path
 
     @property
-    def hold(self) -> HoldToRun:
-        """The core's hold-to-run."""
-        ...
-
-    @property
     def data(self) -> DataDir:
         """The console's data folder."""
         ...
@@ -67,10 +61,6 @@ class PanelHost(Protocol):
     @property
     def panels(self) -> tuple[Any, ...]:
         """The composed panels."""
-        ...
-
-    def stop_motion(self, reason: str, client: Any = None) -> None:
-        """The core's STOP."""
         ...
 
     def refuse(self, client: Any, exc: NotOperator | str, action: str = "") -> None:

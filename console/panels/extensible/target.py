@@ -94,7 +94,7 @@ class TargetPanel(Panel):
         self._target = tip.copy()
         self._typed = TypedFields(self.inputs)  # the echo of an answer skips a field just typed
         self._dragging = False
-        self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
+        self._moving_to: Array | None = None  # set-point handed to core.hold, until it arrives
         self._legs: tuple[int, list[Array]] = (0, [])  # (client id, route postures still to go)
         # (n, target, result, error, info): replaced whole by the worker, shown by on_state.
         self._latest: tuple[int, Array, TipIKResult | None, str | None, str | None] = (
