@@ -41,7 +41,7 @@ from console.core.state import ArmState, StateStore
 log = logging.getLogger(__name__)
 
 T = TypeVar("T")
-TICK_S = 0.02  # the core's thread: forwarding latency at most this, the watcher at this rate
+TICK_S = 0.02  # the watcher's period (forwarding wakes at once on each new command)
 STOP_LOG = 100  # stops kept in ConsoleCore.stop_log
 
 
