@@ -1,7 +1,8 @@
 """A console built with no panels at all still moves the arm from the store and stops it on STOP
 and on a lost lease, for both arms, with the real loop processes (the soft arm's control process
-on its simulated arm, the extensible arm's runner process on its in-process mock): what stops
-the arm no longer depends on which panels were built."""
+on its simulated arm, the extensible arm's runner process on its in-process mock), and a killed
+loop process stops motion once: what stops the arm no longer depends on which panels were
+built."""
 
 from __future__ import annotations
 
@@ -101,3 +102,25 @@ def test_the_extensible_arm_without_panels_follows_the_store_and_stops_on_stop_a
     finally:
         app.stop()
         runner.close()
+
+
+def test_a_killed_loop_process_stops_motion_once_with_why(server: Any) -> None:
+    """The watcher: the soft arm's control process killed mid-jog ends motion through the one
+    route, once, naming why it died (jogging ends: nothing more is commanded)."""
+    ctl = ControlProcess(SOFT, device="sim", sched_priority=None, cpus=None)
+    app = ConsoleApp(SOFT, server, panels=(), access=AccessControl(None),
+                     services=ConsoleServices(soft_control=ctl))
+    app.core.start()
+    try:
+        wait_for(lambda: ctl.view is not None, 60, "the loop")
+        app.access.take(1, name="Ann")
+        assert app.core.hold.move_to(1, np.full(SOFT.n_segments, 3.0))  # a set-point move
+        ctl._proc.kill()
+        wait_for(lambda: app.stops == 1, what="the watcher's stop")
+        assert app.last_stop.reason.startswith("control loop died: ")  # type: ignore[union-attr]
+        assert not app.core.hold.active
+        time.sleep(0.3)  # (the watcher ticks every 20 ms)
+        assert app.stops == 1
+    finally:
+        app.stop()
+        ctl.close()
