@@ -40,7 +40,8 @@ from typing import Any
 
 from console import web
 from console.core.access import AccessControl
-from console.app import DEFAULT_PANELS, ConsoleApp
+from console.app import ConsoleApp
+from console.panel_sets import DEFAULT_PANELS
 from console.core.model import model_for
 from console.serve_lifecycle import Lifecycle, port_in_use
 from console.core.services import ConsoleServices
@@ -298,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _shutdown_steps(app: Any, server: Any) -> list[tuple[str, Any]]:
     """What shutting down does, in order (:meth:`Lifecycle.shutdown` bounds it)."""
-    return [("STOP", lambda: app.stop_motion("console shutting down")),
+    return [("STOP", lambda: app.core.stop_motion("console shutting down")),
             ("hardware", app.services.close),
             ("console threads", app.stop),
             ("web server", server.stop)]

@@ -63,7 +63,6 @@ def _serve_module() -> Any:
 
 def child(a: argparse.Namespace) -> int:
     """Serve the console (``serve.build``) and answer ``mark`` / ``stats`` / ``quit``."""
-    from console.core.demo_motion import DemoMotion
     from core.robots import load
 
     serve = _serve_module()
@@ -73,6 +72,8 @@ def child(a: argparse.Namespace) -> int:
     if a.hardware:
         argv += ["--hardware", a.hardware]
     argv += ["--rt-cpu", a.rt_cpu]
+    if a.motion != "loop":
+        argv += ["--demo"]  # the demo motion is a service: the console core stops it on STOP
     args = serve.parse_args(argv)
     server, app, _ = serve.build(args, robot, "load benchmark")
     print(f"bench_load child: {serve.pin_console(app.services)}", file=sys.stderr, flush=True)
@@ -81,8 +82,8 @@ def child(a: argparse.Namespace) -> int:
     ctl, tally = start_trials(app, robot, stop) if a.motion == "loop" else (None, TrialTally())
     demo = None
     if ctl is None:
-        demo = DemoMotion(app.store)
-        app.add_stop_hook(demo.stop)
+        demo = app.services.demo
+        assert demo is not None
         demo.start()
     loop_pid = ctl._proc.pid if ctl is not None and hasattr(ctl, "_proc") else 0
     print(f"READY http://127.0.0.1:{server.get_port()}/ {'loop' if ctl else 'demo'} {loop_pid}",

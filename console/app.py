@@ -13,9 +13,10 @@ Data flow (see ``console.core.state``)::
 Adding a panel (other engineers): write ``class MyPanel(console.panels.common.base.Panel)`` in
 ``console/panels/my_panel.py`` with ``title``, ``order``, optional ``kinds = ("planar",)``,
 ``build()`` creating widgets with thin callbacks that call ``self.app.store.request(q, "me")``,
-and ``on_state(state)`` for display updates. Then add it to the :data:`DEFAULT_PANELS` tuple
-below (``kinds`` keeps it off the other robot), pass ``panels=`` to the constructor, or call
-``app.add_panel(MyPanel)``; find it again with ``app.panel(MyPanel)``.
+and ``on_state(state)`` for display updates. Then add it to
+:data:`console.panel_sets.DEFAULT_PANELS` (``kinds`` keeps it off the other robot), pass
+``panels=`` to the constructor, or call ``app.add_panel(MyPanel)``; find it again with
+``app.panel(MyPanel)``. Panels see the app as a :class:`console.panels.common.host.PanelHost`.
 
 Plugging in hardware: build the app with ``mirror_commands=False``; the bridge's control thread
 reads ``app.store.wait_command(seq, timeout)`` and reports measurements with
@@ -24,14 +25,17 @@ links the panels use come in one typed :class:`console.core.services.ConsoleServ
 (``services=``, built by ``serve.py``; a loop that needs the console's store before the app
 exists gets it from ``store=``); panels read ``app.services.<name>``.
 
+Motion and safety live in ``app.core`` (:class:`console.core.console_core.ConsoleCore`, headless):
+its ``stop_motion(reason, who)`` is THE STOP (the header's button and Esc, a lost lease, release
+or take-over, hold-to-run expiry, link loss, a dead loop), the same for both arms whatever panels
+exist; it owns hold-to-run (``app.core.hold``) and forwards commanded states to the arm's loop.
+Panels never wire safety: they render state and call the core.
+
 Sharing the console (issue 6): ``app.access`` is the operator lock (``console.core.access``): gate
 every callback that moves the arm with ``console.panels.common.base.operator_only`` (or
-``app.access.check(event.client, "jog")``). ``app.stop_motion(reason, client)`` is STOP: it
-calls every hook registered with ``app.add_stop_hook(fn)`` (``fn(reason)``; the control loop
-registers its controlled stop there) and ends all jogging (``app.hold``, hold-to-run with speed
-caps, ``console.core.hold_to_run``). It also runs when the operator's lease is lost, control is
-released or taken over. ``app.recorder.log(kind, payload, client)`` adds to a running
-recording (``console.recording.recorder``); files live under ``app.data`` (``console.core.datadir``).
+``app.access.check(event.client, "jog")``). ``app.recorder.log(kind, payload, client)`` adds to
+a running recording (``console.recording.recorder``); files live under ``app.data``
+(``console.core.datadir``).
 A process builds a console only after ``console.web.install()`` (``serve.py`` calls it; the
 constructor raises RuntimeError otherwise). ``app.guard`` (``console.web.client_guard``) checks
 every message a browser sends before viser stores or broadcasts it: only valid values, shared
@@ -45,7 +49,7 @@ import logging
 import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Sequence, TypeVar
+from typing import Any, Sequence, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -53,6 +57,7 @@ import viser
 
 from console import web
 from console.core.access import AccessControl, NotOperator, Operator
+from console.core.console_core import ConsoleCore, StopRecord
 from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import DataDir
@@ -61,9 +66,8 @@ from console.header import ConsoleHeader
 from console.core.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
 from console.core.model import ArmModel, model_for
+from console.panel_sets import DEFAULT_PANELS
 from console.panels.common.base import Panel
-from console.panels.common.jog import JogPanel
-from console.panels.common.readout import ReadoutPanel
 from console.recording.lab_feed import feed_grasp
 from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
@@ -76,7 +80,6 @@ from console.web.client_guard import ClientGuard
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PANELS: tuple[type[Panel], ...] = (JogPanel, ReadoutPanel)
 P = TypeVar("P", bound=Panel)
 
 
@@ -127,35 +130,31 @@ class ConsoleApp:
         self.render_period = 1.0 / render_hz
         self.frames_drawn = 0
         self.last_drawn_seq = -1
-        self.stops = 0
         self.refusals = 0
-        self.last_stop: tuple[float, str] | None = None
         self._refused_at: dict[tuple[Any, str], float] = {}
         self._notified_at: dict[tuple[str, str], float] = {}
         self._panels: list[Panel] = []
         self._panel_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._stop_hooks: list[Callable[[str], Any]] = []
-        self._hook_lock = threading.Lock()
+        self._notice_lock = threading.Lock()
 
         self.data_root = Path("runs" if data_dir is None else data_dir)
         self._data: DataDir | None = None
         self.access = access if access is not None else AccessControl()
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
-        self.lease = LeaseMonitor(server, self.access, busy=lambda: self.hold.active)
-        self.hold = HoldToRun(self.store, allowed=self.access.is_operator,
-                              heard=self.access.last_heard)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
-        self.access.add_listener(self._on_control_change)
-        if self.services.demo is not None:
-            self.add_stop_hook(self.services.demo.stop)
+        self.core = ConsoleCore(self.store, self.services, self.access, self.recorder)
+        self.lease = LeaseMonitor(server, self.access, busy=lambda: self.core.hold.active)
+        self.access.add_listener(self._on_control_change)  # after the core's: it stops first
         server.on_client_connect(self.access.grant_if_free)
 
         self.theme = setup_theme(server, robot.name)  # (console.scene.stage) no share tunnel either
         self.status = server.gui.add_markdown(f"<small>{status}</small>", order=0.3)
-        self.header = ConsoleHeader(self)  # STOP, control, phase, link: above every tab
+        self.header = ConsoleHeader(  # STOP, control, phase, link: above every tab
+            server.gui, self.core, allow_viewers=self.guard.allow_viewers,
+            notify_all=self.notify_all, stopped=lambda: self.stopped)
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
         self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
         add_lights(server.scene, self.theme)
@@ -218,41 +217,31 @@ class ConsoleApp:
             self._data = DataDir(self.data_root)
         return self._data
 
-    def add_stop_hook(self, fn: Callable[[str], Any]) -> Callable[[str], Any]:
-        """Call ``fn(reason)`` on every STOP / lost lease / release; returns ``fn``.
-
-        Hooks must return quickly (command a controlled stop, do not wait for it); one that
-        raises is logged and the others still run.
-        """
-        with self._hook_lock:
-            self._stop_hooks.append(fn)
-        return fn
-
-    def remove_stop_hook(self, fn: Callable[[str], Any]) -> None:
-        with self._hook_lock:
-            if fn in self._stop_hooks:
-                self._stop_hooks.remove(fn)
+    @property
+    def hold(self) -> HoldToRun:
+        """The core's hold-to-run (every jog motion)."""
+        return self.core.hold
 
     def stop_motion(self, reason: str, client: Any = None) -> None:
-        """STOP: run every stop hook, then end all jogging (allowed from any client)."""
-        with self._hook_lock:
-            hooks = tuple(self._stop_hooks)
-        for fn in hooks:
-            try:
-                fn(reason)
-            except Exception:
-                log.exception("stop hook %r failed", fn)
-        self.hold.cancel(latch=True)
-        self.stops += 1
-        self.last_stop = (time.time(), reason)
-        self.recorder.action(f"STOP: {reason}", client)
+        """STOP: the core's one safety route (:meth:`ConsoleCore.stop_motion`)."""
+        self.core.stop_motion(reason, client)
+
+    @property
+    def stops(self) -> int:
+        """How many times motion was stopped (the core's count)."""
+        return self.core.stops
+
+    @property
+    def last_stop(self) -> StopRecord | None:
+        """The latest stop: when, why, who (the core's)."""
+        return self.core.last_stop
 
     def refuse(self, client: Any, exc: NotOperator | str, action: str = "") -> None:
         """Tell ``client`` why it may not act (a notification only it sees); logs the refusal."""
         reason = exc.reason if isinstance(exc, NotOperator) else str(exc)
         key = (getattr(client, "client_id", client), action or reason)
         now = time.monotonic()
-        with self._hook_lock:  # a held button refuses 20 times a second: tell them once
+        with self._notice_lock:  # a held button refuses 20 times a second: tell them once
             if now - self._refused_at.get(key, -1e9) < 2.0:
                 return
             self._refused_at[key] = now
@@ -270,7 +259,7 @@ class ConsoleApp:
         """
         if coalesce_s > 0:
             now = time.monotonic()
-            with self._hook_lock:
+            with self._notice_lock:
                 if now - self._notified_at.get((title, body), -1e9) < coalesce_s:
                     return
                 self._notified_at[(title, body)] = now
@@ -284,10 +273,8 @@ class ConsoleApp:
 
     def _on_control_change(self, new: Operator | None, previous: Operator | None,
                            reason: str) -> None:
-        who = new if new is not None else previous
-        self.recorder.action(reason, None if who is None else who.client_id)
-        if previous is not None:  # the operator left or changed: the arm makes a controlled stop
-            self.stop_motion(reason)
+        """Tell every browser that nobody holds control (the core has stopped the arm)."""
+        if previous is not None:
             if new is None:
                 self.notify_all("Control released", f"{reason}. The arm was stopped; nobody "
                                 "holds control.", color="orange", coalesce_s=3.0)
@@ -301,7 +288,7 @@ class ConsoleApp:
             self._thread = threading.Thread(target=self._render_loop, name="console-render",
                                             daemon=True)
             self._thread.start()
-        self.hold.start()
+        self.core.start()
         self.lease.start()
         return self
 
@@ -309,7 +296,7 @@ class ConsoleApp:
         """Stop the threads (and any recording); the viser server keeps running."""
         self._stop.set()
         self.lease.stop(timeout)
-        self.hold.stop(timeout)
+        self.core.stop(timeout)
         self.recorder.stop()
         if self.grasp_session is not None:
             self.grasp_session.close()

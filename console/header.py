@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import html
 import threading
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Callable, Literal
 
 import viser
 
 if TYPE_CHECKING:
-    from console.app import ConsoleApp
+    from console.core.console_core import ConsoleCore
 
 STOP_HOTKEY = "escape"
 FIELDS: tuple[str, ...] = ("control", "phase", "link")
@@ -36,12 +36,20 @@ class ConsoleHeader:
     """STOP and the status fields above the tabs (see the module docstring).
 
     Args:
-        app: The console; STOP calls ``app.stop_motion`` and tells every browser who pressed it.
+        gui: The server's GUI to draw into.
+        core: The console core; STOP calls ``core.stop_motion`` (the one safety route).
+        allow_viewers: Lets viewers use STOP (``ClientGuard.allow_viewers``).
+        notify_all: Tells every browser who pressed STOP (``ConsoleApp.notify_all``).
+        stopped: Whether the console is shutting down (no GUI updates then).
     """
 
-    def __init__(self, app: ConsoleApp) -> None:
-        self.app = app
-        gui = app.server.gui
+    def __init__(self, gui: viser.GuiApi, core: ConsoleCore, *,
+                 allow_viewers: Callable[..., None],
+                 notify_all: Callable[..., None],
+                 stopped: Callable[[], bool] = lambda: False) -> None:
+        self.core = core
+        self._notify_all = notify_all
+        self._stopped = stopped
         self._lock = threading.Lock()
         self._fields: dict[str, tuple[str, str | None]] = {}
         self._shown = ""
@@ -53,7 +61,7 @@ class ConsoleHeader:
                                         hotkey=STOP_HOTKEY)
         self.stop_cmd.on_trigger(self._on_stop)
         self.status = gui.add_html(self._render(), order=0.2)
-        app.guard.allow_viewers(self.stop_btn, self.stop_cmd)
+        allow_viewers(self.stop_btn, self.stop_cmd)
 
     def show(self, field: str, text: str, tone: Tone | None = None, *,
              escape: bool = True) -> None:
@@ -64,7 +72,7 @@ class ConsoleHeader:
         with self._lock:
             self._fields[field] = (body, tone)
             page = self._render()
-            if page == self._shown or self.app.stopped:
+            if page == self._shown or self._stopped():
                 return
             self._shown = page
         self.status.content = page
@@ -88,6 +96,6 @@ class ConsoleHeader:
 
     def _on_stop(self, event: Any) -> None:
         client = getattr(event, "client", None)
-        who = self.app.access.name_of(client)
-        self.app.stop_motion(f"STOP pressed by {who}", client)
-        self.app.notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)
+        who = self.core.access.name_of(client)
+        self.core.stop_motion(f"STOP pressed by {who}", client)
+        self._notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)

@@ -182,10 +182,8 @@ class Hold:
 
 @dataclasses.dataclass(frozen=True)
 class ConnectFactory:
-    """Reconnect to the runner's hardware factory and arm (``follow``: move to the console's
-    command at once, else hold)."""
-
-    follow: bool
+    """Reconnect to the runner's hardware factory and configure it, disarmed (only the
+    operator's :class:`Arm` arms)."""
 
 
 @dataclasses.dataclass(frozen=True)

@@ -3,7 +3,7 @@
 ``python -m hw_bridge.emulator --robot extensible|soft-arm [--baud B] [--drop P] [--corrupt P]
 [--stall-after S] [--disconnect-after S [--disconnect-for D]] [--motors N] [--mocap-port P]
 [--seed S] [--object X Y R] [--control-port P] [--slip F [--slip-jitter J]] [--tip-port P
-[--tip-noise M]]``
+[--tip-noise M]] [--mid-range]``
 
 * stdout line 1: the pty slave path (open it with pyserial); later lines: JSON events
   (``{"event": "watchdog_tripped", "t": ..., "positions": [...]}``, armed, disarmed,
@@ -34,6 +34,9 @@ on distal ones, plus a per-move random part of standard deviation ``--slip-jitte
 encoders do not see it). ``--tip-port P`` sends the tip, as a mocap-like measurement with
 Gaussian noise ``--tip-noise`` (m per axis), every tick to ``127.0.0.1:P`` in the motion-capture
 packet (one point: x, y, z in m). Without these flags the racks follow the encoders exactly.
+The racks power up retracted (every one at rack_min); ``--mid-range`` starts them at the
+console's start pose (straight, mid-range: :func:`core.kinematics.delta.mid_range_delta`), so
+connecting and arming the console moves nothing.
 
 This module is the command line (argument checks, JSON event lines on stdout, signals); the
 emulator itself is :class:`hw_bridge.pty_emulator.Emulator`.
@@ -135,6 +138,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                     help="extensible arm: send the measured tip to UDP 127.0.0.1:P every tick")
     ap.add_argument("--tip-noise", type=float, default=0.002, metavar="M",
                     help="tip measurement noise, m per axis (default 0.002)")
+    ap.add_argument("--mid-range", action="store_true",
+                    help="extensible arm: the racks start at mid-range (the console's start "
+                         "pose), not retracted")
     args = ap.parse_args(argv)
     if args.slip is not None and not 0.0 <= args.slip <= 0.5:
         ap.error("--slip must be in [0, 0.5]")

@@ -27,6 +27,9 @@ Array = npt.NDArray[np.float64]
 Counts = npt.NDArray[np.int64]
 
 
+ARM_FIRST = "arm first (Arm device): connecting never arms the arm"
+
+
 def home_counts(robot: ExtensibleArm) -> Counts:
     """Absolute motor counts ``U^-1 L`` of the retracted pose, where the encoders read 0."""
     retracted = dk.robot_rack_lengths(robot, np.zeros((robot.n_segments, 3)))

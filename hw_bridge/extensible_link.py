@@ -22,7 +22,7 @@ import numpy as np
 from core.robots import ExtensibleArm
 from hw_bridge.commands import Arm, BridgeCommand, Connect
 from hw_bridge.controls import QueuedBridgeControls
-from hw_bridge.extensible_jobs import Array, Counts
+from hw_bridge.extensible_jobs import ARM_FIRST, Array, Counts
 from hw_bridge.interface import HardwareInterface, LifecycleState, ReturnType
 from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor, open_serial
 
@@ -120,28 +120,24 @@ class HardwareLink:
             self.controls.publish(health)
 
     # -- lifecycle (loop thread) ---------------------------------------------------------------
-    def open_and_arm(self, follow: bool) -> str | None:
-        """Runner connect: close the link, take a new one from the factory, configure and
-        activate it; the streamer then holds (or follows). Returns the fault, or None."""
+    def open_link(self) -> str | None:
+        """Runner connect: close the link, take a new one from the factory and configure it,
+        disarmed (arming is the operator's Arm, :class:`StreamerStrategy`). Returns the fault,
+        or None."""
         stack = self.streamer
         stack.disarmed("reconnecting")  # a running job ends here
         hw = self.supervisor.adopt(self.factory())
         self.fault = None
         stack.fault, stack.message = None, "connecting"
-        for step in (hw.configure, hw.activate):
-            ok = step() is ReturnType.OK
-            if step == hw.configure:
-                self.supervisor.on_new_link()
-            if not ok:
-                stack.fault = hw.fault or f"{step.__name__} failed"
-                stack.message = f"fault: {stack.fault}"
-                self.publish()
-                return stack.fault
-        pos = hw.positions()
-        assert pos is not None
-        stack.connected(pos, follow)
-        if not follow:  # the arm stays where it is: so does the console's command
-            stack.settle_link()
+        ok = hw.configure() is ReturnType.OK
+        self.supervisor.on_new_link()
+        if not ok:
+            stack.fault = hw.fault or "configure failed"
+            stack.message = f"fault: {stack.fault}"
+            self.publish()
+            return stack.fault
+        stack.disarmed(f"connected to {getattr(hw, 'port', '') or 'the device'}; disarmed: "
+                       f"{ARM_FIRST}")
         self.publish()
         return None
 
@@ -175,7 +171,7 @@ class HardwareLink:
                 self.fault = None
             if isinstance(cmd, Connect):
                 self.streamer.disarmed(f"connected to {getattr(self.hw, 'port', '')}; "
-                                       "disarmed (Arm to command the arm)")
+                                       f"disarmed: {ARM_FIRST}")
         hw = self.supervisor.hw
         if hw is not before and hw is not None:  # a Connect opened it: the runner's from now on
             self.factory = lambda: hw

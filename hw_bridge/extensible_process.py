@@ -8,11 +8,12 @@ processes while the loop waits for it. In its own process every thread is real-t
 the loop and pinned to the real-time CPU (:mod:`hw_bridge.loop_process`).
 
 :class:`ExtensibleProcess` offers the console the runner's interface (``start`` / ``connect`` /
-``execute`` / ``move_to`` / ``stop`` / ``wait`` / ``snapshot`` / ``port`` / ``bridge_controls``);
+``execute`` / ``move_to`` / ``stop`` / ``setpoint`` / ``wait`` / ``snapshot`` / ``port`` /
+``bridge_controls``);
 in the child an :class:`~hw_bridge.extensible_runner.ExtensibleRunner` runs every command
 (:mod:`hw_bridge.commands`). The console's command reaches it as
-:class:`~hw_bridge.commands.Setpoint` messages (a pump thread watches the store; the runner's
-own settled commands are not sent back), and the measured posture, settled commands and job
+:class:`~hw_bridge.commands.Setpoint` messages (:meth:`ExtensibleProcess.setpoint`, called by the
+console core for each new command that is not the runner's own), and the measured posture, settled commands and job
 results come back to the store and to :meth:`ExtensibleProcess.wait`.
 """
 
@@ -61,7 +62,6 @@ class ExtensibleOptions:
     kind: Literal["mock", "port"]
     port_path: str | None = None
     always_report: bool = False
-    follow: bool = True
     publish_hz: float = 30.0
     sched_priority: int | None = 50
     cpus: CpuPartition | None = None
@@ -118,8 +118,7 @@ def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: A
     try:
         factory = _hardware(robot, opts)  # type: ignore[arg-type]
         link = PipeLink(replies, opts.always_report)
-        runner = ExtensibleRunner(robot, factory, link=link, follow=opts.follow,
-                                  on_new_link=promote_new_threads)
+        runner = ExtensibleRunner(robot, factory, link=link, on_new_link=promote_new_threads)
     except Exception as exc:  # noqa: BLE001 - reported to the parent, which shows it
         replies.put(("failed", f"{opts.kind} device: {exc}"))
         return
@@ -177,18 +176,20 @@ class ExtensibleProcess(LoopProcess):
     Args:
         robot: The extensible arm (its ``source`` file is loaded in the child).
         store: The console's :class:`console.core.state.StateStore`: its commands are followed while
-            idle (``follow``: at once on connect), the measured posture is reported there
+            armed and idle (from the first one after Arm), the measured posture is reported there
             (always when the store does not mirror commands, else while a job runs).
         kind: ``"mock"`` (an in-process MockHardware in the child) or ``"port"`` (a
             SerialHardware on ``port_path``: a controller or the device emulator's pty).
         cpus: Where the processes run (:mod:`hw_bridge.cpu_partition`): ``"auto"`` the loop on
             the highest CPU, the rest on the others; None: anywhere.
 
-    Not started: :meth:`start` spawns the child and connects (the mock's on the first Execute).
+    Not started: :meth:`start` spawns the child and connects, disarmed (only the operator's Arm,
+    :attr:`bridge_controls`, arms; it holds where the encoders are). :meth:`restart` replaces a
+    dead or silent child by a new one, which connects again, disarmed.
     """
 
     def __init__(self, robot: ExtensibleArm, store: Any, kind: Literal["mock", "port"] = "mock",
-                 port_path: str | None = None, *, follow: bool | None = None,
+                 port_path: str | None = None, *,
                  cpus: CpuPartition | None | Literal["auto"] = "auto",
                  sched_priority: int | None = 50, publish_hz: float = 30.0) -> None:
         from hw_bridge.config import BridgeConfig
@@ -200,9 +201,8 @@ class ExtensibleProcess(LoopProcess):
         always_report = not getattr(store, "mirror_commands", True)
         self.robot = robot
         self.store = store
-        self.follow = (not always_report) if follow is None else follow
         self.period_s = BridgeConfig.from_robot(robot).period_s
-        self.options = ExtensibleOptions(kind, port_path, always_report, self.follow, publish_hz,
+        self.options = ExtensibleOptions(kind, port_path, always_report, publish_hz,
                                          sched_priority, cpus)
         self.view: ExtensibleView | None = None
         self.connecting: cf.Future | None = None
@@ -210,7 +210,6 @@ class ExtensibleProcess(LoopProcess):
         self._results: dict[int, JobResult] = {}
         self._done = threading.Condition()
         self._start_lock = threading.Lock()
-        self._quit = threading.Event()
 
     # -- lifecycle -------------------------------------------------------------------------
     @property
@@ -223,18 +222,22 @@ class ExtensibleProcess(LoopProcess):
             if self._proc is None:
                 self.spawn(_child, (str(self.robot.source), self.options, self._commands,
                                     self._replies))
-                threading.Thread(target=self._pump, name="extensible-setpoints",
-                                 daemon=True).start()
                 self.connecting = self.connect()
         return self
 
+    def restart(self, timeout: float = 5.0) -> None:
+        """A new child in place of a dead or silent one (:meth:`LoopProcess.restart`); it
+        connects again, disarmed. Jobs the old child ran end (their :meth:`wait` times out)."""
+        with self._start_lock:
+            super().restart(timeout)
+            self.connecting = self.connect()
+
     def connect(self) -> cf.Future:
-        """(Re)configure and activate the hardware, then hold (or follow the console)."""
-        return self.send(ConnectFactory(self.follow))
+        """(Re)configure the hardware, disarmed (only the operator's Arm arms)."""
+        return self.send(ConnectFactory())
 
     def close(self, timeout: float = 5.0) -> None:
         """Disarm and release the hardware, stop the child."""
-        self._quit.set()
         super().close(timeout)
 
     @property
@@ -287,15 +290,11 @@ class ExtensibleProcess(LoopProcess):
         elif kind == "settled":
             self.store.request(payload, SOURCE)
 
-    def _pump(self) -> None:
-        """Send every new console command (not the runner's own) to the child."""
-        seq = -1
-        while not self._quit.is_set() and (self._proc is None or self._proc.is_alive()
-                                           or seq < 0):
-            cmd = self.store.wait_command(seq, timeout=0.5)
-            if cmd is None:
-                continue
-            seq = cmd.seq
-            if cmd.source != SOURCE:
-                delta = tuple(tuple(float(v) for v in row) for row in np.asarray(cmd.q, float))
-                self._commands.put((0, Setpoint(cmd.seq, delta)))
+    def setpoint(self, seq: int, delta: npt.ArrayLike) -> None:
+        """Send the console's commanded posture ``delta`` (n, 3) with its store sequence number
+        ``seq``; the runner follows the newest while armed and idle. The console core calls
+        this for each new command that is not the runner's own (nothing here watches the
+        store)."""
+        rows = tuple(tuple(float(v) for v in row) for row in np.asarray(delta, float))
+        if self.alive:
+            self._commands.put((0, Setpoint(int(seq), rows)))

@@ -16,8 +16,9 @@ deadlines, overruns skipped): every tick reads the encoders, converts them to ra
   the posture within its rack and bending limits.
 * :meth:`ExtensibleRunner.stop` holds position where the motors are. A hardware ERROR
   (link lost, watchdog, e-stop, ...) aborts the job and stops commanding; the snapshot reports
-  the fault until :meth:`ExtensibleRunner.connect` reconnects (or the operator connects and
-  arms through :attr:`ExtensibleRunner.bridge_controls`). Nothing re-arms by itself.
+  the fault until a reconnect (:meth:`ExtensibleRunner.connect` or the operator's Connect).
+  Connecting never arms: only the operator's Arm (:attr:`ExtensibleRunner.bridge_controls`)
+  does, and it holds where the encoders are. Nothing re-arms by itself.
 * :attr:`ExtensibleRunner.snapshot` is an immutable :class:`RunnerSnapshot` replaced every tick
   (no lock for readers); the job's commanded and measured tips go into a :class:`JobTrace`.
 
@@ -66,7 +67,6 @@ class ExtensibleRunner:
         period_s: Control period (default: the robot's ``[bridge].rate_hz``).
         settle_counts: A job ends once every encoder is within this of its final demand.
         settle_timeout: ... or this long after the last sample (s), reported as not settled.
-        follow: On connect, move to the link's commanded posture at once (else wait for a new one).
         on_new_link: Called on the loop thread after every configure of a link (its new receive
             thread): :func:`hw_bridge.realtime.promote_new_threads` in a real-time process.
     """
@@ -74,12 +74,11 @@ class ExtensibleRunner:
     def __init__(self, robot: ExtensibleArm, hardware_factory: Callable[[], HardwareInterface],
                  *, link: PoseLink | None = None, period_s: float | None = None,
                  settle_counts: int = 3, settle_timeout: float = 3.0,
-                 follow: bool = True, on_new_link: Callable[[], None] = lambda: None) -> None:
+                 on_new_link: Callable[[], None] = lambda: None) -> None:
         if getattr(robot, "kind", None) != "delta":
             raise ValueError(f"robot must be an extensible (delta) arm, got {type(robot).__name__}")
         from hw_bridge.config import BridgeConfig
         self.robot = robot
-        self.follow = follow
         self.period_s = period_s or BridgeConfig.from_robot(robot).period_s
         self.device = HardwareLink(robot, hardware_factory,
                                    health_every=max(1, round(0.1 / self.period_s)),
@@ -143,9 +142,10 @@ class ExtensibleRunner:
         return self.device.controls
 
     def connect(self) -> Future:
-        """(Re)configure and activate the hardware from the factory, on the loop thread; the
-        arm then holds (or, with ``follow``, moves to the console's command)."""
-        return self.send(ConnectFactory(self.follow))
+        """(Re)configure the hardware from the factory, on the loop thread, disarmed: nothing
+        is commanded until the operator's Arm (:attr:`bridge_controls`), which holds where the
+        encoders are."""
+        return self.send(ConnectFactory())
 
     def send(self, cmd: ExtensibleCommand) -> Future:
         """Queue ``cmd`` for the loop thread; the Future resolves once it was applied."""
@@ -158,7 +158,7 @@ class ExtensibleRunner:
         if isinstance(cmd, Hold):
             return self.streamer.halt(t)
         if isinstance(cmd, ConnectFactory):
-            return self.device.open_and_arm(cmd.follow)
+            return self.device.open_link()
         if isinstance(cmd, CloseLink):
             return self.device.close()
         if isinstance(cmd, BRIDGE_COMMANDS):

@@ -19,8 +19,8 @@ import numpy as np
 from core.kinematics import delta as dk
 from core.planning.paths import MotionPath
 from core.robots import ExtensibleArm
-from hw_bridge.extensible_jobs import (Array, Counts, Job, JobResult, JobTrace, PoseLink,
-                                       RunnerSnapshot, concat_paths, home_counts, joint_move,
+from hw_bridge.extensible_jobs import (ARM_FIRST, Array, Counts, Job, JobResult, JobTrace,
+                                       PoseLink, RunnerSnapshot, concat_paths, home_counts, joint_move,
                                        measure, planned_motor_speed)
 
 
@@ -82,7 +82,7 @@ class Streamer:
 
     def start_job(self, job_id: int, label: str, path: MotionPath, t: float) -> None:
         if not self.armed or self.measured_L is None:
-            why = f"not started: {self.fault or self.message}"
+            why = f"not started: {self.fault or ARM_FIRST}"
             self._finish(JobResult(job_id, label, False, why, None, None, None))
             return
         if self.job is not None:

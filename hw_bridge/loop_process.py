@@ -10,8 +10,9 @@ thread is real-time (:mod:`hw_bridge.realtime`) and pinned to the real-time CPU
 Parent side, :class:`LoopProcess`: typed commands (:mod:`hw_bridge.commands`) go down a queue
 with an id, and :meth:`LoopProcess.send` returns a Future that the child's reply resolves (with
 the loop's error, if it refused); the child publishes a view (``("view", v)``), newest in
-:attr:`LoopProcess.view` (a reference swap, no lock for readers); other messages go to
-:meth:`LoopProcess.on_message`. Child side, :func:`serve_commands` reads the queue until the
+:attr:`LoopProcess.view` (a reference swap, no lock for readers) and its age in
+:meth:`LoopProcess.view_age`; other messages go to :meth:`LoopProcess.on_message`. A dead or
+silent child is replaced by :meth:`LoopProcess.restart` (a new one, disarmed, same arguments). Child side, :func:`serve_commands` reads the queue until the
 parent says stop or goes away, and :func:`reply_when_done` answers a command once the loop ran it.
 """
 
@@ -20,9 +21,11 @@ from __future__ import annotations
 import atexit
 import concurrent.futures as cf
 import itertools
+import math
 import multiprocessing
 import queue
 import threading
+import time
 from typing import Any, Callable
 
 from hw_bridge.commands import Arm, Connect, Disarm, Disconnect
@@ -34,44 +37,123 @@ class LoopProcess:
 
     Args:
         name: The child process's name (``ps``, ``top``).
+        clock: Seconds on a monotonic clock: when a view arrived (:meth:`view_age`); tests
+            pass a fake one.
     """
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, clock: Callable[[], float] = time.monotonic) -> None:
         self.name = name
+        self.clock = clock
         self.failure: str | None = None
         self.view: Any = None
+        self._view_at: float | None = None
         ctx = multiprocessing.get_context("spawn")
         self._ctx = ctx
         self._commands = ctx.Queue()
         self._replies = ctx.Queue()
         self._proc: Any = None
+        self._target: Callable[..., None] | None = None
+        self._args: tuple[Any, ...] = ()
+        self._generation = 0  # one per child: a dead child's reader no longer writes here
         self._ids = itertools.count(1)
         self._pending: dict[int, cf.Future] = {}
         self._lock = threading.Lock()
+        self._restart_lock = threading.Lock()
+        self._at_exit = False
 
     def spawn(self, target: Callable[..., None], args: tuple[Any, ...]) -> None:
         """Start ``target(*args)`` in the child (``args`` include this handle's
-        ``_commands`` / ``_replies`` queues where the child expects them) and the reader."""
+        ``_commands`` / ``_replies`` queues where the child expects them; :meth:`restart`
+        puts fresh ones in their places) and the reader."""
+        self._target, self._args = target, args
         # Not a daemon: the child starts processes of its own. close() (also at exit) ends it.
-        self._proc = self._ctx.Process(target=run_reporting, name=self.name,  # (a failure's
-                                       args=(target, self._replies, *args))  # reason -> failure)
-        self._proc.start()
-        threading.Thread(target=self._read, name=f"{self.name}-replies", daemon=True).start()
-        atexit.register(self.close)
+        proc = self._ctx.Process(target=run_reporting, name=self.name,  # (a failure's
+                                 args=(target, self._replies, *args))  # reason -> failure)
+        proc.start()
+        with self._lock:
+            self._proc = proc
+            generation = self._generation
+        threading.Thread(target=self._read, args=(proc, self._replies, generation),
+                         name=f"{self.name}-replies", daemon=True).start()
+        if not self._at_exit:
+            self._at_exit = True
+            atexit.register(self.close)
 
-    def _read(self) -> None:
-        while True:
+    def view_age(self) -> float:
+        """Seconds since the newest view arrived (``clock``); ``math.inf`` before the first."""
+        at = self._view_at
+        return math.inf if at is None else max(0.0, self.clock() - at)
+
+    def restart(self, timeout: float = 5.0) -> None:
+        """Replace the child by a new one with the same arguments; its loop starts disarmed.
+
+        The old child is ended (asked to stop, then SIGTERM, then SIGKILL: it may be alive but
+        silent), every pending Future fails with the reason, the queues are new (a killed
+        child can leave a queue's lock held), and :attr:`view` / :attr:`failure` start over.
+
+        Raises:
+            RuntimeError: nothing was ever spawned (there are no arguments to repeat).
+        """
+        with self._restart_lock:
+            if self._target is None:
+                raise RuntimeError(f"the {self.name} process was never started")
+            old_proc = self._proc
+            reason = self.failure or exit_reason(getattr(old_proc, "exitcode", None))
+            self._end_child(old_proc, timeout)
+            reason = reason or exit_reason(getattr(old_proc, "exitcode", None))
+            why = f"the {self.name} process was restarted" + (f" ({reason})" if reason else "")
+            old_commands, old_replies = self._commands, self._replies
+            with self._lock:
+                self._generation += 1  # the old reader stops writing here
+                pending, self._pending = self._pending, {}
+                self._commands, self._replies = self._ctx.Queue(), self._ctx.Queue()
+                self.view, self._view_at, self.failure = None, None, None
+            for fut in pending.values():
+                if not fut.done():
+                    fut.set_exception(RuntimeError(why))
+            for q in (old_commands, old_replies):
+                q.cancel_join_thread()  # a killed reader: never wait to flush into it
+                q.close()
+            swap = {id(old_commands): self._commands, id(old_replies): self._replies}
+            args = tuple(swap.get(id(a), a) for a in self._args)
+            self.spawn(self._target, args)
+
+    def _end_child(self, proc: Any, timeout: float) -> None:
+        """Ask ``proc`` to stop, then terminate, then kill it; always reap it."""
+        if proc is None:
+            return
+        if proc.is_alive():
             try:
-                msg = self._replies.get(timeout=1.0)
+                self._commands.put(None)
+            except (OSError, ValueError):
+                pass
+            proc.join(min(timeout, 2.0))
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(timeout)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout)
+
+    def _read(self, proc: Any, replies: Any, generation: int) -> None:
+        while self._generation == generation:
+            try:
+                msg = replies.get(timeout=0.25)
             except queue.Empty:
-                if not self._proc.is_alive():  # killed or crashed: the panel says so
-                    self.failure = self.failure or exit_reason(self._proc.exitcode)
+                if not proc.is_alive():  # killed or crashed: the console says so
+                    with self._lock:
+                        if self._generation == generation:
+                            self.failure = self.failure or exit_reason(proc.exitcode)
                     return
                 continue
-            except (EOFError, OSError):
+            except (EOFError, OSError, ValueError):
                 return
+            with self._lock:
+                if self._generation != generation:
+                    return  # restarted meanwhile: this child's news is history
             if msg[0] == "view":
                 self.view = msg[1]
+                self._view_at = self.clock()
             elif msg[0] == "failed":
                 self.failure = msg[1]
             elif msg[0] == "reply":
@@ -101,18 +183,25 @@ class LoopProcess:
         return fut
 
     @property
+    def pid(self) -> int | None:
+        """The current child's process id (None before :meth:`spawn`)."""
+        proc = self._proc
+        return None if proc is None else proc.pid
+
+    @property
     def alive(self) -> bool:
         return self._proc is not None and self._proc.is_alive()
 
     def close(self, timeout: float = 5.0) -> None:
         """Stop the loop and the child process."""
-        if self._proc is None:
+        proc = self._proc
+        if proc is None:
             return
-        if self._proc.is_alive():
+        if proc.is_alive():
             self._commands.put(None)
-            self._proc.join(timeout)
-        if self._proc.is_alive():
-            self._proc.terminate()
+            proc.join(timeout)
+        if proc.is_alive():
+            proc.terminate()
 
 
 class ProcessBridgeControls:

@@ -59,6 +59,7 @@ class EmulatorOptions:
     slip_jitter: float = 0.015
     tip_noise: float = 0.002
     tip_port: int | None = None
+    mid_range: bool = False  # extensible arm: racks start at mid-range, not retracted
 
 
 class Emulator:
@@ -113,6 +114,8 @@ class Emulator:
         self.tip_seq = 0
         if options.slip is not None or options.tip_port is not None:
             self._slip_setup(robot, options)
+        if options.mid_range:
+            self._start_mid_range(robot)
         self.rx_pending: list[tuple[float, bytes]] = []
         self.rx_busy_until = now
         # TX line: frames leave one after another, each ``len * 10 / baud`` s on the wire, and
@@ -139,6 +142,25 @@ class Emulator:
         if options.tip_port is not None:
             self.tip_udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self.tip_addr = ("127.0.0.1", options.tip_port)
+
+    def _start_mid_range(self, robot: Robot) -> None:
+        """Extensible arm: the motors (and racks) start at the console's start pose
+        (:func:`core.kinematics.delta.mid_range_delta`), so arming moves nothing."""
+        if not isinstance(robot, ExtensibleArm):
+            raise ValueError("--mid-range needs the extensible arm")
+        from core.kinematics import delta as dk
+        from hw_bridge.extensible_jobs import home_counts
+        lengths = dk.robot_rack_lengths(robot, dk.mid_range_delta(robot))
+        counts = (dk.motor_counts_from_lengths(robot, lengths) - home_counts(robot)).astype(float)
+        motors = self.core.motors
+        if counts.shape != motors.position.shape:
+            raise ValueError(f"--mid-range needs the arm's {robot.n_motors} motors")
+        motors.position[:] = counts
+        motors.target[:] = counts
+        if self.racks is not None:  # the racks are there already: no slipping move
+            travel = counts.reshape(robot.n_segments, 3) / robot.counts_per_metre
+            self.racks.encoder_m = travel.copy()
+            self.racks.actual_m = travel.copy()
 
     def _step_racks(self, now: float) -> None:
         """The racks follow the motors (slipping); send the measured tip (one point x, y, z)."""

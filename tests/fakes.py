@@ -62,6 +62,8 @@ class FakeRunner:
 
     started = False
     period_s = 0.01
+    failure = None
+    view = None
 
     def __init__(self) -> None:
         from hw_bridge.extensible_jobs import RunnerSnapshot
@@ -70,6 +72,24 @@ class FakeRunner:
 
     def stop(self) -> None:
         pass
+
+    def setpoint(self, seq: int, delta: Any) -> None:
+        pass
+
+    def view_age(self) -> float:
+        return float("inf")
+
+    def restart(self, timeout: float = 5.0) -> None:
+        pass
+
+
+def done_future(result: Any = None) -> Any:
+    """A Future that has resolved with ``result`` (what a loop's command returns)."""
+    import concurrent.futures as cf
+
+    fut: Any = cf.Future()
+    fut.set_result(result)
+    return fut
 
 
 class FakeClock:

@@ -12,7 +12,7 @@ read: the browser's JavaScript must answer, so a frozen or throttled tab fails i
 closed one or a dropped network) and revokes it when the tab disconnects or has not answered for
 ``lease_s`` s; from ``warn_s`` s of silence the operator sees a warning (:meth:`status`). Every
 change of holder is reported to the listeners (the app stops the arm when an operator goes
-away, see ``ConsoleApp.stop_motion``).
+away, see ``console.core.console_core.ConsoleCore.stop_motion``).
 
 The limits come from measurements of headless Chromium with software rendering
 (``benchmarks/lease_gaps.py``, see ``console.core.lease_limits``): the gaps between a tab's answers

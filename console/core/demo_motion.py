@@ -4,8 +4,8 @@ Used for demos, the lab browser tests and the load benchmark until the control l
 is wired into the console. It commands a smooth periodic configuration through
 ``StateStore.request`` with source ``"demo"`` from its own thread, every step limited like a jog
 (no arm point faster than ``tip_speed``, 200 mm/s by default), and stops
-when :meth:`DemoMotion.stop` runs (register it as a stop hook: STOP, a lost lease and Release
-control all call it) or when anyone else commands the arm.
+when :meth:`DemoMotion.stop` runs (as a console service, ``ConsoleServices.demo``, the console
+core's one STOP calls it: STOP, a lost lease, Release...) or when anyone else commands the arm.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ class DemoMotion:
             self._thread.start()
 
     def stop(self, reason: str = "") -> None:
-        """Stop commanding (a stop hook: ``reason`` is only informative)."""
+        """Stop commanding (the console core's STOP: ``reason`` is only informative)."""
         with self._lock:
             self._stop.set()
             thread = self._thread

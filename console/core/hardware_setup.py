@@ -123,15 +123,14 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
             tip_sensor = TipSensor(receiver)
             slip_args = ("--slip", str(slip), "--tip-port", str(receiver.addr[1]))
         emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus,
-                                                  *slip_args])
+                                                  *slip_args, "--mid-range"])
         out.closers.append(emulator.stop)
         path = emulator.path
         out.port_path = path
-    # The emulator's arm powers up retracted (every rack at rack_min: no room to bend); it moves
-    # to the console's start pose (console.core.model.ExtensibleModel.initial) on connect. A real
-    # controller is never moved by connecting: the console's command becomes where it is.
-    runner = extensible_process.ExtensibleProcess(robot, store, "port", path,
-                                                  follow=port_path is None, cpus=part)
+    # Connecting never arms and arming never moves: Arm holds where the encoders are and makes
+    # that the console's command. The emulator's racks start at the console's start pose
+    # (--mid-range: console.core.model.ExtensibleModel.initial), so nothing needs to move there.
+    runner = extensible_process.ExtensibleProcess(robot, store, "port", path, cpus=part)
     out.closers.insert(0, runner.close)
     runner.start()
     return ConsoleServices(hardware=out, extensible_runner=runner,

@@ -21,7 +21,9 @@ ends and, on the soft arm, the gripper's far end) moves faster than ``tip_speed`
 measured with the forward kinematics of ``core.kinematics``. :meth:`HoldToRun.cancel` (STOP, a
 lost lease) ends all motion and latches: a button still held keeps renewing into nothing until
 it is released (its click arrives on mouse-up) and pressed again, or has sent no renewal for
-``latch_gap`` s (a release whose click never arrived).
+``latch_gap`` s (a release whose click never arrived). A held jog that ends because its renewals
+stopped (not a release) is reported to ``on_expired``: the console core
+(``console.core.console_core``) makes it a stop through its one safety route.
 """
 
 from __future__ import annotations
@@ -114,12 +116,15 @@ class HoldToRun:
         latch_gap: After a STOP, a held button counts as released after this long without a
             renewal (normally its release is seen at once, see :meth:`release`).
         clock: Monotonic time source.
+        on_expired: ``on_expired(reason)`` when a held jog ends because its renewals stopped
+            (not on a release): the console core makes that a stop like any other.
     """
 
     def __init__(self, store: StateStore, *, allowed: Callable[[int], bool] = lambda _: True,
                  heard: Callable[[int], float | None] | None = None, expiry: float = 0.3,
                  tip_speed: float = 0.25, rate_hz: float = 50.0, sweep_s: float = 4.0,
-                 latch_gap: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
+                 latch_gap: float = 2.0, clock: Callable[[], float] = time.monotonic,
+                 on_expired: Callable[[str], None] | None = None) -> None:
         if expiry <= 0 or tip_speed <= 0 or rate_hz <= 0 or sweep_s <= 0:
             raise ValueError("expiry, tip_speed, rate_hz and sweep_s must be > 0")
         self.store = store
@@ -132,6 +137,7 @@ class HoldToRun:
         self.sweep_s = sweep_s
         self.latch_gap = latch_gap
         self._clock = clock
+        self.on_expired = on_expired
         self._cond = threading.Condition()
         self._hold: _Hold | None = None
         self._move: _Move | None = None
@@ -234,11 +240,27 @@ class HoldToRun:
     # -- motion -----------------------------------------------------------------------------
 
     def tick(self) -> ArmState | None:
-        """One step of the current motion; returns the new command or None (nothing moved)."""
-        now = self._clock()
+        """One step of the current motion; returns the new command or None (nothing moved).
+
+        A held jog whose renewals stopped ends here and is reported to ``on_expired``."""
+        expired = ""
+        state = self._tick(self._clock())
+        if isinstance(state, str):
+            expired, state = state, None
+        if expired and self.on_expired is not None:
+            self.on_expired(expired)
+        return state
+
+    def _tick(self, now: float) -> ArmState | str | None:
+        """:meth:`tick` under the lock; a string: the held jog expired (why)."""
         with self._cond:
             h, m = self._hold, self._move
-            if h is not None and (now - h.renewed > self.expiry or not self.allowed(h.client_id)):
+            if h is not None and now - h.renewed > self.expiry and self.allowed(h.client_id):
+                self._hold = None
+                self._last_tick = None
+                return (f"hold-to-run expired: no renewal of the {h.coord.key} jog for "
+                        f"{now - h.renewed:.2f} s")
+            if h is not None and not self.allowed(h.client_id):
                 self._hold = h = None
             if m is not None and (not self.allowed(m.client_id)
                                   or self.store.command.seq != self._last_seq):

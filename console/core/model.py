@@ -179,18 +179,15 @@ class ExtensibleModel(ArmModel):
         self.coordinates = tuple(coords)
 
     def initial(self) -> Array:
-        """Straight, every rack at the middle of [rack_min, rack_max] (whole millimetres).
+        """Straight, every rack at the middle of [rack_min, rack_max] (whole millimetres):
+        :func:`core.kinematics.delta.mid_range_delta`, where the device emulator starts too.
 
         Retracted (zero) every rack sits at rack_min, so no segment can bend: bending one way
         shortens a rack. At mid-range each rack has (rack_max - rack_min) / 2 of travel both
         ways, so every jog, target and path starts with room to move. A rule on the robot's
         own limits (data/robots/*.toml), so every extensible robot file gets its own.
         """
-        r = self.robot
-        mid = math.floor((0.5 * (r.rack_min + r.rack_max) - r.L0) * 1e3 + 1e-9) / 1e3
-        q = self.zero()
-        q[:, 2] = mid
-        return q
+        return dk.mid_range_delta(self.robot)
 
     def rack_lengths(self, q: Array) -> Array:
         """Rack lengths (n, 3) in metres."""

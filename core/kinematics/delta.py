@@ -271,6 +271,19 @@ def bend_angles(delta: npt.ArrayLike, d: float) -> Array:
     return np.hypot(delta[..., 0], delta[..., 1]) / d
 
 
+def mid_range_delta(robot: "ExtensibleArm") -> Array:
+    """Straight, every rack at the middle of [rack_min, rack_max] (whole millimetres), (n, 3).
+
+    Retracted (zero) every rack sits at rack_min, so no segment can bend: bending one way
+    shortens a rack. At mid-range each rack has (rack_max - rack_min) / 2 of travel both ways.
+    The console starts here, and so does the device emulator (nothing moves to get there).
+    """
+    mid = math.floor((0.5 * (robot.rack_min + robot.rack_max) - robot.L0) * 1e3 + 1e-9) / 1e3
+    q = np.zeros((robot.n_segments, 3))
+    q[:, 2] = mid
+    return q
+
+
 def limit_rack_lengths(robot: "ExtensibleArm", lengths: npt.ArrayLike) -> Array:
     """Rack lengths (..., n, 3) moved into the feasible set: racks in [rack_min, rack_max] and
     every segment's bend theta <= theta_max.

@@ -22,9 +22,12 @@ class Lab:
     def __init__(self, server: Any, app: Any, token: str, browser: Any) -> None:
         self.server, self.app, self.token, self.browser = server, app, token, browser
         self.url = f"http://127.0.0.1:{server.get_port()}/"
-        self.stops: list[tuple[float, str]] = []
-        app.add_stop_hook(lambda reason: self.stops.append((time.monotonic(), reason)))
         self.contexts: list[Any] = []
+
+    @property
+    def stops(self) -> list[tuple[float, str]]:
+        """Every stop of the console so far: (time.monotonic(), reason), from its core."""
+        return [(r.at, r.reason) for r in self.app.core.stop_log]
 
     def page(self) -> Any:
         """A new browser (its own context, 1280x900) on the console, the Operate tab open."""
@@ -145,7 +148,7 @@ def lab(browser, tmp_path: Path) -> Iterator[Lab]:
     with the panels these tests use -- Jog, Readout, Control (the real Execute and the control
     process), Session -- rather than all of them: the full console takes twice as long to load
     in software-rendered Chromium, and the other panels play no part here."""
-    from console.app import DEFAULT_PANELS
+    from console.panel_sets import DEFAULT_PANELS
     from console.panels.soft_arm.control import ControlPanel
     from console.panels.common.session import SessionPanel
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from browser_tabs import open_tab
-from console.app import DEFAULT_PANELS, ConsoleApp
+from console.app import ConsoleApp
+from console.panel_sets import DEFAULT_PANELS
 from console.core.hold_to_run import HOLD_SOURCE
 from console.panels.common.jog import JogPanel
 from core.robots import load
@@ -76,8 +77,7 @@ def test_each_sliders_buttons_sit_on_its_row_and_hold_jogs(jog_page, artifacts_d
     deadline = time.monotonic() + 30.0
     while app.lease.probes < probes + 3 and time.monotonic() < deadline:
         time.sleep(0.05)  # the tab answers the lease probes: it holds control
-    stops: list[str] = []
-    app.add_stop_hook(stops.append)
+    stops = app.core.stop_log  # (shown if the hold never ran)
     page.mouse.down()
     seen = set()
     deadline = time.monotonic() + 10.0

@@ -19,7 +19,8 @@ import viser
 from viser import _messages
 
 from console.core.access import AccessControl
-from console.app import DEFAULT_PANELS, ConsoleApp
+from console.app import ConsoleApp
+from console.panel_sets import DEFAULT_PANELS
 from console.panels.common.jog import JogPanel
 from console.panels.common.session import SessionPanel
 from console.web.client_guard import GuardLimits

@@ -22,7 +22,7 @@ from core.robots import load
 from hw_bridge.interface import LinkHealth
 from hw_bridge.loop import LoopSnapshot, LoopStats
 import ws_client
-from fakes import FakeClient, console_app
+from fakes import FakeClient, console_app, done_future
 
 SOFT = load("soft-arm")
 
@@ -90,6 +90,21 @@ class FakeControl:
     def __init__(self):
         self.view = None
         self.closed = False
+        self.sent: list[tuple] = []  # what the console core sent (stops, forwarded moves)
+
+    def stop_arm(self, reason="operator STOP"):
+        self.sent.append(("stop", reason))
+        return done_future()
+
+    def goto(self, q):
+        self.sent.append(("goto", tuple(q)))
+        return done_future()
+
+    def view_age(self):
+        return float("inf") if self.view is None else 0.0
+
+    def restart(self, timeout=5.0):
+        pass
 
     def close(self):
         self.closed = True

@@ -119,8 +119,8 @@ def test_hardware_line_is_the_link_supervisors_health_and_phase_follows_stop(ser
     assert wait_for(lambda: ">idle<" in app.header.status.content.replace("</span>", "<"))
     app.stop_motion("client 0's tab went silent for 2 s")  # stops motion; was idle: still idle
     assert ">idle<" in app.header.status.content.replace("</span>", "<")
-    app.stop_motion("STOP pressed by client 0")
-    assert "holding after STOP" in app.header.status.content
+    app.stop_motion("STOP pressed by client 0")  # the panel shows the core's state (2 Hz)
+    assert wait_for(lambda: "holding after STOP" in app.header.status.content)
     app.stop()
 
     mock = console_app(EXT, server, panels=(), extensible_runner=FakeRunner(),

@@ -15,7 +15,8 @@ import viser
 from viser import _messages
 
 from console.core.access import AccessControl
-from console.app import DEFAULT_PANELS, ConsoleApp
+from console.app import ConsoleApp
+from console.panel_sets import DEFAULT_PANELS
 from console.core.hold_to_run import HOLD_SOURCE
 from console.panels.common.jog import HOLD_HZ, JogPanel
 from console.panels.common.session import SessionPanel

@@ -193,12 +193,10 @@ def test_a_lab_tab_that_went_silent_after_answering_must_take_control_again() ->
 
 
 def test_a_lapse_stops_the_consoles_arm(server) -> None:
-    """The same lapse through a real ConsoleApp: its stop hooks run and STOP is counted."""
+    """The same lapse through a real ConsoleApp: its core stops motion, once, with the reason."""
     clock = FakeClock()
     app = console_app(load("soft-arm"), server, panels=(),
                       access=AccessControl(None, lease_s=3.0, warn_s=1.5, clock=clock))
-    hooks: list[str] = []
-    app.add_stop_hook(hooks.append)
     tab = SlowTab(1, clock)
     monitor = LeaseMonitor(FakeServer(tab), app.access)  # type: ignore[arg-type]
     app.access.take(1, name="Ann")
@@ -206,7 +204,7 @@ def test_a_lapse_stops_the_consoles_arm(server) -> None:
     assert app.stops == 0
     tab.freeze(None)
     settle(monitor, clock, 3.5)
-    assert hooks == ["Ann's tab went silent for 3 s"] and app.stops == 1
+    assert app.stops == 1 and app.last_stop.reason == "Ann's tab went silent for 3 s"
     assert tab.notes[0].removed  # the warning made way for the app's notice
 
 

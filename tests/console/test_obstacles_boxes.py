@@ -223,8 +223,7 @@ def test_target_and_paths_keep_clear_of_the_boxes_or_say_which_box_blocks(gated,
     np.testing.assert_allclose(dk.tip_position(EXT, legs[-1]), [0.2, 0.0, 0.38], atol=1e-3)
     chain = dk.robot_rack_lengths(EXT, np.stack([q_before, *legs]))
     assert bc.motion_clearance(EXT, chain, [shelf]).clear_of(0.02)
-    app.hold.cancel()
-    target._on_stop("test")
+    app.stop_motion("test")  # the one STOP: the hold ends, the target panel lets go
     # A path through a box is refused by the planner, naming it.
     post = bc.make_box("Post", (0.1, 0.0, 0.1), (0.04, 0.04, 0.04))  # on the tip's way in x
     obstacles.set_scene(BoxScene((post,), 0.02), "Post")
@@ -259,8 +258,26 @@ def test_a_route_leg_starts_only_for_the_operator_and_a_refusal_moves_nothing(ga
     assert client_id == op.client_id and len(rest) == 1 and np.array_equal(rest[0], second)
     np.testing.assert_allclose(app.hold.target(), first)
     np.testing.assert_allclose(target._moving_to, first)
-    app.hold.cancel()
-    target._on_stop("test")
+    app.stop_motion("test")  # the one STOP: the hold ends, the target panel lets go
+
+
+def test_a_target_asked_for_before_a_stop_never_moves_the_arm(gated):
+    """A solve under way when STOP comes (the worker took the target under the older stop
+    generation) starts no move after it: the core refuses it under the same lock as STOP."""
+    from fakes import FakeClient
+
+    from console.panels.extensible.target import TargetPanel
+
+    app = gated
+    target = app.panel(TargetPanel)
+    op = FakeClient(1)
+    app.access.take(op.client_id, "tok", name="Alice")
+    taken = app.core.stop_generation  # the worker takes the target ...
+    app.stop_motion("STOP pressed by Bob")  # ... STOP while it solves ...
+    goal = np.zeros((EXT.n_segments, 3)) + [0, 0, 0.01]
+    assert not target._start_leg(op.client_id, [goal], "refused", taken)  # ... then no move
+    assert app.hold.target() is None and target._moving_to is None
+    assert "motion stopped (STOP pressed by Bob)" in target.status.content
 
 
 def test_boxes_are_recorded_and_read_back_with_the_mcap_reader(gated, tmp_path):

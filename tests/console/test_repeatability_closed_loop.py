@@ -21,6 +21,8 @@ REPO = Path(__file__).resolve().parents[2]
 class FakeRunner:
     started = False
     period_s = 0.01
+    failure = None
+    view = None
 
     def stop(self) -> None:
         pass

@@ -36,6 +36,8 @@ class SlippingRunner:
     tip it measured with the repetition it belongs to (a repetition starts with a retract)."""
 
     started = True
+    failure = None
+    view = None
 
     def __init__(self, slip: float = 0.2, jitter: float = 0.05, seed: int = 4,
                  stop_after: int | None = None, on_move: Any = None,
@@ -79,6 +81,9 @@ class SlippingRunner:
 
     def stop(self) -> None:
         self.stops += 1
+
+    def setpoint(self, seq: int, delta: Any) -> None:
+        pass  # the console core forwards commands; this runner only runs moves
 
     def measure(self, samples: int | None = None) -> np.ndarray:
         self.samples.add(samples)
@@ -206,7 +211,7 @@ def test_a_request_older_than_the_newest_stop_moves_nothing(server) -> None:
     from console.panels.extensible.repeatability import RunRequest
     fake = SlippingRunner()
     panel = panel_with(server, fake)
-    req = RunRequest(POINT, 2, panel._stops)  # clicked ...
+    req = RunRequest(POINT, 2, panel.app.core.stop_generation)  # clicked ...
     panel.app.stop_motion("test")             # ... STOP before the worker took it
     panel._run(req)
     assert fake.jobs == {} and 'data-state="stopped"' in panel.table.content

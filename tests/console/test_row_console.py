@@ -76,6 +76,21 @@ class FakeRowControl:
 
     def stop_arm(self, reason="operator STOP"):
         self.sent.append(("stop", reason))
+        fut = cf.Future()
+        fut.set_result(None)
+        return fut
+
+    def goto(self, q):
+        self.sent.append(("goto", tuple(q)))
+        fut = cf.Future()
+        fut.set_result(None)
+        return fut
+
+    def view_age(self):
+        return 0.0
+
+    def restart(self, timeout=5.0):
+        pass
 
     def close(self):
         pass

@@ -76,12 +76,16 @@ def mock() -> Iterator[MockHardware]:
 
 @pytest.fixture
 def runner_on(request: pytest.FixtureRequest) -> Iterator:
-    """Factory ``runner_on(hw)``: a started runner; closed at teardown."""
+    """Factory ``runner_on(hw)``: a started runner, connected (disarmed, as every connect
+    leaves it) and then armed by the operator's Arm; closed at teardown."""
     made: list[ExtensibleRunner] = []
 
     def make(hw, **kw) -> ExtensibleRunner:
         r = ExtensibleRunner(ROBOT, lambda: hw, **kw).start()
         made.append(r)
+        assert r.connecting is not None and r.connecting.result(5) is None
+        assert r.snapshot.state in ("disarmed", "disconnected")  # connecting never arms
+        r.bridge_controls.arm()
         deadline = time.monotonic() + 3.0
         while r.snapshot.state not in ("holding", "fault") and time.monotonic() < deadline:
             time.sleep(0.02)

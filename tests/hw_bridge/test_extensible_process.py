@@ -1,5 +1,5 @@
-"""The extensible arm's runner in its own process (hw_bridge.extensible_process): connects and
-holds, runs a move to the commanded posture within a few mm, reports it to the console's store,
+"""The extensible arm's runner in its own process (hw_bridge.extensible_process): connects
+disarmed, holds once armed, runs a move to the commanded posture within a few mm, reports it to the console's store,
 follows the console's newer commands (not its own settled one), obeys the Hardware panel's
 bridge verbs and refuses bad jobs before anything is sent."""
 
@@ -45,6 +45,13 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     assert not p.started and p.snapshot.state == "disconnected"
     p.start()
     assert p.connecting is not None and p.connecting.result(30) is None  # no fault
+    # Connecting configures the link and never arms it: only the operator's Arm does.
+    wait_for(lambda: p.snapshot.state == "disarmed", what="connected, disarmed")
+    assert not p.bridge_controls.health().armed
+    job = p.move_to(dk.robot_rack_lengths(ROBOT, Q0))
+    refused = p.wait(job, timeout=30)
+    assert refused is not None and not refused.ok and "arm first" in refused.message, refused
+    p.bridge_controls.arm()
     wait_for(lambda: p.snapshot.state in ("holding", "following"), what="armed")
     assert p.port == "mock://" and p.bridge_controls.health().armed
 
@@ -56,7 +63,8 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     tip = p.snapshot.measured_tip
     assert tip is not None and np.linalg.norm(tip - dk.tip_position(ROBOT, Q0)) < TIP_TOL
 
-    store.request(Q1, "jog")  # the console's newer command: followed while idle
+    q1 = store.request(Q1, "jog")  # the console's newer command (the console core sends it
+    p.setpoint(q1.seq, q1.q)       # on as a set-point, nothing watches the store): followed
     wait_for(lambda: np.linalg.norm(p.snapshot.measured_tip - dk.tip_position(ROBOT, Q1))
              < TIP_TOL, what="following the console")
 

@@ -212,7 +212,7 @@ def test_idle_runner_follows_the_console_within_speed_limits(mock: MockHardware,
     link = FakeLink(np.zeros((N, 3)))
     runner = runner_on(mock, link=link)
     goal = np.array([[0.02, 0.0, 0.04], [0.0, -0.01, 0.02]])
-    link.seq, link.q = 2, goal
+    link.seq, link.q = link.seq + 1, goal  # a new command (Arm settled the last one)
     samples = []
     t0 = time.monotonic()
     while time.monotonic() - t0 < 4.0:

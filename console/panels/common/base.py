@@ -38,8 +38,11 @@ refusal is recorded, and :meth:`Panel.on_refused` runs so input widgets can snap
 has already shown the viewer's new slider value to everyone). Events with ``event.client is
 None`` (server-side value mirrors) pass through. Code that is not a GUI callback can call
 ``self.app.access.check(client, "jog")``, which raises ``console.core.access.NotOperator(reason)``.
-Motion must also stop when asked: register ``self.app.add_stop_hook(fn)`` (``fn(reason)``) for
-anything that moves the arm on its own; STOP (any client), a lost lease and Release call it.
+Panels never wire safety: STOP (any client), a lost lease, Release, hold-to-run expiry, link
+loss and a dead loop all end motion in ``self.app.core.stop_motion`` whatever panels exist. A
+panel that starts a motion later (after a plan, on a worker) starts it through
+``self.app.core.start_motion`` / ``run_if_current`` / ``run_expected``, so none is queued behind
+a STOP; it reads ``core.stop_generation`` / ``core.last_stop`` to show what stopped.
 Actions worth keeping go to ``self.app.recorder.log(kind, payload, event.client)``.
 """
 
@@ -53,7 +56,7 @@ from console.core.access import NotOperator
 from console.core.state import ArmState
 
 if TYPE_CHECKING:
-    from console.app import ConsoleApp
+    from console.panels.common.host import PanelHost
     from core.robots import Robot
 
 
@@ -66,7 +69,7 @@ class Panel:
     kinds: ClassVar[tuple[str, ...]] = ("planar", "delta")
     expand_by_default: ClassVar[bool] = True
 
-    def __init__(self, app: ConsoleApp) -> None:
+    def __init__(self, app: PanelHost) -> None:
         self.app = app
         self.gui = app.server.gui
         with app.tabs.tab(self.tab):

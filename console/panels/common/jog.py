@@ -16,8 +16,8 @@ each slider and its − / + out on one grid row with a small style sheet (:func:
 HTML widget of the panel) keyed on the widgets' ids. A browser without CSS ``:has()`` shows
 the same buttons stacked under their slider: the same row order, only taller.
 
-All motion goes through ``app.hold`` (``console.core.hold_to_run.HoldToRun``), capped at 250 mm/s
-for every arm point and clamped to the soft limits:
+All motion goes through ``app.core.hold`` (``console.core.hold_to_run.HoldToRun``), capped at
+250 mm/s for every arm point and clamped to the soft limits:
 
 * The − / + buttons hold to jog: the arm moves only while the button is held
   (viser's ``on_hold`` renews the jog 20 times a second; a jog expires 300 ms after its last
@@ -185,7 +185,7 @@ class JogPanel(Panel):
         return np.asarray(q, dtype=float) * np.asarray(self.app.robot.lengths, dtype=float)
 
     def _base(self) -> np.ndarray:
-        target = self.app.hold.target()
+        target = self.app.core.hold.target()
         return np.array(self.app.store.command.q) if target is None else target
 
     @operator_only(action="jog")
@@ -201,7 +201,7 @@ class JogPanel(Panel):
             requested = float(handle.value) / scale
             target, note = model.set_coordinate(self._base(), coord, requested)
             note = note or model.limit_note(target, coord)
-            self.app.hold.move_to(event.client.client_id, target)
+            self.app.core.hold.move_to(event.client.client_id, target)
         applied = float(target[coord.index])
         if abs(applied - requested) > 1e-9:
             # Snap back to what the limits allow, within the slider's range: the bending limit
@@ -214,16 +214,16 @@ class JogPanel(Panel):
         if event.client is None:
             return
         with self._target_lock:
-            self.app.hold.move_to(event.client.client_id, fn(self._base()))
-        self._sync_sliders(self.app.hold.target())
+            self.app.core.hold.move_to(event.client.client_id, fn(self._base()))
+        self._sync_sliders(self.app.core.hold.target())
 
     def _on_hold(self, coord: Coordinate, direction: int, event: viser.GuiEvent) -> None:
         if event.client is not None:
-            self.app.hold.hold(event.client.client_id, coord, direction)
+            self.app.core.hold.hold(event.client.client_id, coord, direction)
 
     def _on_release(self, coord: Coordinate, event: viser.GuiEvent) -> None:
         if event.client is not None:  # letting go is always allowed: it only stops
-            self.app.hold.release(event.client.client_id, coord)
+            self.app.core.hold.release(event.client.client_id, coord)
 
     def on_refused(self, event: Any) -> None:
         # viser already showed the viewer's slider value to everyone: put the arm's back.

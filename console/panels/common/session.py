@@ -149,10 +149,10 @@ class SessionPanel(Panel):
     @operator_only(action="run the demo motion")
     def _on_demo(self, event: viser.GuiEvent) -> None:
         demo = self.app.services.demo
-        if demo is None:  # the button exists only with a demo (serve.py --demo)
+        if demo is None:  # (the button exists only with a demo)
             return
         self.app.recorder.action("started the demo motion", event.client)
-        demo.start()
+        self.app.core.start_motion(demo.start)
 
     @operator_only(action="start or stop a recording")
     def _on_record(self, event: viser.GuiEvent) -> None:

@@ -9,7 +9,9 @@ through the :class:`~hw_bridge.extensible_process.ExtensibleProcess` (``app.serv
 started on first use; it first joins the path from where the motors are). While it runs the
 panel shows the progress, the measured tip trace and a plot of the commanded and the measured
 tip's distance to the path target (mm). Preview, Execute and Reconnect are operator-only; Stop is the
-header's STOP (any client; the one STOP), whose hook makes the runner hold position, as does a lost lease.
+header's STOP (any client; the console core's one STOP), which makes the runner hold position, as
+does a lost lease. An Execute that waits for its plan is the core's expected motion
+(:data:`EXECUTE_ONCE_PLANNED`): any STOP meanwhile cancels it.
 
 Preview answers at once: the requested tip path is drawn while the worker plans, the status
 counts the seconds, and a plan that has not come back within ``PLAN_TIMEOUT_S`` is reported as
@@ -58,6 +60,7 @@ PLOT_HZ = 5.0
 PLAN_TIMEOUT_S = 30.0  # s: a Fig. 9 path plans in 2-5 s unloaded, 10-25 s on a busy 2-core box
 STATUS_HZ = 2.0  # planning seconds, Hardware line and the header's Phase field
 TRAIL_S = 30.0  # the measured tip trace shows at most the run's last this many seconds
+EXECUTE_ONCE_PLANNED = "paths: execute once planned"  # the core's expected motion
 
 
 class PathsPanel(Panel):
@@ -101,17 +104,14 @@ class PathsPanel(Panel):
         self._pool: WorkerPool | None = None
         self._planned: tuple[PathRequest, MotionPath] | None = None
         self._planning: PendingPlan | None = None
-        self._execute_after_plan = False
         self._job = 0
         self._plot_at = 0.0
-        self._stopped = False  # STOP held the arm; cleared by the next motion
         self._quit = threading.Event()
         self.preview_btn.on_click(self.operator_only(
             lambda _: self._request_plan(execute=False), "preview a path"))
         self.execute_btn.on_click(self.operator_only(self._on_execute, "execute a path"))
         self.reconnect_btn.on_click(self.operator_only(lambda _: self._reconnect(),
                                                        "connect the hardware"))
-        self.app.add_stop_hook(self._on_stop)
         self.app.server.on_client_connect(lambda _: self._warm_up())
         threading.Thread(target=self._status_loop, daemon=True, name="paths-status").start()
 
@@ -146,8 +146,12 @@ class PathsPanel(Panel):
         except ValueError as exc:
             self._set_status(f"⚠ {exc}", "error")
             return
+        core = self.app.core
         with self._lock:
-            self._execute_after_plan = execute
+            if execute:
+                core.expect_motion(EXECUTE_ONCE_PLANNED)
+            else:  # a Preview replaces a pending Execute
+                core.drop_expected(EXECUTE_ONCE_PLANNED)
             if self._planning is not None and self._planning.req == req:
                 return  # already planning this one (its status counts the seconds)
         self.drawing.draw_requested(waypoints)
@@ -176,18 +180,6 @@ class PathsPanel(Panel):
             self._execute(planned[1])
         else:
             self._request_plan(execute=True)
-
-    def _on_stop(self, reason: str) -> None:
-        """Stop hook (STOP, a lost lease, shutdown): no pending execute, motors hold."""
-        with self._lock:
-            self._execute_after_plan = False
-        # STOP itself (the header's, a panel's Stop); a lost lease or a change of control
-        # also stops motion, but an arm that was idle then is still just idle.
-        self._stopped = self._stopped or "stop" in reason.lower()
-        self.show_phase()
-        runner = self.app.services.extensible_runner
-        if runner is not None and runner.started:
-            runner.stop()
 
     def _reconnect(self) -> None:
         runner = self.runner
@@ -223,10 +215,11 @@ class PathsPanel(Panel):
             if self._planning is not planning:
                 return  # timed out (already reported) or replaced
             self._planning = None
-            execute, self._execute_after_plan = self._execute_after_plan, False
+        execute = self.app.core.is_expected(EXECUTE_ONCE_PLANNED)  # (a STOP since: False)
         try:
             self._show_plan(planning, execute)
         except Exception as exc:  # noqa: BLE001 - a done-callback's exception would be lost
+            self.app.core.drop_expected(EXECUTE_ONCE_PLANNED)
             self._set_status(f"⚠ Planning failed: {type(exc).__name__}: {exc}", "error")
 
     def _show_plan(self, planning: PendingPlan, execute: bool) -> None:
@@ -238,6 +231,7 @@ class PathsPanel(Panel):
             if isinstance(exc, BrokenProcessPool) and pool is not None:
                 self._drop_pool(pool)
             blocked = isinstance(exc, BlockedPath)
+            self.app.core.drop_expected(EXECUTE_ONCE_PLANNED)  # nothing to execute
             self._set_status(f"⚠ {'Blocked by the boxes' if blocked else 'Planning failed'}: "
                              f"{exc or type(exc).__name__}", "blocked" if blocked else "error")
             return
@@ -251,23 +245,35 @@ class PathsPanel(Panel):
                    + (f", arm ≥ {fmt_mm(path.clearance, 1)} mm from box "
                       f"'{path.nearest_box}'" if path.nearest_box else ""))
         if not ok:
+            self.app.core.drop_expected(EXECUTE_ONCE_PLANNED)
             self._set_status(f"⚠ {summary}. The path leaves the reachable workspace: shrink it "
                              "or move the arm.", "infeasible")
         elif execute:
-            self._execute(path)
+            self._execute(path, once_planned=True)
         else:
             self._set_status(f"Preview: {summary}.", "previewed")
 
-    def _execute(self, path: MotionPath) -> None:
+    def _execute(self, path: MotionPath, once_planned: bool = False) -> None:
+        """Run ``path`` on the runner; ``once_planned``: the Execute that waited for this plan
+        (the core's expected motion: not if a STOP came meanwhile)."""
+        core, jobs = self.app.core, []
         if path.max_error > MAX_EXECUTE_ERROR:
+            core.drop_expected(EXECUTE_ONCE_PLANNED)
             self._set_status("⚠ This path leaves the reachable workspace; not executed.", "error")
             return
         runner = self.runner.start()
         if runner.snapshot.busy:
+            core.drop_expected(EXECUTE_ONCE_PLANNED)
             self._set_status("⚠ A job is running: stop it first.", "error")
             return
-        self._job = job = runner.execute(path, "path")
-        self._stopped = False
+        start = lambda: jobs.append(runner.execute(path, "path"))  # noqa: E731
+        if once_planned:
+            if not core.run_expected(EXECUTE_ONCE_PLANNED, start):
+                self._set_status("Preview: planned; not executed (stopped meanwhile).", "stopped")
+                return
+        else:
+            core.start_motion(start)
+        self._job = job = jobs[0]
         self.hardware.content = hardware_html(self.app)
         self._set_status(f"Executing ({path.duration:.1f} s)…", "running")
         # Frames come while the arm moves; this shows the end even if nothing is redrawn then.
@@ -283,8 +289,8 @@ class PathsPanel(Panel):
                 if self._planning is not planning:
                     return
                 self._planning = None
-                self._execute_after_plan = False
                 pool = self._pool
+            self.app.core.drop_expected(EXECUTE_ONCE_PLANNED)
             if pool is not None:
                 self._drop_pool(pool)
             self._set_status(f"⚠ Planning gave no answer within {PLAN_TIMEOUT_S:.0f} s (the "
@@ -311,11 +317,9 @@ class PathsPanel(Panel):
         """The header's Phase field for the extensible arm (what the runner is doing)."""
         runner = self.app.services.extensible_runner
         snap = runner.snapshot if runner is not None and runner.started else None
-        moving = self.app.hold.target() is not None
-        if moving or (snap is not None and (snap.busy or snap.state == "following")):
-            self._stopped = False  # a new motion: the STOP is over
+        moving = self.app.core.hold.target() is not None
         period = runner.period_s if runner is not None else 0.01
-        return runner_phase(snap, period, self._job, moving, self._stopped)
+        return runner_phase(snap, period, self._job, moving, self.app.core.holding_after_stop)
 
     def show_phase(self) -> None:
         """Push :meth:`phase` to the header (it sends only changes)."""

@@ -18,8 +18,8 @@ loop already repeats; the encoders, the only measurement, cannot see slip) and *
 open loop by the encoders.
 
 The button only enqueues a request for the panel's worker thread; the worker queues moves on the
-runner (the loop is the only writer to the hardware) and waits for them. STOP closes a
-:class:`StopGate` (no move is queued after it) and makes the runner hold.
+runner (the loop is the only writer to the hardware) and waits for them. A STOP (the console
+core's) closes its :class:`StopGate` (no move is queued after it) and makes the runner hold.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from console.panels.common.base import Panel
 from console.panels.extensible.status import extensible_arm, extensible_runner
 from console.panels.extensible.repeatability_view import (Comparison, RepeatabilityResult, comparison_html,
                                                error_plot_svg, sensor_note)
+from console.core.console_core import ConsoleCore
 from console.core.state import ArmState
 from core.control.closed_loop import ClosedLoopSettings
 from core.kinematics import delta as dk
@@ -127,39 +128,33 @@ def run_repeatability(runner: ExtensibleRunner, robot: ExtensibleArm, point: npt
 
 
 class StopGate:
-    """A runner whose moves STOP can cut off: once closed, no move reaches the runner.
+    """A runner whose moves a STOP cuts off: a move asked for under an older stop generation of
+    the console core never reaches the runner.
 
-    The check and the queueing of a move happen under one lock, as do :meth:`close` and the
-    runner's hold, so no move is ever queued behind STOP's hold. It offers what
+    The check and the queueing of a move happen under the core's lock
+    (:meth:`console.core.console_core.ConsoleCore.run_if_current`), as does the core's STOP, so
+    no move is ever queued behind a STOP (the core makes the runner hold). It offers what
     :func:`run_repeatability` uses of a runner.
     """
 
-    def __init__(self, runner: Any) -> None:
+    def __init__(self, runner: Any, core: ConsoleCore, generation: int) -> None:
         self.runner = runner
         self.robot = runner.robot
-        self._lock = threading.Lock()
-        self._closed = False
+        self.core = core
+        self.generation = generation
 
     @property
     def closed(self) -> bool:
-        return self._closed
-
-    def close(self) -> None:
-        """STOP: refuse further moves and hold the arm where it is."""
-        with self._lock:
-            self._closed = True
-            if self.runner.started:
-                self.runner.stop()
+        return self.core.stop_generation != self.generation
 
     def start(self) -> Any:
         return self.runner.start()
 
     def move_to(self, lengths: npt.ArrayLike, label: str = "move") -> int:
-        """The runner's move, unless STOP came first (then RuntimeError "stopped")."""
-        with self._lock:
-            if self._closed:
-                raise RuntimeError("stopped")
-            return self.runner.move_to(lengths, label)
+        """The runner's move, unless a STOP came first (then :class:`MotionStopped`,
+        a RuntimeError "stopped")."""
+        return self.core.run_if_current(self.generation,
+                                        lambda: self.runner.move_to(lengths, label))
 
     def wait(self, job_id: int, timeout: float | None = None) -> Any:
         return self.runner.wait(job_id, timeout)
@@ -205,7 +200,7 @@ def run_comparison(runner: Any, robot: ExtensibleArm, point: npt.ArrayLike, n: i
 @dataclasses.dataclass(frozen=True)
 class RunRequest:
     """What the button asks the worker for: ``n`` moves per loop to ``point`` (m); ``stops``:
-    how many STOPs the panel had seen when it was asked (a STOP since cancels it)."""
+    the console core's stop generation when it was asked (a STOP since cancels it)."""
 
     point: Array
     n: int
@@ -242,12 +237,9 @@ class RepeatabilityPanel(Panel):
         self.plot = self.gui.add_html("")
         self._requests: queue.SimpleQueue[RunRequest | None] = queue.SimpleQueue()
         self._busy = threading.Event()
-        self._gate: StopGate | None = None
-        self._stops = 0  # STOPs seen (a request from before the newest one never runs)
         self.use_tip.on_click(lambda _: self._use_tip())
         self.run_btn.on_click(self.operator_only(lambda _: self._request(),
                                                  "run a repeatability test"))
-        self.app.add_stop_hook(self._halt)
         threading.Thread(target=self._serve, daemon=True, name="repeatability").start()
 
     def _use_tip(self) -> None:
@@ -265,14 +257,7 @@ class RepeatabilityPanel(Panel):
             return
         self._busy.set()
         self._requests.put(RunRequest(np.array([float(h.value) for h in self.inputs]) / 1e3,
-                                      int(self.count.value), self._stops))
-
-    def _halt(self, reason: str = "") -> None:
-        """Stop hook: no further move is queued and the runner holds now."""
-        self._stops += 1
-        gate = self._gate
-        if gate is not None:
-            gate.close()
+                                      int(self.count.value), self.app.core.stop_generation))
 
     def _serve(self) -> None:
         """Worker: one run per request, one at a time."""
@@ -282,19 +267,18 @@ class RepeatabilityPanel(Panel):
             except Exception as exc:  # noqa: BLE001 - shown, and the worker goes on
                 self._say(f"⚠ {exc}")
             finally:
-                self._gate = None
                 self._busy.clear()
 
     def close(self) -> None:
         """End the worker (after the run in progress, which this stops)."""
-        self._halt()
+        if self._busy.is_set():
+            self.app.core.stop_motion("the Repeatability panel closed")
         self._requests.put(None)
         super().close()
 
     def _run(self, req: RunRequest) -> None:
-        gate = self._gate = StopGate(extensible_runner(self.app))
-        if req.stops != self._stops:  # STOP came between the click and now
-            gate.close()
+        gate = StopGate(extensible_runner(self.app), self.app.core, req.stops)  # (a STOP
+        # between the click and now: closed already)
         tip = self.app.services.tip_sensor
         self.progress.value = 0.0
         self.plot.content = ""

@@ -69,7 +69,7 @@ def hardware_html(app: Any, text: str | None = None) -> str:
 def runner_phase(snap: RunnerSnapshot | None, period_s: float, job: int, moving: bool,
                  stopped: bool) -> tuple[str, Tone]:
     """The Phase field: ``snap`` the runner's snapshot (None: not started), ``job`` the Paths
-    panel's job id, ``moving`` whether ``app.hold`` moves to a set-point (target, slider),
+    panel's job id, ``moving`` whether ``app.core.hold`` moves to a set-point (target, slider),
     ``stopped`` whether STOP held the arm since its last motion."""
     if snap is not None and snap.fault:
         return f"fault: {snap.fault}", "fault"

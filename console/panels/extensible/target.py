@@ -8,7 +8,7 @@ for typed targets) it solves once more with restarts. The solve itself runs in a
 worker process (started on the first solve), never in the console's process: there a CPU-bound
 solve holds the GIL the extensible runner's 100 Hz loop needs (measured: an IK thread next to the
 runner tripped the serial link's write timeout within seconds). The solution
-is a set-point for ``app.hold`` (``console.core.hold_to_run``: speed-capped, stops on STOP or a lost
+is a set-point for ``app.core.hold`` (``console.core.hold_to_run``: speed-capped, stops on STOP or a lost
 lease), like the jog sliders; on arrival the panel re-commands it as ``"target"`` so the Δ jog
 sliders show it. With the hardware runner started, the motors follow the command; when the
 link is not armed (its health, as the Hardware panel shows it) the status says the motors will
@@ -45,6 +45,7 @@ from console.panels.extensible.obstacles_boxes import box_scene_of
 from console.panels.extensible.target_worker import TargetIKWorker
 from console.panels.extensible.worker_pool import WorkerPool
 from console.panels.common.typed_fields import TypedFields
+from console.core.console_core import MotionStopped
 from console.core.state import ArmState
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
@@ -95,7 +96,7 @@ class TargetPanel(Panel):
         self._target = tip.copy()
         self._typed = TypedFields(self.inputs)  # the echo of an answer skips a field just typed
         self._dragging = False
-        self._moving_to: Array | None = None  # set-point handed to app.hold, until it arrives
+        self._moving_to: Array | None = None  # set-point handed to core.hold, until it arrives
         self._legs: tuple[int, list[Array]] = (0, [])  # (client id, route postures still to go)
         # (n, target, result, error, info): replaced whole by the worker, shown by on_state.
         self._latest: tuple[int, Array, TipIKResult | None, str | None, str | None] = (
@@ -109,7 +110,6 @@ class TargetPanel(Panel):
         for handle in self.inputs:
             handle.on_update(self._on_typed)
         self.to_tip.on_click(lambda _: self._reset_to_tip())
-        self.app.add_stop_hook(self._on_stop)
         self.app.server.on_client_connect(lambda _: self._warm_up())
 
     def _warm_up(self) -> None:
@@ -165,24 +165,32 @@ class TargetPanel(Panel):
         self._publish(tip, None, None)
         self._show()  # nothing else changes, so no frame would show it
 
-    def _on_stop(self, reason: str) -> None:
-        """STOP / lost lease: drop pending solves (app.hold stops the motion itself), and say
-        so when that leaves a target unanswered or not reached."""
+    def on_stopped(self) -> None:
+        """Worker thread, after the console core stopped motion (STOP, a lost lease...; the
+        core's hold-to-run ended the move itself): say so when that leaves a target
+        unanswered or not reached."""
         pending = self._latest[4] is not None or self._moving_to is not None
-        self.worker.cancel()
         self._moving_to = None
         self._legs = (0, [])
         if pending:
-            self.report_error(f"Not moved to the target: motion stopped ({reason}).")
+            self.report_error(f"Not moved to the target: motion stopped ({self._why_stopped()}).")
+
+    def _why_stopped(self) -> str:
+        last = self.app.core.last_stop
+        return "stopped" if last is None else last.reason
 
     # -- worker ----------------------------------------------------------------------------
-    def solve(self, target: Array, final: bool, client_id: int, generation: int) -> None:
-        """Worker thread: IK to ``target``, then move there (unless a job runs or STOP came)."""
+    def solve(self, target: Array, final: bool, client_id: int, generation: int,
+              stops: int | None = None) -> None:
+        """Worker thread: IK to ``target``, then move there (unless a job runs or STOP came:
+        ``stops`` is the core's stop generation when the target was taken; None: now)."""
+        if stops is None:
+            stops = self.app.core.stop_generation
         runner = self.app.services.extensible_runner
         if runner is not None and runner.snapshot.busy:
             self.report_error("A path is running: stop it before moving the target.")
             return
-        moving = self.app.hold.target()
+        moving = self.app.core.hold.target()
         q0 = np.asarray(self.app.store.command.q if moving is None else moving)
         scene, _ = box_scene_of(self.app)
         if scene.boxes:
@@ -201,18 +209,26 @@ class TargetPanel(Panel):
                 return
         self._route_len = len(legs)
         self._publish(target, result, None)
-        if self._start_leg(client_id, legs, "Not moved: you no longer hold control."):
+        if self._start_leg(client_id, legs, "Not moved: you no longer hold control.", stops):
             self._show()
 
-    def _start_leg(self, client_id: int, legs: list[Array], refused: str) -> bool:
+    def _start_leg(self, client_id: int, legs: list[Array], refused: str,
+                   stops: int | None = None) -> bool:
         """Move to the first of ``legs`` (the rest follow on arrival, :meth:`check_arrival`);
-        False after reporting ``refused`` when ``client_id`` no longer holds control."""
+        False after reporting ``refused`` when ``client_id`` no longer holds control, or that
+        motion stopped when the core stopped since its generation ``stops`` (None: now)."""
+        core = self.app.core
+        if stops is None:
+            stops = core.stop_generation
         # Set before the move starts: a frame of the move ("jog") must not read as someone
         # else's command, which would put the target back on the tip and clear this status.
         self._legs = (client_id, legs[1:])
         self._moving_to = legs[0]
-        if self.app.hold.move_to(client_id, legs[0]):
-            return True
+        try:
+            if core.run_if_current(stops, lambda: core.hold.move_to(client_id, legs[0])):
+                return True
+        except MotionStopped:
+            refused = f"Not moved to the target: motion stopped ({self._why_stopped()})."
         self._moving_to = None
         self._legs = (0, [])
         self.report_error(refused)
@@ -263,10 +279,10 @@ class TargetPanel(Panel):
         super().close()
 
     def check_arrival(self) -> None:
-        """Worker thread: once ``app.hold`` reached the set-point, command it as ``"target"``
+        """Worker thread: once ``app.core.hold`` reached the set-point, command it as ``"target"``
         (the jog sliders do not mirror ``"jog"`` moves, this makes them show the posture)."""
         goal = self._moving_to
-        if goal is None or self.app.hold.target() is not None:
+        if goal is None or self.app.core.hold.target() is not None:
             return
         command = self.app.store.command
         arrived = command.source == "jog" and np.allclose(command.q, goal, atol=1e-9)
@@ -274,7 +290,8 @@ class TargetPanel(Panel):
         if arrived and rest and not self._measured_at(goal):
             return  # the motors lag the command: the next leg starts from the corner
         if arrived and rest:  # a route past the boxes: on to its next posture
-            self._start_leg(client_id, rest, "Stopped on the way: you no longer hold control.")
+            self._start_leg(client_id, rest, "Stopped on the way: you no longer hold control.",
+                            self.worker.stops)
             return
         self._legs = (0, [])
         if arrived:

@@ -3,8 +3,11 @@
 The Tip target panel (:class:`console.panels.extensible.target.TargetPanel`) hands every target
 to a :class:`TargetIKWorker`; its one daemon thread solves the newest (a final solve is never
 downgraded by a later live one), at most ``LIVE_HZ`` live solves a second, and between requests
-checks every ``ARRIVAL_POLL_S`` whether the arm arrived (``TargetPanel.check_arrival``). The
-worker knows the panel only as a :class:`TargetSolver`, so it does not import the panel back.
+checks every ``ARRIVAL_POLL_S`` whether the arm arrived (``TargetPanel.check_arrival``) and
+whether the console core stopped motion since (then pending targets are dropped and the panel
+says so, ``TargetPanel.on_stopped``; a solve under way cannot move the arm either: its move
+carries the core's stop generation, :attr:`TargetIKWorker.stops`). The worker knows the panel
+only as a :class:`TargetSolver`, so it does not import the panel back.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ class TargetIKWorker:
         self._cond = threading.Condition()
         self._request: tuple[Array, bool, int] | None = None
         self.generation = 0  # bumped by cancel(): results of older requests are dropped
+        self.stops = panel.app.core.stop_generation  # the core's stops this worker has seen
         threading.Thread(target=self._run, name="target-ik", daemon=True).start()
 
     def submit(self, target: Array, final: bool, client_id: int) -> None:
@@ -61,6 +65,12 @@ class TargetIKWorker:
         while True:
             with self._cond:
                 self._cond.wait_for(lambda: self._request is not None, ARRIVAL_POLL_S)
+            stops = self.panel.app.core.stop_generation
+            if stops != self.stops:  # STOP, a lost lease...: nothing asked before it moves
+                self.stops = stops
+                self.cancel()
+                self.panel.on_stopped()
+            with self._cond:
                 request, self._request = self._request, None
                 generation = self.generation
             self.panel.check_arrival()
@@ -76,7 +86,7 @@ class TargetIKWorker:
                             continue
             last = time.perf_counter()
             try:
-                self.panel.solve(target, final, client_id, generation)
+                self.panel.solve(target, final, client_id, generation, stops)
             except Exception as exc:  # noqa: BLE001 - report, keep the worker alive
                 self.panel.report_error(str(exc))
 

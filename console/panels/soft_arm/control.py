@@ -12,12 +12,13 @@ state machine's state and reason, a hardware fault in bold (every browser is tol
 re-arms until the operator does), one line of link health (device, lifecycle state, armed, round
 trip p99, lost demands), measured vs target kappa per segment in numbers, and the live plots of
 :mod:`console.panels.soft_arm.control_plots` (tracking error per segment, loop timing). STOP is the
-header's (any client; it runs ``app.stop_motion``, whose hook freezes the arm).
+header's (any client; it runs the console core's ``stop_motion``, which freezes the arm whether or
+not this panel exists).
 
 What Execute and *Click to grasp* act on (the Objects panel's selected object, the Grasp
 planner's plan for it) is :mod:`console.panels.soft_arm.control_execute`. While armed the 3D view shows
-the measured arm; jog commands from other panels are forwarded as moves when no task runs. The
-render thread only runs on new arm states (none while disarmed), so the pump refreshes the text
+the measured arm; jog commands reach the loop as moves through the console core (when no task
+runs: ``console.core.arm_supervisor.SoftArmSupervisor``), not through this panel. The render thread only runs on new arm states (none while disarmed), so the pump refreshes the text
 itself when ``on_state`` has been quiet.
 """
 
@@ -59,7 +60,6 @@ TABLE_HZ = 2.0  # the kappa table follows the drawn arm at most at this rate
 COUNTERS_HZ = 0.2  # link and loop lines (their counters change on every refresh; news at once)
 HISTORY_S = 10.0
 STATS_TICKS = 1000
-FORWARD_PHASES = ("idle", "released")  # jog commands become moves only then
 
 
 __all__ = ["ControlPanel", "control_for", "fault_markdown", "header_link", "header_phase",
@@ -114,16 +114,13 @@ class ControlPanel(Panel):
                                             action="arm the arm"))
         self.disarm_btn.on_click(operator_only(lambda e: self._disarm(e), panel=self,
                                                action="disarm the arm"))
-        self.app.add_stop_hook(self._stop_hook)
 
         self._plot_at = 0.0
         self._table_at = 0.0
         self._table_key: Any = None
         self._counters_at = 0.0
         self._link_key: Any = None
-        self._fwd_seq = self.app.store.command.seq
         self._reported: ControlView | None = None  # the view last reported to the store
-        self._stopped = False
         self._last_fault: str | None = None
         self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
             self.app.recorder, lambda: self.app.services.bridge_controls is not None)
@@ -135,9 +132,7 @@ class ControlPanel(Panel):
 
     # -- callbacks (thin: enqueue to the loop) -----------------------------------------------
     def _arm(self, event: Any = None) -> None:
-        self._fwd_seq = self.app.store.command.seq  # forward only later jog commands
-        self._stopped = False
-        fut = self.ctl.arm()  # a refusal (link down, Disconnected) is told to this operator
+        fut = self.app.core.start_motion(self.ctl.arm)  # a refusal (link down, Disconnected) is told to this operator
         fut.add_done_callback(lambda f: self._report(event, f))
 
     def _disarm(self, event: Any = None) -> None:
@@ -154,10 +149,6 @@ class ControlPanel(Panel):
         c = None if view is None else view.snapshot.control
         return c is None or not c.armed
 
-    def _stop_hook(self, reason: str) -> None:
-        self._stopped = True  # no forwarded jog may undo a STOP (race with the view)
-        self.ctl.stop_arm(reason)
-
     @staticmethod
     def _report(event: Any, fut: Any) -> None:
         exc = fut.exception()
@@ -165,7 +156,7 @@ class ControlPanel(Panel):
         if exc is not None and client is not None:
             client.add_notification("Refused", str(exc), color="red", auto_close_seconds=8.0)
 
-    # -- the pump: loop snapshot -> view, history, forwarded jog commands ----------------------
+    # -- the pump: loop snapshot -> view, history, the measured arm to the store ---------------
     def _pump_loop(self) -> None:
         # Each new view as it arrives (polled every PUMP_POLL_S: a reference check), else at
         # PUMP_HZ: pumping on a timer of its own at the publish rate, the pump and the publisher
@@ -212,12 +203,6 @@ class ControlPanel(Panel):
         self.plots.append(c.t, c.kappa_ref, meas, c.phase, snap.period_ms, snap.work_ms)
         store = self.app.store
         if c.armed and c.kappa_meas is not None:
-            cmd = store.command
-            if cmd.seq != self._fwd_seq and cmd.source != "control":
-                self._fwd_seq = cmd.seq
-                # Never after STOP: only Arm / Execute clear a stop (jogging does not).
-                if c.phase in FORWARD_PHASES and not self._stopped:
-                    self.ctl.goto(np.asarray(cmd.q))
             if view is not self._reported:
                 # Each measurement once: a view pumped again (none newer in time) reported
                 # twice reads to the 3D view as an arm that stopped exactly there, and a still
@@ -342,5 +327,4 @@ class ControlPanel(Panel):
     def close(self) -> None:
         self._pump_stop.set()
         self.ctl.close()
-        self.app.remove_stop_hook(self._stop_hook)
         super().close()

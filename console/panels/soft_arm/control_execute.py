@@ -71,7 +71,7 @@ class SentGrasp:
 class ExecuteControls:
     """The Control panel's target line, Execute button and Click to grasp (see the module
     docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``_disarmed``,
-    ``_refuse``, ``_report`` and ``_stopped``)."""
+    ``_refuse`` and ``_report``); the task starts through the console core."""
 
     def __init__(self, panel: Any) -> None:
         self.panel, self.app = panel, panel.app
@@ -124,18 +124,19 @@ class ExecuteControls:
 
     def _run(self, event: Any, target: ExecuteTarget) -> None:
         """Send the grasp-and-place of ``target`` and tell the operator which object it is."""
-        self.panel._stopped = False
         self.target = target
         sent = self.sent = SentGrasp(target.name, target.x, target.y)
         view = self.app.soft_arm_grasp().view()
         table_bin = view.bin  # a placed bin; None: the robot file's
+        ctl, start = self.panel.ctl, self.app.core.start_motion
         if target.plan is not None:
-            fut = self.panel.ctl.execute(target.plan, target.x, target.y, target.r,
-                                         bin_params=table_bin)
+            plan = target.plan
+            fut = start(lambda: ctl.execute(plan, target.x, target.y, target.r,
+                                            bin_params=table_bin))
         else:
-            fut = self.panel.ctl.grasp_at(target.x, target.y, target.r,
-                                          view.obstacles, view.clearance,
-                                          bin_params=table_bin)
+            obstacles, clearance = tuple(view.obstacles), float(view.clearance)
+            fut = start(lambda: ctl.grasp_at(target.x, target.y, target.r, obstacles, clearance,
+                                             bin_params=table_bin))
         fut.add_done_callback(lambda f: self._report(event, f, sent))
         client = client_of(event)
         if client is not None:

@@ -142,12 +142,11 @@ class RowControls:
         self.rows[sent.row_id] = sent
         for old in sorted(self.rows)[:-KEEP_ROWS]:
             del self.rows[old]
-        self.panel._stopped = False  # (as Execute: a new task after a STOP)
         self.panel.execute.target = None
-        fut = self.panel.ctl.run_row(sent.row_id, [(o.x, o.y, o.r) for o in view.objects],
-                                     (view.bin.x, view.bin.y), view.bin.kappa,
-                                     view.bin.kappa_right, tuple(view.obstacles),
-                                     float(view.clearance))
+        ctl = self.panel.ctl
+        fut = self.app.core.start_motion(lambda: ctl.run_row(
+            sent.row_id, [(o.x, o.y, o.r) for o in view.objects], (view.bin.x, view.bin.y),
+            view.bin.kappa, view.bin.kappa_right, tuple(view.obstacles), float(view.clearance)))
         fut.add_done_callback(lambda f: self._sent(event, sent, f))
 
     def _sent(self, event: Any, sent: SentRow, fut: Any) -> None:
