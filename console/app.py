@@ -57,6 +57,7 @@ from console.guarded_receive import install as _install_client_guard
 from console.header import ConsoleHeader
 from console.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
+from console.loop_header import LoopHeader, LoopSource
 from console.model import ArmModel, model_for
 from console.panels.base import Panel
 from console.panels.jog import JogPanel
@@ -153,6 +154,11 @@ class ConsoleApp:
         self.theme = setup_theme(server, robot.name)  # (console.stage) no share tunnel either
         self.status = server.gui.add_markdown(f"<small>{status}</small>", order=0.3)
         self.header = ConsoleHeader(self)  # STOP, control, phase, link: above every tab
+        # Phase and Link: the arm's loop process's view with its age (console.loop_header);
+        # panels word a fresh view through it: (app.loop_header or app.header).show(...)
+        loop = self.services.soft_control or self.services.extensible_runner
+        self.loop_header: LoopHeader | None = (LoopHeader(self.header, loop)
+                                               if isinstance(loop, LoopSource) else None)
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
         self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
         add_lights(server.scene, self.theme)
@@ -280,11 +286,15 @@ class ConsoleApp:
             self._thread.start()
         self.hold.start()
         self.lease.start()
+        if self.loop_header is not None:
+            self.loop_header.start()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the threads (and any recording); the viser server keeps running."""
         self._stop.set()
+        if self.loop_header is not None:
+            self.loop_header.stop(timeout)
         self.lease.stop(timeout)
         self.hold.stop(timeout)
         self.recorder.stop()

@@ -7,13 +7,12 @@ device in-process (no serial); ``--port-path PATH`` talks to a real controller. 
 which starts the emulator itself); the extensible arm's loop is
 :class:`hw_bridge.extensible_process.ExtensibleProcess` (its own process too) on a
 :class:`hw_bridge.interface.SerialHardware` to the emulator's pty or the controller (or, with
-``--hardware mock``, on an in-process MockHardware in that process, started by the first
-Execute).
+``--hardware mock``, on an in-process MockHardware in that process, ``mock://``). Both arms
+start connected and disarmed: only the operator's Arm arms.
 
 :func:`attach` returns the :class:`console.services.ConsoleServices` the app is built with: the
 loop, and its :class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm /
-health, all enqueue-only) for the Hardware panel (``console.panels.hardware``), or None when
-there is no serial link to manage (the extensible arm's in-process mock).
+health, all enqueue-only) for the Hardware panel (``console.panels.hardware``).
 """
 
 from __future__ import annotations
@@ -106,7 +105,7 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
 
     Returns the services with ``hardware`` (what to close), ``soft_control`` (soft arm) or
     ``extensible_runner`` (extensible arm; ``store`` is the console's command/report channel),
-    ``bridge_controls`` (None for the extensible arm's in-process mock) and ``cpu_partition``.
+    ``bridge_controls`` and ``cpu_partition``.
     ``slip`` (extensible arm on the emulator only): the emulator's racks slip on their pinions
     by that fraction (``--slip``) and stream the tip, read by ``tip_sensor``.
 
@@ -133,11 +132,14 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
 
     part = CpuPartition.default() if cpus == "auto" else cpus
     if mode == "mock" and not port_path:
-        # A MockHardware in the runner's process: no serial link for the Hardware panel to
-        # manage; the runner connects on the first Execute (as it always did).
+        # A MockHardware in the runner's process (``mock://``), connected at start like every
+        # link and, like every link, armed only by the operator's Arm (the Hardware panel's).
         runner = extensible_process.ExtensibleProcess(robot, store, "mock", cpus=part)
         out.closers.insert(0, runner.close)
-        return ConsoleServices(hardware=out, extensible_runner=runner, cpu_partition=part)
+        out.port_path = "mock://"
+        runner.start()
+        return ConsoleServices(hardware=out, extensible_runner=runner,
+                               bridge_controls=runner.bridge_controls, cpu_partition=part)
     path = port_path
     tip_sensor = None  # serve.py --slip: the emulator's tip stream
     if path is None:

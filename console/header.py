@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import html
 import threading
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import viser
+
+from console.arm_status import Tone
 
 if TYPE_CHECKING:
     from console.app import ConsoleApp
@@ -27,7 +29,6 @@ if TYPE_CHECKING:
 STOP_HOTKEY = "escape"
 FIELDS: tuple[str, ...] = ("control", "phase", "link")
 LABELS = {"control": "Control", "phase": "Phase", "link": "Link"}
-Tone = Literal["ok", "busy", "warn", "fault"]
 TONE_COLORS: dict[str, str] = {"ok": "#2b8a3e", "busy": "#1c7ed6", "warn": "#e67700",
                                "fault": "#c92a2a"}
 

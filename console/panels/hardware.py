@@ -319,7 +319,8 @@ class HardwarePanel(Panel):
             state = h.state if h is not None else "unconfigured"
             if self.app.robot.kind == "delta":  # the soft arm's Control panel tells its link
                 link = h if ctl is not None else extensible_link_health(self.app)  # mock
-                self.app.header.show("link", *header_link(self.kind, link))
+                shown = self.app.loop_header or self.app.header  # (checks the view's age)
+                shown.show("link", *header_link(self.kind, link))
             self.connect_btn.disabled = ctl is None
             self.disconnect_btn.disabled = ctl is None or state == "unconfigured"
             self.arm_btn.disabled = ctl is None or state != "inactive"

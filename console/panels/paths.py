@@ -321,8 +321,8 @@ class PathsPanel(Panel):
 
     def show_phase(self) -> None:
         """Push :meth:`phase` to the header (it sends only changes)."""
-        if not self.app.stopped:
-            self.app.header.show("phase", *self.phase())
+        if not self.app.stopped:  # (the loop header checks the view's age)
+            (self.app.loop_header or self.app.header).show("phase", *self.phase())
 
     def _status_loop(self) -> None:
         """Worker: planning seconds (and timeout), the Hardware line and the Phase field,
