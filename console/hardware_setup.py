@@ -155,9 +155,8 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
             out.closers.append(receiver.stop)
             tip_sensor = TipSensor(receiver)
             slip_args = ("--slip", str(slip), "--tip-port", str(receiver.addr[1]))
-        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus,
-                                                  *slip_args, "--mid-range"])
-        out.closers.append(emulator.stop)
+        emulator_args = ["--robot", str(robot.source), *on_cpus, *slip_args, "--mid-range"]
+        emulator = soft_arm_link.EmulatorProcess(emulator_args)
         path = emulator.path
         out.port_path = path
     # Connecting never arms and arming never moves: Arm holds where the encoders are and makes
@@ -166,6 +165,17 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
     runner = extensible_process.ExtensibleProcess(robot, store, "port", path, cpus=part)
     out.closers.insert(0, runner.close)
     runner.start()
-    return ConsoleServices(hardware=out, extensible_runner=runner,
-                           bridge_controls=runner.bridge_controls, cpu_partition=part,
-                           tip_sensor=tip_sensor)
+    controls: Any = runner.bridge_controls
+    if port_path is None:  # our emulator: a reconnect brings a dead one back
+        from hw_bridge.reviving_controls import RevivingControls
+
+        def new_path(path: str) -> None:
+            out.port_path = path
+            runner.use_port(path)
+
+        controls = RevivingControls(controls, emulator,
+                                    lambda: soft_arm_link.EmulatorProcess(emulator_args),
+                                    new_path)
+        out.closers.append(controls.stop)
+    return ConsoleServices(hardware=out, extensible_runner=runner, bridge_controls=controls,
+                           cpu_partition=part, tip_sensor=tip_sensor)

@@ -11,10 +11,12 @@ the header still tells the truth, worded from the view's link health alone.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from typing import Any, Callable, Protocol, runtime_checkable
 
-from console.arm_status import Field, LoopNews, Tone, header_fields, loop_trouble
+from console.arm_status import (STALE_AFTER_S, Field, LoopNews, Tone, header_fields,
+                                loop_trouble)
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +43,8 @@ class LoopSource(Protocol):
     def pid(self) -> int | None: ...
 
     def view_age(self) -> float: ...
+
+    def restart(self) -> None: ...
 
 
 class HeaderSink(Protocol):
@@ -96,6 +100,7 @@ class LoopHeader:
         self._lock = threading.Lock()
         self._wording: dict[str, Callable[[Any], Field]] = {}
         self.trouble = False  # whether the last refresh found the view untrustworthy
+        self.needs_restart = False  # ... because the loop process died, failed or went silent
         self._quit = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -121,6 +126,8 @@ class LoopHeader:
         phase, link = header_fields(news, view, phase_of, link_of)
         with self._lock:
             self.trouble = view is None or loop_trouble(news) is not None
+            self.needs_restart = news.started and (not news.alive or news.failure is not None
+                                                   or STALE_AFTER_S < news.age < math.inf)
             if self.trouble:  # a panel's wording is of an old view: never shown again
                 self._wording.clear()
         self.header.show("phase", phase[0], phase[1])

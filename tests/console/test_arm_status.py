@@ -106,6 +106,7 @@ def test_the_header_turns_truthful_within_1_s_of_the_last_view_without_new_views
     lh.refresh()
     assert header.fields["phase"] == ("control loop not running: killed (SIGKILL)", "fault")
     assert header.fields["link"] == ("unknown", "fault")
+    assert lh.needs_restart  # the Hardware panel offers Restart control loop
 
     # Alive but silent: stale once older than 0.5 s, said by the next refresh.
     loop.alive, loop.failure = True, None
@@ -119,7 +120,7 @@ def test_the_header_turns_truthful_within_1_s_of_the_last_view_without_new_views
         if "no news" in header.fields["phase"][0]:
             said_at = clock.t - t0
             break
-    assert said_at is not None and said_at <= 1.0
+    assert said_at is not None and said_at <= 1.0 and lh.needs_restart
     assert header.fields["phase"][1] == "fault" and header.fields["link"] == ("unknown", "fault")
     # A panel still wording the old view (ARMED) is not believed while stale ...
     lh.show("phase", "approach · ARMED", "busy")
@@ -130,6 +131,7 @@ def test_the_header_turns_truthful_within_1_s_of_the_last_view_without_new_views
     lh.refresh()
     assert header.fields["phase"] == ("running · disarmed", "ok")
     assert header.fields["link"] == ("inactive · disarmed", "ok")
+    assert not lh.needs_restart and not lh.trouble
 
 
 def test_without_panels_the_view_link_health_is_worded_and_faults_shown() -> None:
@@ -138,6 +140,7 @@ def test_without_panels_the_view_link_health_is_worded_and_faults_shown() -> Non
     lh = LoopHeader(header, loop)
     lh.refresh()
     assert header.fields["phase"] == ("starting the control loop…", "busy")
+    assert lh.trouble and not lh.needs_restart  # only starting: nothing to restart
     loop.publish(View(Health(state="active", armed=True)))
     assert lh.refresh() == (("running · ARMED", "ok"), ("active · ARMED", "ok"))
     loop.publish(View(Health(state="unconfigured", armed=False, fault="link lost")))

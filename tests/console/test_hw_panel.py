@@ -368,7 +368,8 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     ext = attach(ROBOT, store, "emulator", None)
     out = ext.hardware
     assert out.kind == "emulator" and out.port_path == "/dev/pts/77" and made["started"]
-    assert ext.bridge_controls is ext.extensible_runner.bridge_controls
+    # The runner's controls, wrapped so that a Connect brings a dead emulator back.
+    assert ext.bridge_controls.controls is ext.extensible_runner.bridge_controls
     assert made["hardware"] == ("port", "/dev/pts/77")
     out.close()
     assert made["runner_closed"] and made["emulator_stopped"]
