@@ -45,6 +45,7 @@ import viser
 
 from console.model import Coordinate, subscript
 from console.panels.base import Panel, operator_only
+from console.panels.extensible_status import disarmed_note
 from console.state import ArmState
 from core.units import MM_PER_M, fmt_deg
 
@@ -186,9 +187,20 @@ class JogPanel(Panel):
         target = self.app.hold.target()
         return np.array(self.app.store.command.q) if target is None else target
 
+    def _refused_disarmed(self) -> bool:
+        """A disarmed extensible arm on hardware does not move: say so, move nothing."""
+        note = disarmed_note(self.app)
+        if note is None:
+            return False
+        self.note.content = f"⚠ Not moved: {note}"
+        self._sync_sliders(self._base())
+        return True
+
     @operator_only(action="jog")
     def _on_slider(self, coord: Coordinate, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own mirror of the state into the slider
+            return
+        if self._refused_disarmed():
             return
         handle = self.sliders[coord.key]
         scale = display_unit(coord).scale
@@ -209,14 +221,14 @@ class JogPanel(Panel):
         self.note.content = f"⚠ {note}" if note else ""
 
     def _go(self, event: viser.GuiEvent, fn: Any) -> None:
-        if event.client is None:
+        if event.client is None or self._refused_disarmed():
             return
         with self._target_lock:
             self.app.hold.move_to(event.client.client_id, fn(self._base()))
         self._sync_sliders(self.app.hold.target())
 
     def _on_hold(self, coord: Coordinate, direction: int, event: viser.GuiEvent) -> None:
-        if event.client is not None:
+        if event.client is not None and not self._refused_disarmed():
             self.app.hold.hold(event.client.client_id, coord, direction)
 
     def _on_release(self, coord: Coordinate, event: viser.GuiEvent) -> None:

@@ -268,6 +268,10 @@ class PathsPanel(Panel):
         if runner.snapshot.busy:
             self._set_status("⚠ A job is running: stop it first.", "error")
             return
+        if runner.snapshot.state in ("disarmed", "disconnected"):  # never armed behind the
+            self._set_status("⚠ Not executed: arm first (Hardware tab: Arm device); "  # back
+                             "connecting never arms the arm.", "error")
+            return
         self._job = job = runner.execute(path, "path")
         self._stopped = False
         self.hardware.content = hardware_html(self.app)

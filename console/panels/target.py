@@ -40,7 +40,7 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel, operator_only
-from console.panels.extensible_status import link_summary, worker_pool
+from console.panels.extensible_status import disarmed_note, link_summary, worker_pool
 from console.panels.obstacles_boxes import box_scene_of
 from console.panels.target_worker import TargetIKWorker
 from console.panels.typed_fields import TypedFields
@@ -205,6 +205,10 @@ class TargetPanel(Panel):
     def _start_leg(self, client_id: int, legs: list[Array], refused: str) -> bool:
         """Move to the first of ``legs`` (the rest follow on arrival, :meth:`check_arrival`);
         False after reporting ``refused`` when ``client_id`` no longer holds control."""
+        note = disarmed_note(self.app)
+        if note is not None:  # never armed behind the operator's back
+            self.report_error(f"Not moved: {note}")
+            return False
         # Set before the move starts: a frame of the move ("jog") must not read as someone
         # else's command, which would put the target back on the tip and clear this status.
         self._legs = (client_id, legs[1:])

@@ -29,6 +29,7 @@ from console.hardware_setup import attach
 from console.model import model_for
 from console.panels.control import ControlPanel
 from console.panels.hardware import HardwarePanel
+from console.panels.jog import JogPanel
 from console.state import StateStore
 from core.kinematics import delta as dk
 from core.robots import load
@@ -86,7 +87,8 @@ def console(request: pytest.FixtureRequest) -> Iterator[tuple[Any, FakeClient]]:
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     store = StateStore(model_for(robot), mirror_commands=robot.kind != "delta")
     services = attach(robot, store, "emulator", None, cpus=None)
-    panels = (ControlPanel, HardwarePanel) if robot.kind == "planar" else (HardwarePanel,)
+    panels = ((ControlPanel, HardwarePanel) if robot.kind == "planar"
+              else (HardwarePanel, JogPanel))
     app = console_app(robot, server, store=store, panels=panels,
                       soft_control=services.soft_control,
                       extensible_runner=services.extensible_runner,
@@ -199,7 +201,7 @@ def ext_arm_and_move(app: Any, goal: np.ndarray = GOAL, wait_end: bool = True) -
 
 @pytest.mark.parametrize("console", [EXT], indirect=True, ids=["extensible"])
 def test_extensible_connects_disarmed_at_the_start_pose(console) -> None:
-    app, _ = console
+    app, _op = console
     runner = ext_connected_disarmed(app)
     np.testing.assert_allclose(runner.snapshot.measured_delta, model_for(EXT).initial(),
                                atol=5e-5)  # the emulator starts where the console does
@@ -208,6 +210,16 @@ def test_extensible_connects_disarmed_at_the_start_pose(console) -> None:
     job = runner.move_to(dk.robot_rack_lengths(EXT, GOAL))
     result = runner.wait(job, SLOW)
     assert result is not None and not result.ok and "arm first" in result.message
+    # A jog is refused with what to do (the view shows the encoders: nothing would move).
+    jog = app.panel(JogPanel)
+    before = app.store.command.seq
+    jog._on_hold(jog.rows[0].coord, +1, viser.GuiEvent(client=_op, client_id=_op.client_id,
+                                                       target=None))
+    assert "Not moved: arm first" in jog.note.content
+    assert app.store.command.seq == before and app.hold.target() is None
+    app.services.bridge_controls.arm()
+    wait_for(lambda: runner.snapshot.state == "holding", "armed, holding")
+    assert not jog._refused_disarmed()  # armed: jogs go to the arm
 
 
 @pytest.mark.parametrize("console", [EXT], indirect=True, ids=["extensible"])
