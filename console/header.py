@@ -9,6 +9,10 @@ Panels own what the fields say and push it here with :meth:`ConsoleHeader.show`:
     app.header.show("phase", "moving · waypoint 3/8", tone="busy")
     app.header.show("link", "emulator · active · ARMED")
 
+Phase and Link describe the arm's loop process, so with one they go through
+``app.loop_header`` (:class:`console.loop_header.LoopHeader`), which shows a panel's wording
+only while the loop's view is fresh and says otherwise that the loop died or went silent.
+
 Fields are shown in :data:`FIELDS` order; an empty text hides a field. ``tone`` colours the
 field's text (``ok``, ``busy``, ``warn``, ``fault`` or ``None`` for plain).
 """
