@@ -4,8 +4,7 @@
 Link field do (``console.panels.hardware.header_link``); :func:`runner_phase` is the header's
 Phase field (idle, moving to target, running path t/T s, holding after STOP, fault), pushed by
 the Paths panel; :func:`hardware_html` is the Paths panel's "Hardware:" line (that link and
-the runner's state); :func:`disarmed_note` says why a jog or a target cannot move a
-disarmed arm; :func:`worker_pool` is the spawned worker process the Paths and Tip target
+the runner's state); :func:`worker_pool` is the spawned worker process the Paths and Tip target
 panels plan and solve in, off the console's GIL; :func:`extensible_runner` is the runner the
 Paths and Repeatability panels drive.
 """
@@ -44,19 +43,6 @@ def worker_pool() -> cf.ProcessPoolExecutor:
     """
     return cf.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
                                   initializer=watch_parent, initargs=(os.getpid(),))
-
-
-ARM_FIRST = "arm first (Hardware tab: Arm device): a disarmed arm does not move"
-
-
-def disarmed_note(app: Any) -> str | None:
-    """Why a jog or a tip target cannot move the extensible arm now (None: it can, or the
-    console only previews commands): the view shows what the encoders measure and the arm is
-    not armed. Connecting never arms it; nothing here arms it behind the operator's back."""
-    runner = app.services.extensible_runner
-    if runner is None or app.store.mirror_commands or not runner.started:
-        return None
-    return ARM_FIRST if runner.snapshot.state in ("disarmed", "disconnected") else None
 
 
 def link_summary(app: Any) -> str:

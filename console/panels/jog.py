@@ -45,7 +45,7 @@ import viser
 
 from console.model import Coordinate, subscript
 from console.panels.base import Panel, operator_only
-from console.panels.extensible_status import disarmed_note
+from console.panels.disarmed import disarmed_note
 from console.state import ArmState
 from core.units import MM_PER_M, fmt_deg
 

@@ -40,7 +40,8 @@ import numpy.typing as npt
 import viser
 
 from console.panels.base import Panel, operator_only
-from console.panels.extensible_status import disarmed_note, link_summary, worker_pool
+from console.panels.disarmed import disarmed_note
+from console.panels.extensible_status import link_summary, worker_pool
 from console.panels.obstacles_boxes import box_scene_of
 from console.panels.target_worker import TargetIKWorker
 from console.panels.typed_fields import TypedFields
