@@ -65,6 +65,7 @@ from console.core.grasp_session import GraspSession
 from console.header import ConsoleHeader
 from console.core.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
+from console.loop_header import LoopHeader, LoopSource
 from console.core.model import ArmModel, model_for
 from console.panel_sets import DEFAULT_PANELS
 from console.panels.common.base import Panel
@@ -155,6 +156,11 @@ class ConsoleApp:
         self.header = ConsoleHeader(  # STOP, control, phase, link: above every tab
             server.gui, self.core, allow_viewers=self.guard.allow_viewers,
             notify_all=self.notify_all, stopped=lambda: self.stopped)
+        # Phase and Link: the arm's loop process's view with its age (console.loop_header);
+        # panels word a fresh view through it: (app.loop_header or app.header).show(...)
+        loop = self.services.soft_control or self.services.extensible_runner
+        self.loop_header: LoopHeader | None = (LoopHeader(self.header, loop)
+                                               if isinstance(loop, LoopSource) else None)
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
         self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
         add_lights(server.scene, self.theme)
@@ -290,11 +296,15 @@ class ConsoleApp:
             self._thread.start()
         self.core.start()
         self.lease.start()
+        if self.loop_header is not None:
+            self.loop_header.start()
         return self
 
     def stop(self, timeout: float = 2.0) -> None:
         """Stop the threads (and any recording); the viser server keeps running."""
         self._stop.set()
+        if self.loop_header is not None:
+            self.loop_header.stop(timeout)
         self.lease.stop(timeout)
         self.core.stop(timeout)
         self.recorder.stop()

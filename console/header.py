@@ -9,6 +9,10 @@ Panels own what the fields say and push it here with :meth:`ConsoleHeader.show`:
     app.header.show("phase", "moving · waypoint 3/8", tone="busy")
     app.header.show("link", "emulator · active · ARMED")
 
+Phase and Link describe the arm's loop process, so with one they go through
+``app.loop_header`` (:class:`console.loop_header.LoopHeader`), which shows a panel's wording
+only while the loop's view is fresh and says otherwise that the loop died or went silent.
+
 Fields are shown in :data:`FIELDS` order; an empty text hides a field. ``tone`` colours the
 field's text (``ok``, ``busy``, ``warn``, ``fault`` or ``None`` for plain).
 """
@@ -17,9 +21,11 @@ from __future__ import annotations
 
 import html
 import threading
-from typing import TYPE_CHECKING, Any, Callable, Literal
+from typing import TYPE_CHECKING, Any, Callable
 
 import viser
+
+from console.core.arm_status import Tone
 
 if TYPE_CHECKING:
     from console.core.console_core import ConsoleCore
@@ -27,7 +33,6 @@ if TYPE_CHECKING:
 STOP_HOTKEY = "escape"
 FIELDS: tuple[str, ...] = ("control", "phase", "link")
 LABELS = {"control": "Control", "phase": "Phase", "link": "Link"}
-Tone = Literal["ok", "busy", "warn", "fault"]
 TONE_COLORS: dict[str, str] = {"ok": "#2b8a3e", "busy": "#1c7ed6", "warn": "#e67700",
                                "fault": "#c92a2a"}
 

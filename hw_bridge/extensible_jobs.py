@@ -36,6 +36,13 @@ def home_counts(robot: ExtensibleArm) -> Counts:
     return dk.motor_counts_from_lengths(robot, retracted)
 
 
+def mid_range_counts(robot: ExtensibleArm) -> Counts:
+    """Encoder counts (3n,) of the console's start pose (straight, racks at mid-range:
+    :func:`core.kinematics.delta.mid_range_delta`), where the emulated and mock devices start."""
+    lengths = dk.robot_rack_lengths(robot, dk.mid_range_delta(robot))
+    return dk.motor_counts_from_lengths(robot, lengths) - home_counts(robot)
+
+
 def measure(robot: ExtensibleArm, encoders: npt.ArrayLike,
             home: Counts) -> tuple[Array, Array, Array]:
     """Encoder counts (3n,) -> rack lengths (n, 3), Delta (n, 3) and tip (3,)."""

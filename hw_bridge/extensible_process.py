@@ -225,10 +225,21 @@ class ExtensibleProcess(LoopProcess):
                 self.connecting = self.connect()
         return self
 
+    def use_port(self, port_path: str) -> None:
+        """Where a restarted child connects (a revived device emulator's new pty); the running
+        child is told by the operator's Connect."""
+        if self.options.kind != "port":
+            raise ValueError("only a 'port' runner has a port to change")
+        self.options = dataclasses.replace(self.options, port_path=str(port_path))
+
     def restart(self, timeout: float = 5.0) -> None:
         """A new child in place of a dead or silent one (:meth:`LoopProcess.restart`); it
-        connects again, disarmed. Jobs the old child ran end (their :meth:`wait` times out)."""
+        connects again (:meth:`use_port`'s port), disarmed. Jobs the old child ran end (their
+        :meth:`wait` times out)."""
         with self._start_lock:
+            if self._proc is not None:  # the options as they are now (use_port)
+                self._args = (str(self.robot.source), self.options, self._commands,
+                              self._replies)
             super().restart(timeout)
             self.connecting = self.connect()
 

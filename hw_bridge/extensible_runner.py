@@ -240,16 +240,22 @@ def mock_factory(robot: ExtensibleArm, relaxed_s: float = 0.5) -> Callable[[], H
     persists across reconnects, like a board).
 
     It shares the GIL with the GUI, so its link timeout and watchdog are relaxed to
-    ``relaxed_s``: a slow GUI callback must not read as a lost cable.
+    ``relaxed_s``: a slow GUI callback must not read as a lost cable. Its motors start at the
+    console's start pose (:func:`hw_bridge.extensible_jobs.mid_range_counts`, as the device
+    emulator's ``--mid-range``), so arming, which holds where the encoders are, moves nothing.
     """
     made: list[HardwareInterface] = []
 
     def factory() -> HardwareInterface:
         if not made:
+            from hw_bridge.extensible_jobs import mid_range_counts
             from hw_bridge.mock import MockHardware
             hw = MockHardware(robot)
             hw.config = dataclasses.replace(hw.config, link_timeout_s=relaxed_s,
                                             watchdog_s=relaxed_s)
+            motors = hw.device.motors
+            motors.position[:] = mid_range_counts(robot)
+            motors.target[:] = motors.position
             made.append(hw)
         return made[0]
     return factory

@@ -44,7 +44,7 @@ class LoopProcess:
     def __init__(self, name: str, clock: Callable[[], float] = time.monotonic) -> None:
         self.name = name
         self.clock = clock
-        self.failure: str | None = None
+        self._failure: str | None = None
         self.view: Any = None
         self._view_at: float | None = None
         ctx = multiprocessing.get_context("spawn")
@@ -98,16 +98,16 @@ class LoopProcess:
             if self._target is None:
                 raise RuntimeError(f"the {self.name} process was never started")
             old_proc = self._proc
-            reason = self.failure or exit_reason(getattr(old_proc, "exitcode", None))
+            reason = self.failure
             self._end_child(old_proc, timeout)
-            reason = reason or exit_reason(getattr(old_proc, "exitcode", None))
+            reason = reason or exit_reason(old_proc.exitcode)
             why = f"the {self.name} process was restarted" + (f" ({reason})" if reason else "")
             old_commands, old_replies = self._commands, self._replies
             with self._lock:
                 self._generation += 1  # the old reader stops writing here
                 pending, self._pending = self._pending, {}
                 self._commands, self._replies = self._ctx.Queue(), self._ctx.Queue()
-                self.view, self._view_at, self.failure = None, None, None
+                self.view, self._view_at, self._failure = None, None, None
             for fut in pending.values():
                 if not fut.done():
                     fut.set_exception(RuntimeError(why))
@@ -143,7 +143,7 @@ class LoopProcess:
                 if not proc.is_alive():  # killed or crashed: the console says so
                     with self._lock:
                         if self._generation == generation:
-                            self.failure = self.failure or exit_reason(proc.exitcode)
+                            self._failure = self._failure or exit_reason(proc.exitcode)
                     return
                 continue
             except (EOFError, OSError, ValueError):
@@ -155,7 +155,7 @@ class LoopProcess:
                 self.view = msg[1]
                 self._view_at = self.clock()
             elif msg[0] == "failed":
-                self.failure = msg[1]
+                self._failure = msg[1]
             elif msg[0] == "reply":
                 with self._lock:
                     fut = self._pending.pop(msg[1], None)
@@ -181,6 +181,16 @@ class LoopProcess:
             self._pending[cid] = fut
         self._commands.put((cid, cmd))
         return fut
+
+    @property
+    def failure(self) -> str | None:
+        """Why the child failed (its own report) or died (its exit), None while it runs."""
+        failure = self._failure
+        if failure is None:
+            proc = self._proc
+            if proc is not None and not proc.is_alive():
+                failure = exit_reason(proc.exitcode)
+        return failure
 
     @property
     def pid(self) -> int | None:

@@ -148,10 +148,8 @@ class Emulator:
         (:func:`core.kinematics.delta.mid_range_delta`), so arming moves nothing."""
         if not isinstance(robot, ExtensibleArm):
             raise ValueError("--mid-range needs the extensible arm")
-        from core.kinematics import delta as dk
-        from hw_bridge.extensible_jobs import home_counts
-        lengths = dk.robot_rack_lengths(robot, dk.mid_range_delta(robot))
-        counts = (dk.motor_counts_from_lengths(robot, lengths) - home_counts(robot)).astype(float)
+        from hw_bridge.extensible_jobs import mid_range_counts
+        counts = mid_range_counts(robot).astype(float)
         motors = self.core.motors
         if counts.shape != motors.position.shape:
             raise ValueError(f"--mid-range needs the arm's {robot.n_motors} motors")

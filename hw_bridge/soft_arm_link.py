@@ -224,6 +224,25 @@ class SoftArmLink:
                 pass
 
 
+def start_emulator(robot: Any, mocap_port: int, seed: int = 0,
+                   emulator_args: tuple[str, ...] = ()) -> tuple[EmulatorProcess, UdpScene]:
+    """Start the soft arm's device emulator (mocap to ``mocap_port``) and open its scene
+    channel, once it serves; also how a dead emulator is replaced on a reconnect."""
+    emu = EmulatorProcess(["--robot", str(robot.source), "--mocap-port", str(mocap_port),
+                           "--control-port", "0", "--seed", str(seed), *emulator_args])
+    try:
+        scene = UdpScene(int(emu.wait_event("control", 10.0)["port"]))
+    except Exception:
+        emu.stop()
+        raise
+    if emu.realtime:  # it serves once its pty keeper (a Python process) has started: under
+        try:  # load that took longer than the first HELLO's 500 ms ("no HELLO answer" at start)
+            emu.wait_event("scheduling", 30.0)  # (its last event before serving)
+        except TimeoutError:
+            pass  # then the first configure may fail; the operator's Arm configures again
+    return emu, scene
+
+
 def open_link(robot: Any, kind: DeviceKind, *, port_path: str | None = None, seed: int = 0,
               mocap_port: int | None = None, emulator_args: tuple[str, ...] = ()) -> SoftArmLink:
     """Build the link (not configured yet: the caller's control thread configures it).
@@ -263,22 +282,10 @@ def open_link(robot: Any, kind: DeviceKind, *, port_path: str | None = None, see
     rx = UdpMocapReceiver(0 if mocap_port is None else mocap_port)
     rx.start()
     try:
-        emu = EmulatorProcess(["--robot", str(robot.source), "--mocap-port", str(rx.addr[1]),
-                               "--control-port", "0", "--seed", str(seed), *emulator_args])
+        emu, scene = start_emulator(robot, rx.addr[1], seed, emulator_args)
     except Exception:
         rx.stop()
         raise
-    try:
-        scene = UdpScene(int(emu.wait_event("control", 10.0)["port"]))
-    except Exception:
-        emu.stop()
-        rx.stop()
-        raise
-    if emu.realtime:  # it serves once its pty keeper (a Python process) has started: under
-        try:  # load that took longer than the first HELLO's 500 ms ("no HELLO answer" at start)
-            emu.wait_event("scheduling", 30.0)  # (its last event before serving)
-        except TimeoutError:
-            pass  # then the first configure may fail; the operator's Arm configures again
     hw = SerialHardware(config, emu.path)
     return SoftArmLink(kind, hw, rx, HardwareDevice(hw, rx, n, radius), scene, emu)
 

@@ -237,6 +237,12 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         promote_threads(helper_priority)
     try:
         def handle(cid: int, cmd: Any) -> None:
+            if isinstance(cmd, Connect) and world.kind == "emulator":
+                try:  # a dead emulator is replaced here, off the loop thread (seconds)
+                    cmd = world.revive_emulator(cmd)
+                except (RuntimeError, OSError, ValueError, TimeoutError) as exc:
+                    replies.put(("reply", cid, f"the device emulator did not start: {exc}"))
+                    return
             if isinstance(cmd, RunRow) and world.kind != "sim":
                 if not stack.armed:  # (the loop checks again) no object placed when refused
                     replies.put(("reply", cid, ROW_ARM_FIRST))

@@ -127,6 +127,7 @@ class HardwareWorld:
     def __init__(self, robot: Any, seed: int, opts: DeviceOptions):
         from hw_bridge.soft_arm_link import open_link
         self.kind = opts.kind
+        self.robot, self.seed, self.emulator_args = robot, seed, opts.emulator_args
         self.link = open_link(robot, opts.kind, port_path=opts.port_path, seed=seed,  # type: ignore[arg-type]
                               emulator_args=opts.emulator_args)
         self.device = self.link.device
@@ -138,6 +139,23 @@ class HardwareWorld:
         from hw_bridge.interface import ReturnType
         if self.link.hw.configure() is not ReturnType.OK:
             self.device.fault = self.link.hw.fault
+
+    def revive_emulator(self, cmd: Connect) -> Connect:
+        """Command thread, before a Connect runs: if the device emulator died (killed, or
+        crashed), start a new one (same mocap port, a new scene channel) and connect to its
+        pty instead of the dead one's. ``cmd`` as given otherwise."""
+        from hw_bridge.soft_arm_link import start_emulator
+        old = self.link.emulator
+        if old is None or old.proc.poll() is None:
+            return cmd
+        old.stop()  # reaped
+        emu, scene = start_emulator(self.robot, self.link.mocap.addr[1], self.seed,
+                                    self.emulator_args)
+        dead_scene, self.link.scene, self.link.emulator = self.link.scene, scene, emu
+        if dead_scene is not None:
+            dead_scene.close()
+        port = emu.path if cmd.port in ("", old.path) else cmd.port
+        return Connect(port, cmd.baud)
 
     def place_object(self, x: float, y: float, r: float) -> None:
         """Command thread: put the object into the simulated world (none for a real device)."""

@@ -105,13 +105,14 @@ class FakeClock:
 def console_app(robot: Any, server: Any, *, soft_control: Any = None,
                 extensible_runner: Any = None, bridge_controls: Any = None, hardware: Any = None,
                 demo: bool = False, mirror_commands: bool = True, tip_sensor: Any = None,
-                **kwargs: Any) -> Any:
+                store: Any = None, **kwargs: Any) -> Any:
     """A ConsoleApp with exactly the services a test names -- the one place tests build them.
 
     ``soft_control="process"`` starts a real :class:`hw_bridge.soft_arm_process.ControlProcess`
     (simulated arm, default scheduling and CPUs) as ``serve.py`` does; anything else is used as
     given (a fake). ``demo=True`` adds the demo motion (``serve.py --demo``). Nothing else is
-    created: a service left out is None, as in production.
+    created: a service left out is None, as in production. ``store``: the console's store,
+    when a service was built on it first (``hardware_setup.attach``, as serve.py does).
     """
     from console.app import ConsoleApp
     from console.core.demo_motion import DemoMotion
@@ -122,7 +123,8 @@ def console_app(robot: Any, server: Any, *, soft_control: Any = None,
     if soft_control == "process":
         from hw_bridge.soft_arm_process import ControlProcess
         soft_control = ControlProcess(robot)
-    store = StateStore(model_for(robot), mirror_commands=mirror_commands)
+    if store is None:
+        store = StateStore(model_for(robot), mirror_commands=mirror_commands)
     services = ConsoleServices(hardware=hardware, soft_control=soft_control,
                                extensible_runner=extensible_runner,
                                bridge_controls=bridge_controls,

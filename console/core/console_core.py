@@ -108,14 +108,19 @@ class ConsoleCore:
 
     # -- the one safety route ----------------------------------------------------------------
 
-    def stop_motion(self, reason: str, who: Any = None) -> None:
-        """End all motion now (any thread, anyone): see the module docstring."""
+    def stop_motion(self, reason: str, who: Any = None, *, latch: bool = True) -> None:
+        """End all motion now (any thread, anyone): see the module docstring.
+
+        ``latch``: a jog button still held stays dead until it is released (STOP, a lost lease,
+        a link fault); False when the jog's own renewals stopped (a late renewal may then start
+        a new jog, as a fresh press would).
+        """
         with self._lock:
             self._generation += 1
             self._expected.clear()
             if self.services.demo is not None:
                 self._quietly(self.services.demo.stop, reason)
-            self.hold.cancel(latch=True)
+            self.hold.cancel(latch=latch)
             self._stop_seq = self.store.command.seq  # STOP's own command and all before it
             self._quietly(self.arm.stop, reason)
             self._held = self._held or "stop" in reason.lower()
@@ -160,7 +165,7 @@ class ConsoleCore:
             self.stop_motion(reason)
 
     def _on_hold_expired(self, reason: str) -> None:
-        self.stop_motion(reason)
+        self.stop_motion(reason, latch=False)
 
     # -- motion routes -----------------------------------------------------------------------
 
@@ -215,6 +220,20 @@ class ConsoleCore:
             sent = self.arm.forward(state)
             self._held = self._held and not sent  # the arm takes a new command: it moves again
             return sent
+
+    def restart_loop(self, who: Any = None) -> None:
+        """Replace the arm's loop process with a new one, disarmed (blocks for seconds): motion
+        ends first through :meth:`stop_motion`; the new loop's failure and faults are news again.
+
+        Raises:
+            RuntimeError: the new loop process did not start (the reason is in the message).
+        """
+        self.recorder.action("restart the control loop", who)
+        self.stop_motion("control loop restarted", who)
+        self.arm.restart()
+        with self._lock:
+            self._seen_fault = None
+            self._seen_death = None
 
     # -- the core's thread: forwarding and the watcher ---------------------------------------
 

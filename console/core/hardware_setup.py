@@ -7,13 +7,12 @@ device in-process (no serial); ``--port-path PATH`` talks to a real controller. 
 which starts the emulator itself); the extensible arm's loop is
 :class:`hw_bridge.extensible_process.ExtensibleProcess` (its own process too) on a
 :class:`hw_bridge.interface.SerialHardware` to the emulator's pty or the controller (or, with
-``--hardware mock``, on an in-process MockHardware in that process, started by the first
-Execute).
+``--hardware mock``, on an in-process MockHardware in that process, ``mock://``). Both arms
+start connected and disarmed: only the operator's Arm arms.
 
 :func:`attach` returns the :class:`console.core.services.ConsoleServices` the app is built with: the
 loop, and its :class:`hw_bridge.controls.BridgeControls` (connect / disconnect / arm / disarm /
-health, all enqueue-only) for the Hardware panel (``console.panels.common.hardware``), or None when
-there is no serial link to manage (the extensible arm's in-process mock).
+health, all enqueue-only) for the Hardware panel (``console.panels.common.hardware``).
 """
 
 from __future__ import annotations
@@ -75,7 +74,7 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
 
     Returns the services with ``hardware`` (what to close), ``soft_control`` (soft arm) or
     ``extensible_runner`` (extensible arm; ``store`` is the console's command/report channel),
-    ``bridge_controls`` (None for the extensible arm's in-process mock) and ``cpu_partition``.
+    ``bridge_controls`` and ``cpu_partition``.
     ``slip`` (extensible arm on the emulator only): the emulator's racks slip on their pinions
     by that fraction (``--slip``) and stream the tip, read by ``tip_sensor``.
 
@@ -102,11 +101,14 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
 
     part = CpuPartition.default() if cpus == "auto" else cpus
     if mode == "mock" and not port_path:
-        # A MockHardware in the runner's process: no serial link for the Hardware panel to
-        # manage; the runner connects on the first Execute (as it always did).
+        # A MockHardware in the runner's process (``mock://``), connected at start like every
+        # link and, like every link, armed only by the operator's Arm (the Hardware panel's).
         runner = extensible_process.ExtensibleProcess(robot, store, "mock", cpus=part)
         out.closers.insert(0, runner.close)
-        return ConsoleServices(hardware=out, extensible_runner=runner, cpu_partition=part)
+        out.port_path = "mock://"
+        runner.start()
+        return ConsoleServices(hardware=out, extensible_runner=runner,
+                               bridge_controls=runner.bridge_controls, cpu_partition=part)
     path = port_path
     tip_sensor = None  # serve.py --slip: the emulator's tip stream
     if path is None:
@@ -122,9 +124,8 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
             out.closers.append(receiver.stop)
             tip_sensor = TipSensor(receiver)
             slip_args = ("--slip", str(slip), "--tip-port", str(receiver.addr[1]))
-        emulator = soft_arm_link.EmulatorProcess(["--robot", str(robot.source), *on_cpus,
-                                                  *slip_args, "--mid-range"])
-        out.closers.append(emulator.stop)
+        emulator_args = ["--robot", str(robot.source), *on_cpus, *slip_args, "--mid-range"]
+        emulator = soft_arm_link.EmulatorProcess(emulator_args)
         path = emulator.path
         out.port_path = path
     # Connecting never arms and arming never moves: Arm holds where the encoders are and makes
@@ -133,6 +134,17 @@ def attach(robot: Any, store: StateStore, mode: HardwareMode, port_path: str | N
     runner = extensible_process.ExtensibleProcess(robot, store, "port", path, cpus=part)
     out.closers.insert(0, runner.close)
     runner.start()
-    return ConsoleServices(hardware=out, extensible_runner=runner,
-                           bridge_controls=runner.bridge_controls, cpu_partition=part,
-                           tip_sensor=tip_sensor)
+    controls: Any = runner.bridge_controls
+    if port_path is None:  # our emulator: a reconnect brings a dead one back
+        from hw_bridge.reviving_controls import RevivingControls
+
+        def new_path(path: str) -> None:
+            out.port_path = path
+            runner.use_port(path)
+
+        controls = RevivingControls(controls, emulator,
+                                    lambda: soft_arm_link.EmulatorProcess(emulator_args),
+                                    new_path)
+        out.closers.append(controls.stop)
+    return ConsoleServices(hardware=out, extensible_runner=runner, bridge_controls=controls,
+                           cpu_partition=part, tip_sensor=tip_sensor)

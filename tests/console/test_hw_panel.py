@@ -369,24 +369,35 @@ def test_attach_takes_the_loops_bridge_controls(monkeypatch) -> None:
     ext = attach(ROBOT, store, "emulator", None)
     out = ext.hardware
     assert out.kind == "emulator" and out.port_path == "/dev/pts/77" and made["started"]
-    assert ext.bridge_controls is ext.extensible_runner.bridge_controls
+    # The runner's controls, wrapped so that a Connect brings a dead emulator back.
+    assert ext.bridge_controls.controls is ext.extensible_runner.bridge_controls
     assert made["hardware"] == ("port", "/dev/pts/77")
     out.close()
     assert made["runner_closed"] and made["emulator_stopped"]
 
     made.clear()
-    mock = attach(ROBOT, store, "mock", None)  # a runner on MockHardware, built now, not started
-    assert mock.hardware.kind == "mock" and mock.bridge_controls is None
-    assert made["hardware"] == ("mock", None) and "started" not in made
+    # A runner on MockHardware, started (connected, disarmed) with controls for the Hardware
+    # panel: its Arm device is the only way to arm it (connecting never arms, issue #27).
+    mock = attach(ROBOT, store, "mock", None)
+    assert mock.hardware.kind == "mock" and mock.hardware.port_path == "mock://"
+    assert mock.bridge_controls is mock.extensible_runner.bridge_controls
+    assert made["hardware"] == ("mock", None) and made["started"]
 
 
-def test_serve_composes_the_hardware_panel_and_says_mock(serve_module, tmp_path) -> None:
+def test_serve_composes_the_hardware_panel_for_the_mock_disarmed(serve_module, tmp_path) -> None:
     args = serve_module.parse_args(["--robot", "extensible", "--hardware", "mock", "--port", "0",
                                     "--data-dir", str(tmp_path)])
     server, app, _ = serve_module.build(args, load("extensible"), "test")
     try:
-        panel = app.panel(HardwarePanel)
-        assert "in-process mock device" in panel.note.content and panel.connect_btn.disabled
+        panel = app.panel(HardwarePanel)  # the mock connects at start and waits for Arm
+        assert not panel.note.visible and not panel.connect_btn.disabled
+        assert panel.port_text.value == "mock://"
+        deadline = time.monotonic() + 30.0
+        while app.services.bridge_controls.health() is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        panel.refresh()
+        assert "mock://" in panel.readout.content and "disarmed" in panel.readout.content
+        assert not panel.arm_btn.disabled  # configured (inactive): Arm device is the next step
     finally:
         app.services.close()
         app.stop()

@@ -254,6 +254,8 @@ def test_extensible_path_executes_on_the_mock_device(name):
     hw.config = dataclasses.replace(hw.config, link_timeout_s=0.5, watchdog_s=0.5)
     runner = ExtensibleRunner(arm, lambda: hw).start()
     try:
+        assert runner.connecting is not None and runner.connecting.result(5) is None
+        runner.bridge_controls.arm()  # connecting never arms: the operator's Arm does
         end = time.monotonic() + 3.0
         while runner.snapshot.state != "holding" and time.monotonic() < end:
             time.sleep(0.02)

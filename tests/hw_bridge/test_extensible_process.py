@@ -48,6 +48,8 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     # Connecting configures the link and never arms it: only the operator's Arm does.
     wait_for(lambda: p.snapshot.state == "disarmed", what="connected, disarmed")
     assert not p.bridge_controls.health().armed
+    # The mock starts at the console's start pose (mid-range), so arming moves nothing.
+    np.testing.assert_allclose(p.snapshot.measured_delta, model_for(ROBOT).initial(), atol=5e-5)
     job = p.move_to(dk.robot_rack_lengths(ROBOT, Q0))
     refused = p.wait(job, timeout=30)
     assert refused is not None and not refused.ok and "arm first" in refused.message, refused

@@ -6,8 +6,12 @@ control process or the extensible arm's runner). Its methods only enqueue; the l
 applies them. Without controls (the extensible arm's in-process mock, or a loop that offers
 none) the panel says why and disables its inputs.
 
-Sharing: Connect, Disconnect, Arm device, Disarm device and every change of port or baud are
-:func:`~console.panels.common.base.operator_only`; a viewer's edit of the shared port / baud fields snaps
+Restart control loop (shown while the arm's loop process is dead or silent, i.e. while the
+header says so, :mod:`console.loop_header`): ends the old loop process and starts a new one,
+disarmed (:meth:`hw_bridge.loop_process.LoopProcess.restart`), without restarting serve.py.
+
+Sharing: Connect, Disconnect, Arm device, Disarm device, Restart control loop and every change
+of port or baud are :func:`~console.panels.common.base.operator_only`; a viewer's edit of the shared port / baud fields snaps
 back. A new link fault (a new non-empty ``health().fault``, the device watchdog tripping, the
 e-stop being pressed) is shown once to every connected browser and logged to the recording.
 
@@ -180,6 +184,11 @@ class HardwarePanel(Panel):
                                       hint="ARM: the device accepts demands (clears a tripped "
                                            "watchdog).")
         self.disarm_btn = gui.add_button("Disarm device", icon=viser.Icon.HAND_STOP)
+        self.restart_btn = gui.add_button(
+            "Restart control loop", color="orange", icon=viser.Icon.REFRESH, visible=False,
+            hint="The arm's control loop process died or went silent: start a new one "
+                 "(disarmed; Arm again to move).")
+        self._restarting = threading.Lock()
         self.readout = gui.add_markdown(format_health(None))
         self.plot = gui.add_uplot(
             data=(np.zeros(1), np.zeros(1), np.zeros(1)),
@@ -210,6 +219,7 @@ class HardwarePanel(Panel):
         self.disconnect_btn.on_click(self._on_disconnect)
         self.arm_btn.on_click(self._on_arm)
         self.disarm_btn.on_click(self._on_disarm)
+        self.restart_btn.on_click(self._on_restart)
         self.port_list.on_update(self._on_port_choice)
         self.port_text.on_update(self._on_port_text)
         self.baud.on_update(self._on_baud)
@@ -266,6 +276,35 @@ class HardwarePanel(Panel):
     def _on_disarm(self, event: viser.GuiEvent) -> None:
         self._enqueue(event, "disarm the device", "disarm")
 
+    @operator_only(action="restart the control loop")
+    def _on_restart(self, event: viser.GuiEvent) -> None:
+        client = getattr(event, "client", None)
+        if self.app.loop_header is None:
+            self._tell(event, "This console has no control loop process to restart.")
+            return
+        if not self._restarting.acquire(blocking=False):
+            self._tell(event, "The control loop is being restarted.")
+            return
+        threading.Thread(target=self._restart, args=(client,), name="loop-restart",
+                         daemon=True).start()
+
+    def _restart(self, client: Any) -> None:
+        """Worker: the core ends motion and replaces the loop process (blocks seconds); tell
+        everyone."""
+        try:
+            self.restart_btn.disabled = True
+            self.app.core.restart_loop(client)
+        except Exception as exc:  # noqa: BLE001 - say why, keep the button for another try
+            log.exception("restarting the control loop failed")
+            self.app.notify_all("Restart control loop", f"failed: {exc}", color="red")
+        else:
+            self.app.notify_all("Control loop restarted",
+                                "A new control loop runs, disarmed: Arm to move the arm again.",
+                                color="orange")
+        finally:
+            self.restart_btn.disabled = False
+            self._restarting.release()
+
     @operator_only(action="change the serial port")
     def _on_port_choice(self, event: viser.GuiEvent) -> None:
         self._accepted[id(self.port_list)] = self.port_list.value
@@ -309,6 +348,8 @@ class HardwarePanel(Panel):
         """Show the newest health; notify each new fault once to every browser."""
         with self._lock:
             self._refreshed_at = self.clock()
+            loop_header = self.app.loop_header
+            self.restart_btn.visible = loop_header is not None and loop_header.needs_restart
             ctl = self.controls()
             h = None if ctl is None else ctl.health()
             # (viser sends a property only when its value changes)
@@ -321,7 +362,8 @@ class HardwarePanel(Panel):
             state = h.state if h is not None else "unconfigured"
             if self.app.robot.kind == "delta":  # the soft arm's Control panel tells its link
                 link = h if ctl is not None else extensible_link_health(self.app)  # mock
-                self.app.header.show("link", *header_link(self.kind, link))
+                shown = self.app.loop_header or self.app.header  # (checks the view's age)
+                shown.show("link", *header_link(self.kind, link))
             self.connect_btn.disabled = ctl is None
             self.disconnect_btn.disabled = ctl is None or state == "unconfigured"
             self.arm_btn.disabled = ctl is None or state != "inactive"

@@ -48,6 +48,7 @@ from console.panels.common.base import Panel, operator_only
 from console.core.state import ArmState
 from console.panels.common.events import target_of
 from console.web.widgets import widget_id
+from console.panels.common.disarmed import disarmed_note
 from core.units import MM_PER_M, fmt_deg
 
 HOLD_HZ = 20.0
@@ -188,9 +189,20 @@ class JogPanel(Panel):
         target = self.app.core.hold.target()
         return np.array(self.app.store.command.q) if target is None else target
 
+    def _refused_disarmed(self) -> bool:
+        """A disarmed extensible arm on hardware does not move: say so, move nothing."""
+        note = disarmed_note(self.app)
+        if note is None:
+            return False
+        self.note.content = f"⚠ Not moved: {note}"
+        self._sync_sliders(self._base())
+        return True
+
     @operator_only(action="jog")
     def _on_slider(self, coord: Coordinate, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own mirror of the state into the slider
+            return
+        if self._refused_disarmed():
             return
         handle = self.sliders[coord.key]
         scale = display_unit(coord).scale
@@ -211,14 +223,14 @@ class JogPanel(Panel):
         self.note.content = f"⚠ {note}" if note else ""
 
     def _go(self, event: viser.GuiEvent, fn: Any) -> None:
-        if event.client is None:
+        if event.client is None or self._refused_disarmed():
             return
         with self._target_lock:
             self.app.core.hold.move_to(event.client.client_id, fn(self._base()))
         self._sync_sliders(self.app.core.hold.target())
 
     def _on_hold(self, coord: Coordinate, direction: int, event: viser.GuiEvent) -> None:
-        if event.client is not None:
+        if event.client is not None and not self._refused_disarmed():
             self.app.core.hold.hold(event.client.client_id, coord, direction)
 
     def _on_release(self, coord: Coordinate, event: viser.GuiEvent) -> None:

@@ -266,6 +266,11 @@ class PathsPanel(Panel):
             core.drop_expected(EXECUTE_ONCE_PLANNED)
             self._set_status("⚠ A job is running: stop it first.", "error")
             return
+        if runner.snapshot.state in ("disarmed", "disconnected"):  # never armed behind the
+            core.drop_expected(EXECUTE_ONCE_PLANNED)
+            self._set_status("⚠ Not executed: arm first (Hardware tab: Arm device); "  # back
+                             "connecting never arms the arm.", "error")
+            return
         start = lambda: jobs.append(runner.execute(path, "path"))  # noqa: E731
         if once_planned:
             if not core.run_expected(EXECUTE_ONCE_PLANNED, start):
@@ -323,8 +328,8 @@ class PathsPanel(Panel):
 
     def show_phase(self) -> None:
         """Push :meth:`phase` to the header (it sends only changes)."""
-        if not self.app.stopped:
-            self.app.header.show("phase", *self.phase())
+        if not self.app.stopped:  # (the loop header checks the view's age)
+            (self.app.loop_header or self.app.header).show("phase", *self.phase())
 
     def _status_loop(self) -> None:
         """Worker: planning seconds (and timeout), the Hardware line and the Phase field,

@@ -47,6 +47,7 @@ from console.panels.extensible.worker_pool import WorkerPool
 from console.panels.common.typed_fields import TypedFields
 from console.core.console_core import MotionStopped
 from console.core.state import ArmState
+from console.panels.common.disarmed import disarmed_note
 from core.kinematics import delta as dk
 from core.kinematics.delta_ik import TipIKResult, solve_tip_ik
 from core.planning.box_routes import ClearReach, reach_clear
@@ -220,6 +221,10 @@ class TargetPanel(Panel):
         core = self.app.core
         if stops is None:
             stops = core.stop_generation
+        note = disarmed_note(self.app)
+        if note is not None:  # never armed behind the operator's back
+            self.report_error(f"Not moved: {note}")
+            return False
         # Set before the move starts: a frame of the move ("jog") must not read as someone
         # else's command, which would put the target back on the tip and clear this status.
         self._legs = (client_id, legs[1:])

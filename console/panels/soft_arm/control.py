@@ -184,11 +184,12 @@ class ControlPanel(Panel):
             if not self._told_died:  # once: the panel shows it from now on
                 self._told_died = True
                 self.app.notify_all("Control process died", f"{died}. The arm is not commanded "
-                                    "(the device's watchdog stops it); restart the console.",
-                                    color="red")
+                                    "(the device's watchdog stops it); the operator can press "
+                                    "Restart control loop (Hardware tab).", color="red")
                 self.app.recorder.action(f"control process died: {died}", None)
                 self._refresh()
             return
+        self._told_died = False  # running (again, after a restart): a next death is told too
         view = self.ctl.view
         c = None if view is None else view.snapshot.control
         self._feed.on_view(view)
@@ -244,7 +245,8 @@ class ControlPanel(Panel):
         died = self._died()
         if died:
             self.state_md.content = (f"**Control process died:** {died}. The arm is not "
-                                     "commanded; restart the console.")
+                                     "commanded; press **Restart control loop** (Hardware "
+                                     "tab).")
             for btn in (self.arm_btn, self.disarm_btn, self.execute.execute_btn, self.row.button):
                 btn.disabled = True
             return
@@ -256,10 +258,11 @@ class ControlPanel(Panel):
         c = view.snapshot.control
         self.state_md.content = state_html(view, self.execute.target)
         target = self.execute.target
-        self.app.header.show("phase", *(self.row.header(view) or header_phase(view, target)))
+        shown = self.app.loop_header or self.app.header  # the loop header checks the view's age
+        shown.show("phase", *(self.row.header(view) or header_phase(view, target)))
         self.row.show(view)
         self.execute.show(view)  # a released single grasp's object leaves the table
-        self.app.header.show("link", *header_link(view))
+        shown.show("link", *header_link(view))
         if c is not None:
             busy = c.phase not in IDLE_PHASES + ("settling",)
             self.execute.execute_btn.disabled = busy
