@@ -62,10 +62,10 @@ from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import DataDir
 from console.core.grasp_session import GraspSession
-from console.header import ConsoleHeader
+from console.panels.common.header import ConsoleHeader
 from console.core.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
-from console.loop_header import LoopHeader, LoopSource
+from console.panels.common.loop_header import LoopHeader, LoopSource
 from console.core.model import ArmModel, model_for
 from console.panel_sets import DEFAULT_PANELS
 from console.panels.common.base import Panel
@@ -75,7 +75,7 @@ from console.core.services import ConsoleServices
 from console.scene.grasp_layers import GraspSceneView
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
-from console.tabs import ConsoleTabs
+from console.panels.common.tabs import ConsoleTabs
 from core.robots import Robot, SoftArm
 from console.web.client_guard import ClientGuard
 
@@ -156,7 +156,7 @@ class ConsoleApp:
         self.header = ConsoleHeader(  # STOP, control, phase, link: above every tab
             server.gui, self.core, allow_viewers=self.guard.allow_viewers,
             notify_all=self.notify_all, stopped=lambda: self.stopped)
-        # Phase and Link: the arm's loop process's view with its age (console.loop_header);
+        # Phase and Link: the arm's loop process's view with its age (console.panels.common.loop_header);
         # panels word a fresh view through it: (app.loop_header or app.header).show(...)
         loop = self.services.soft_control or self.services.extensible_runner
         self.loop_header: LoopHeader | None = (LoopHeader(self.header, loop)

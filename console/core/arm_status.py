@@ -7,7 +7,7 @@ last view behind, and that view may still say "approach · ARMED · active". :fu
 decides, from the loop's news (:class:`LoopNews`: alive, its failure, the view's age), whether
 the arm's own wording of the view may be shown, or what to say instead (in the fault tone,
 never ARMED, the link "unknown"). Pure: no viser, no clock, no threads; the console's
-:class:`console.loop_header.LoopHeader` feeds it and pushes the result to the header.
+:class:`console.panels.common.loop_header.LoopHeader` feeds it and pushes the result to the header.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import dataclasses
 import math
 from typing import Any, Callable, Literal, Optional, Tuple
 
-Tone = Literal["ok", "busy", "warn", "fault"]  # a header field's colour (console.header)
+Tone = Literal["ok", "busy", "warn", "fault"]  # a header field's colour (console.panels.common.header)
 STALE_AFTER_S = 0.5  # a view older than this is not the arm's state any more
 Field = Tuple[str, Optional[Tone]]  # (text, tone) of one header field
 UNKNOWN_LINK: Field = ("unknown", "fault")

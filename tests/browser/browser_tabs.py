@@ -1,4 +1,4 @@
-"""Browser-test helpers: the console's panels live in tabs (``console.tabs``), and a widget is in
+"""Browser-test helpers: the console's panels live in tabs (``console.panels.common.tabs``), and a widget is in
 the page only while its tab is open; notifications can cover widgets. :func:`wait_until` is
 tests/ws_client.wait_for for pages."""
 

@@ -1,4 +1,4 @@
-"""The header's truth rule (console.core.arm_status) and its one writer (console.loop_header):
+"""The header's truth rule (console.core.arm_status) and its one writer (console.panels.common.loop_header):
 a dead or silent loop process is said in the fault tone within 1 s, never ARMED or an active
 link from its last view; fresh views are worded by the arm's panels. Fake views, a fake loop
 and a fake clock: no processes, no wall-clock timing."""
@@ -13,7 +13,7 @@ import pytest
 
 from fakes import FakeClock
 from console.core.arm_status import STALE_AFTER_S, LoopNews, header_fields, loop_trouble
-from console.loop_header import REFRESH_S, LoopHeader
+from console.panels.common.loop_header import REFRESH_S, LoopHeader
 
 
 @dataclasses.dataclass

@@ -6,12 +6,12 @@ from typing import Any
 
 import pytest
 
-from console.header import FIELDS
+from console.panels.common.header import FIELDS
 from console.panels.common.base import Panel
 from console.panels.common.jog import JogPanel
 from console.panels.common.readout import ReadoutPanel
 from console.panels.common.session import SessionPanel
-from console.tabs import TAB_ORDER
+from console.panels.common.tabs import TAB_ORDER
 from core.robots import load
 from tests.fakes import FakeClient, console_app
 

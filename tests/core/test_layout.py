@@ -62,15 +62,7 @@ KNOWN_CIRCLES: frozenset[tuple[str, ...]] = frozenset()
 #: console/recording/recorder.py, already named like its layer) importing top-level console modules that
 #: have not yet moved into a lower sub-package (console.core.state, console.scene.plan_view, ...) or that are
 #: the composition itself (console.app, console.header).
-KNOWN_BACK_ARROWS: frozenset[tuple[str, str]] = frozenset({
-    ('console.panels.common.hardware', 'console.header'),
-    ('console.panels.common.host', 'console.header'),
-    ('console.panels.common.host', 'console.tabs'),
-    ('console.panels.extensible.paths', 'console.header'),
-    ('console.panels.extensible.status', 'console.header'),
-    ('console.panels.soft_arm.control_row', 'console.header'),
-    ('console.panels.soft_arm.control_text', 'console.header'),
-})
+KNOWN_BACK_ARROWS: frozenset[tuple[str, str]] = frozenset()
 
 #: (console module, private viser module) imports outside console/web/.
 KNOWN_PRIVATE_VISER: frozenset[tuple[str, str]] = frozenset()

@@ -1,7 +1,7 @@
 """The panel contract: one class per GUI panel, owning its handles, composed by ConsoleApp.
 
 A panel subclasses :class:`Panel`, sets ``title``, ``tab`` (its task's tab: ``Operate``,
-``Hardware``, ``Experiments`` or ``Session``, see ``console.tabs``), ``order`` (smaller is higher
+``Hardware``, ``Experiments`` or ``Session``, see ``console.panels.common.tabs``), ``order`` (smaller is higher
 in its tab) and, if it only makes sense for one robot, ``kinds``; builds its widgets in
 :meth:`Panel.build` (called inside the panel's own folder, so ``self.gui.add_*`` lands there) and
 keeps the handles as attributes. Rules:
@@ -64,7 +64,7 @@ class Panel:
     """Base class of console panels (see the module docstring for the contract)."""
 
     title: ClassVar[str] = "Panel"
-    tab: ClassVar[str] = "Operate"  # one of console.tabs.TAB_ORDER
+    tab: ClassVar[str] = "Operate"  # one of console.panels.common.tabs.TAB_ORDER
     order: ClassVar[float] = 100.0
     kinds: ClassVar[tuple[str, ...]] = ("planar", "delta")
     expand_by_default: ClassVar[bool] = True

@@ -7,7 +7,7 @@ applies them. Without controls (the extensible arm's in-process mock, or a loop 
 none) the panel says why and disables its inputs.
 
 Restart control loop (shown while the arm's loop process is dead or silent, i.e. while the
-header says so, :mod:`console.loop_header`): ends the old loop process and starts a new one,
+header says so, :mod:`console.panels.common.loop_header`): ends the old loop process and starts a new one,
 disarmed (:meth:`hw_bridge.loop_process.LoopProcess.restart`), without restarting serve.py.
 
 Sharing: Connect, Disconnect, Arm device, Disarm device, Restart control loop and every change
@@ -38,7 +38,7 @@ import numpy as np
 import viser
 from viser import uplot
 
-from console.header import Tone
+from console.panels.common.header import Tone
 from console.recording.lab_feed import LinkFeed
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.plot_data import PlotPacer, axis_top, thin

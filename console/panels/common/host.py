@@ -22,10 +22,10 @@ if TYPE_CHECKING:
     from console.core.model import ArmModel
     from console.core.services import ConsoleServices
     from console.core.state import StateStore
-    from console.header import ConsoleHeader
+    from console.panels.common.header import ConsoleHeader
     from console.recording.recorder import Recorder
     from console.scene.arm_view import ArmView
-    from console.tabs import ConsoleTabs
+    from console.panels.common.tabs import ConsoleTabs
     from core.robots import Robot
 
 

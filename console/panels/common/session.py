@@ -1,7 +1,7 @@
 """Session panel: take/release control, record, replay, export (STOP is the header's).
 
 Shared widgets (every browser sees the same): who holds control (shown in the header,
-``console.header``), recording start/stop (operator only) and "Export scene (HTML)" (anyone: a
+``console.panels.common.header``), recording start/stop (operator only) and "Export scene (HTML)" (anyone: a
 plan to hand to students).
 
 Per-browser widgets (``client.gui``, added on connect inside this panel's folder, so what one

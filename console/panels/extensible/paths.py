@@ -37,7 +37,7 @@ import numpy.typing as npt
 import viser
 import viser.uplot as uplot
 
-from console.header import Tone
+from console.panels.common.header import Tone
 from console.recording.lab_feed import path_plan_record
 from console.panels.common.base import Panel
 from console.panels.extensible.status import (extensible_arm, extensible_runner, hardware_html,

@@ -14,7 +14,7 @@ from __future__ import annotations
 import html
 from typing import Any
 
-from console.header import Tone
+from console.panels.common.header import Tone
 from console.panels.common.hardware import extensible_link_health, header_link
 from core.robots import ExtensibleArm
 from hw_bridge.extensible_jobs import RunnerSnapshot

@@ -24,7 +24,7 @@ from typing import Any
 
 import viser
 
-from console.header import Tone
+from console.panels.common.header import Tone
 from console.panels.common.base import operator_only
 from console.panels.soft_arm.control_text import IDLE_PHASES
 from console.core.table_scene import validate_object

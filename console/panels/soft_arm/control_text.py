@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from console.header import Tone
+from console.panels.common.header import Tone
 from console.core.grasp_state import SessionView
 from hw_bridge.link_supervisor import DISCONNECTED
 from hw_bridge.soft_arm_process import ControlView

@@ -1,6 +1,6 @@
 """The console's always-visible header: the one STOP, who holds control, the phase, the link.
 
-It sits above the tabs (``console.tabs``), so on a desktop, a tablet (820x1180) or a phone
+It sits above the tabs (``console.panels.common.tabs``), so on a desktop, a tablet (820x1180) or a phone
 (390x844) STOP and the arm's phase are on screen without scrolling, whichever tab is open.
 STOP works for everyone (viewers too, also the ``Esc`` hotkey through viser's command palette).
 
@@ -10,7 +10,7 @@ Panels own what the fields say and push it here with :meth:`ConsoleHeader.show`:
     app.header.show("link", "emulator · active · ARMED")
 
 Phase and Link describe the arm's loop process, so with one they go through
-``app.loop_header`` (:class:`console.loop_header.LoopHeader`), which shows a panel's wording
+``app.loop_header`` (:class:`console.panels.common.loop_header.LoopHeader`), which shows a panel's wording
 only while the loop's view is fresh and says otherwise that the loop died or went silent.
 
 Fields are shown in :data:`FIELDS` order; an empty text hides a field. ``tone`` colours the

@@ -1,7 +1,7 @@
 """The console's tabs by task, so a demo runs without scrolling through one long column.
 
 Every panel names its tab (``Panel.tab``); :class:`ConsoleTabs` makes one viser tab group below
-the header (``console.header``) and a tab the first time a panel asks for it. Tabs keep the
+the header (``console.panels.common.header``) and a tab the first time a panel asks for it. Tabs keep the
 order of :data:`TAB_ORDER` whatever order panels are added in, and a robot without, say,
 experiments shows no empty *Experiments* tab.
 """

@@ -48,7 +48,7 @@ class LoopSource(Protocol):
 
 
 class HeaderSink(Protocol):
-    """Where the fields go (:class:`console.header.ConsoleHeader`)."""
+    """Where the fields go (:class:`console.panels.common.header.ConsoleHeader`)."""
 
     def show(self, field: str, text: str, tone: Tone | None = None, *,
              escape: bool = True) -> None: ...
