@@ -69,7 +69,6 @@ KNOWN_PRIVATE_VISER: frozenset[tuple[str, str]] = frozenset()
 
 #: ``# type: ignore`` comments per file under console/ (a file not listed has none).
 KNOWN_TYPE_IGNORES: dict[str, int] = {
-    'console/panels/common/base.py': 4,
     'console/web/client_message_checks.py': 1,
     'console/web/scene_clicks.py': 2,
     'console/web/share_tunnel.py': 1,

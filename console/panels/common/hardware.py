@@ -32,7 +32,7 @@ import collections
 import logging
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import viser
@@ -246,12 +246,13 @@ class HardwarePanel(Panel):
         if client is not None:
             client.add_notification("Hardware", message, color="orange", auto_close_seconds=6.0)
 
-    def _enqueue(self, event: Any, what: str, fn: Any, *args: Any) -> None:
+    def _enqueue(self, event: Any, what: str,
+                 verb: Callable[[BridgeControls], None]) -> None:
         ctl = self.controls()
         if ctl is None:
             self._tell(event, no_controls_text(self.kind, self.owner).replace("**", ""))
             return
-        getattr(ctl, fn)(*args)
+        verb(ctl)
         self.app.recorder.action(f"hardware: {what}", client_of(event))
 
     @operator_only(action="connect the hardware")
@@ -262,23 +263,24 @@ class HardwarePanel(Panel):
                               "/dev/ttyACM0, or a pyserial URL).")
             return
         baud = int(self.baud.value)
-        self._enqueue(event, f"connect {port} at {baud} baud", "connect", port, baud)
+        self._enqueue(event, f"connect {port} at {baud} baud",
+                      lambda ctl: ctl.connect(port, baud))
 
     @operator_only(action="disconnect the hardware")
     def _on_disconnect(self, event: viser.GuiEvent) -> None:
-        self._enqueue(event, "disconnect", "disconnect")
+        self._enqueue(event, "disconnect", lambda ctl: ctl.disconnect())
 
     @operator_only(action="arm the device")
     def _on_arm(self, event: viser.GuiEvent) -> None:
-        self._enqueue(event, "arm the device", "arm")
+        self._enqueue(event, "arm the device", lambda ctl: ctl.arm())
 
     @operator_only(action="disarm the device")
     def _on_disarm(self, event: viser.GuiEvent) -> None:
-        self._enqueue(event, "disarm the device", "disarm")
+        self._enqueue(event, "disarm the device", lambda ctl: ctl.disarm())
 
     @operator_only(action="restart the control loop")
     def _on_restart(self, event: viser.GuiEvent) -> None:
-        client = getattr(event, "client", None)
+        client = client_of(event)
         if self.app.loop_header is None:
             self._tell(event, "This console has no control loop process to restart.")
             return

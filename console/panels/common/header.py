@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import viser
 
+from console.panels.common.events import client_of
 from console.core.arm_status import Tone
 
 if TYPE_CHECKING:
@@ -100,7 +101,7 @@ class ConsoleHeader:
                 + "<br>".join(parts) + "</div>")
 
     def _on_stop(self, event: Any) -> None:
-        client = getattr(event, "client", None)
+        client = client_of(event)
         who = self.core.access.name_of(client)
         self.core.stop_motion(f"STOP pressed by {who}", client)
         self._notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)

@@ -32,6 +32,7 @@ from typing import Any
 
 import viser
 
+from console.panels.common.events import target_of
 from console.core.grasp_state import SessionView
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.typed_fields import TypedFields
@@ -202,7 +203,7 @@ class ObjectsPanel(Panel):
 
     def on_refused(self, event: Any) -> None:
         """Undo what a refused viewer's edit shows everyone."""
-        target = getattr(event, "target", None)
+        target = target_of(event)
         if isinstance(event, viser.TransformControlsEvent):
             self.session.redraw_objects()  # the gizmo goes back to the object
         elif target is self.click_place:

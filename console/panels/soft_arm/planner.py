@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import html
 
+from console.panels.common.events import target_of
 from console.core.grasp_session import GraspSession
 from console.core.grasp_state import SessionView
 from console.panels.common.base import Panel, operator_only
@@ -110,7 +111,7 @@ class PlannerPanel(Panel):
 
     def on_refused(self, event) -> None:
         """Put a refused (or bad) edit back to the session's setting, for everyone."""
-        s, target = self.session, getattr(event, "target", None)
+        s, target = self.session, target_of(event)
         if target is self.delta_d:
             self.delta_d.value = round(s.delta_d * 1e3, 1)
         elif target is self.weights:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from console.panels.common.events import target_of
 from console.core.grasp_state import SessionView
 from console.panels.common.base import Panel, operator_only
 
@@ -129,7 +130,7 @@ class WaypointsPanel(Panel):
 
     def on_refused(self, event) -> None:
         """Put a refused viewer's slider / speed / trail edit back, for everyone."""
-        view, target = self.session.view(), getattr(event, "target", None)
+        view, target = self.session.view(), target_of(event)
         if target is self.slider:
             self.slider.value = view.index + 1
         elif target is self.speed:
