@@ -13,7 +13,7 @@ arm's 40 ms link timeout.
 control process (loop, its helper threads) and the device emulator it starts; the others run
 the console, the planner worker and everything else this project starts (the load
 benchmark's browsers too). Other programs on the machine can still land on the real-time CPU;
-for a hard guarantee boot with ``isolcpus=<cpu>`` (README, "Real time").
+for a hard guarantee boot with ``isolcpus=<cpu>`` (docs/real-time.md).
 """
 
 from __future__ import annotations

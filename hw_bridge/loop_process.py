@@ -3,7 +3,7 @@
 In the console process the render thread, viser's event loop and the panels hold the GIL for
 milliseconds at a time, and on a loaded machine a thread holding it is descheduled while the
 real-time loop waits for it: a loop *thread* there misses deadlines and loses its serial link
-(see the README's "Real time" section). So each arm's loop runs in a spawned child whose every
+(see docs/real-time.md). So each arm's loop runs in a spawned child whose every
 thread is real-time (:mod:`hw_bridge.realtime`) and pinned to the real-time CPU
 (:mod:`hw_bridge.cpu_partition`).
 

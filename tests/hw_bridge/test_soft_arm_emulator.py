@@ -188,8 +188,8 @@ def test_under_cpu_hogs_the_default_link_moves_the_arm_and_a_loss_stops_it_with_
     churner run at normal priority anywhere: the arm reaches its targets (the mocap-fitted
     curvature), and a link loss, when one comes, disarms the arm with its reason, nothing arms
     by itself, and the operator's Arm brings it back. How often the link is lost is a timing
-    figure, measured by ``benchmarks/link_gaps.py --hog 2 --churn 1 --hog-nice 0`` (README "Real
-    time": about 2 a minute on the 2-core VM, each after a ~50 ms stall of the real-time CPU;
+    figure, measured by ``benchmarks/link_gaps.py --hog 2 --churn 1 --hog-nice 0`` (docs/real-time.md,
+    "Real time": about 2 a minute on the 2-core VM, each after a ~50 ms stall of the real-time CPU;
     before the CPU partition 1-6 a minute); this test asserted none in 20 s and failed CI."""
     import subprocess
     import sys
