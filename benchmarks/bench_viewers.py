@@ -292,15 +292,15 @@ def run(a: argparse.Namespace, robot: str, method: str, many: int) -> dict[str, 
         console.send("still")
         console.wait_for("STILL")
         time.sleep(a.warmup)
-        still = console.scene.measure(a.seconds)
+        still = console.measure(a.seconds)
         console.send("move")
         time.sleep(a.warmup + (5.0 if robot == "soft-arm" else 0.0))  # arm + first plan
-        moving = console.scene.measure(a.seconds)
+        moving = console.measure(a.seconds)
         crowd = None
         if many:
             console.add_viewers(many - 1)
             time.sleep(a.warmup)
-            crowd = console.scene.measure(a.seconds)
+            crowd = console.measure(a.seconds)
         return {"still": still, "moving": moving, "crowd": crowd, "reach_s": console.reach_s}
     finally:
         console.close()

@@ -152,8 +152,12 @@ def test_a_held_jog_whose_renewals_stop_ends_in_the_one_route_once() -> None:
         clock.t += 0.02
         assert core.hold.tick() is None
     assert len(arm.stops) == 1
-    assert not core.hold.hold(1, coord, +1)  # the same press, renewed late: latched
-    core.hold.release(1)  # ... until it is released
+    # A renewal that comes late (the button is still held) is a new jog, as a fresh press is:
+    # the expiry stopped the arm, it did not latch the button (only STOP and a lost lease do).
+    assert core.hold.hold(1, coord, +1)
+    clock.t += 0.02
+    assert core.hold.tick() is not None
+    core.hold.release(1)
     assert arm.stops == [arm.stops[0]]
 
 

@@ -120,7 +120,7 @@ def test_session_plans_refuses_inspects_and_plays(console):
     from console.panels.soft_arm.planner import PlannerPanel, outcome_html
     from console.panels.soft_arm.waypoints import WaypointsPanel
 
-    s = console.core.grasp_session
+    s = console.grasp_session
     first = wait_for(lambda: s.view().outcome)            # the demo object, planned at start
     assert first.plan is not None and first.plan.success
     name = s.place(-0.12, 0.28)
@@ -154,7 +154,7 @@ def test_session_plans_refuses_inspects_and_plays(console):
 
 
 def test_live_replanning_is_throttled_to_the_newest_position(console):
-    s = console.core.grasp_session
+    s = console.grasp_session
     name = s.place(-0.25, 0.15)
     wait_for(lambda: (o := s.view().outcome) and o.obj and o.obj.name == name)
     seq0 = s.view().outcome.seq
