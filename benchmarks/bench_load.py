@@ -85,7 +85,7 @@ def child(a: argparse.Namespace) -> int:
         demo = app.services.demo
         assert demo is not None
         demo.start()
-    loop_pid = ctl._proc.pid if ctl is not None and hasattr(ctl, "_proc") else 0
+    loop_pid = (ctl.pid or 0) if ctl is not None else 0
     print(f"READY http://127.0.0.1:{server.get_port()}/ {'loop' if ctl else 'demo'} {loop_pid}",
           flush=True)
     base_overruns = 0

@@ -162,12 +162,12 @@ class ConsoleApp:
         self.loop_header: LoopHeader | None = (LoopHeader(self.header, loop)
                                                if isinstance(loop, LoopSource) else None)
         self.tabs = ConsoleTabs(self.server.gui, order=1.0)  # panels build into their tab
-        self.table, self.grid = add_table(server.scene, self.theme, self._table_extent())
+        self.table, self.grid = add_table(server.scene, self.theme, self.table_rectangle())
         add_lights(server.scene, self.theme)
         self.view: ArmView[ArmModel] = make_arm_view(server.scene, self.model)
         if isinstance(robot, SoftArm):  # the table, its objects and plans
             self.grasp_session = GraspSession(
-                robot, self._table_extent(), kappa=lambda: self.store.display.q,
+                robot, self.table_rectangle(), kappa=lambda: self.store.display.q,
                 feed=lambda view, changed: feed_grasp(self.recorder, view, changed),
                 cache_dirs=(self.data_root / "cache",))
             self.grasp_scene = GraspSceneView(server, robot, self.grasp_session)
@@ -376,11 +376,11 @@ class ConsoleApp:
 
     # -- the stage (console.scene.stage) ----------------------------------------------------------
 
-    def _span(self) -> float:
+    def arm_reach(self) -> float:
         """Largest distance of any arm point from the base (:func:`console.scene.stage.arm_span`)."""
         return arm_span(self.robot, self.model.kind)
 
-    def _table_extent(self) -> tuple[float, float, float, float]:
+    def table_rectangle(self) -> tuple[float, float, float, float]:
         """Table rectangle (x0, x1, y0, y1) around the arm's workspace
         (:func:`console.scene.stage.table_extent`)."""
         return table_extent(self.robot, self.model.kind)

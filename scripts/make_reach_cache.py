@@ -1,7 +1,7 @@
 """Regenerate the shipped reachability map of the default soft arm, so a fresh console says "from cache".
 
 ``python scripts/make_reach_cache.py [--robot soft-arm] [--check]`` computes the map the console
-asks for at start (the table rectangle of ``ConsoleApp._table_extent``, the robot's nominal
+asks for at start (the table rectangle of ``ConsoleApp.table_rectangle``, the robot's nominal
 object radius, ``console.core.reach_job.REACH_STEP`` and ``DEFAULT_LEVELS``), writes it to
 ``data/reach_cache/`` under its key and removes the other files there. Run it after a change to
 the robot file, the planner or :data:`core.planning.reachability.ALGORITHM_VERSION`. With
@@ -23,7 +23,7 @@ from core.planning.reachability import DEFAULT_LEVELS, reachability_map  # noqa:
 
 
 def console_request(robot: robots.SoftArm) -> ReachRequest:
-    """The request the console makes at start for ``robot`` (see ``ConsoleApp._table_extent``:
+    """The request the console makes at start for ``robot`` (see ``ConsoleApp.table_rectangle``:
     span = straight arm plus gripper; the table from -span to span across, -0.4 span to
     1.15 span along the base heading)."""
     span = robot.n_segments * robot.segment_length + robot.gripper.length

@@ -4,7 +4,7 @@ What every console draws the same way whatever its panels: the theme (``static/t
 brand colour, panel label; no share button or logo), the table (the z = 0 plane around the
 arm's workspace, with a subtle grid), cheap lights for software-rendered WebGL, and the first of
 the robot's camera presets. :class:`console.app.ConsoleApp` builds it in this order; its
-``_span`` and ``_table_extent`` are :func:`console.core.table_area.arm_span` and
+``arm_reach`` and ``table_rectangle`` are :func:`console.core.table_area.arm_span` and
 :func:`console.core.table_area.table_extent` of its robot (pure geometry, shared with the grasp
 session).
 """

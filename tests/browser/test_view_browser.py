@@ -105,7 +105,7 @@ def test_top_down_moves_my_camera_and_two_clicks_measure_a_distance(
     cam = client.camera
     pixels = [(0.22 * w, 0.62 * h), (0.52 * w, 0.38 * h)]
     points = [table_point(cam, px, py, w, h) for px, py in pixels]
-    x0, x1, y0, y1 = app._table_extent()
+    x0, x1, y0, y1 = app.table_rectangle()
     for p in points:
         assert x0 < p[0] < x1 and y0 < p[1] < y1, p                 # both on the table
     want_mm = float(np.linalg.norm(points[1] - points[0]) * 1e3)

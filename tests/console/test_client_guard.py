@@ -343,7 +343,7 @@ def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) ->
     real = panel.ctl.grasp_at, panel.ctl.execute
     panel.ctl.grasp_at = lambda *a, **k: sent.append(a)  # type: ignore[method-assign]
     panel.ctl.execute = lambda *a, **k: sent.append(a)  # type: ignore[method-assign]
-    panel._disarmed = lambda: False  # type: ignore[method-assign]  # as if armed
+    panel.is_disarmed = lambda: False  # type: ignore[method-assign]  # as if armed
     client = FakeClient(op.client_id)
     event = type("E", (), {"client": client, "client_id": op.client_id})()
     first = session.view().objects[0]
@@ -358,7 +358,7 @@ def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) ->
         assert "radius" in client.notes[0][1] or "finite" in client.notes[0][1]
     finally:
         panel.ctl.grasp_at, panel.ctl.execute = real  # type: ignore[method-assign]
-        del panel._disarmed
+        del panel.is_disarmed
         with session._cond:
             session._objects[0] = first
 

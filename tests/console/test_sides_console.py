@@ -96,10 +96,10 @@ def test_two_finger_gripper_is_drawn_as_a_mirrored_pair() -> None:
 
 
 def test_shipped_reach_map_is_the_consoles_request_and_covers_both_sides() -> None:
-    # The request as the console makes it (ConsoleApp._table_extent on the default arm).
+    # The request as the console makes it (ConsoleApp.table_rectangle on the default arm).
     stub = SimpleNamespace(robot=SOFT, model=SimpleNamespace(kind="planar"))
-    stub._span = lambda: ConsoleApp._span(stub)
-    x0, x1, y0, y1 = ConsoleApp._table_extent(stub)
+    stub.arm_reach = lambda: ConsoleApp.arm_reach(stub)
+    x0, x1, y0, y1 = ConsoleApp.table_rectangle(stub)
     request = ReachRequest(SOFT.source, SOFT.capture.nominal_object_radius, (x0, x1), (y0, y1))
     reach = ReachCache(SHIPPED_CACHE).load(request)
     assert reach is not None, "run: python scripts/make_reach_cache.py"

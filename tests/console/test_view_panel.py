@@ -23,7 +23,7 @@ SOFT, EXT = load("soft-arm"), load("extensible")
 
 
 def span_and_table(robot) -> tuple[float, tuple[float, float, float, float]]:
-    """What ConsoleApp._span / _table_extent give (written out: an independent expectation)."""
+    """What ConsoleApp.arm_reach / table_rectangle give (written out: an independent expectation)."""
     if robot.kind == "planar":
         s = robot.n_segments * robot.segment_length + robot.gripper.length
         return s, (-s, s, -0.4 * s, 1.15 * s)

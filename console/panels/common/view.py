@@ -135,8 +135,8 @@ class ViewPanel(Panel):
     def build(self) -> None:
         app, gui = self.app, self.gui
         self.kind = app.model.kind
-        self.span = app._span()
-        self.table = app._table_extent()
+        self.span = app.arm_reach()
+        self.table = app.table_rectangle()
         names = [p.name for p in camera.presets(self.kind, self.span, self.table)]
         # One button per preset (a button group's value is refused by console.web.client_values,
         # which takes every button-like widget for a plain button).

@@ -133,24 +133,24 @@ class ControlPanel(Panel):
     # -- callbacks (thin: enqueue to the loop) -----------------------------------------------
     def _arm(self, event: Any = None) -> None:
         fut = self.app.core.start_motion(self.ctl.arm)  # a refusal (link down, Disconnected) is told to this operator
-        fut.add_done_callback(lambda f: self._report(event, f))
+        fut.add_done_callback(lambda f: self.report_done(event, f))
 
     def _disarm(self, event: Any = None) -> None:
         fut = self.ctl.disarm()
-        fut.add_done_callback(lambda f: self._report(event, f))
+        fut.add_done_callback(lambda f: self.report_done(event, f))
 
-    def _refuse(self, event: Any, title: str, message: str) -> None:
+    def refuse_action(self, event: Any, title: str, message: str) -> None:
         client = client_of(event)
         if client is not None:
             client.add_notification(title, message, color="red", auto_close_seconds=8.0)
 
-    def _disarmed(self) -> bool:
+    def is_disarmed(self) -> bool:
         view = self.ctl.view
         c = None if view is None else view.snapshot.control
         return c is None or not c.armed
 
     @staticmethod
-    def _report(event: Any, fut: Any) -> None:
+    def report_done(event: Any, fut: Any) -> None:
         exc = fut.exception()
         client = client_of(event)
         if exc is not None and client is not None:

@@ -70,8 +70,8 @@ class SentGrasp:
 
 class ExecuteControls:
     """The Control panel's target line, Execute button and Click to grasp (see the module
-    docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``_disarmed``,
-    ``_refuse`` and ``_report``); the task starts through the console core."""
+    docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``is_disarmed``,
+    ``refuse_action`` and ``report_done``); the task starts through the console core."""
 
     def __init__(self, panel: Any) -> None:
         self.panel, self.app = panel, panel.app
@@ -111,14 +111,14 @@ class ExecuteControls:
     def _target(self, event: Any) -> ExecuteTarget | None:
         """The selected object (and its plan) Execute acts on, or None after telling the
         operator why (nothing is sent: a radius of 1e308 must not reach the arm)."""
-        if self.panel._disarmed():  # arming is the operator's own act (issue 19.3)
-            self.panel._refuse(event, "Arm first", ARM_FIRST)
+        if self.panel.is_disarmed():  # arming is the operator's own act (issue 19.3)
+            self.panel.refuse_action(event, "Arm first", ARM_FIRST)
             return None
         try:
             target = execute_target(self.app.soft_arm_grasp().view())
             validate_object(target_object(target), self.app.robot)
         except ValueError as exc:
-            self.panel._refuse(event, "Refused", str(exc))
+            self.panel.refuse_action(event, "Refused", str(exc))
             return None
         return target
 
@@ -137,7 +137,7 @@ class ExecuteControls:
             obstacles, clearance = tuple(view.obstacles), float(view.clearance)
             fut = start(lambda: ctl.grasp_at(target.x, target.y, target.r, obstacles, clearance,
                                              bin_params=table_bin))
-        fut.add_done_callback(lambda f: self._report(event, f, sent))
+        fut.add_done_callback(lambda f: self.report_done(event, f, sent))
         client = client_of(event)
         if client is not None:
             where = bin_sentence(self.app.robot, table_bin, target.r)
@@ -149,7 +149,7 @@ class ExecuteControls:
         """The control process took the grasp or refused it (then nothing leaves the table)."""
         if fut.exception() is not None and self.sent is sent:
             self.sent = None
-        self.panel._report(event, fut)
+        self.panel.report_done(event, fut)
 
     def show(self, view: Any) -> None:
         """The Control panel's refresh: once the arm, having started on the sent grasp, reads
@@ -193,14 +193,14 @@ class ExecuteControls:
         p = table_point(event.ray_origin, event.ray_direction)
         if p is None:
             return
-        if self.panel._disarmed():
-            self.panel._refuse(event, "Arm first", ARM_FIRST)
+        if self.panel.is_disarmed():
+            self.panel.refuse_action(event, "Arm first", ARM_FIRST)
             return
         session = self.app.soft_arm_grasp()
         try:  # the Objects panel's object there (selected), or a new one
             session.place(p[0], p[1])
         except ValueError as exc:
-            self.panel._refuse(event, "Refused", str(exc))
+            self.panel.refuse_action(event, "Refused", str(exc))
             return
         target = self._target(event)
         if target is not None:

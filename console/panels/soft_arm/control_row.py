@@ -98,8 +98,8 @@ def row_html(view: ControlView | None, sent: SentRow | None) -> str:
 
 class RowControls:
     """The Control panel's "Clear table into bin" button and row status (see the module
-    docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``_disarmed``, ``_refuse``
-    and ``_report``)."""
+    docstring). ``panel`` is the Control panel (its ``ctl``, ``app``, ``is_disarmed``,
+    ``refuse_action`` and ``report_done``)."""
 
     def __init__(self, panel: Any) -> None:
         self.panel, self.app = panel, panel.app
@@ -119,21 +119,21 @@ class RowControls:
 
     # -- the button (operator only) ------------------------------------------------------------
     def _clear(self, event: Any) -> None:
-        if self.panel._disarmed():  # arming is the operator's own act (issue 19.3)
-            self.panel._refuse(event, "Arm first", ROW_ARM_FIRST)
+        if self.panel.is_disarmed():  # arming is the operator's own act (issue 19.3)
+            self.panel.refuse_action(event, "Arm first", ROW_ARM_FIRST)
             return
         view = self.app.soft_arm_grasp().view()
         if view.bin is None:
-            self.panel._refuse(event, "Place a bin first", NO_BIN)
+            self.panel.refuse_action(event, "Place a bin first", NO_BIN)
             return
         if not view.objects:
-            self.panel._refuse(event, "Nothing to clear", NO_OBJECTS)
+            self.panel.refuse_action(event, "Nothing to clear", NO_OBJECTS)
             return
         try:
             for o in view.objects:
                 validate_object(o, self.app.robot)
         except ValueError as exc:
-            self.panel._refuse(event, "Refused", str(exc))
+            self.panel.refuse_action(event, "Refused", str(exc))
             return
         sent = SentRow(next(self._ids), tuple(o.name for o in view.objects),
                        view.bin.describe())
@@ -153,7 +153,7 @@ class RowControls:
         """The control process took the row (say so) or refused it (the operator is told why)."""
         if fut.exception() is not None:
             self.rows.pop(sent.row_id, None)
-            self.panel._report(event, fut)
+            self.panel.report_done(event, fut)
             return
         what = f"{len(sent.names)} object{'s' if len(sent.names) != 1 else ''} into the " \
                f"{sent.bin_text}"
