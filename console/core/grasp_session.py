@@ -36,7 +36,7 @@ import numpy.typing as npt
 from console.core.grasp_carry import plan_carry
 from console.core.grasp_inspection import WaypointInspection
 from console.core.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
-from console.core.grasp_state import LIVE_HZ, GraspListener, Outcome, SessionView
+from console.core.grasp_state import LIVE_HZ, PARTS, GraspListener, Outcome, SessionView
 from console.core.planning_clock import PlanningClock
 from console.core.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome,
                                     ReachRequest, start_reach_map)
@@ -110,6 +110,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         self._reach: ReachMap | str | None = "computing" if self._with_reach else "off"
         self._reach_note = ""
         self._listeners: list[GraspListener] = []
+        self._welcome: list[GraspListener] = []  # added since the worker last ran
         self._stop = False
         self._next_tick = 0.0
         self.planning_clock: PlanningClock | None = None   # "planning for n s" from 0.5 s on
@@ -139,9 +140,13 @@ class GraspSession(ObstacleEdits, WaypointInspection):
 
     def add_listener(self, fn: GraspListener) -> None:
         """Call ``fn(view, changed)`` on the worker thread after every change (the snapshot
-        and the parts that changed, :mod:`console.core.grasp_state`), in the order added."""
+        and the parts that changed, :mod:`console.core.grasp_state`), in the order added. A
+        listener added after the session started is first told everything (``PARTS``) once, so
+        it never waits for the next change to show the table."""
         with self._cond:
             self._listeners.append(fn)
+            self._welcome.append(fn)
+            self._cond.notify_all()
 
     def _changed(self, *parts: str, plan: bool | None = None) -> None:
         """Mark parts dirty and optionally request a plan (True = live); caller holds the lock."""
@@ -310,7 +315,8 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                     now = self._clock()
                     tick = self._playing and now >= self._next_tick
                     wait_live = (self._request is True and now - last_live < 1.0 / LIVE_HZ)
-                    if (self._request is not None and not wait_live) or self._dirty or tick:
+                    if ((self._request is not None and not wait_live) or self._dirty or tick
+                            or self._welcome):
                         break
                     timeout = 0.5
                     if self._playing:
@@ -322,6 +328,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 if request is not None:
                     self._request = None
                 dirty, self._dirty = self._dirty, set()
+                welcome, self._welcome = self._welcome, []
                 if tick:
                     last = max(self._n() - 1, 0)
                     self._index = min(self._index + 1, last)
@@ -331,6 +338,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 objects, selected = list(self._objects), self._selected
                 settings = (self.delta_d, self.weights, tuple(self._obstacles), self.clearance,
                             None if request else self._bin)  # live plans skip the carry
+            self._greet(welcome)
             if request is not None:
                 if dirty:   # what changed on the table is drawn before the plan for it runs
                     self._publish(dirty)
@@ -381,6 +389,18 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             listeners = list(self._listeners)
         for fn in listeners:
             fn(view, PLANNING)
+
+    def _greet(self, listeners: list[GraspListener]) -> None:
+        """Tell listeners added since the last run the whole state (the feed is not told: it
+        recorded every change already)."""
+        if not listeners:
+            return
+        view = self.view()
+        for fn in listeners:
+            try:
+                fn(view, PARTS)
+            except Exception:
+                log.exception("grasp session listener %r failed", fn)
 
     def _publish(self, dirty: set[str]) -> None:
         """Tell every listener (views first: they subscribed first) and then ``feed`` what

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from console.core.grasp_session import GraspSession
+from console.core.grasp_state import PARTS
 from console.core.table_area import table_extent
 from console.recording.lab_feed import feed_grasp
 from core.planning.sides import plan_grasp_sided
@@ -144,3 +145,21 @@ def test_the_console_makes_the_grasp_session_whatever_panels(name, monkeypatch):
         assert session._thread is not None and not session._thread.is_alive()
     finally:
         server.stop()
+
+
+def test_a_listener_added_after_the_start_is_told_the_table_at_once():
+    """A panel built after the app made (and started) the session must not wait for the next
+    change to show the table: it is told the whole state once, with every part changed. (Panels
+    built after the session's first publish showed an empty Objects line until an edit.)"""
+    s, told, logged = headless_session()
+    try:
+        wait_for(lambda: s.view().outcome, 30.0, "the first object planned")
+        n_logged = len(logged)
+        late: list = []
+        s.add_listener(lambda view, changed: late.append((view, changed)))
+        view, changed = wait_for(lambda: late and late[0], 10.0, "the late listener told")
+        assert changed == PARTS
+        assert [o.name for o in view.objects] == ["Object 1"] and view.outcome is not None
+        assert len(logged) == n_logged  # the recording is not told the same table again
+    finally:
+        s.close()
