@@ -54,9 +54,15 @@ def field(page, label: str):
 
 
 def type_target(page, xyz_mm) -> None:
+    """Type x, y, z as a person would, checking each field shows what was typed: the first fill
+    of a number input just mounted again (the Operate tab reopened) can be swallowed by the
+    page, which then keeps the old value (seen after a visit to the Hardware tab)."""
     for axis, value in zip("xyz", xyz_mm):
         box = field(page, f"Target {axis} (mm)")
-        box.fill(f"{value:g}")
+        for _ in range(3):
+            box.fill(f"{value:g}")
+            if box.input_value() == f"{value:g}":
+                break
         box.press("Tab")
 
 
@@ -122,9 +128,21 @@ def test_path_preview_and_execute_on_mock_hardware(
     wait_until("the link armed", lambda: "ARMED" in link_text(page), 20,
                show=lambda: link_text(page))
     open_tab(page, "Operate")
+    # Arm holds where the encoders are (the mock starts at the start pose) and makes that the
+    # console's command, which the target rides on: type only once it has (else that echo can
+    # land between two typed fields, as it would for a person typing within milliseconds).
+    armed_at = dk.tip_position(ROBOT, ExtensibleModel(ROBOT).initial()) * 1e3
+    wait_until("the command at the armed posture",
+               lambda: np.abs(readout_tip(page) - armed_at).max() <= 1.0,
+               show=lambda: f"readout {readout_tip(page)}")
+    wait_until("the target fields at the armed posture", lambda: np.abs(
+        np.array([float(field(page, f"Target {a} (mm)").input_value() or "nan") for a in "xyz"])
+        - armed_at).max() <= 1.0)
     start = np.array([100.0, 0.0, 300.0])
     type_target(page, start)
-    wait_until("the tip at the start", lambda: np.abs(readout_tip(page) - start).max() <= 1.0)
+    target_status = page.locator('[data-testid="target-status"]')
+    wait_until("the tip at the start", lambda: np.abs(readout_tip(page) - start).max() <= 1.0,
+               show=lambda: f"readout {readout_tip(page)}; {target_status.inner_text()!r}")
     status = page.locator('[data-testid="path-status"]')
     page.get_by_role("button", name="Preview").click()
     wait_until("the preview", lambda: status.get_attribute("data-state") == "previewed", 60,
