@@ -19,6 +19,7 @@ parent says stop or goes away, and :func:`reply_when_done` answers a command onc
 from __future__ import annotations
 
 import atexit
+import dataclasses
 import concurrent.futures as cf
 import itertools
 import math
@@ -30,6 +31,9 @@ from typing import Any, Callable
 
 from hw_bridge.commands import Arm, Connect, Disarm, Disconnect
 from hw_bridge.parent_watch import exit_reason, run_reporting
+
+
+STALE_VIEW_S = 0.5  # a published view older than this is not the loop's state any more
 
 
 class LoopProcess:
@@ -243,9 +247,25 @@ class ProcessBridgeControls:
         self.ctl.send(Disarm())
 
     def health(self) -> Any:
-        """The newest published :class:`~hw_bridge.interface.LinkHealth` (None: no link yet)."""
+        """The newest published :class:`~hw_bridge.interface.LinkHealth` (None: no link yet).
+
+        While the loop process is dead, or its newest view is older than
+        :data:`STALE_VIEW_S`, that health is not the link's any more: its state says why
+        (``unknown: …``) and it is never armed."""
         view = self.ctl.view
-        return None if view is None else view.link
+        health = None if view is None else view.link
+        if health is None:
+            return None
+        if not self.ctl.alive:
+            why = self.ctl.failure or "the process ended"
+            return dataclasses.replace(health, state=f"unknown: control loop not running ({why})",
+                                       armed=False)
+        age = self.ctl.view_age()
+        if age > STALE_VIEW_S:
+            return dataclasses.replace(
+                health, state=f"unknown: no news from the control loop for {age:.1f} s",
+                armed=False)
+        return health
 
 
 def serve_commands(commands: Any, handle: Callable[[int, Any], None]) -> None:

@@ -16,8 +16,10 @@ import dataclasses
 import math
 from typing import Any, Callable, Literal, Optional, Tuple
 
+from hw_bridge.loop_process import STALE_VIEW_S
+
 Tone = Literal["ok", "busy", "warn", "fault"]  # a header field's colour (console.panels.common.header)
-STALE_AFTER_S = 0.5  # a view older than this is not the arm's state any more
+STALE_AFTER_S = STALE_VIEW_S  # a view older than this is not the arm's state any more
 Field = Tuple[str, Optional[Tone]]  # (text, tone) of one header field
 UNKNOWN_LINK: Field = ("unknown", "fault")
 

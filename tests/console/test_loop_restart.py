@@ -140,6 +140,10 @@ def test_soft_arm_loop_killed_mid_motion_then_restarted(console) -> None:
     os.kill(ctl.pid, signal.SIGKILL)
     wait_for(lambda: header_says_loop_dead(app), "the header: loop not running")
     assert "SIGKILL" in header(app)[0] and "ARMED" not in app.header.status.content
+    # The Control panel's own link line no longer repeats the dead loop's last view.
+    control = app.panel(ControlPanel)
+    wait_for(lambda: "unknown" in control.link_md.content, "the Control panel: link unknown")
+    assert "ARMED" not in control.link_md.content and "active" not in control.link_md.content
     wait_for(lambda: hw.restart_btn.visible, "Restart control loop offered")
 
     viewer = FakeClient(8)

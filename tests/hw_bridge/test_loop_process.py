@@ -121,3 +121,28 @@ def test_restart_ends_a_silent_child_that_is_still_alive(make) -> None:
         hanging.result(1)
     assert p.alive and p.pid != old
     assert p.send("again").result(TIMEOUT_S) == ("echo", "again")
+
+
+def test_bridge_health_of_a_dead_or_silent_loop_is_never_armed() -> None:
+    """The Hardware panel and the tip target read the link's health from the loop's newest
+    view: once the loop is dead, or silent past STALE_VIEW_S, that view's "active, ARMED" is
+    not true any more, so health() says why and is not armed."""
+    import types
+
+    from hw_bridge.interface import LinkHealth
+    from hw_bridge.loop_process import STALE_VIEW_S, ProcessBridgeControls
+
+    link = LinkHealth("active", "/dev/pts/3", None, True, False, False, 0.2, 0.3, 0.2, 10, 10,
+                      0, 0, 0, 0, 1.0)
+    ctl = types.SimpleNamespace(view=types.SimpleNamespace(link=link), alive=True, failure=None,
+                                age=0.1)
+    ctl.view_age = lambda: ctl.age
+    controls = ProcessBridgeControls(ctl)  # type: ignore[arg-type]
+    assert controls.health() == link  # fresh: as published
+    ctl.age = STALE_VIEW_S + 0.7
+    silent = controls.health()
+    assert not silent.armed and silent.state == "unknown: no news from the control loop for 1.2 s"
+    ctl.alive, ctl.failure = False, "the control process was killed (SIGKILL)"
+    dead = controls.health()
+    assert not dead.armed and "not running" in dead.state and "SIGKILL" in dead.state
+    assert dead.port == link.port and dead.rtt_ms_p99 == link.rtt_ms_p99  # the rest as last seen

@@ -24,6 +24,7 @@ itself when ``on_state`` has been quiet.
 
 from __future__ import annotations
 
+import html
 import threading
 import time
 from typing import Any
@@ -32,7 +33,9 @@ import numpy as np
 import viser
 
 from console.recording.lab_feed import ControlFeed
+from console.core.arm_status import loop_trouble
 from console.panels.common.base import Panel, operator_only
+from console.panels.common.loop_header import LoopSource, news_of
 from console.panels.soft_arm.control_execute import ExecuteControls
 from console.panels.soft_arm.control_plots import ControlPlots
 from console.panels.soft_arm.control_row import RowControls
@@ -241,12 +244,27 @@ class ControlPanel(Panel):
         finally:
             self._draw_lock.release()
 
+    def _trouble(self) -> str | None:
+        """Why the newest view is not the arm's state now (dead, or silent for more than
+        ``STALE_AFTER_S``): None while it is fresh (:func:`console.core.arm_status.loop_trouble`)."""
+        if not isinstance(self.ctl, LoopSource):  # a stand-in without a process (tests)
+            return None
+        return loop_trouble(news_of(self.ctl))
+
     def _show(self, view: ControlView | None) -> None:
         died = self._died()
-        if died:
-            self.state_md.content = (f"**Control process died:** {died}. The arm is not "
-                                     "commanded; press **Restart control loop** (Hardware "
-                                     "tab).")
+        trouble = self._trouble() if view is not None else None
+        if died or trouble:
+            self.state_md.content = (
+                f"**Control process died:** {died}. The arm is not commanded; press **Restart "
+                "control loop** (Hardware tab)." if died else
+                f"**{trouble[:1].upper() + trouble[1:]}:** what is shown below is not the arm "
+                "now.")
+            # What the last view said is no longer true: never leave ARMED or active showing.
+            self.link_md.content = f"<small>link: unknown ({html.escape(died or trouble)})</small>"
+            self._link_key = None
+            self.loop_md.content = "<small>loop: not running</small>" if died else \
+                f"<small>loop: {html.escape(trouble)}</small>"
             for btn in (self.arm_btn, self.disarm_btn, self.execute.execute_btn, self.row.button):
                 btn.disabled = True
             return
