@@ -245,10 +245,14 @@ TIMING_FILES = frozenset({
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the ``browser`` marker (tests that drive Chromium against serve.py) and the
+    """Register the ``browser`` marker (tests that drive Chromium against serve.py), the
+    ``timing`` marker (tests whose assertions hold wall-clock limits: the timing part) and the
     ``alone`` marker (browser tests whose assertions hold tight wall-clock limits or need the
     page's full frame rate)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
+    config.addinivalue_line(
+        "markers", "timing: assertions hold wall-clock limits: run one at a time with nothing "
+        "beside them (SUITE_PART=timing)")
     config.addinivalue_line(
         "markers", "alone: a browser test with tight wall-clock limits (a 300 ms hold expiry, "
         "a 1 s answer, the lease) or that samples a readout at the page's frame rate, or a "

@@ -13,6 +13,8 @@ from test_recording_budget import GB, SOFT, header, max_rss_mb, write_gzip
 from console.core.model import model_for
 from console.recording.recorder import load_recording
 
+pytestmark = pytest.mark.timing
+
 
 @pytest.fixture
 def model() -> Any:
