@@ -223,32 +223,15 @@ def serve_module() -> object:
     return module
 
 
-# Tests (besides the browser tests) whose assertions hold wall-clock limits (a 300 ms hold, the
-# 100 Hz loop's period, link timeouts and watchdogs, the lease, shutdown within 2 s, a rate).
-TIMING_FILES = frozenset({
-    "tests/console/test_client_guard.py", "tests/console/test_client_guard_flood.py",
-    "tests/console/test_lab_access.py", "tests/console/test_lab_hold.py",
-    "tests/console/test_lab_many_clients.py", "tests/console/test_lease_warning.py",
-    "tests/console/test_no_orphans.py", "tests/console/test_serve_lifecycle.py",
-    "tests/hw_bridge/test_cpu_partition.py", "tests/hw_bridge/test_extensible_bridge.py",
-    "tests/hw_bridge/test_extensible_closed_loop.py", "tests/hw_bridge/test_extensible_process.py",
-    "tests/hw_bridge/test_extensible_runner.py", "tests/hw_bridge/test_hw_emulator.py",
-    "tests/hw_bridge/test_hw_lifecycle.py", "tests/hw_bridge/test_hw_mocap.py",
-    "tests/hw_bridge/test_link_supervisor.py", "tests/hw_bridge/test_loop.py",
-    "tests/hw_bridge/test_parent_watch.py", "tests/hw_bridge/test_realtime.py",
-    "tests/hw_bridge/test_slip_emulator.py", "tests/hw_bridge/test_soft_arm_emulator.py",
-    "tests/hw_bridge/test_soft_arm_row.py", "tests/hw_bridge/test_extensible_streamer.py",
-    "tests/hw_bridge/test_soft_arm_obstacles.py",
-    "tests/core/test_custom_robots.py", "tests/console/test_control_console.py",
-    "tests/console/test_hw_panel.py", "tests/console/test_recording_budget_timing.py",
-})
-
-
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the ``browser`` marker (tests that drive Chromium against serve.py) and the
+    """Register the ``browser`` marker (tests that drive Chromium against serve.py), the
+    ``timing`` marker (tests whose assertions hold wall-clock limits: the timing part) and the
     ``alone`` marker (browser tests whose assertions hold tight wall-clock limits or need the
     page's full frame rate)."""
     config.addinivalue_line("markers", "browser: drives headless Chromium against serve.py")
+    config.addinivalue_line(
+        "markers", "timing: assertions hold wall-clock limits: run one at a time with nothing "
+        "beside them (SUITE_PART=timing)")
     config.addinivalue_line(
         "markers", "alone: a browser test with tight wall-clock limits (a 300 ms hold expiry, "
         "a 1 s answer, the lease) or that samples a readout at the page's frame rate, or a "
@@ -256,15 +239,14 @@ def pytest_configure(config: pytest.Config) -> None:
         "nothing else beside it")
 
 
-def xdist_group_of(nodeid: str) -> str | None:
-    """The group a test runs in under ``pytest -n 2 --dist loadgroup``: every browser test
-    (tests/browser/) on one worker, one after another (each loads Chromium's software renderer,
-    and several hold timings: a 300 ms hold, the lease), and likewise the tests of
-    ``TIMING_FILES``; None for the others, which spread over both workers."""
-    path = nodeid.split("::", 1)[0]
-    if path.startswith("tests/browser/"):
+def xdist_group_of(item: pytest.Item) -> str | None:
+    """The group ``item`` runs in: "browser" for every browser test (tests/browser/; each loads
+    Chromium's software renderer, and several hold timings: a 300 ms hold, the lease), "timing"
+    for a test marked ``timing`` (its assertions hold wall-clock limits), None for the others,
+    which spread over both pytest-xdist workers."""
+    if item.nodeid.split("::", 1)[0].startswith("tests/browser/"):
         return "browser"
-    return "timing" if path in TIMING_FILES else None
+    return "timing" if item.get_closest_marker("timing") is not None else None
 
 
 SUITE_PARTS = ("parallel", "browser", "serial", "timing", "alone")
@@ -273,8 +255,8 @@ SUITE_PARTS = ("parallel", "browser", "serial", "timing", "alone")
 def suite_part_of(item: pytest.Item) -> str:
     """Which part of scripts/test runs ``item``: "parallel" (no group, :func:`xdist_group_of`),
     "browser" (a browser test without the ``alone`` marker: two at a time, a file per worker)
-    or "serial" (``TIMING_FILES`` and the ``alone`` tests: one at a time)."""
-    group = xdist_group_of(item.nodeid)
+    or "serial" (the tests marked ``timing`` and the ``alone`` tests: one at a time)."""
+    group = xdist_group_of(item)
     if group is None:
         return "parallel"
     if group == "browser" and item.get_closest_marker("alone") is None:
@@ -307,22 +289,6 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep
-
-
-@pytest.hookimpl(optionalhook=True)
-def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
-    """``--dist loadgroup`` by :func:`xdist_group_of`. (pytest-xdist's own loadgroup groups by an
-    ``xdist_group`` marker it appends to the node id, which pytest 9 no longer lets it change:
-    every test would be on its own.)"""
-    if config.getoption("dist") != "loadgroup":
-        return None
-    from xdist.scheduler import LoadScopeScheduling
-
-    class GroupScheduling(LoadScopeScheduling):
-        def _split_scope(self, nodeid: str) -> str:
-            return xdist_group_of(nodeid) or nodeid
-
-    return GroupScheduling(config, log)
 
 
 # Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py);

@@ -24,6 +24,8 @@ from console.panels.common.session import SessionPanel
 from fakes import FakeClient
 from tests.ws_client import RawClient, wait_for
 
+pytestmark = pytest.mark.timing
+
 PACE = 1.0 / 80  # below the guard's 100 messages/s per client: every message is judged
 BULK_RATE = 1000.0  # messages/s the bulk attack test lifts the limit to
 BULK_PACE = 1.0 / 400  # and its pace, below it

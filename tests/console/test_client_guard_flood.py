@@ -27,6 +27,8 @@ from console.web.client_guard import GuardLimits
 from core.robots import load
 from tests.ws_client import CAMERA, RawClient, wait_for
 
+pytestmark = pytest.mark.timing
+
 SOFT = load("soft-arm")
 
 

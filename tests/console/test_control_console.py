@@ -24,6 +24,8 @@ from hw_bridge.loop import LoopSnapshot, LoopStats
 import ws_client
 from fakes import FakeClient, console_app, done_future
 
+pytestmark = pytest.mark.timing
+
 SOFT = load("soft-arm")
 
 

@@ -25,6 +25,8 @@ from hw_bridge.link_supervisor import LinkRefused, LinkSupervisor
 from hw_bridge.mock import MockHardware
 from fakes import FakeClient, console_app, user
 
+pytestmark = pytest.mark.timing
+
 ROBOT = load("extensible")
 SOFT = load("soft-arm")
 

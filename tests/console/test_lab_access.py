@@ -17,6 +17,8 @@ from console.panels.common.jog import JogPanel
 from core.robots import load
 from fakes import FakeClient, FakeClock
 
+pytestmark = pytest.mark.timing
+
 SOFT = load("soft-arm")
 
 

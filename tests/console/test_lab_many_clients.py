@@ -26,6 +26,8 @@ from console.web import installed
 from console.web.shared_sends import LoopSafeEvent
 from core.robots import load
 
+pytestmark = pytest.mark.timing
+
 SOFT = load("soft-arm")
 
 

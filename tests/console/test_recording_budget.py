@@ -4,7 +4,7 @@ the browser that asked sees, and loading never runs on the callback that asked f
 The huge files are written as repeated gzip members (a 1 MB block of zero bytes or short lines,
 compressed once), so a 1 GB recording is a few MB on disk and written in a few milliseconds.
 The one wall-clock claim ("within a second") is in test_recording_budget_timing.py, which runs
-alone (tests/conftest.py TIMING_FILES); the bounds here are far above what the reads take.
+alone (marked `timing`); the bounds here are far above what the reads take.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """A one-line gigabyte recording is refused within a second without the reader growing: the
-wall-clock part of test_recording_budget.py, in tests/conftest.py TIMING_FILES so it runs alone
+wall-clock part of test_recording_budget.py, marked `timing` so it runs alone
 (the rest of that file asserts no wall-clock time that another test's load could break)."""
 
 from __future__ import annotations
@@ -12,6 +12,8 @@ from test_recording_budget import GB, SOFT, header, max_rss_mb, write_gzip
 
 from console.core.model import model_for
 from console.recording.recorder import load_recording
+
+pytestmark = pytest.mark.timing
 
 
 @pytest.fixture

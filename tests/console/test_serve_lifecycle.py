@@ -12,8 +12,12 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from console.serve_lifecycle import port_in_use
 from test_no_orphans import descendants, free_port, start_console, survivors
+
+pytestmark = pytest.mark.timing
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -32,6 +32,8 @@ from hw_bridge.config import BridgeConfig
 from hw_bridge.interface import ReturnType, SerialHardware
 from hw_bridge.mock import MockHardware
 
+pytestmark = pytest.mark.timing
+
 ROOT = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
 SOFT = {"soft-4x80mm": (4, 0.08), "soft-8x50mm": (8, 0.05)}

@@ -1,7 +1,7 @@
 """A lab's own soft arm (tests/data/robots/, see test_custom_robots.py) grasps an object and puts
 it in the bin in a headless trial through the simulated arm. The trial runs on simulated time
 (its time limit is the loop's clock, not the wall's), so unlike the device tests of
-test_custom_robots.py (tests/conftest.py TIMING_FILES) it runs in the suite's parallel part.
+test_custom_robots.py (marked `timing`) it runs in the suite's parallel part.
 """
 
 from __future__ import annotations

@@ -1,29 +1,17 @@
 """The test suite's own groups and parts (tests/conftest.py): scripts/test runs the tests
 without wall-clock limits on two workers, the browser tests two at a time and the
-timing-sensitive tests (``TIMING_FILES`` and the browser tests marked ``alone``) one at a
-time; a file renamed or moved must not silently leave its group."""
+timing-sensitive tests (marked ``timing``, and the browser tests marked ``alone``) one at a
+time; the marker, not a list of paths, puts a test in the timing part."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
-from conftest import REPO, TIMING_FILES, in_suite_part, suite_part_of, xdist_group_of
+from conftest import REPO, in_suite_part, suite_part_of, xdist_group_of
 
-
-def test_every_timing_file_exists_and_is_grouped() -> None:
-    missing = sorted(p for p in TIMING_FILES if not (REPO / p).is_file())
-    assert missing == [], f"in TIMING_FILES but not in the repository: {missing}"
-    for path in TIMING_FILES:
-        assert xdist_group_of(f"{path}::test_x[a]") == "timing"
-
-
-def test_browser_tests_share_one_group_and_the_rest_none() -> None:
-    for path in sorted((REPO / "tests" / "browser").glob("test_*.py")):
-        rel = path.relative_to(REPO).as_posix()
-        assert xdist_group_of(f"{rel}::test_x") == "browser"
-    assert xdist_group_of(f"{Path(__file__).relative_to(REPO).as_posix()}::t") is None
-    assert xdist_group_of("tests/core/test_units.py::test_radians_read_as_degrees") is None
+PARTS = ("parallel", "browser", "timing", "alone")
+pytest_plugins = ["pytester"]  # its `pytester` fixture: real items from a module's source
 
 
 class _Item:
@@ -32,30 +20,76 @@ class _Item:
     def __init__(self, nodeid: str, *markers: str) -> None:
         self.nodeid, self.markers = nodeid, markers
 
-    def get_closest_marker(self, name: str) -> object | None:
-        return pytest.mark.alone if name in self.markers else None
+    def get_closest_marker(self, name: str) -> pytest.Mark | None:
+        return getattr(pytest.mark, name).mark if name in self.markers else None
+
+
+def test_browser_tests_share_one_group_and_the_rest_none() -> None:
+    for path in sorted((REPO / "tests" / "browser").glob("test_*.py")):
+        rel = path.relative_to(REPO).as_posix()
+        assert xdist_group_of(_Item(f"{rel}::test_x", "browser")) == "browser"  # type: ignore[arg-type]
+    here = f"{Path(__file__).relative_to(REPO).as_posix()}::t"
+    assert xdist_group_of(_Item(here)) is None  # type: ignore[arg-type]
+    assert xdist_group_of(_Item("tests/core/test_units.py::t")) is None  # type: ignore[arg-type]
+
+
+def test_a_test_marked_timing_is_in_the_timing_part_and_an_unmarked_one_in_parallel() -> None:
+    """The ``timing`` marker alone decides, wherever the file is (no list of paths)."""
+    for path in ("tests/core/test_units.py", "tests/hw_bridge/test_loop.py"):
+        marked, unmarked = _Item(f"{path}::t", "timing"), _Item(f"{path}::t")
+        assert xdist_group_of(marked) == "timing"  # type: ignore[arg-type]
+        assert suite_part_of(marked) == "serial"  # type: ignore[arg-type]
+        assert [p for p in PARTS if in_suite_part(marked, p)] == ["timing"]  # type: ignore[arg-type]
+        assert suite_part_of(unmarked) == "parallel"  # type: ignore[arg-type]
+        assert [p for p in PARTS if in_suite_part(unmarked, p)] == ["parallel"]  # type: ignore[arg-type]
+
+
+def test_a_modules_timing_pytestmark_reaches_its_collected_tests(pytester: pytest.Pytester) -> None:
+    """Real items: ``pytestmark = pytest.mark.timing`` in a module (as the timing files have it)
+    puts each of its tests, parametrised or in a class, in the timing part; a module without
+    it stays in the parallel part."""
+    pytester.makeini("[pytest]\nmarkers = timing: as in tests/conftest.py\n")
+    pytester.makepyfile(
+        test_marked="import pytest\n"
+        "pytestmark = [pytest.mark.skipif(False, reason='-'), pytest.mark.timing]\n"
+        "def test_a(): pass\n"
+        "@pytest.mark.parametrize('x', [1, 2])\n"
+        "def test_b(x): pass\n"
+        "class TestC:\n"
+        "    def test_c(self): pass\n",
+        test_unmarked="def test_d(): pass\n")
+    items, _ = pytester.inline_genitems()
+    assert [(i.nodeid, suite_part_of(i)) for i in items] == [
+        ("test_marked.py::test_a", "serial"), ("test_marked.py::test_b[1]", "serial"),
+        ("test_marked.py::test_b[2]", "serial"), ("test_marked.py::TestC::test_c", "serial"),
+        ("test_unmarked.py::test_d", "parallel")]
+    assert [in_suite_part(i, "timing") for i in items] == [True, True, True, True, False]
+
+
+def test_the_timing_marker_is_registered(pytestconfig: pytest.Config) -> None:
+    assert any(line.startswith("timing:") for line in pytestconfig.getini("markers"))
 
 
 def test_suite_parts_split_the_browser_tests_by_the_alone_marker() -> None:
     browser = "tests/browser/test_browser_lab.py::test_x"
     assert suite_part_of(_Item(browser, "browser")) == "browser"  # type: ignore[arg-type]
     assert suite_part_of(_Item(browser, "browser", "alone")) == "serial"  # type: ignore[arg-type]
-    timing = f"{sorted(TIMING_FILES)[0]}::test_x"
-    assert suite_part_of(_Item(timing)) == "serial"  # type: ignore[arg-type]
+    timing = "tests/hw_bridge/test_loop.py::test_x"
+    assert suite_part_of(_Item(timing, "timing")) == "serial"  # type: ignore[arg-type]
     assert suite_part_of(_Item("tests/core/test_units.py::t")) == "parallel"  # type: ignore[arg-type]
 
 
 def test_the_serial_part_splits_into_timing_and_alone() -> None:
     """SUITE_PART=timing and SUITE_PART=alone are the serial part's two halves, and every test
     is in exactly one part of the four."""
-    timing = f"{sorted(TIMING_FILES)[0]}::test_x"
+    timing = "tests/hw_bridge/test_loop.py::test_x"
     browser = "tests/browser/test_browser_lab.py::test_x"
-    items = {"timing": _Item(timing), "alone": _Item(timing, "alone"),
+    items = {"timing": _Item(timing, "timing"), "alone": _Item(timing, "timing", "alone"),
              "browser": _Item(browser, "browser"),
              "alone browser": _Item(browser, "browser", "alone"),
              "parallel": _Item("tests/core/test_units.py::t")}
-    parts = {name: [p for p in ("parallel", "browser", "timing", "alone")
-                    if in_suite_part(item, p)] for name, item in items.items()}  # type: ignore[arg-type]
+    parts = {name: [p for p in PARTS if in_suite_part(item, p)]
+             for name, item in items.items()}  # type: ignore[arg-type]
     assert parts == {"timing": ["timing"], "alone": ["alone"], "browser": ["browser"],
                      "alone browser": ["alone"], "parallel": ["parallel"]}
     assert all(in_suite_part(items[n], "serial") for n in ("timing", "alone", "alone browser"))  # type: ignore[arg-type]

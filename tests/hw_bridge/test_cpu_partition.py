@@ -15,6 +15,8 @@ import pytest
 from hw_bridge.cpu_partition import (CpuPartition, format_cpus, online_cpus, parse_cpus,
                                      pin_tree, process_cpus)
 
+pytestmark = pytest.mark.timing
+
 REPO = Path(__file__).resolve().parents[2]
 needs_two_cpus = pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2,
                                     reason="a partition needs two CPUs")

@@ -20,6 +20,8 @@ from hw_bridge.extensible_runner import ExtensibleRunner  # noqa: E402
 from hw_bridge.interface import LifecycleState, LinkHealth  # noqa: E402
 from hw_bridge.mock import MockHardware  # noqa: E402
 
+pytestmark = pytest.mark.timing
+
 pytest_plugins = ["extensible_rig"]  # its fixtures: mock, runner_on, emulator
 
 

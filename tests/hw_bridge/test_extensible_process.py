@@ -17,6 +17,8 @@ from core.kinematics import delta as dk
 from core.robots import load
 from hw_bridge.extensible_process import ExtensibleProcess
 
+pytestmark = pytest.mark.timing
+
 ROBOT = load("extensible")
 Q0 = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.03]])
 Q1 = np.array([[0.01, 0.0, 0.05], [0.0, -0.01, 0.04]])

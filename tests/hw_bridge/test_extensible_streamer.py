@@ -9,11 +9,14 @@ test_runner_executes_a_path_on_mock_hardware under load).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from core.kinematics import delta as dk
 from core.robots import load
 from hw_bridge.extensible_jobs import JobResult, joint_move
 from hw_bridge.extensible_streamer import Streamer
+
+pytestmark = pytest.mark.timing
 
 ROBOT = load("extensible")
 N = ROBOT.n_segments

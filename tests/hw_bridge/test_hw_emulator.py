@@ -30,6 +30,8 @@ from hw_bridge.interface import LifecycleState, ReturnType, SerialHardware
 from hw_bridge.mocap import UdpMocapReceiver, frame_health
 from hw_bridge.link_probe import run_probe
 
+pytestmark = pytest.mark.timing
+
 ROOT = Path(__file__).resolve().parents[2]
 EXT = load("extensible")
 SPEED = EmulatorConfig.from_robot(EXT).motor_speed_counts

@@ -15,6 +15,8 @@ from hw_bridge.interface import LifecycleState, ReturnType, SerialHardware
 from hw_bridge.mock import DeviceRunner, DeviceTransport, MockHardware
 from hw_bridge.plants import MotorBank
 
+pytestmark = pytest.mark.timing
+
 ROBOT = load("extensible")
 SPEED = EmulatorConfig.from_robot(ROBOT).motor_speed_counts
 

@@ -12,6 +12,8 @@ import pytest
 from hw_bridge import mocap as m
 from hw_bridge.plants import CurvaturePlant, MotorBank
 
+pytestmark = pytest.mark.timing
+
 
 def test_packet_round_trip_and_rejects_garbage() -> None:
     pts = np.arange(21, dtype=float).reshape(7, 3)

@@ -14,6 +14,8 @@ from hw_bridge.link_supervisor import (DISARMED, DISCONNECTED, MOCK_PORT, LinkRe
                                        LinkSupervisor, open_serial)
 from hw_bridge.mock import MockHardware
 
+pytestmark = pytest.mark.timing
+
 ROBOT = load("extensible")
 
 

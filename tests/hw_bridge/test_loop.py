@@ -15,6 +15,8 @@ from hw_bridge.loop import LoopRunner, SimClock
 from hw_bridge.loop_devices import HardwareDevice, SimDevice
 from hw_bridge.planner_process import ProcessPlanner
 
+pytestmark = pytest.mark.timing
+
 MS = 1_000_000
 
 

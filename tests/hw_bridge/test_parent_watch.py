@@ -17,7 +17,10 @@ import pytest
 from hw_bridge.parent_watch import exit_reason
 
 ROOT = Path(__file__).resolve().parents[2]
-pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux prctl/proc")
+pytestmark = [
+    pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux prctl/proc"),
+    pytest.mark.timing,
+]
 
 HOST = textwrap.dedent("""
     import concurrent.futures as cf, multiprocessing, os, subprocess, sys, threading, time

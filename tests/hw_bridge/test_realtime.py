@@ -15,6 +15,8 @@ import pytest
 from hw_bridge.realtime import (TtyWorkerKeeper, demote_tty_workers, promote_tty_workers,
                                 tty_workers)
 
+pytestmark = pytest.mark.timing
+
 REPO = Path(__file__).resolve().parents[2]
 needs_root = pytest.mark.skipif(os.geteuid() != 0, reason="changing kernel threads needs root")
 

@@ -15,6 +15,8 @@ from hw_bridge.extensible_jobs import home_counts
 from hw_bridge.mocap import UdpMocapReceiver
 from hw_bridge.pty_emulator import Emulator, EmulatorOptions
 
+pytestmark = pytest.mark.timing
+
 EXT = load("extensible")
 L0 = EXT.L0
 

@@ -32,6 +32,8 @@ from hw_bridge.soft_arm_process import ControlProcess
 from core.robots import load
 from hw_bridge import protocol as p
 
+pytestmark = pytest.mark.timing
+
 SOFT = load("soft-arm")
 
 

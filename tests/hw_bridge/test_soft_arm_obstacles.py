@@ -28,6 +28,8 @@ from hw_bridge.planner_process import ProcessPlanner
 from hw_bridge.soft_arm_process import ControlProcess
 from tests.ws_client import wait_for
 
+pytestmark = pytest.mark.timing
+
 SOFT = load("soft-arm")
 R = 0.0165
 START = (-0.20, 0.20)

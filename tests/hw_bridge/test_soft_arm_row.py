@@ -30,6 +30,8 @@ from core.control.row import bin_at
 from core.robots import load
 from hw_bridge.soft_arm_process import ControlProcess
 
+pytestmark = pytest.mark.timing
+
 R = 0.0165
 OBJECTS = ((-0.22, 0.20, R), (-0.08, 0.33, R))
 BIN_XY = (0.05, 0.40)  # clear of the objects (its box is 100 mm wide)
