@@ -241,7 +241,7 @@ TIMING_FILES = frozenset({
     "tests/hw_bridge/test_soft_arm_obstacles.py",
     "tests/core/test_custom_robots.py", "tests/console/test_control_console.py",
     "tests/console/test_hw_panel.py", "tests/console/test_recording_budget_timing.py",
-    "tests/console/test_row_process.py",
+    "tests/console/test_row_process.py", "tests/console/test_custom_robots_console.py",
 })
 
 
