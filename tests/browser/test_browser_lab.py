@@ -5,8 +5,10 @@ Checked: a viewer's jog, "Run demo motion" and the Control panel's "Execute gras
 refused with the reason shown to them and move nothing; STOP from the viewer (button and Esc
 hotkey) stops the operator's (demo) motion through the stop hooks; a held jog stops within
 300 ms of letting go and a STOP latches it; closing (or freezing) the operator's tab stops the
-arm and releases the lock (closing: within 2 s; freezing: within the lease). Recording and export: test_browser_lab_export.py; the rig:
-lab_rig.py.
+arm and releases the lock (closing: within 2 s; freezing: within the lease). Recording and export:
+test_browser_lab_export.py; the rig: lab_rig.py. That a viewer can neither add, edit, plan nor
+place objects nor connect the hardware is tested without a browser
+(tests/console/test_planner_console.py, test_hw_panel.py, test_lab_access.py).
 """
 
 from __future__ import annotations
@@ -14,7 +16,6 @@ from __future__ import annotations
 import re
 import time
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -22,7 +23,7 @@ from console.core.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
 from browser_tabs import open_tab  # noqa: E402
-from lab_rig import (Lab, field, jog_button, lab, lab_app,  # noqa: E402,F401 (lab: fixture)
+from lab_rig import (field, jog_button, lab,  # noqa: E402,F401 (lab: fixture)
                      notifications, press, session_button, stop_button, wait_for)
 
 pytestmark = pytest.mark.browser
@@ -144,82 +145,3 @@ def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(l
     # lease_s of silence, plus the probe's 0.1 s polling and thread scheduling on a busy machine
     assert "silent" in lab.stops[-1][1] and lab.stops[-1][0] - frozen <= lease_s + 0.6
     assert app.access.holder is None
-
-
-@pytest.fixture
-def grasp_lab(browser, tmp_path: Path) -> Iterator[Lab]:
-    """A lab console with the grasp panels (Objects, Grasp planner, Waypoints), the Hardware
-    panel on queued bridge controls (nothing drains them here) and Session; no reachability
-    map (CPU), no control process."""
-    from console.core.hardware_attachment import HardwareAttachment
-    from console.panels.soft_arm import panel_set, planner
-    from console.panels.common.hardware import HardwarePanel
-    from console.panels.common.session import SessionPanel
-    from hw_bridge.controls import QueuedBridgeControls
-
-    planner.GraspSession.compute_reach = False
-    server, app, token = lab_app(
-        tmp_path, bridge_controls=QueuedBridgeControls(),
-        hardware=HardwareAttachment("test", kind="emulator", port_path="/dev/pts/99"))
-    for panel_cls in (*panel_set.grasp_panels(), HardwarePanel, SessionPanel):
-        app.add_panel(panel_cls)
-    app.start()
-    lab = Lab(server, app, token, browser)
-    try:
-        yield lab
-    finally:
-        for context in lab.contexts:
-            context.close()
-        app.stop()
-        app.panel(HardwarePanel).close()
-        app.grasp_session.close()  # type: ignore[attr-defined]
-        app.grasp_session._thread.join(5)  # type: ignore[attr-defined]
-        server.stop()
-        planner.GraspSession.compute_reach = True
-
-
-def test_viewer_cannot_add_move_or_plan_objects_nor_connect_hardware(
-        grasp_lab, artifacts_dir: Path) -> None:
-    app = grasp_lab.app
-    session = app.grasp_session  # type: ignore[attr-defined]
-    alice, bob = grasp_lab.pages(2)
-    grasp_lab.take_control(alice, "Alice")
-    planned = wait_for(lambda: session.view().outcome, timeout=10.0)
-    objects = session.view().objects
-    x_box = bob.get_by_label("x (mm)", exact=True)
-    shown = x_box.input_value()
-
-    def refused(action: str) -> bool:  # (who holds control is checked in other tests)
-        return any(f"Only the operator can {action} — " in n for n in notifications(bob))
-
-    bob.get_by_role("button", name="Add object").click()
-    wait_for(lambda: refused("add an object"), timeout=15.0)
-    x_box.fill("50")
-    x_box.press("Enter")
-    wait_for(lambda: refused("edit an object"), timeout=15.0)
-    wait_for(lambda: x_box.input_value() == shown, timeout=15.0)  # snapped back for Bob
-    bob.get_by_role("button", name="Plan grasp").click()
-    wait_for(lambda: refused("plan a grasp"), timeout=15.0)
-    box = bob.locator("canvas").first.bounding_box()
-    assert box is not None
-    bob.mouse.click(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.6)  # the table
-    wait_for(lambda: refused("place or select an object"), timeout=15.0)
-    open_tab(bob, "Hardware")
-    connect = bob.get_by_role("button", name="Connect", exact=True)
-    connect.scroll_into_view_if_needed()
-    connect.click()
-    wait_for(lambda: refused("connect the hardware"), timeout=15.0)
-    bob.screenshot(path=str(artifacts_dir / "browser_lab_viewer_refused.png"))
-    open_tab(bob, "Operate")
-    time.sleep(0.3)
-    assert session.view().objects == objects and session.view().outcome.seq == planned.seq
-    assert app.services.bridge_controls.commands.empty()  # type: ignore[union-attr]
-    assert alice.get_by_label("x (mm)", exact=True).input_value() == shown
-    assert not any("Only the operator" in n for n in notifications(alice))
-
-    if app.access.holder is None:  # a loaded machine can starve a tab past its lease
-        grasp_lab.take_control(alice, "Alice")
-    alice.get_by_role("button", name="Add object").click()  # the operator may
-    wait_for(lambda: len(session.view().objects) == len(objects) + 1, timeout=15.0)
-    wait_for(lambda: bob.locator('[data-testid="objects-info"]').inner_text()
-             .startswith(f"{len(objects) + 1} objects"), timeout=15.0)

@@ -1,5 +1,6 @@
-"""Recording, replay and export from the GUI, and exported HTML opened from disk (file://)
-with no network request, showing the arm and the plan (on the lab rig of lab_rig.py)."""
+"""Exported HTML opened from disk (file://) with no network request: the scene shows the arm
+and the plan, a recorded run the arm and its markers (on the lab rig of lab_rig.py). Recording,
+replay and export through the GUI: tests/console/test_lab_record_replay_flow.py."""
 
 from __future__ import annotations
 
@@ -12,9 +13,7 @@ import numpy as np
 import pytest
 
 pytest.register_assert_rewrite("lab_rig")
-from browser_tabs import open_tab  # noqa: E402
-from lab_rig import (SOFT, Lab, lab, session_button, stop_button,  # noqa: E402,F401 (lab)
-                     wait_for)
+from lab_rig import Lab, lab, session_button, wait_for  # noqa: E402,F401 (lab)
 
 pytestmark = pytest.mark.browser
 
@@ -82,67 +81,35 @@ def test_exported_scene_opens_from_disk_and_shows_the_arm_and_the_plan(
         page.context.close()
 
 
-def test_record_replay_and_export_a_run_from_the_gui(lab, artifacts_dir: Path) -> None:
+def test_exported_run_opens_from_disk_and_shows_the_arm_and_its_markers(
+        lab, artifacts_dir: Path) -> None:
+    """What the exported run's page draws (recording, replay and export through the GUI:
+    tests/console/test_lab_record_replay_flow.py): a run recorded here, exported by a replay
+    session, opened from disk with no network request, draws the arm and lists the markers."""
+    from fakes import ScopedClient
+
+    from console.playback.replay import ReplaySession
+    from console.recording.recorder import Recorder
+
     app = lab.app
-    alice, bob = lab.pages(2)  # Bob, a viewer, will replay and export
-    lab.take_control(alice, "Alice")
-    session_button(alice, "Start recording").click()
-    wait_for(lambda: app.recorder.recording)
-    alice.get_by_role("button", name="Run demo motion").click()
-    wait_for(lambda: app.services.demo.running)
-    time.sleep(0.8)
-    stop_button(alice).click()
-    alice.get_by_role("button", name="Stop recording").click()
-    wait_for(lambda: not app.recorder.recording)
-    names = app.data.list("recordings", ".mcap")
-    assert len(names) == 1
-
-    open_tab(bob, "Session")
-    bob.get_by_text("Replay", exact=True).click()
-    bob.get_by_role("button", name="Load recording").wait_for()
-    bob.get_by_role("button", name="Load recording").click()
-    info = bob.locator('[data-testid="replay-info"]')
-    wait_for(lambda: names[0] in info.inner_text())
-    session = wait_for(lambda: next((s for s in app.panels[-1].player.all()
-                                     if s.rec is not None), None))
-    rec = session.rec
-    assert rec.duration > 0.5 and any("STOP" in e.text for e in rec.events)
-    assert any(e.who == "Alice" and "demo" in e.text for e in rec.events)
-    bob.get_by_role("button", name="Play replay").click()
-    wait_for(lambda: float(info.get_attribute("data-t") or 0) > 0.3)
-    ghost = session.ghost
-    t = session.pos
-    from core.kinematics import planar as pk
-    tip = pk.forward_kinematics(rec.q_at(t), SOFT.lengths, SOFT.base_pose)[-1]
-    body = np.asarray(ghost.body.vertices, dtype=float)
-    k, m = ghost.body_topology.sides, ghost.body_topology.n_rings
-    drawn_tip = body[: m * k].reshape(m, k, 3).mean(axis=1)[-1]
-    assert np.linalg.norm(drawn_tip[:2] - tip[:2]) < 0.03  # played on between read and draw
-    assert app.store.command.source == "stop"  # replay never commands the arm
-
-    # Markers (started recording, the demo, STOP, ...): from the end, back two and on one.
-    from console.playback.replay_markers import current_marker, next_marker, previous_marker
-    wait_for(lambda: not session.playing, timeout=15.0)  # the replay ran to its end
+    recorder = Recorder(app.data, app.model, name_of=lambda c: "Alice")
+    path = recorder.start("run", client=None)
+    events = [lambda: recorder.action("started the demo motion", None),
+              lambda: recorder.log("phase", {"phase": "approach", "reason": None}),
+              lambda: recorder.action("STOP: STOP pressed by Bob", None), lambda: None]
+    for k, event in zip((0.0, 4.0, 8.0, 12.0), events):
+        recorder.on_state(app.store.report(np.full(6, k), "hardware"))
+        time.sleep(0.05)
+        event()
+        time.sleep(0.05)
+    recorder.stop()
+    session = ReplaySession(app, ScopedClient(app.server), order=50.0)
+    assert session.load(path.name)
     markers = session.markers
-    assert len(markers) >= 3 and any(m.category == "stop" for m in markers)
-    marker = bob.locator('[data-testid="replay-marker"]')
-    pos = session.pos
-    for name in ("◀ Previous marker", "◀ Previous marker", "Next marker ▶"):
-        target = (previous_marker if name.startswith("◀") else next_marker)(markers, pos)
-        assert target is not None
-        pos = min(target.t, rec.duration)
-        index = current_marker(markers, pos)[0]
-        bob.get_by_role("button", name=name).click()
-        # (the first jump, from the end, lands on the marker already shown there: wait for the
-        # server's jump itself; a loaded run read the position before the click arrived)
-        wait_for(lambda: abs(session.pos - pos) <= 1e-6)
-        wait_for(lambda: marker.count() == 1 and marker.get_attribute("data-index") == str(index))
-        assert markers[index].text in marker.inner_text()
-        np.testing.assert_allclose(rec.q_at(session.pos), rec.q_at(pos))
-    assert app.store.command.source == "stop"
-
-    bob.get_by_role("button", name="Export run (HTML)").click()
-    files = wait_for(lambda: list(app.data.folder("exports").glob("*.html")), timeout=15.0)
+    assert [m.category for m in markers] == ["action", "phase", "stop"]
+    session.export()
+    files = list(app.data.folder("exports").glob("*.html"))
+    assert len(files) == 1
     page, requested = open_offline(lab.browser, files[0])
     try:
         canvas = page.locator("canvas").first

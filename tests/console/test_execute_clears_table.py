@@ -51,3 +51,24 @@ def test_a_stopped_grasp_or_a_moved_object_stays_on_the_table(rig) -> None:
     s.update("Object 1", x=0.05, y=0.30)  # the operator moved it: not what the arm took
     show(control, view_with(phase="released"))
     assert names(app) == ["Object 1"]
+
+
+def test_a_grasp_the_control_process_refuses_is_told_and_leaves_the_table(rig) -> None:
+    """The refusal reaches the operator as "Refused" with the process's reason (the done
+    callback called a method the Execute controls do not have: nothing was told), and a later
+    "released" leaves the refused object on the table."""
+    import concurrent.futures as cf
+
+    app, _, control, ctl, operator, _ = rig
+
+    def refuses(*args, **kwargs):
+        fut = cf.Future()
+        fut.set_exception(RuntimeError("object out of reach"))
+        return fut
+
+    ctl.grasp_at = ctl.execute = refuses
+    show(control, view_with(armed=True))
+    execute(control, operator)
+    assert ("Refused", "object out of reach") in operator.notes
+    show(control, view_with(phase="released"))  # another task's end
+    assert names(app) == ["Object 1"]

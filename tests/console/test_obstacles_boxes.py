@@ -311,3 +311,68 @@ def test_boxes_are_recorded_and_read_back_with_the_mcap_reader(gated, tmp_path):
     assert scene_from_json(json.dumps(records[-1])).names() == ["Shelf", "Wall"]
     assert [c["size"] for c in cubes[-1]] == [{"x": 0.2, "y": 0.3, "z": 0.02},
                                               {"x": 0.02, "y": 0.3, "z": 0.4}]
+
+
+def _surface_distance_mm(delta: np.ndarray, centre_mm, size_mm) -> float:
+    """Smallest distance (mm) from the arm's body at ``delta`` to the box: the backbone's,
+    sampled every 0.5 mm with the forward kinematics (an arc fraction s of segment i is segment i
+    with (s dx, s dy, s L)), measured by clipping, minus the robot file's body radius --
+    independent of core.kinematics.box_clearance."""
+    import math
+
+    lo = (np.array(centre_mm) - np.array(size_mm) / 2) / 1e3
+    hi = (np.array(centre_mm) + np.array(size_mm) / 2) / 1e3
+    frames = dk.forward_kinematics(delta, EXT.L0, EXT.d)
+    pts = [np.zeros((1, 3))]
+    for i, (dx, dy, dl) in enumerate(delta):
+        length = EXT.L0 + dl
+        s = np.linspace(0.0, 1.0, int(math.ceil(length / 5e-4)) + 1)[1:]
+        part = np.stack([s * dx, s * dy, s * length - EXT.L0], axis=-1)
+        pts.append((frames[i] @ dk.segment_transform(part, EXT.L0, EXT.d))[:, :3, 3])
+    p = np.vstack(pts)
+    outside = np.linalg.norm(p - np.clip(p, lo, hi), axis=-1)
+    inside = np.minimum(p - lo, hi - p).min(axis=-1)
+    return float((np.where(outside > 0, outside, -inside).min() - EXT.body_radius) * 1e3)
+
+
+def test_a_typed_shelf_and_a_typed_target_over_it_are_reached_clear_of_it(gated, monkeypatch):
+    """The operator types a shelf board in the Obstacles panel and a tip target 120 mm above it
+    (was tests/browser/test_browser_boxes.py): the panel lists the shelf with the default 20 mm
+    clearance, the target is answered reachable with >= 20 mm and names the shelf, and the
+    posture the arm is sent to has its tip at the target and its body (sampled here every
+    0.5 mm) >= 20 mm from the board, which the plain IK's posture would cut through."""
+    from fakes import FakeClient
+
+    from console.panels.extensible.obstacles_boxes import BoxObstaclesPanel
+    from console.panels.extensible.target import TargetPanel
+    from core.kinematics.delta_ik import solve_tip_ik
+    from tests.ws_client import wait_for
+
+    centre, size, target_mm = (200.0, 0.0, 250.0), (200.0, 300.0, 20.0), (200.0, 0.0, 380.0)
+    plain = solve_tip_ik(EXT, np.array(target_mm) / 1e3)
+    assert plain.reachable and _surface_distance_mm(plain.delta, centre, size) < 0  # a detour
+    app = gated
+    obstacles, target = app.panel(BoxObstaclesPanel), app.panel(TargetPanel)
+    monkeypatch.setattr(target, "_ik_pool", lambda: SyncPool())
+    op = FakeClient(1)
+    app.access.take(op.client_id, "tok", name="Alice")
+    type_box(obstacles, op, "Shelf", centre, size)
+    user(obstacles.add_button, op)
+    info = obstacles.info.content
+    assert state_of(info, "count") == "1" and state_of(info, "names") == "Shelf"
+    assert float(state_of(info, "clearance-mm")) == 20.0
+    for handle, value in zip(target.inputs, target_mm):
+        user(handle, op, value)
+    aimed = ",".join(f"{v:.1f}" for v in target_mm)
+    wait_for(lambda: state_of(target.status.content, "target-mm") == aimed
+             and state_of(target.status.content) in ("reachable", "blocked", "error"),
+             timeout=60.0, what="the typed target solved with the shelf")
+    status = target.status.content
+    assert state_of(status) == "reachable", status
+    assert float(state_of(status, "clearance-mm")) >= 20.0 and "Shelf" in status
+    wait_for(lambda: app.hold.target() is not None, timeout=10.0, what="a move started")
+    goal = app.hold.target()
+    final = ([goal] + target._legs[1])[-1]
+    np.testing.assert_allclose(dk.tip_position(EXT, final) * 1e3, target_mm, atol=1.0)
+    assert _surface_distance_mm(final, centre, size) >= 20.0 - 0.3
+    assert not any(title == "Not allowed" for title, _ in op.notes)

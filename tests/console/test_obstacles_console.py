@@ -268,3 +268,65 @@ def test_a_placed_obstacle_is_drawn_and_recorded_before_its_re_plan_ends(gated):
     finally:
         release.set()
     wait_for(lambda: any(k == "plan" for k, _ in logged))
+
+
+def _dense_gap(kappas: np.ndarray, x: float, y: float, r: float) -> np.ndarray:
+    """Arm (backbone +- half-width, straight gripper +- its half-width) to disk gap, from the
+    planar kinematics sampled densely (independent of the planner's own clearance check)."""
+    from core.kinematics import planar
+
+    bb = planar.sample_backbone(kappas, ROBOT.lengths, 64, ROBOT.base_pose)
+    body = np.hypot(bb[..., 0] - x, bb[..., 1] - y).min(axis=-1) - ROBOT.half_width
+    tip = bb[..., -1, :]
+    s = np.linspace(0.0, ROBOT.gripper.length, 65)
+    gx = tip[..., 0:1] + s * np.cos(tip[..., 2:3])
+    gy = tip[..., 1:2] + s * np.sin(tip[..., 2:3])
+    grip = np.hypot(gx - x, gy - y).min(axis=-1) - ROBOT.gripper.half_width
+    return np.minimum(body, grip) - r
+
+
+def _swept(kappa_meas: np.ndarray, kappas: np.ndarray) -> np.ndarray:
+    """Every configuration on the straight lines in kappa between waypoints (201 per leg)."""
+    chain = np.vstack([kappa_meas, kappas])
+    tau = np.linspace(0.0, 1.0, 201)
+    return chain[:-1, None, :] + tau[:, None] * (chain[1:] - chain[:-1])[:, None, :]
+
+
+def test_an_obstacle_clicked_between_arm_and_object_is_planned_around(gated):
+    """A click with "Table click places: Obstacle" between the straight arm (x = 0) and Object 1,
+    then Plan grasp: every arm and gripper point between waypoints keeps the clearance from it,
+    where the plain Algorithm 1 plan for the same object would not (the plan goes around it);
+    the summary the page shows says so (was tests/browser/test_obstacle_browser.py)."""
+    from console.panels.soft_arm.objects import ObjectsPanel
+    from console.panels.soft_arm.planner import PlannerPanel
+    from core.planning.grasp import plan_grasp
+
+    spot = (-0.062, 0.188)
+    app, s = gated, gated.grasp_session
+    op, pp = app.panel(ObjectsPanel), app.panel(PlannerPanel)
+    operator = FakeClient(41)
+    app.access.take(operator.client_id, "tok", name="Alice")
+    wait_for(lambda: s.view().outcome)
+    assert [(o.x, o.y) for o in s.view().objects] == [(-0.2, 0.2)]
+    user(op.click_place, operator, "Obstacle")
+    click_at(op, operator, *spot)
+    (obs,) = wait_for(lambda: s.view().obstacles)
+    assert math.hypot(obs.x - spot[0], obs.y - spot[1]) < 1e-9
+    assert len(s.view().objects) == 1  # an obstacle, not an object
+    wait_for(lambda: 'data-count="1"' in op.obstacles.info.content)
+    user(pp.plan_button, operator)
+    out = wait_for(lambda: (o := s.view().outcome) and o.plan is not None and o.plan.obstacles
+                   and o, timeout=60.0)
+    plan, clearance = out.plan, s.view().clearance
+    assert clearance == pytest.approx(0.010)
+    assert plan.success, plan.summary()
+    gaps = _dense_gap(_swept(plan.kappa_meas, plan.kappas), obs.x, obs.y, obs.r)
+    assert gaps.min() >= clearance - 1e-9, gaps.min()
+    plain = plan_grasp(ROBOT, plan.kappa_meas, plan.center, plan.radius)
+    assert _dense_gap(_swept(plain.kappa_meas, plain.kappas), obs.x, obs.y, obs.r).min() \
+        < clearance
+    summary = outcome_html(out)
+    assert 'data-state="ok"' in summary and "from the obstacles" in summary
+    mm = float(summary.split('data-obstacle-mm="')[1].split('"')[0])
+    assert mm >= 10.0 - 1e-6
+    assert not any(title == "Not allowed" for title, _ in operator.notes)

@@ -13,7 +13,7 @@ Two objects, on a test copy of the soft arm that moves three times faster with s
 placer, the report, STOP); the row itself runs three objects on core's control cycle in
 tests/core/test_control_row.py. The same process on the simulated arm (objects put into the
 world from the loop thread) runs a three-object row to "3 released" in the console in
-tests/browser/test_browser_row.py."""
+tests/console/test_row_process.py."""
 
 from __future__ import annotations
 

@@ -137,7 +137,7 @@ class ExecuteControls:
             obstacles, clearance = tuple(view.obstacles), float(view.clearance)
             fut = start(lambda: ctl.grasp_at(target.x, target.y, target.r, obstacles, clearance,
                                              bin_params=table_bin))
-        fut.add_done_callback(lambda f: self.report_done(event, f, sent))
+        fut.add_done_callback(lambda f: self._report(event, f, sent))
         client = client_of(event)
         if client is not None:
             where = bin_sentence(self.app.robot, table_bin, target.r)
