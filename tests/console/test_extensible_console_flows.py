@@ -37,14 +37,14 @@ ROBOT = load("extensible")
 
 @pytest.fixture
 def served(serve_module: Any, tmp_path: Path) -> Iterator[Callable[..., Any]]:
-    """``served(robot, hardware)``: the console serve.py builds, started, shut down as serve.py
-    does after the test."""
+    """``served(robot, hardware, *more_args)``: the console serve.py builds, started, shut down
+    as serve.py does after the test."""
     built: list[tuple[Any, Any]] = []
 
-    def serve(robot: str, hardware: str) -> Any:
+    def serve(robot: str, hardware: str, *more_args: str) -> Any:
         args = serve_module.parse_args(["--robot", robot, "--no-token", "--port", "0",
                                         "--hardware", hardware, "--rt-cpu", "none",
-                                        "--data-dir", str(tmp_path / "runs")])
+                                        "--data-dir", str(tmp_path / "runs"), *more_args])
         server, app, _ = serve_module.build(args, load(args.robot), "test")
         built.append((server, app))
         app.start()
@@ -58,11 +58,12 @@ def served(serve_module: Any, tmp_path: Path) -> Iterator[Callable[..., Any]]:
 
 @pytest.fixture
 def tab(served: Callable[..., Any]) -> Iterator[Callable[..., tuple[Any, RawClient]]]:
-    """``tab(robot, hardware)``: the served console and a raw websocket tab holding its lease."""
+    """``tab(robot, hardware, *more_args)``: the served console and a raw websocket tab holding
+    its lease."""
     tabs: list[RawClient] = []
 
-    def open_tab(robot: str, hardware: str) -> tuple[Any, RawClient]:
-        app = served(robot, hardware)
+    def open_tab(robot: str, hardware: str, *more_args: str) -> tuple[Any, RawClient]:
+        app = served(robot, hardware, *more_args)
         client = RawClient(app.server)
         tabs.append(client)
         app.access.take(client.client_id, None, name="tester")
