@@ -20,7 +20,7 @@ import time
 import urllib.error
 import urllib.request
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Callable, Iterator
 
 import pytest
 
@@ -221,6 +221,31 @@ def serve_module() -> object:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+@pytest.fixture
+def served_console(serve_module: Any, tmp_path: Path) -> Iterator[Callable[..., Any]]:
+    """``served_console(robot, hardware="mock", *more_args, start=False)``: the console serve.py
+    builds for ``robot`` (``--no-token``, a free port, no CPU pinning, data under the test's
+    tmp_path), in this process; shut down after the test as serve.py does. Not started unless
+    asked: a started console's lease would take control from a headless FakeClient."""
+    built: list[tuple[Any, Any]] = []
+
+    def serve(robot: str | Path, hardware: str = "mock", *more_args: str,
+              start: bool = False) -> Any:
+        from core.robots import load
+        args = serve_module.parse_args(["--robot", str(robot), "--no-token", "--port", "0",
+                                        "--hardware", hardware, "--rt-cpu", "none",
+                                        "--data-dir", str(tmp_path / "runs"), *more_args])
+        server, app, token = serve_module.build(args, load(args.robot), "test")
+        built.append((server, app))
+        assert token is None
+        return app.start() if start else app
+
+    yield serve
+    for server, app in built:
+        for _, step in serve_module._shutdown_steps(app, server):
+            step()
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 import tomllib
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,6 @@ from console.panels.soft_arm.control import ControlPanel
 from console.panels.soft_arm.objects import ObjectsPanel
 from core.control.trials import paper_locations
 from core.kinematics import planar
-from core.robots import load
 from fakes import FakeClient, user
 from tests.ws_client import RawClient, wait_for
 
@@ -66,27 +65,13 @@ KAPPA_TOL = 0.5  # 1/m, mean measured curvature per segment over a window
 
 
 @pytest.fixture
-def served(serve_module: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-           ) -> Iterator[Callable[[str], Any]]:
+def served(served_console: Callable[..., Any], tmp_path: Path,
+           monkeypatch: pytest.MonkeyPatch) -> Callable[[str], Any]:
     """``served(hardware)``: the console serve.py builds for the quick soft arm with
-    ``--hardware`` that, ``--no-token``, not started; shut down as serve.py does."""
+    ``--hardware`` that, ``--no-token``, not started (conftest ``served_console``)."""
     monkeypatch.setattr(GraspSession, "compute_reach", False)  # (no part here)
     robot = robot_copy("soft-arm", tmp_path, QUICK_MOTION)
-    built: list[tuple[Any, Any]] = []
-
-    def serve(hardware: str) -> Any:
-        args = serve_module.parse_args(["--robot", str(robot), "--no-token", "--port", "0",
-                                        "--hardware", hardware, "--rt-cpu", "none",
-                                        "--data-dir", str(tmp_path / "runs")])
-        server, app, token = serve_module.build(args, load(args.robot), "test")
-        built.append((server, app))
-        assert token is None
-        return app
-
-    yield serve
-    for server, app in built:
-        for _, step in serve_module._shutdown_steps(app, server):
-            step()
+    return lambda hardware: served_console(robot, hardware)
 
 
 def control_of(app: Any) -> Any:

@@ -16,7 +16,6 @@ The four-segment arm moves as tests/robot_files.py QUICK_MOTION says (a test cop
 from __future__ import annotations
 
 import re
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Callable
 
@@ -37,28 +36,13 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
 
 
 @pytest.fixture
-def served(serve_module: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-           ) -> Iterator[Callable[[Path], Any]]:
+def served(served_console: Callable[..., Any],
+           monkeypatch: pytest.MonkeyPatch) -> Callable[[Path], Any]:
     """``served(robot_file)``: the console serve.py builds for that file on mock hardware, not
-    started (the lease would take control from this headless client), shut down as serve.py
-    does after the test."""
+    started (the lease would take control from this headless client; conftest
+    ``served_console``)."""
     monkeypatch.setattr(GraspSession, "compute_reach", False)  # (no reach cache for these arms)
-    built: list[tuple[Any, Any]] = []
-
-    def serve(robot_file: Path) -> Any:
-        args = serve_module.parse_args(["--robot", str(robot_file), "--no-token", "--port", "0",
-                                        "--hardware", "mock", "--rt-cpu", "none",
-                                        "--data-dir", str(tmp_path / "runs")])
-        robot = load(args.robot)
-        server, app, token = serve_module.build(args, robot, "test")
-        built.append((server, app))
-        assert token is None
-        return app
-
-    yield serve
-    for server, app in built:
-        for _, step in serve_module._shutdown_steps(app, server):
-            step()
+    return lambda robot_file: served_console(robot_file)
 
 
 def test_four_segment_soft_arm_grasps_and_places(served: Callable[[Path], Any],

@@ -36,24 +36,10 @@ ROBOT = load("extensible")
 
 
 @pytest.fixture
-def served(serve_module: Any, tmp_path: Path) -> Iterator[Callable[..., Any]]:
-    """``served(robot, hardware, *more_args)``: the console serve.py builds, started, shut down
-    as serve.py does after the test."""
-    built: list[tuple[Any, Any]] = []
-
-    def serve(robot: str, hardware: str, *more_args: str) -> Any:
-        args = serve_module.parse_args(["--robot", robot, "--no-token", "--port", "0",
-                                        "--hardware", hardware, "--rt-cpu", "none",
-                                        "--data-dir", str(tmp_path / "runs"), *more_args])
-        server, app, _ = serve_module.build(args, load(args.robot), "test")
-        built.append((server, app))
-        app.start()
-        return app
-
-    yield serve
-    for server, app in built:
-        for _, step in serve_module._shutdown_steps(app, server):
-            step()
+def served(served_console: Callable[..., Any]) -> Callable[..., Any]:
+    """``served(robot, hardware, *more_args)``: the console serve.py builds, started
+    (conftest ``served_console``)."""
+    return lambda robot, hardware, *more: served_console(robot, hardware, *more, start=True)
 
 
 @pytest.fixture

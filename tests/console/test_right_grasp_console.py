@@ -20,23 +20,17 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-import viser
-from robot_files import QUICK_MOTION, robot_copy
 
-from console.core.access import AccessControl
-from console.panels.soft_arm import planner
 from console.panels.soft_arm.control import ControlPanel
 from console.panels.soft_arm.objects import ObjectsPanel
 from core.control.trials import paper_locations
 from core.kinematics import planar
-from core.robots import load
-from fakes import FakeClient, console_app, user
+from fakes import FakeClient, user
+from test_row_process import quick_soft_app  # noqa: F401 (a fixture: the same console)
 from tests.ws_client import wait_for
 
 pytestmark = pytest.mark.timing  # the 100 Hz control process in real time
@@ -45,32 +39,14 @@ RUN_TIMEOUT_S = 90.0
 PALM_MM = 55.0
 
 
-@pytest.fixture
-def right_app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
-    """Objects + Control panels on the control process of the quick soft arm, a token console
-    (the test's client takes control with it)."""
-    monkeypatch.setattr(planner.GraspSession, "compute_reach", False)  # (no part here)
-    robot = load(robot_copy("soft-arm", tmp_path, QUICK_MOTION))
-    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    app = console_app(robot, server, panels=(ObjectsPanel, ControlPanel), soft_control="process",
-                      access=AccessControl("tok"))
-    try:  # (not started: no lease probe, which would take control from this headless client)
-        yield app
-    finally:
-        app.stop_motion("test over")
-        app.panel(ControlPanel).close()
-        app.grasp_session.close()
-        server.stop()
-
-
 def palm_mm(robot: Any, kappa: np.ndarray) -> np.ndarray:
     """The palm point w_t (mm) of the arm with curvatures ``kappa``, as the readout shows it."""
     tip = planar.forward_kinematics(kappa, robot.lengths, robot.base_pose)[-1]
     return planar.point_in_frame(tip, robot.gripper.w_off) * 1e3
 
 
-def test_execute_grasps_a_right_side_object_and_releases_it(right_app: Any) -> None:
-    app = right_app
+def test_execute_grasps_a_right_side_object_and_releases_it(quick_soft_app: Any) -> None:
+    app = quick_soft_app
     objects, control = app.panel(ObjectsPanel), app.panel(ControlPanel)
     session = app.grasp_session
     x, y = paper_locations()["E"]

@@ -40,7 +40,7 @@ ROW_TIMEOUT_S = 400.0
 
 
 @pytest.fixture
-def row_app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
+def quick_soft_app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
     """Objects + Control panels on the control process of the quick soft arm, a token console
     (the test's client takes control with it)."""
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)  # (no part here)
@@ -57,8 +57,8 @@ def row_app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
         server.stop()
 
 
-def test_three_objects_are_cleared_into_a_clicked_bin(row_app: Any) -> None:
-    app = row_app
+def test_three_objects_are_cleared_into_a_clicked_bin(quick_soft_app: Any) -> None:
+    app = quick_soft_app
     objects, control = app.panel(ObjectsPanel), app.panel(ControlPanel)
     session = app.grasp_session
     operator = FakeClient(1)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +36,6 @@ from console.panels.soft_arm.objects import ObjectsPanel
 from console.panels.soft_arm.planner import PlannerPanel
 from console.panels.soft_arm.waypoints import WaypointsPanel
 from core.kinematics import planar
-from core.robots import load
 from fakes import FakeClient, click_at, user
 from tests.ws_client import wait_for
 
@@ -51,23 +50,12 @@ PALM_MM = 55.0
 
 
 @pytest.fixture
-def console(serve_module: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-            ) -> Iterator[Any]:
+def console(served_console: Callable[..., Any], tmp_path: Path,
+            monkeypatch: pytest.MonkeyPatch) -> Any:
     """The console serve.py builds for the quick soft arm on mock hardware, ``--no-token``; not
-    started (the lease would take control from this headless client); shut down as serve.py
-    does."""
+    started (the lease would take control from this headless client)."""
     monkeypatch.setattr(GraspSession, "compute_reach", False)  # (no part here)
-    robot = robot_copy("soft-arm", tmp_path, QUICK_MOTION)
-    args = serve_module.parse_args(["--robot", str(robot), "--no-token", "--port", "0",
-                                    "--hardware", "mock", "--rt-cpu", "none",
-                                    "--data-dir", str(tmp_path / "runs")])
-    server, app, token = serve_module.build(args, load(args.robot), "test")
-    assert token is None
-    try:
-        yield app
-    finally:
-        for _, step in serve_module._shutdown_steps(app, server):
-            step()
+    return served_console(robot_copy("soft-arm", tmp_path, QUICK_MOTION))
 
 
 def operator_of(app: Any) -> FakeClient:
