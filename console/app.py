@@ -49,7 +49,7 @@ import logging
 import threading
 import time
 from pathlib import Path
-from typing import Any, Sequence, TypeVar
+from typing import Any, Callable, Sequence, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -104,6 +104,8 @@ class ConsoleApp:
             default has none, and panels that need one say so).
         store: The console's state store, when a service built before the app needs it (it
             then carries ``initial`` and ``mirror_commands`` itself).
+        clock: Monotonic time source of the core, its hold-to-run and the panels' rate limits
+            (tests pass a simulated one).
     """
 
     def __init__(self, robot: Robot, server: viser.ViserServer, *,
@@ -112,7 +114,8 @@ class ConsoleApp:
                  status: str = "Kinematic simulation (no hardware connected)",
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
                  data_dir: str | Path | None = None, services: ConsoleServices | None = None,
-                 store: StateStore | None = None) -> None:
+                 store: StateStore | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         if not web.installed():  # fail closed: no console on an unguarded, unfixed viser
             raise RuntimeError("call console.web.install() first: viser's patches (the client "
                                "guard, shared sends) are not installed")
@@ -146,7 +149,8 @@ class ConsoleApp:
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
-        self.core = ConsoleCore(self.store, self.services, self.access, self.recorder)
+        self.core = ConsoleCore(self.store, self.services, self.access, self.recorder,
+                                clock=clock)
         self.lease = LeaseMonitor(server, self.access, busy=lambda: self.core.hold.active)
         self.access.add_listener(self._on_control_change)  # after the core's: it stops first
         server.on_client_connect(self.access.grant_if_free)

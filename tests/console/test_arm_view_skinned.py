@@ -268,7 +268,8 @@ def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_id
     from console.app import ConsoleApp
     from console.panels.common.readout import READOUT_HZ, ReadoutPanel
 
-    app = ConsoleApp(SOFT, server)
+    now = [100.0]  # a simulated clock: the readout's rate limit must not hang on the CPU
+    app = ConsoleApp(SOFT, server, clock=lambda: now[0])
     readout = app.panel(ReadoutPanel)
     q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
     first = app.store.request(q, "test")
@@ -280,11 +281,12 @@ def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_id
         app.render(app.store.report(q + 1e-4 * (k + 1), "mocap"))
     assert readout.html.content == shown
     # Two moves within 1 / READOUT_HZ: the second is held back ...
-    time.sleep(1.1 / READOUT_HZ)
+    now[0] += 1.1 / READOUT_HZ
     moved = app.store.report(q + 0.5, "mocap")
     app.render(moved)
     after_first_move = readout.html.content
     assert after_first_move != shown
+    now[0] += 0.9 / READOUT_HZ
     last = app.store.report(q + 1.0, "mocap")
     app.render(last)
     assert readout.html.content == after_first_move

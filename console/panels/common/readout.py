@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import html
 import math
-import time
 
 import numpy as np
 
@@ -125,7 +124,7 @@ class ReadoutPanel(Panel):
 
     def on_state(self, state: ArmState) -> None:
         self._pending = state
-        if time.monotonic() - self._shown_at >= 1.0 / READOUT_HZ:
+        if self.app.core.clock() - self._shown_at >= 1.0 / READOUT_HZ:
             self._show()
 
     def on_idle(self) -> None:
@@ -137,7 +136,7 @@ class ReadoutPanel(Panel):
         if state is None or frame == self._frame_shown:
             return  # nothing new, or the drawn arm did not change
         self._pending = None
-        self._shown_at = time.monotonic()
+        self._shown_at = self.app.core.clock()
         self._frame_shown = frame
         self.html.content = self._render(state)
         self.source.content = f"<small>shown: {html.escape(state.source)} · #{state.seq}</small>"
