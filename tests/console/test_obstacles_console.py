@@ -122,6 +122,49 @@ def test_bad_obstacle_input_is_refused_with_a_message_and_changes_nothing(gated)
     assert any("clearance must be between" in body for _, body in operator.notes)
 
 
+def test_a_grasp_echo_between_a_typed_value_and_its_callback_cannot_smuggle_it_in(gated):
+    """viser stores a browser's value before its callback runs (in a thread pool) while the
+    grasp worker echoes the session into the same fields: a bad radius typed then must still be
+    refused and put back to the obstacle's radius, whether the echo lands between the store and
+    the callback or the callback runs while the echo is writing (a CI run put back NaN)."""
+    import viser
+
+    from console.panels.soft_arm.objects import ObjectsPanel
+
+    app, s = gated, gated.grasp_session
+    op = app.panel(ObjectsPanel)
+    ed = op.obstacles
+    operator = FakeClient(43)
+    app.access.take(operator.client_id, "tok", name="Alice")
+    user(op.click_place, operator, "Obstacle")
+    click_at(op, operator, -0.1, 0.3)
+    wait_for(lambda: s.view().obstacles)
+    before = s.view().obstacles
+    radius_mm = before[0].r * 1e3
+
+    def callback(value: float) -> None:
+        for cb in list(ed.r._impl.update_cb):
+            cb(viser.GuiEvent(client=operator, client_id=operator.client_id,  # type: ignore[arg-type]
+                              target=ed.r))
+
+    # 1. The echo between viser's store and the callback.
+    ed.r._impl.value = math.nan
+    ed.refresh(s.view())
+    callback(math.nan)
+    assert s.view().obstacles == before
+    assert sum("finite" in body for _, body in operator.notes) == 1
+    assert ed.r.value == pytest.approx(radius_mm)
+    # 2. The callback runs while the echo writes the fields (here: from inside its write of
+    #    the dropdown, as another thread's callback may).
+    ed.r._impl.value = -5.0
+    ed.selected._impl.value = "(none)"  # so the echo writes the dropdown back
+    ed.selected.on_update(lambda _: callback(-5.0) if ed.r.value == -5.0 else None)
+    ed.refresh(s.view())
+    assert s.view().obstacles == before
+    assert any("radius must be positive" in body for _, body in operator.notes)
+    assert ed.r.value == pytest.approx(radius_mm)
+
+
 def test_viewers_cannot_place_change_or_remove_obstacles(gated):
     from console.panels.soft_arm.objects import ObjectsPanel
     from console.panels.soft_arm.planner import PlannerPanel

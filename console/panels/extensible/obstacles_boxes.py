@@ -272,8 +272,8 @@ class BoxObstaclesPanel(Panel):
             box = scene.get(selected)
             self.name.value = box.name
             for handle, v in zip((*self.centre, *self.size), (*box.centre, *box.size)):
-                handle.value = mm_value(v)
-                self._fields[id(handle)] = handle.value
+                self._fields[id(handle)] = mm_value(v)  # (not handle.value: a browser's
+                handle.value = mm_value(v)              # value may wait there for its callback)
             self._fields[id(self.name)] = box.name
         if abs(float(self.clearance.value) - mm_value(scene.clearance)) > 0.05:
             self.clearance.value = mm_value(scene.clearance)

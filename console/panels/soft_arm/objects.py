@@ -83,7 +83,6 @@ class ObjectsPanel(Panel):
                                                       hint="Upload a scene JSON file.")
         self.info = self.gui.add_html("")
         self.obstacles = ObstacleEditor(self, self.session, self._error)
-        self._mirror = False
         self._click_mode = self.click_place.value
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
         self._typed = TypedFields((self.x, self.y, self.r))  # refresh skips a field just typed
@@ -173,7 +172,7 @@ class ObjectsPanel(Panel):
     @operator_only(action="edit an object")
     def _on_typed(self, event) -> None:
         self._fields[id(event.target)] = event.target.value  # accepted (or a mirror)
-        if event.client is None or self._mirror:
+        if event.client is None:  # our own write (a refresh's echo, a put-back): a mirror
             return
         x, y, r = self._typed.read()  # every field as typed now (taken, selection or not)
         name = self.session.view().selected
@@ -241,18 +240,14 @@ class ObjectsPanel(Panel):
     def refresh(self, view: SessionView) -> None:
         self.obstacles.refresh(view)
         names = [o.name for o in view.objects] or ["(none)"]
-        self._mirror = True
-        try:
-            if tuple(self.selected.options) != tuple(names):
-                self.selected.options = names
-            want = view.selected or "(none)"
-            if self.selected.value != want:
-                self.selected.value = want
-            obj = next((o for o in view.objects if o.name == view.selected), None)
-            if obj is not None:
-                self._typed.show([mm(obj.x), mm(obj.y), mm(obj.r)])
-        finally:
-            self._mirror = False
+        if tuple(self.selected.options) != tuple(names):
+            self.selected.options = names
+        want = view.selected or "(none)"
+        if self.selected.value != want:
+            self.selected.value = want
+        obj = next((o for o in view.objects if o.name == view.selected), None)
+        if obj is not None:
+            self._typed.show([mm(obj.x), mm(obj.y), mm(obj.r)])
         count = len(view.objects)
         obj = next((o for o in view.objects if o.name == view.selected), None)
         where = ("" if obj is None else

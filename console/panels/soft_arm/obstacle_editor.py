@@ -56,7 +56,9 @@ class ObstacleEditor:
                                          "selected one.")
             self.remove_button = gui.add_button("Remove obstacle", color="red")
             self.info = gui.add_html("")
-        self._mirror = False
+        # What a refused edit puts back: the session's value (never a value viser stored for a
+        # browser whose callback has not run yet). A write of ours calls back at once, in this
+        # thread, with no client: that is how a mirror is told from a browser's edit.
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}
         self._typed = TypedFields((self.x, self.y, self.r))  # refresh skips a field just typed
         self.selected.on_update(operator_only(self._on_select, panel=panel,
@@ -88,7 +90,7 @@ class ObstacleEditor:
             self._error(event, str(exc))
 
     def _on_typed(self, event) -> None:
-        if event.client is None or self._mirror:
+        if event.client is None:  # our own write (restore, refresh): already in _fields
             self._fields[id(event.target)] = event.target.value
             return
         value, = self._typed.read([event.target])  # taken: the next echo may show another
@@ -115,29 +117,22 @@ class ObstacleEditor:
         if target is self.selected:
             self.selected.value = self.session.view().obstacle_selected or NONE
         elif target is not None and id(target) in self._fields:
-            self._mirror = True
-            try:
-                self._typed.show([self._fields[id(target)]], [target], typed_too=True)
-            finally:
-                self._mirror = False
+            self._typed.show([self._fields[id(target)]], [target], typed_too=True)
 
     # -- display (grasp worker thread) -------------------------------------------------------
     def refresh(self, view: SessionView) -> None:
         names = [o.name for o in view.obstacles] or [NONE]
-        self._mirror = True
-        try:
-            if tuple(self.selected.options) != tuple(names):
-                self.selected.options = names
-            want = view.obstacle_selected or NONE
-            if self.selected.value != want:
-                self.selected.value = want
-            obs = next((o for o in view.obstacles if o.name == view.obstacle_selected), None)
-            if obs is not None:
-                self._typed.show([mm(obs.x), mm(obs.y), mm(obs.r)])
-                for handle in (self.x, self.y, self.r):
-                    self._fields[id(handle)] = handle.value
-        finally:
-            self._mirror = False
+        if tuple(self.selected.options) != tuple(names):
+            self.selected.options = names
+        want = view.obstacle_selected or NONE
+        if self.selected.value != want:
+            self.selected.value = want
+        obs = next((o for o in view.obstacles if o.name == view.obstacle_selected), None)
+        if obs is not None:
+            shown = [mm(obs.x), mm(obs.y), mm(obs.r)]
+            for handle, value in zip((self.x, self.y, self.r), shown):
+                self._fields[id(handle)] = value  # before the write: its mirror reads it
+            self._typed.show(shown)
         count = len(view.obstacles)
         items = "".join(
             f"<br>{html.escape(o.name)}: ({mm(o.x):.0f}, {mm(o.y):.0f}) mm, r {mm(o.r):.0f} mm"
