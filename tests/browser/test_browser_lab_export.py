@@ -47,8 +47,7 @@ def open_offline(browser: Any, path: Path) -> tuple[Any, list[str]]:
     return page, requested
 
 
-def test_exported_scene_opens_from_disk_and_shows_the_arm_and_the_plan(
-        lab, artifacts_dir: Path) -> None:
+def _scene_shows_the_arm_and_the_plan(lab, artifacts_dir: Path) -> None:
     app = lab.app
     q = np.array([6.0, 4.0, 2.0, 0.0, -3.0, -5.0])
     state = app.store.request(q, "planner")
@@ -81,17 +80,15 @@ def test_exported_scene_opens_from_disk_and_shows_the_arm_and_the_plan(
         page.context.close()
 
 
-def test_exported_run_opens_from_disk_and_shows_the_arm_and_its_markers(
-        lab, artifacts_dir: Path) -> None:
-    """What the exported run's page draws (recording, replay and export through the GUI:
-    tests/console/test_lab_record_replay_flow.py): a run recorded here, exported by a replay
-    session, opened from disk with no network request, draws the arm and lists the markers."""
+def _run_shows_the_arm_and_its_markers(lab, artifacts_dir: Path) -> None:
     from fakes import ScopedClient
 
     from console.playback.replay import ReplaySession
     from console.recording.recorder import Recorder
 
     app = lab.app
+    exports = app.data.folder("exports")
+    before = set(exports.glob("*.html"))
     recorder = Recorder(app.data, app.model, name_of=lambda c: "Alice")
     path = recorder.start("run", client=None)
     events = [lambda: recorder.action("started the demo motion", None),
@@ -108,7 +105,7 @@ def test_exported_run_opens_from_disk_and_shows_the_arm_and_its_markers(
     markers = session.markers
     assert [m.category for m in markers] == ["action", "phase", "stop"]
     session.export()
-    files = list(app.data.folder("exports").glob("*.html"))
+    files = sorted(set(exports.glob("*.html")) - before)
     assert len(files) == 1
     page, requested = open_offline(lab.browser, files[0])
     try:
@@ -123,3 +120,13 @@ def test_exported_run_opens_from_disk_and_shows_the_arm_and_its_markers(
                                                                                  abs=1e-3)
     finally:
         page.context.close()
+
+
+def test_exported_scene_and_run_open_from_disk_and_show_the_arm_plan_and_markers(
+        lab, artifacts_dir: Path) -> None:
+    """What the exported pages draw, opened from disk with no network request: the scene
+    (exported from the Session tab) shows the arm and the plan; a run recorded here and exported
+    by a replay session (recording, replay and export through the GUI:
+    tests/console/test_lab_record_replay_flow.py) draws the arm and lists its markers."""
+    _scene_shows_the_arm_and_the_plan(lab, artifacts_dir)
+    _run_shows_the_arm_and_its_markers(lab, artifacts_dir)
