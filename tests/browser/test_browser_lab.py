@@ -3,9 +3,9 @@ console in lab mode with an operator token, so the test sees the server side).
 
 Checked: a viewer's jog, "Run demo motion" and the Control panel's "Execute grasp-and-place" are
 refused with the reason shown to them and move nothing; STOP from the viewer (button and Esc
-hotkey) stops the operator's (demo) motion through the stop hooks; a held jog stops within
-300 ms of letting go and a STOP latches it; closing (or freezing) the operator's tab stops the
-arm and releases the lock (closing: within 2 s; freezing: within the lease). Recording and export:
+hotkey) stops the operator's (demo) motion through the stop hooks; a held jog ends when let go
+and a STOP latches it; closing (or freezing) the operator's tab stops the arm and releases the
+lock. Recording and export:
 test_browser_lab_export.py; the rig: lab_rig.py. That a viewer can neither add, edit, plan nor
 place objects nor connect the hardware is tested without a browser
 (tests/console/test_planner_console.py, test_hw_panel.py, test_lab_access.py).
@@ -89,59 +89,58 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     assert not app.services.demo.running
 
 
-@pytest.mark.alone  # a 300 ms hold expiry
-def test_held_jog_stops_within_300_ms_of_release_and_stop_latches_it(lab) -> None:
+@pytest.mark.alone  # hold-to-run renewals and the lease probe from a software-rendered page
+def test_held_jog_release_stop_latch_and_closing_or_freezing_the_operators_tab(lab) -> None:
+    """What the operator's page does to motion: a held jog moves while held and ends when let
+    go; a STOP from the viewer latches it while the button is still held; closing the tab stops
+    the arm and frees control; a tab frozen longer than the lease loses control and stops the
+    arm. (The expiry and the lease themselves run on a simulated clock in
+    tests/console/test_console_core.py and test_lab_access.py; their wall-clock figures in a
+    real browser are benchmarks/lease_gaps.py's.)"""
     app = lab.app
     alice, bob = lab.pages(2)
     lab.take_control(alice, "Alice")
     mouse = press(alice, jog_button(alice, "κ₂", "+"))
-    wait_for(lambda: app.store.command.source == HOLD_SOURCE, timeout=3.0)
+    wait_for(lambda: app.store.command.source == HOLD_SOURCE, timeout=10.0)
     time.sleep(0.8)
     mouse.up()
-    released = time.perf_counter()
-    time.sleep(0.6)
+    wait_for(lambda: not app.hold.active, timeout=10.0)  # expiry, or the release ended it
     last = app.store.command
     # How far it got depends on how often this busy software-rendered page sent renewals;
     # the server saw the hold (above), so it moved.
     assert last.q[1] > 0.0, "the held jog should have bent segment 2"
-    assert last.stamp - released < 0.3 + 0.05  # expiry, or the release click ended it sooner
-    time.sleep(0.3)
-    assert app.store.command.seq == last.seq
+    time.sleep(0.5)
+    assert app.store.command.seq == last.seq, "the jog went on after its release"
 
     mouse = press(alice, jog_button(alice, "κ₂", "+"))
-    wait_for(lambda: app.store.command.seq > last.seq + 3, timeout=3.0)
+    wait_for(lambda: app.store.command.seq > last.seq + 3, timeout=10.0)
     stop_button(bob).click()
-    wait_for(lambda: app.store.command.source == "stop", timeout=3.0)
+    wait_for(lambda: app.store.command.source == "stop", timeout=10.0)
     frozen = app.store.command
     time.sleep(1.0)  # Alice is still holding the button
     assert app.store.command.seq == frozen.seq
     mouse.up()
 
-
-@pytest.mark.alone  # closed: stopped within 2 s; frozen: within the lease + 0.6 s
-def test_closing_or_freezing_the_operators_tab_stops_the_arm_and_frees_control(lab) -> None:
-    app = lab.app
-    alice, bob = lab.pages(2)
-    lab.take_control(alice, "Alice")
+    # Closing the operator's tab stops the arm and frees control.
     session_button(alice, "Run demo motion").click()
-    wait_for(lambda: app.services.demo.running)
-    closed = time.monotonic()
+    wait_for(lambda: app.services.demo.running, timeout=10.0)
+    n_stops = len(lab.stops)
     alice.context.close()
-    wait_for(lambda: lab.stops, timeout=3.0)
-    assert lab.stops[-1][0] - closed < 2.0 and "Alice's tab" in lab.stops[-1][1]
+    wait_for(lambda: len(lab.stops) > n_stops, timeout=10.0)
+    assert "Alice's tab" in lab.stops[-1][1], lab.stops
     assert app.access.holder is None and not app.services.demo.running
     wait_for(lambda: "nobody" in bob.locator('[data-testid="holder"]').inner_text())
 
+    # A tab frozen longer than the lease loses control (and would stop the arm).
     carol = lab.page()
     lab.take_control(carol, "Carol")
-    time.sleep(0.8)  # a few lease round trips succeed
-    assert app.access.holder is not None and app.lease.probes > 0
+    probes = app.lease.probes
+    wait_for(lambda: app.lease.probes >= probes + 2, timeout=10.0)  # lease round trips answer
+    assert app.access.holder is not None
     n_stops = len(lab.stops)
-    frozen = time.monotonic()
     lease_s = app.access.lease_s  # 7 s (console.core.access.LEASE_S: measured browsers x 2)
     carol.evaluate("s => { const end = Date.now() + s * 1000; while (Date.now() < end) {} }",
                    lease_s + 1.5)
-    wait_for(lambda: len(lab.stops) > n_stops, timeout=2.0)
-    # lease_s of silence, plus the probe's 0.1 s polling and thread scheduling on a busy machine
-    assert "silent" in lab.stops[-1][1] and lab.stops[-1][0] - frozen <= lease_s + 0.6
+    wait_for(lambda: len(lab.stops) > n_stops, timeout=10.0)
+    assert "silent" in lab.stops[-1][1], lab.stops
     assert app.access.holder is None
