@@ -19,7 +19,7 @@ curvatures, the plant's settling after a STOP (data/robots/soft-arm.toml [sim]: 
 the held volumes by 0.125-0.25 s, and one lagging its drive may stick for up to 1 s, then slip up
 to 50 % past; at the shipped speed the tip carried on by at most 5.8 mm, on the quick copy up to
 what it covers at its pre-STOP speed while stuck and slipping). A real click's mapping from
-pixels to the table stays tested in tests/browser/test_planner_browser.py.
+pixels to the table stays tested in tests/browser/test_canvas_browser.py.
 """
 
 from __future__ import annotations
@@ -234,7 +234,7 @@ def test_click_to_grasp_on_the_default_emulator_console(served: Callable[[str], 
         wait_for(lambda: control.execute.click_mode.value is True, what="Click to grasp on")
         x, y = paper_locations()[SPOT]
         # The click's ray from 1 m above the spot, straight down (a real page's mapping from
-        # pixels to this ray is test_planner_browser.py's).
+        # pixels to this ray is test_canvas_browser.py's).
         assert tab.send(viser._messages.ScenePointerMessage(
             "click", (x, y, 1.0), (0.0, 0.0, -1.0), ((0.5, 0.5),), None))
         wait_phase(app, RUNNING, avoid=("stopped",), timeout=15.0)

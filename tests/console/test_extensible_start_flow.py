@@ -8,7 +8,7 @@ idle; a held Δx₁ + jog moves the tip (at start it used to be refused: retract
 rack_min); a typed target is answered by the field's own callback (before any solve) and reached;
 Preview draws the requested path at once and ends in a planned preview; after Retract a held
 Δx₁ − is clamped with a note; nothing shown reads "-0". Was the flow of
-tests/browser/test_browser_jog_layout.py, which keeps the page's hold buttons and what the
+tests/browser/test_browser_jog.py, which keeps the page's hold buttons and what the
 page draws.
 """
 
