@@ -316,6 +316,5 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items[:] = keep
 
 
-# Why a rerun test failed the first time, printed with the suite's output (tests/rerun_reasons.py);
-# per-test wall and CPU seconds when PYTEST_CPU_TIMES=FILE (tests/cpu_times.py).
-pytest_plugins = ["rerun_reasons", "cpu_times"]
+# Per-test wall and CPU seconds when PYTEST_CPU_TIMES=FILE (tests/cpu_times.py).
+pytest_plugins = ["cpu_times"]
