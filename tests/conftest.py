@@ -267,11 +267,13 @@ def pytest_configure(config: pytest.Config) -> None:
 def xdist_group_of(item: pytest.Item) -> str | None:
     """The group ``item`` runs in: "browser" for every browser test (tests/browser/; each loads
     Chromium's software renderer, and several hold timings: a 300 ms hold, the lease), "timing"
-    for a test marked ``timing`` (its assertions hold wall-clock limits), None for the others,
-    which spread over both pytest-xdist workers."""
+    for a test marked ``timing`` or ``alone`` (one at a time: its assertions hold wall-clock
+    limits, or it loads every core on purpose), None for the others, which spread over both
+    pytest-xdist workers."""
     if item.nodeid.split("::", 1)[0].startswith("tests/browser/"):
         return "browser"
-    return "timing" if item.get_closest_marker("timing") is not None else None
+    one_at_a_time = any(item.get_closest_marker(m) is not None for m in ("timing", "alone"))
+    return "timing" if one_at_a_time else None
 
 
 SUITE_PARTS = ("parallel", "browser", "serial", "timing", "alone")

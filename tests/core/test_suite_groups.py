@@ -85,11 +85,13 @@ def test_the_serial_part_splits_into_timing_and_alone() -> None:
     timing = "tests/hw_bridge/test_loop.py::test_x"
     browser = "tests/browser/test_browser_lab.py::test_x"
     items = {"timing": _Item(timing, "timing"), "alone": _Item(timing, "timing", "alone"),
+             "alone only": _Item(timing, "alone"),  # (not in the parallel part: CPU hogs)
              "browser": _Item(browser, "browser"),
              "alone browser": _Item(browser, "browser", "alone"),
              "parallel": _Item("tests/core/test_units.py::t")}
     parts = {name: [p for p in PARTS if in_suite_part(item, p)]
              for name, item in items.items()}  # type: ignore[arg-type]
-    assert parts == {"timing": ["timing"], "alone": ["alone"], "browser": ["browser"],
+    assert parts == {"timing": ["timing"], "alone": ["alone"], "alone only": ["alone"],
+                     "browser": ["browser"],
                      "alone browser": ["alone"], "parallel": ["parallel"]}
     assert all(in_suite_part(items[n], "serial") for n in ("timing", "alone", "alone browser"))  # type: ignore[arg-type]
