@@ -58,6 +58,23 @@ def wait_for(pred, timeout=20.0, what="condition"):
         time.sleep(0.02)
 
 
+def control_when(ctl: ControlProcess, pred, timeout: float = 20.0, what: str = "condition"):
+    """The loop's control telemetry once ``pred(control)`` holds for it: checks read that very
+    telemetry, not a later view (a mocap frame late by > 50 ms on a busy box leaves one tick
+    untracked: no measured curvature, no object)."""
+    got = []
+
+    def check() -> bool:
+        c = ctl.view.snapshot.control
+        if pred(c):
+            got.append(c)
+            return True
+        return False
+
+    wait_for(check, timeout, what)
+    return got[-1]
+
+
 def emulator_children(pid: int) -> list[int]:
     """Pids of ``hw_bridge.emulator`` processes whose parent is ``pid`` (from /proc)."""
     out = []
@@ -117,9 +134,8 @@ def test_goto_stop_and_grasp_object_through_the_emulator(quick):
         target = np.array([4.0, -3.0, 3.0, 2.0, -2.0, 5.0])
         ctl.goto(target).result(10)
         # Measured curvature (fit to the mocap markers) converges to the target.
-        wait_for(lambda: np.max(np.abs(ctl.view.snapshot.control.kappa_meas - target)) < 0.3,
-                 timeout=60.0, what="curvature convergence")
-        c = ctl.view.snapshot.control
+        c = control_when(ctl, lambda c: np.max(np.abs(c.kappa_meas - target)) < 0.3,
+                         timeout=60.0, what="curvature convergence")
         assert c.armed and c.tracking_ok and c.phase in ("idle", "released")
         h = ctl.view.link
         assert h.received > 100 and h.crc_errors == 0 and h.rtt_ms_p50 is not None
@@ -139,8 +155,7 @@ def test_goto_stop_and_grasp_object_through_the_emulator(quick):
 
         # grasp_at puts the object into the emulator's world: it appears in its mocap stream.
         ctl.grasp_at(-0.16, 0.28, 0.0165).result(10)
-        wait_for(lambda: ctl.view.snapshot.control.object_xy is not None, what="object tracked")
-        xy = ctl.view.snapshot.control.object_xy
+        xy = control_when(ctl, lambda c: c.object_xy is not None, what="object tracked").object_xy
         assert np.hypot(xy[0] + 0.16, xy[1] - 0.28) < 0.003
         assert ctl.view.object_xy is not None and ctl.view.object_radius == pytest.approx(0.0165)
         wait_for(lambda: ctl.view.snapshot.control.phase not in ("stopped", "idle"),

@@ -79,7 +79,13 @@ def test_a_re_plan_in_the_control_process_keeps_to_the_obstacles(tmp_path):
         wait_for(lambda: ctl.view is not None and ctl.view.snapshot.control is not None, 30.0)
         ctl.arm().result(10)
         wait_for(lambda: ctl.view.snapshot.control.prepressurised, 60.0)
-        kappa = ctl.view.snapshot.control.kappa_meas
+        # (a tick with a marker occluded has no measured curvature: take a tracked one)
+
+        def measured() -> tuple[np.ndarray] | None:
+            k = ctl.view.snapshot.control.kappa_meas
+            return None if k is None else (k,)
+
+        (kappa,) = wait_for(measured, 20.0, "measured curvature")
         plan = plan_grasp_sided(robot, kappa, START, R, obstacles=[WALL], clearance=CLEARANCE)
         assert plan.success
         ctl.execute(plan, *START, R).result(10)
