@@ -182,7 +182,9 @@ def test_link_fault_stops_commanding_and_does_not_rearm(quick):
         ctl.goto(np.full(6, 3.0)).result(10)
         wait_for(lambda: ctl.view.snapshot.control.kappa_ref[0] > 0.5, what="moving")
         os.kill(emu, signal.SIGKILL)  # the device vanishes mid-motion
-        wait_for(lambda: ctl.view.fault is not None, what="fault shown")
+        # (the loop's fault and the link's health are published apart: wait for both)
+        wait_for(lambda: ctl.view.fault is not None and ctl.view.link.state == "unconfigured",
+                 what="fault shown")
         v = ctl.view
         assert v.link.state == "unconfigured" and "link lost" in v.fault
         sent = v.link.sent
