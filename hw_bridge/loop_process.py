@@ -207,7 +207,8 @@ class LoopProcess:
         return self._proc is not None and self._proc.is_alive()
 
     def close(self, timeout: float = 5.0) -> None:
-        """Stop the loop and the child process."""
+        """Stop the loop and the child process: asked to stop (``timeout`` s), then terminated,
+        then killed (``timeout`` s each); the child has ended when this returns."""
         proc = self._proc
         if proc is None:
             return
@@ -216,6 +217,10 @@ class LoopProcess:
             proc.join(timeout)
         if proc.is_alive():
             proc.terminate()
+            proc.join(timeout)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(timeout)
 
 
 class ProcessBridgeControls:

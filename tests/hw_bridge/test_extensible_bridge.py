@@ -15,24 +15,15 @@ from core.kinematics import delta as dk
 
 pytest.register_assert_rewrite("extensible_rig")  # before its import: it holds fixtures
 from extensible_rig import (Q0, ROBOT, TIP_TOL, Emulator,  # noqa: E402
-                            serial_to, tip_from_counts)
+                            serial_to, tip_from_counts, wait_for)
 from hw_bridge.extensible_runner import ExtensibleRunner  # noqa: E402
 from hw_bridge.interface import LifecycleState, LinkHealth  # noqa: E402
 from hw_bridge.mock import MockHardware  # noqa: E402
-
-pytestmark = pytest.mark.timing
 
 pytest_plugins = ["extensible_rig"]  # its fixtures: mock, runner_on, emulator
 
 
 # -- bridge controls (the Hardware panel's connect / disconnect / arm / disarm / health) --------
-
-def wait_for(pred, timeout: float = 5.0, what: str = "") -> None:
-    end = time.monotonic() + timeout
-    while not pred():
-        assert time.monotonic() < end, f"timed out waiting for {what}"
-        time.sleep(0.02)
-
 
 def received(ctl) -> int:
     h = ctl.health()
@@ -83,7 +74,7 @@ def test_bridge_controls_on_mock_hardware(mock: MockHardware, runner_on) -> None
     ctl.arm()
     wait_for(lambda: runner.snapshot.state == "holding", what="armed after reconnect")
     goal = dk.robot_rack_lengths(ROBOT, Q0)
-    result = runner.wait(runner.move_to(goal), timeout=10)
+    result = runner.wait(runner.move_to(goal), timeout=30)
     assert result is not None and result.ok, result
     np.testing.assert_allclose(tip_from_counts(mock.positions()), dk.tip_position(ROBOT, Q0),
                                atol=1e-3)
@@ -122,7 +113,7 @@ def test_bridge_controls_on_the_emulator_over_a_pty(emulator: Emulator, runner_o
 
     ctl.arm()
     wait_for(lambda: ctl.health().armed and runner.snapshot.state == "holding", what="armed")
-    result = runner.wait(runner.move_to(dk.robot_rack_lengths(ROBOT, Q0)), timeout=10)
+    result = runner.wait(runner.move_to(dk.robot_rack_lengths(ROBOT, Q0)), timeout=30)
     assert result is not None and result.ok, result
     assert np.linalg.norm(tip_from_counts(new.positions()) - dk.tip_position(ROBOT, Q0)) < TIP_TOL
 
@@ -197,5 +188,5 @@ def test_bytes_really_stuck_still_fail_after_the_write_timeout(pty_pair) -> None
     with pytest.raises(TransportError, match="stuck for 50 ms"):
         for _ in range(10_000):  # nobody reads the other end: the pty buffer fills up
             t.write(b"x" * 1000)
-    assert time.monotonic() - t0 < 5.0
+    assert time.monotonic() - t0 < 60.0  # it fails, not hangs (50 ms each: a generous bound)
     t.close()

@@ -16,8 +16,6 @@ from hw_bridge.mocap import MocapFrame, UdpMocapReceiver
 
 from extensible_rig import ROBOT, ROOT, runner_on, serial_to  # noqa: F401
 
-pytestmark = pytest.mark.timing
-
 # A short move (racks travel <= 0.1 m, about 2 s at the motor speed limit).
 TARGET = dk.tip_position(ROBOT, np.array([[0.012, -0.006, 0.09], [-0.006, 0.012, 0.06]]))
 SLIP = 0.1

@@ -17,8 +17,6 @@ from core.kinematics import delta as dk
 from core.robots import load
 from hw_bridge.extensible_process import ExtensibleProcess
 
-pytestmark = pytest.mark.timing
-
 ROBOT = load("extensible")
 Q0 = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.03]])
 Q1 = np.array([[0.01, 0.0, 0.05], [0.0, -0.01, 0.04]])
@@ -49,6 +47,8 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     assert p.connecting is not None and p.connecting.result(30) is None  # no fault
     # Connecting configures the link and never arms it: only the operator's Arm does.
     wait_for(lambda: p.snapshot.state == "disarmed", what="connected, disarmed")
+    # (the link's health and the loop's view travel apart: wait for the health too)
+    wait_for(lambda: p.bridge_controls.health() is not None, what="health")
     assert not p.bridge_controls.health().armed
     # The mock starts at the console's start pose (mid-range), so arming moves nothing.
     np.testing.assert_allclose(p.snapshot.measured_delta, model_for(ROBOT).initial(), atol=5e-5)
@@ -57,7 +57,8 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     assert refused is not None and not refused.ok and "arm first" in refused.message, refused
     p.bridge_controls.arm()
     wait_for(lambda: p.snapshot.state in ("holding", "following"), what="armed")
-    assert p.port == "mock://" and p.bridge_controls.health().armed
+    wait_for(lambda: p.bridge_controls.health().armed, what="health: armed")
+    assert p.port == "mock://"
 
     job = p.move_to(dk.robot_rack_lengths(ROBOT, Q0))
     result = p.wait(job, timeout=30)
@@ -88,7 +89,7 @@ def test_move_report_follow_and_bridge_verbs_in_the_child(proc) -> None:
     p.close()
     assert not p.alive
     with pytest.raises(RuntimeError, match="not running"):
-        p.stop().result(1)
+        p.stop().result(10)
 
 
 def test_bad_jobs_raise_before_anything_is_sent(proc) -> None:

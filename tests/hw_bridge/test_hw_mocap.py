@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import socket
 import sys
+import threading
 import time
 
 import numpy as np
@@ -11,8 +12,6 @@ import pytest
 
 from hw_bridge import mocap as m
 from hw_bridge.plants import CurvaturePlant, MotorBank
-
-pytestmark = pytest.mark.timing
 
 
 def test_packet_round_trip_and_rejects_garbage() -> None:
@@ -40,18 +39,26 @@ def test_udp_receiver_latest_never_blocks_and_counts_bad_packets() -> None:
     rx = m.UdpMocapReceiver(0)
     rx.start()
     try:
-        t0 = time.perf_counter()
-        assert rx.latest() is None
-        assert time.perf_counter() - t0 < 0.01
+        # Nothing was sent yet: a latest() that waited for a packet would never return. (How
+        # long it takes is a figure: benchmarks/mocap_latest.py.)
+        got: list[object] = []
+        reader = threading.Thread(target=lambda: got.append(rx.latest()), daemon=True)
+        reader.start()
+        reader.join(timeout=20)
+        assert not reader.is_alive() and got == [None]
         s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sent_at = time.monotonic()
         s.sendto(b"garbage", rx.addr)
         s.sendto(m.encode_mocap_packet(5, 0.0, np.ones((3, 3)), True), rx.addr)
-        end = time.monotonic() + 2
+        end = time.monotonic() + 20
         while rx.latest() is None and time.monotonic() < end:
             time.sleep(0.005)
         f = rx.latest()
         assert f is not None and f.seq == 5 and rx.bad_packets == 1
-        assert m.frame_health(f) == "ok"
+        # Stamped on arrival on this host's monotonic clock (its age is what frame_health
+        # judges; asking at once would be a race with a stall of the test's thread).
+        assert sent_at <= f.t_received <= time.monotonic()
+        assert m.frame_health(f, f.t_received + 0.01) == "ok"
         s.close()
     finally:
         rx.stop()

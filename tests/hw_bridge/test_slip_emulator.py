@@ -15,8 +15,6 @@ from hw_bridge.extensible_jobs import home_counts
 from hw_bridge.mocap import UdpMocapReceiver
 from hw_bridge.pty_emulator import Emulator, EmulatorOptions
 
-pytestmark = pytest.mark.timing
-
 EXT = load("extensible")
 L0 = EXT.L0
 
@@ -63,7 +61,7 @@ def test_slip_makes_the_racks_fall_short_of_the_encoders_by_the_closed_form() ->
         seg2 = L0 + (1 - f / 2) * T2
         seg1 = L0 + (1 - f) * (T1 - T2) + (1 - f / 2) * T2
         assert emu.racks.tip == pytest.approx([0, 0, seg1 + seg2], abs=5e-5)
-        end = time.monotonic() + 2.0
+        end = time.monotonic() + 20.0
         while ((frame := rx.latest()) is None or frame.seq != emu.tip_seq) \
                 and time.monotonic() < end:  # the frame of the last tick
             time.sleep(0.01)

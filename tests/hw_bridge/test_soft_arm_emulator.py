@@ -10,9 +10,11 @@ disarmed (not tripped) with still motors; Connect to the same pty brings telemet
 arming; only Arm arms; a bad port is a clear fault; the sim and the mock say what they cannot do.
 
 The moves run on a test copy of the soft arm whose trajectory is three times faster
-(tests/robot_files.py QUICK_MOTION; its link timing is the shipped one): these tests are about
-the process, the link and the device, not the trajectory's speed. The test of the default link
-under CPU hogs keeps the shipped file, as serve.py starts it.
+(tests/robot_files.py QUICK_MOTION) and whose link tolerates a starved process (watchdog 1 s,
+link timeout 0.8 s; shipped: 50 / 40 ms): these tests are about the process, the link and the
+device, not the trajectory's speed or the link's timing, and they run beside other tests on a
+busy machine. The test of the default link under CPU hogs keeps the shipped file, as serve.py
+starts it (its link losses are a figure: benchmarks/link_gaps.py).
 """
 
 from __future__ import annotations
@@ -32,16 +34,15 @@ from hw_bridge.soft_arm_process import ControlProcess
 from core.robots import load
 from hw_bridge import protocol as p
 
-pytestmark = pytest.mark.timing
-
 SOFT = load("soft-arm")
 
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory: pytest.TempPathFactory):
-    """The soft arm with QUICK_MOTION (the shipped link and bridge timing)."""
+    """The soft arm with QUICK_MOTION and a slack link (watchdog 1 s, link timeout 0.8 s)."""
     folder = tmp_path_factory.mktemp("robots")
-    return load(robot_copy("soft-arm", folder, QUICK_MOTION, name="soft-arm-quick"))
+    changes = {**QUICK_MOTION, "bridge.watchdog_ms": 1000, "bridge.link_timeout_ms": 800}
+    return load(robot_copy("soft-arm", folder, changes, name="soft-arm-quick-slack-link"))
 
 
 def wait_for(pred, timeout=20.0, what="condition"):
@@ -55,6 +56,23 @@ def wait_for(pred, timeout=20.0, what="condition"):
         if time.monotonic() > end:
             raise AssertionError(f"{what} not reached within {timeout} s")
         time.sleep(0.02)
+
+
+def control_when(ctl: ControlProcess, pred, timeout: float = 20.0, what: str = "condition"):
+    """The loop's control telemetry once ``pred(control)`` holds for it: checks read that very
+    telemetry, not a later view (a mocap frame late by > 50 ms on a busy box leaves one tick
+    untracked: no measured curvature, no object)."""
+    got = []
+
+    def check() -> bool:
+        c = ctl.view.snapshot.control
+        if pred(c):
+            got.append(c)
+            return True
+        return False
+
+    wait_for(check, timeout, what)
+    return got[-1]
 
 
 def emulator_children(pid: int) -> list[int]:
@@ -81,7 +99,7 @@ def alive(pid: int) -> bool:
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
-def device_state(path: str, timeout: float = 1.0) -> p.State:
+def device_state(path: str, timeout: float = 10.0) -> p.State:
     """The device's own STATE, asked by this test over the pty (HELLO only: arms nothing)."""
     from hw_bridge.link import Link
     from hw_bridge.transport import open_serial
@@ -116,9 +134,8 @@ def test_goto_stop_and_grasp_object_through_the_emulator(quick):
         target = np.array([4.0, -3.0, 3.0, 2.0, -2.0, 5.0])
         ctl.goto(target).result(10)
         # Measured curvature (fit to the mocap markers) converges to the target.
-        wait_for(lambda: np.max(np.abs(ctl.view.snapshot.control.kappa_meas - target)) < 0.3,
-                 timeout=15.0, what="curvature convergence")
-        c = ctl.view.snapshot.control
+        c = control_when(ctl, lambda c: np.max(np.abs(c.kappa_meas - target)) < 0.3,
+                         timeout=60.0, what="curvature convergence")
         assert c.armed and c.tracking_ok and c.phase in ("idle", "released")
         h = ctl.view.link
         assert h.received > 100 and h.crc_errors == 0 and h.rtt_ms_p50 is not None
@@ -128,16 +145,17 @@ def test_goto_stop_and_grasp_object_through_the_emulator(quick):
         wait_for(lambda: ctl.view.snapshot.control.phase == "stopped", what="stopped")
         held = ctl.view.snapshot.control.commands.copy()
         t0, sent0 = ctl.view.snapshot.t, ctl.view.link.sent
-        wait_for(lambda: ctl.view.snapshot.t > t0 + 0.5, what="loop running")
+        # (the link's counts and the loop's telemetry are published apart: wait for both)
+        wait_for(lambda: ctl.view.snapshot.t > t0 + 0.5 and ctl.view.link.sent > sent0 + 30,
+                 what="loop running, demands streamed")
         v = ctl.view
         assert np.array_equal(v.snapshot.control.commands, held)
-        assert v.link.sent > sent0 + 30 and v.link.armed  # still streaming the held demands
+        assert v.link.armed  # still streaming the held demands
         assert v.snapshot.control.reason == "test STOP" and v.fault is None
 
         # grasp_at puts the object into the emulator's world: it appears in its mocap stream.
         ctl.grasp_at(-0.16, 0.28, 0.0165).result(10)
-        wait_for(lambda: ctl.view.snapshot.control.object_xy is not None, what="object tracked")
-        xy = ctl.view.snapshot.control.object_xy
+        xy = control_when(ctl, lambda c: c.object_xy is not None, what="object tracked").object_xy
         assert np.hypot(xy[0] + 0.16, xy[1] - 0.28) < 0.003
         assert ctl.view.object_xy is not None and ctl.view.object_radius == pytest.approx(0.0165)
         wait_for(lambda: ctl.view.snapshot.control.phase not in ("stopped", "idle"),
@@ -147,7 +165,9 @@ def test_goto_stop_and_grasp_object_through_the_emulator(quick):
     finally:
         ctl.close()
     assert not ctl.alive
-    assert emu_pids and not any(alive(p) for p in emu_pids)  # no orphan emulator
+    # No orphan emulator (one whose parent was terminated ends within 1 s: parent_watch).
+    assert emu_pids
+    wait_for(lambda: not any(alive(p) for p in emu_pids), what="the emulator ended")
 
 
 def test_bad_device_is_refused():
@@ -164,7 +184,9 @@ def test_link_fault_stops_commanding_and_does_not_rearm(quick):
         ctl.goto(np.full(6, 3.0)).result(10)
         wait_for(lambda: ctl.view.snapshot.control.kappa_ref[0] > 0.5, what="moving")
         os.kill(emu, signal.SIGKILL)  # the device vanishes mid-motion
-        wait_for(lambda: ctl.view.fault is not None, timeout=5.0, what="fault shown")
+        # (the loop's fault and the link's health are published apart: wait for both)
+        wait_for(lambda: ctl.view.fault is not None and ctl.view.link.state == "unconfigured",
+                 what="fault shown")
         v = ctl.view
         assert v.link.state == "unconfigured" and "link lost" in v.fault
         sent = v.link.sent
@@ -184,6 +206,7 @@ HOGS = ("while True: pass", "while True: pass",
 
 
 @pytest.mark.alone  # it loads every core on purpose
+@pytest.mark.timing  # tests/conftest.py puts an `alone` test in the alone part only with it
 def test_under_cpu_hogs_the_default_link_moves_the_arm_and_a_loss_stops_it_with_its_reason():
     """The default console's pair (loop process + emulator on the real-time CPU, as serve.py
     starts them) moves the arm back and forth for 20 s while two busy loops and a memory
@@ -259,7 +282,7 @@ def test_mock_device_runs_the_same_plant_in_process(quick):
         target = np.array([-3.0, 2.0, 4.0, 0.0, 3.0, -2.0])
         ctl.goto(target).result(10)
         wait_for(lambda: np.max(np.abs(ctl.view.snapshot.control.kappa_meas - target)) < 0.3,
-                 timeout=15.0, what="curvature convergence")
+                 timeout=60.0, what="curvature convergence")
         ctl.place_object(0.25, 0.02, 0.02).result(10)
         wait_for(lambda: ctl.view.object_xy is not None, what="object in the mock world")
         assert ctl.view.object_xy == pytest.approx((0.25, 0.02), abs=1e-6)
@@ -353,5 +376,34 @@ def test_bridge_controls_on_the_simulated_arm_say_there_is_no_link():
         wait_for(lambda: ctl.view.snapshot.control.armed, what="armed")
         bc.disarm()
         wait_for(lambda: not ctl.view.snapshot.control.armed, what="disarmed")
+    finally:
+        ctl.close()
+
+
+class _StopLost:
+    """The child's command queue, losing the parent's stop request (None): a child too busy or
+    too starved to stop within close()'s timeout, as on a loaded machine."""
+
+    def __init__(self, queue) -> None:
+        self.queue = queue
+
+    def put(self, item) -> None:
+        if item is not None:
+            self.queue.put(item)
+
+    def __getattr__(self, name: str):
+        return getattr(self.queue, name)
+
+
+def test_close_returns_once_the_child_has_ended_even_if_it_did_not_stop_in_time():
+    """A child that did not stop within the timeout is terminated (then killed), and close()
+    returns only once it has ended: closing left it running for a moment (seen as a flaky
+    ``assert not ctl.alive`` in test_goto_stop_and_grasp_object_through_the_emulator)."""
+    ctl = ControlProcess(SOFT, seed=7, device="sim", sched_priority=None)
+    try:
+        wait_for(lambda: ctl.view is not None, what="first view")
+        ctl._commands = _StopLost(ctl._commands)
+        ctl.close(timeout=1.0)
+        assert not ctl.alive
     finally:
         ctl.close()

@@ -28,8 +28,6 @@ from hw_bridge.planner_process import ProcessPlanner
 from hw_bridge.soft_arm_process import ControlProcess
 from tests.ws_client import wait_for
 
-pytestmark = pytest.mark.timing
-
 SOFT = load("soft-arm")
 R = 0.0165
 START = (-0.20, 0.20)
@@ -80,8 +78,14 @@ def test_a_re_plan_in_the_control_process_keeps_to_the_obstacles(tmp_path):
     try:
         wait_for(lambda: ctl.view is not None and ctl.view.snapshot.control is not None, 30.0)
         ctl.arm().result(10)
-        wait_for(lambda: ctl.view.snapshot.control.prepressurised, 20.0)
-        kappa = ctl.view.snapshot.control.kappa_meas
+        wait_for(lambda: ctl.view.snapshot.control.prepressurised, 60.0)
+        # (a tick with a marker occluded has no measured curvature: take a tracked one)
+
+        def measured() -> tuple[np.ndarray] | None:
+            k = ctl.view.snapshot.control.kappa_meas
+            return None if k is None else (k,)
+
+        (kappa,) = wait_for(measured, 20.0, "measured curvature")
         plan = plan_grasp_sided(robot, kappa, START, R, obstacles=[WALL], clearance=CLEARANCE)
         assert plan.success
         ctl.execute(plan, *START, R).result(10)
@@ -117,7 +121,7 @@ def test_grasp_takes_the_object_to_the_bin_placed_on_the_table(tmp_path):
     try:
         wait_for(lambda: ctl.view is not None and ctl.view.snapshot.control is not None, 30.0)
         ctl.arm().result(10)
-        wait_for(lambda: ctl.view.snapshot.control.prepressurised, 20.0)
+        wait_for(lambda: ctl.view.snapshot.control.prepressurised, 60.0)
         bad = BinParams(np.zeros(4), 0.02)
         with pytest.raises(RuntimeError, match="6 curvatures"):
             ctl.grasp_at(*START, R, bin_params=bad).result(10)
@@ -126,8 +130,13 @@ def test_grasp_takes_the_object_to_the_bin_placed_on_the_table(tmp_path):
         wait_for(lambda: ctl.view.snapshot.control.phase in ("stopped", "released"), 120.0)
         c = ctl.view.snapshot.control
         assert c.phase == "released", c.reason
-        xy = ctl.view.object_xy
-        assert xy is not None and not ctl.view.captured
-        assert np.hypot(xy[0] + 0.12, xy[1] - 0.10) < placed.drop_radius_m, xy
+        # (the view's world and telemetry may be a tick apart: wait for the object to show)
+
+        def in_placed_bin() -> bool:
+            v = ctl.view
+            return v.object_xy is not None and not v.captured and np.hypot(
+                v.object_xy[0] + 0.12, v.object_xy[1] - 0.10) < placed.drop_radius_m
+
+        wait_for(in_placed_bin, 20.0, f"the object in the placed bin (at {ctl.view.object_xy})")
     finally:
         ctl.close()
