@@ -10,7 +10,8 @@ headless trials through the simulated arm put the object in the bin
 
 No test here asserts a wall-clock figure: waits have deadlines far above what they take (the
 suite's parallel part runs them beside another test on two busy cores), and the links and device
-watchdogs are patient (2 s), as these tests are about channel counts and motion, not link timing.
+watchdogs are patient (2 s for a STATE, 1 s for the device's watchdog: the most a device
+takes), as these tests are about channel counts and motion, not link timing.
 """
 
 from __future__ import annotations
@@ -114,7 +115,7 @@ def test_soft_arm_mock_device_has_2n_plus_1_channels(name):
     arm = load(name)
     n = arm.n_segments
     hw = MockHardware(arm)
-    hw.config = dataclasses.replace(hw.config, link_timeout_s=2.0, watchdog_s=2.0)
+    hw.config = dataclasses.replace(hw.config, link_timeout_s=2.0, watchdog_s=1.0)
     try:
         assert hw.configure() is ReturnType.OK, hw.fault  # HELLO answered with 2N + 1 motors
         assert hw.device.motors.position.shape == (2 * n + 1,)
@@ -170,7 +171,7 @@ def test_emulator_process_answers_with_the_files_channel_count(name, shipped):
     emu = Emulator(DATA / f"{name}.toml")
     try:
         slow = dataclasses.replace(BridgeConfig.from_robot(arm), link_timeout_s=2.0,
-                                   watchdog_s=2.0)
+                                   watchdog_s=1.0)
         hw = SerialHardware(slow, emu.port)
         assert hw.configure() is ReturnType.OK, hw.fault
         hw.cleanup()
@@ -256,7 +257,7 @@ def test_extensible_path_executes_on_the_mock_device(name):
     assert mp.motor_counts.shape[1] == 3 * n
     assert np.all(np.linalg.norm(mp.tips - mp.targets, axis=1) <= arm.ik.tolerance)
     hw = MockHardware(arm)
-    hw.config = dataclasses.replace(hw.config, link_timeout_s=2.0, watchdog_s=2.0)
+    hw.config = dataclasses.replace(hw.config, link_timeout_s=2.0, watchdog_s=1.0)
     runner = ExtensibleRunner(arm, lambda: hw).start()
     try:
         assert runner.connecting is not None and runner.connecting.result(30) is None
