@@ -144,11 +144,18 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
     click_at(objects, operator, *OBJECT_2)  # a click on an object selects it
     assert len(session.view().objects) == 3 and session.view().selected == "Object 2"
     wait_for(lambda: 'data-selected="Object 2"' in objects.info.content, what="shown selected")
+    # Selecting plans too: let that plan end first, so the one waited for below is the button's
+    # (two plans may differ in waypoints, and the summary shows the newest a frame later).
+    selected_plan = wait_for(lambda: (o := session.view().outcome) is not None
+                             and o.obj.name == "Object 2" and session.view().planning_s is None
+                             and o, timeout=30.0, what="the selection's plan")
 
     user(planner.plan_button, operator)
-    wait_for(lambda: (o := session.view().outcome) is not None and o.obj.name == "Object 2"
-             and 'data-state="ok"' in planner.summary.content, timeout=30.0,
-             what=f"Object 2 planned: {planner.summary.content}")
+    wait_for(lambda: (o := session.view().outcome) is not None and o.seq != selected_plan.seq
+             and o.obj.name == "Object 2" and o.plan is not None
+             and 'data-state="ok"' in planner.summary.content
+             and attr(planner.summary.content, "data-waypoints") == str(o.plan.n),
+             timeout=30.0, what=f"Object 2 planned: {planner.summary.content}")
     n = session.view().outcome.plan.n
     assert n >= 2 and attr(planner.summary.content, "data-waypoints") == str(n)
     wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=30.0,
