@@ -1,7 +1,7 @@
 """A one-line gigabyte recording is refused without the reader growing: the part of
 test_recording_budget.py that used to assert a wall-clock limit ("within a second").
 
-The refusal's time is measured by ``benchmarks/bench_recording_budget.py`` (about 0.01 s, goal
+The refusal's time is measured by ``benchmarks/bench_recording_budget.py`` (a few ms, goal
 1 s, beside the time gzip takes to inflate the megabyte the refusal has to read), never
 asserted here: the suite runs this test beside another on two busy cores. What is checked here
 holds under any load: the reason names the line and the limit, and the reader never held more

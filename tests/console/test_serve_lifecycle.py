@@ -2,7 +2,7 @@
 starting ends it at once (exit 128 + SIGTERM, before it serves); with a browser that never
 answers, shutdown still ends (exit 0) and leaves no children.
 
-How long these take (SIGTERM while starting: about 0.1 s, goal 1 s; shutdown with a silent
+How long these take (SIGTERM while starting: about 0.01 s, goal 1 s; shutdown with a silent
 browser: goal 2 s) is measured by ``benchmarks/bench_process_lifecycle.py`` beside a baseline,
 never asserted here: the suite runs these tests beside another on two busy cores. The deadlines
 here only end a test that hangs."""
