@@ -1,6 +1,11 @@
 """Control / trials / capture panels without a browser: the loop process obeys Arm, moves,
 holds on STOP (from any source), refuses bad input; the panel shows a hardware fault (told to
-every browser once) and the link; trials and capture helpers."""
+every browser once) and the link; trials and capture helpers.
+
+No wall-clock figure is asserted: the loop process test waits (30 s deadlines) for what the
+process reports, on a patient link (0.5 s for a STATE and for the device's watchdog, not the
+shipped 40 / 50 ms): it is about Arm, moves and STOP, not link timing, and the suite runs it
+beside another test on two busy cores."""
 
 from __future__ import annotations
 
@@ -23,8 +28,7 @@ from hw_bridge.interface import LinkHealth
 from hw_bridge.loop import LoopSnapshot, LoopStats
 import ws_client
 from fakes import FakeClient, console_app, done_future
-
-pytestmark = pytest.mark.timing
+from robot_files import robot_copy
 
 SOFT = load("soft-arm")
 
@@ -34,9 +38,11 @@ def wait_for(pred, timeout=30.0):
 
 
 @pytest.fixture
-def app():
+def app(tmp_path):
+    robot = load(robot_copy("soft-arm", tmp_path, {"bridge.watchdog_ms": 500,
+                                                   "bridge.link_timeout_ms": 500}))
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    a = console_app(SOFT, srv, panels=(ControlPanel,), soft_control="process")
+    a = console_app(robot, srv, panels=(ControlPanel,), soft_control="process")
     a.start()
     try:
         yield a
@@ -57,7 +63,7 @@ def test_arm_move_and_stop_hold_through_the_loop_process(app):
     # Issue 19.3: Execute while disarmed is refused with what to do; it does not arm.
     with pytest.raises(RuntimeError, match=r"Arm first \(press Arm\)"):
         panel.ctl.grasp_at(-0.16, 0.28, 0.0165).result(10)
-    time.sleep(0.2)
+    time.sleep(0.2)  # (were it to arm, the next view would show it)
     assert not control(app).armed and control(app).phase == "idle"
     panel._arm()
     wait_for(lambda: control(app).armed and control(app).prepressurised)

@@ -43,7 +43,10 @@ from core.kinematics import planar
 from fakes import FakeClient, user
 from tests.ws_client import RawClient, wait_for
 
-pytestmark = pytest.mark.timing  # the 100 Hz control process in real time
+# A patient link (0.5 s for a STATE and for the device's watchdog, not the shipped 40 / 50 ms):
+# this test is about what the console and the control process do, not link timing, and the
+# suite runs it beside another test on two busy cores (link gaps: benchmarks/link_gaps.py).
+PATIENT_LINK = {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500}
 
 SPOT = "E"  # (-0.08, 0.33): the quickest of the five spots
 RUNNING = ("settling", "planning", "approach", "grasp", "move_to_bin", "release")
@@ -51,7 +54,7 @@ RUN_TIMEOUT_S = 60.0
 WINDOW_S = 1.0
 TIP_MOVING_MM = 2.0  # per WINDOW_S before STOP (the browser saw 3-21 mm/s early in the approach)
 TIP_TOL_MM = 1.0  # two windows' mean tips (no readout frames here: every published view)
-SETTLE_S = 8.0
+SETTLE_S = 30.0  # (about 2 s: an arm that went on after STOP fails the carry check)
 HOLD_S = 3.0
 CARRY_MM = 6.0  # the plant's carry after STOP at the shipped speed (at most 5.8 mm in sim)
 SIM = tomllib.loads((Path(__file__).resolve().parents[2] / "data" / "robots" / "soft-arm.toml")
@@ -70,7 +73,7 @@ def served(served_console: Callable[..., Any], tmp_path: Path,
     """``served(hardware)``: the console serve.py builds for the quick soft arm with
     ``--hardware`` that, ``--no-token``, not started (conftest ``served_console``)."""
     monkeypatch.setattr(GraspSession, "compute_reach", False)  # (no part here)
-    robot = robot_copy("soft-arm", tmp_path, QUICK_MOTION)
+    robot = robot_copy("soft-arm", tmp_path, {**QUICK_MOTION, **PATIENT_LINK})
     return lambda hardware: served_console(robot, hardware)
 
 
@@ -163,7 +166,7 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
 
     # 2. Start again, STOP on the way: the arm holds where it is.
     user(control.execute.execute_btn, operator)
-    wait_phase(app, RUNNING, avoid=("stopped",), timeout=20.0)  # ("released" showed until now)
+    wait_phase(app, RUNNING, avoid=("stopped",), timeout=30.0)  # ("released" showed until now)
     wait_phase(app, ("approach",), avoid=("stopped", "idle", "released"))
     time.sleep(0.3)  # into the approach
     _, tip0, _ = window(app)
@@ -174,7 +177,7 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
     # A tip that went on at that speed would leave the tolerance within HOLD_S: the check can fail.
     assert moved / WINDOW_S * HOLD_S > 2 * TIP_TOL_MM
     user(app.header.stop_btn, operator)
-    wait_phase(app, ("stopped",), timeout=5.0)
+    wait_phase(app, ("stopped",), timeout=30.0)
     m = wait_for(lambda: measured(app), what="a measurement at the STOP")
     tip_stop, ref_stop = m[1], m[2]
     wait_for(lambda: "STOP pressed by" in control.state_md.content,
@@ -237,7 +240,7 @@ def test_click_to_grasp_on_the_default_emulator_console(served: Callable[[str], 
         # pixels to this ray is test_canvas_browser.py's).
         assert tab.send(viser._messages.ScenePointerMessage(
             "click", (x, y, 1.0), (0.0, 0.0, -1.0), ((0.5, 0.5),), None))
-        wait_phase(app, RUNNING, avoid=("stopped",), timeout=15.0)
+        wait_phase(app, RUNNING, avoid=("stopped",), timeout=30.0)
         selected = session.view().selected
         placed = next(o for o in session.view().objects if o.name == selected)
         assert np.hypot(placed.x - x, placed.y - y) < 0.01, placed  # the Objects panel's

@@ -8,6 +8,10 @@ calls back for a click. Expectations are the test's own: the IK (``solve_tip_ik`
 is reachable, forward kinematics of the Δ jog sliders' values gives their tip, ``build_path``
 gives the path's end, the robot file gives the rack limits and the tip speed. Was
 tests/browser/test_browser_extensible.py (three Chromium tests on serve.py subprocesses).
+
+The suite runs these beside another test on two busy cores: every wait has a deadline far above
+what it takes, links are patient where a device runs, and the one time compared (the measured
+tip takes no less than the tip speed allows) is a lower bound that load only makes easier.
 """
 
 from __future__ import annotations
@@ -29,8 +33,6 @@ from core.planning.paths import build_path
 from core.robots import load
 from fakes import FakeClient, user
 from tests.ws_client import RawClient, wait_for
-
-pytestmark = pytest.mark.timing  # the 100 Hz control process in real time
 
 ROBOT = load("extensible")
 
@@ -120,7 +122,7 @@ def test_typed_target_moves_the_tip_and_the_jog_sliders(tab: Callable[..., Any])
     far = np.array([900.0, -60.0, 350.0])  # beyond the 820 mm arm
     assert not solve_tip_ik(ROBOT, far / 1e3).reachable
     type_target(client, target, far)
-    wait_for(lambda: attr(target.status.content, "data-state") == "unreachable", timeout=15.0,
+    wait_for(lambda: attr(target.status.content, "data-state") == "unreachable", timeout=30.0,
              what="the unreachable status")
     said = float(attr(target.status.content, "data-error-mm"))
     wait_for(lambda: abs(np.linalg.norm(readout_tip(readout) - far) - said) <= 0.2,
@@ -137,7 +139,7 @@ def arm_link(app: Any, hardware: Any, operator: FakeClient) -> None:
     from console.panels.common.hardware import extensible_link_health
 
     user(hardware.arm_btn, operator)
-    wait_for(lambda: (h := extensible_link_health(app)) is not None and h.armed, timeout=20.0,
+    wait_for(lambda: (h := extensible_link_health(app)) is not None and h.armed, timeout=30.0,
              what=f"the link armed ({extensible_link_health(app)}; told {operator.notes})")
 
 
@@ -188,7 +190,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     # serve.py connected the link at start, disarmed; the operator connects again and arms.
     user(hardware.connect_btn, operator)
     wait_for(lambda: (h := extensible_link_health(app)) is not None and h.state == "inactive",
-             timeout=20.0, what=f"the link configured ({extensible_link_health(app)})")
+             timeout=30.0, what=f"the link configured ({extensible_link_health(app)})")
     assert "/dev/pts/" in extensible_link_health(app).port
     arm_link(app, hardware, operator)
     # The emulated arm powers up at the console's start pose and Arm holds where it is.
@@ -200,7 +202,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
         seen.append(readout_tip(readout))
         return bool(np.abs(seen[-1] - seen[-2]).max() <= 0.05)
 
-    wait_for(still, timeout=20.0, what="the measured tip held still")
+    wait_for(still, timeout=30.0, what="the measured tip held still")
     start = seen[-1]
     assert np.abs(start - initial).max() <= 0.5
     candidates = [np.array(c) for c in ((80.0, 40.0, 300.0), (80.0, 40.0, 180.0),

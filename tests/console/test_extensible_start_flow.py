@@ -19,7 +19,6 @@ import time
 from typing import Any, Callable
 
 import numpy as np
-import pytest
 import viser
 from test_extensible_console_flows import (  # noqa: F401 (fixtures)
     attr,
@@ -37,8 +36,6 @@ from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 from fakes import FakeClient, user
 from tests.ws_client import RawClient, wait_for
-
-pytestmark = pytest.mark.timing  # the 100 Hz control process in real time
 
 ROBOT = load("extensible")
 NEGATIVE_ZERO = re.compile(r"(?<![\d.])[-−]0(?:\.0+)?(?![\d.])")
@@ -64,7 +61,7 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     target, readout, jog, paths, _ = panels(app)
     operator = FakeClient(client.client_id)
     start = dk.tip_position(ROBOT, ExtensibleModel(ROBOT).initial()) * 1e3
-    wait_for(lambda: np.abs(readout_tip(readout) - start).max() <= 0.5, timeout=20.0,
+    wait_for(lambda: np.abs(readout_tip(readout) - start).max() <= 0.5, timeout=30.0,
              what="the readout at the start pose")
     wait_for(lambda: ">idle<" in app.header.status.content.replace("</span>", "<"),
              what=f"the header's phase idle ({app.header.status.content})")
@@ -72,9 +69,9 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     # A bend jog moves at start.
     dx1 = next(r for r in jog.rows if r.coord.key == "dx1")
     hold(client, dx1.plus, 1.0)
-    wait_for(lambda: np.linalg.norm(readout_tip(readout) - start) > 2.0, timeout=5.0,
+    wait_for(lambda: np.linalg.norm(readout_tip(readout) - start) > 2.0, timeout=30.0,
              what=f"the tip moved by the bend jog ({jog.note.content})")
-    wait_for(lambda: not app.hold.active, what="the jog to end")
+    wait_for(lambda: not app.hold.active, timeout=30.0, what="the jog to end")
     assert np.asarray(app.store.command.q)[0, 0] > 0.0  # Δx₁, the way of the button
 
     # A typed target is answered by the field's callback itself ("Solving…"), then reached.
@@ -101,10 +98,10 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     assert jog.retract is not None
     user(jog.retract, operator)
     retracted = np.array([0.0, 0.0, ROBOT.n_segments * ROBOT.L0 * 1e3])
-    wait_for(lambda: np.abs(readout_tip(readout) - retracted).max() <= 0.5, timeout=20.0,
+    wait_for(lambda: np.abs(readout_tip(readout) - retracted).max() <= 0.5, timeout=30.0,
              what="the arm retracted")
     hold(client, dx1.minus, 0.5)
-    wait_for(lambda: "clamped to +0 mm" in jog.note.content, timeout=5.0,
+    wait_for(lambda: "clamped to +0 mm" in jog.note.content, timeout=30.0,
              what=f"the clamp note ({jog.note.content!r})")
     assert "extend δL₁ first" in jog.note.content
     text = shown_text(app, readout.html, target.status, paths.status, jog.note)

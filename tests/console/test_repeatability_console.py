@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-import pytest
 from robot_files import robot_copy
 from test_extensible_console_flows import arm_link, attr, served, tab  # noqa: F401 (fixtures)
 
@@ -28,8 +27,6 @@ from core.kinematics.delta_ik import solve_tip_ik
 from core.robots import load
 from fakes import FakeClient, user
 from tests.ws_client import wait_for
-
-pytestmark = pytest.mark.timing  # the 100 Hz control process and the emulator in real time
 
 ROBOT = load("extensible")
 # A point with both segments bent (core.control.repeatability.sample_targets, seed 1): about
@@ -63,7 +60,7 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
     # serve.py connected the emulator at start, disarmed: the operator connects and arms it.
     user(hardware.connect_btn, operator)
     wait_for(lambda: (h := extensible_link_health(app)) is not None and h.state == "inactive",
-             timeout=20.0, what=f"the link configured ({extensible_link_health(app)})")
+             timeout=30.0, what=f"the link configured ({extensible_link_health(app)})")
     arm_link(app, hardware, operator)
 
     for handle, value in zip(panel.inputs, POINT_MM):

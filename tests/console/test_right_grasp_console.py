@@ -23,7 +23,6 @@ import time
 from typing import Any
 
 import numpy as np
-import pytest
 
 from console.panels.soft_arm.control import ControlPanel
 from console.panels.soft_arm.objects import ObjectsPanel
@@ -32,8 +31,6 @@ from core.kinematics import planar
 from fakes import FakeClient, user
 from test_row_process import quick_soft_app  # noqa: F401 (a fixture: the same console)
 from tests.ws_client import wait_for
-
-pytestmark = pytest.mark.timing  # the 100 Hz control process in real time
 
 RUN_TIMEOUT_S = 90.0
 PALM_MM = 55.0
@@ -74,11 +71,11 @@ def test_execute_grasps_a_right_side_object_and_releases_it(quick_soft_app: Any)
         return control.ctl.view.snapshot.control.phase
 
     end = time.monotonic() + RUN_TIMEOUT_S
-    while phase() not in ("grasp", "move_to_bin"):  # the first frame of the grasp
-        assert phase() not in ("stopped", "released"), (phase(), control.state_md.content)
+    while (c := control.ctl.view.snapshot.control).phase not in ("grasp", "move_to_bin"):
+        assert c.phase not in ("stopped", "released"), (c.phase, control.state_md.content)
         assert time.monotonic() < end, f"no grasp: {control.state_md.content}; {operator.notes}"
         time.sleep(0.02)
-    palm = palm_mm(app.robot, control.ctl.view.snapshot.control.kappa_meas)
+    palm = palm_mm(app.robot, c.kappa_meas)  # (the first frame of the grasp seen: one view)
     # The palm point is g_off + r = 26.5 mm beside the object's centre: on its right side.
     d = math.hypot(palm[0] - spot[0] * 1e3, palm[1] - spot[1] * 1e3)
     assert palm[0] > 0 and d < PALM_MM, (palm, d, control.state_md.content)

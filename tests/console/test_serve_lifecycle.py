@@ -1,5 +1,11 @@
 """serve.py's lifecycle: a busy port is refused (exit 2) unless --next-free-port; SIGTERM while
-starting ends it at once; with a browser that never answers, shutdown still takes <= 2 s."""
+starting ends it at once (exit 128 + SIGTERM, before it serves); with a browser that never
+answers, shutdown still ends (exit 0) and leaves no children.
+
+How long these take (SIGTERM while starting: about 0.01 s, goal 1 s; shutdown with a silent
+browser: goal 2 s) is measured by ``benchmarks/bench_process_lifecycle.py`` beside a baseline,
+never asserted here: the suite runs these tests beside another on two busy cores. The deadlines
+here only end a test that hangs."""
 
 from __future__ import annotations
 
@@ -9,15 +15,15 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from console.serve_lifecycle import port_in_use
-from test_no_orphans import descendants, free_port, start_console, survivors
-
-pytestmark = pytest.mark.timing
+from console import serve_lifecycle
+from console.serve_lifecycle import Lifecycle, port_in_use
+from test_no_orphans import descendants, free_port, start_console, wait_gone
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -68,18 +74,66 @@ def test_sigterm_while_starting_exits_at_once_and_leaves_no_children(tmp_path):
     while line and "hardware:" not in line:
         line = proc.stderr.readline()
     tree = descendants(proc.pid)  # now building: importing viser, the panels, the children
-    t0 = time.monotonic()
     proc.send_signal(signal.SIGTERM)
-    proc.wait(10)
-    took = time.monotonic() - t0
-    assert proc.returncode == 128 + signal.SIGTERM and took < 1.0, (proc.returncode, took)
-    time.sleep(1.0)
+    out, err = proc.communicate(timeout=60)
+    # The start-up path's exit (a console that had started would shut down and exit 0), and it
+    # never served.
+    assert proc.returncode == 128 + signal.SIGTERM, (proc.returncode, err[-800:])
+    assert "Console for" not in out
     tree.update({p: v for p, v in descendants(proc.pid).items()})
-    left = survivors(tree)
+    left = wait_gone(tree)
     for pid in left:
         os.kill(pid, signal.SIGKILL)
     assert left == {}
-    assert "SIGTERM while starting: exiting now" in proc.stderr.read()
+    assert "SIGTERM while starting: exiting now" in err
+
+
+class _Exited(Exception):
+    """What the patched ``os._exit`` raises instead of ending the test's process."""
+
+
+def _raise_exited(code: int) -> None:
+    raise _Exited(code)
+
+
+def test_shutdown_runs_every_step_in_order_within_its_budget(monkeypatch):
+    said: list[str] = []
+    ran: list[str] = []
+
+    def boom() -> None:
+        ran.append("boom")
+        raise RuntimeError("gone")
+
+    steps = [("a", lambda: ran.append("a")), ("boom", boom), ("c", lambda: ran.append("c"))]
+    monkeypatch.setattr(serve_lifecycle.os, "_exit", _raise_exited)
+    assert Lifecycle(said.append).shutdown(steps, budget=60.0) is True
+    assert ran == ["a", "boom", "c"]  # a failing step does not stop the rest
+    assert said == ["shutdown: boom failed: gone"]
+
+
+def test_shutdown_past_its_budget_names_the_hung_step_and_exits_0(monkeypatch):
+    """A step that never returns (a browser holding viser's close handshake): the shutdown
+    exits after its budget, without waiting for that step. The step here blocks until the test
+    ends, so the outcome does not depend on how long anything takes."""
+    said: list[str] = []
+    release = threading.Event()
+    ran: list[str] = []
+
+    def hang() -> None:
+        release.wait()
+        ran.append("hang returned")
+
+    monkeypatch.setattr(serve_lifecycle.os, "_exit", _raise_exited)
+    try:
+        with pytest.raises(_Exited) as exited:
+            Lifecycle(said.append).shutdown([("STOP", lambda: None), ("web server", hang),
+                                             ("after", lambda: ran.append("after"))],
+                                            budget=0.05)
+        assert exited.value.args == (0,)
+        assert len(said) == 1 and said[0].startswith("shutdown: 'web server' still running")
+        assert ran == []
+    finally:
+        release.set()
 
 
 def _silent_websocket(port: int) -> socket.socket:
@@ -94,22 +148,19 @@ def _silent_websocket(port: int) -> socket.socket:
     return s
 
 
-def test_shutdown_with_a_browser_that_never_answers_takes_at_most_2_s(tmp_path):
+def test_shutdown_with_a_browser_that_never_answers_ends_and_leaves_no_children(tmp_path):
     proc, stderr = start_console(tmp_path, "--robot", "soft-arm")
     try:
         port = int(proc.args[proc.args.index("--port") + 1])
         clients = [_silent_websocket(port) for _ in range(3)]
         time.sleep(3.0)  # the console pushes the scene to them; nobody reads
         tree = descendants(proc.pid)
-        t0 = time.monotonic()
         proc.send_signal(signal.SIGTERM)
-        proc.wait(30)
-        took = time.monotonic() - t0
+        proc.wait(60)  # (a bounded shutdown takes <= 2 s: bench_process_lifecycle.py)
     finally:
         if proc.poll() is None:
             proc.kill()
     for c in clients:
         c.close()
-    assert proc.returncode == 0 and took < 2.5, (proc.returncode, took, stderr.read_text()[-800:])
-    time.sleep(1.0)
-    assert survivors(tree) == {}
+    assert proc.returncode == 0, (proc.returncode, stderr.read_text()[-800:])
+    assert wait_gone(tree) == {}

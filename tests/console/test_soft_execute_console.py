@@ -39,7 +39,10 @@ from core.kinematics import planar
 from fakes import FakeClient, click_at, user
 from tests.ws_client import wait_for
 
-pytestmark = pytest.mark.timing  # the 100 Hz control process in real time
+# A patient link (0.5 s for a STATE and for the device's watchdog, not the shipped 40 / 50 ms):
+# this test is about what the console and the control process do, not link timing, and the
+# suite runs it beside another test on two busy cores (link gaps: benchmarks/link_gaps.py).
+PATIENT_LINK = {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500}
 
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
 OBJECT_3 = (-0.08, 0.33)  # spot E
@@ -55,7 +58,7 @@ def console(served_console: Callable[..., Any], tmp_path: Path,
     """The console serve.py builds for the quick soft arm on mock hardware, ``--no-token``; not
     started (the lease would take control from this headless client)."""
     monkeypatch.setattr(GraspSession, "compute_reach", False)  # (no part here)
-    return served_console(robot_copy("soft-arm", tmp_path, QUICK_MOTION))
+    return served_console(robot_copy("soft-arm", tmp_path, {**QUICK_MOTION, **PATIENT_LINK}))
 
 
 def operator_of(app: Any) -> FakeClient:
@@ -95,11 +98,11 @@ def test_clean_start_shows_no_fault_and_execute_does_not_arm(console: Any) -> No
              what=f"Object 1 planned: {planner.summary.content}")
     n = attr(planner.summary.content, "data-waypoints")
     assert n and int(n) >= 2 and "Place an object" not in planner.summary.content
-    wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=10.0,
+    wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=30.0,
              what=f"waypoints agree: {waypoints.info.content}")
     assert f"Waypoint 1 of {n}" in waypoints.info.content
     # A clean start: no fault in the header nor in the Control panel, for CLEAN_S.
-    wait_for(lambda: "mock device" in app.header.text("link"), timeout=10.0,
+    wait_for(lambda: "mock device" in app.header.text("link"), timeout=30.0,
              what=f"the header's link: {app.header.text('link')!r}")
     end = time.monotonic() + CLEAN_S
     while time.monotonic() < end:
@@ -141,16 +144,23 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
     click_at(objects, operator, *OBJECT_2)  # a click on an object selects it
     assert len(session.view().objects) == 3 and session.view().selected == "Object 2"
     wait_for(lambda: 'data-selected="Object 2"' in objects.info.content, what="shown selected")
+    # Selecting plans too: let that plan end first, so the one waited for below is the button's
+    # (two plans may differ in waypoints, and the summary shows the newest a frame later).
+    selected_plan = wait_for(lambda: (o := session.view().outcome) is not None
+                             and o.obj.name == "Object 2" and session.view().planning_s is None
+                             and o, timeout=30.0, what="the selection's plan")
 
     user(planner.plan_button, operator)
-    wait_for(lambda: (o := session.view().outcome) is not None and o.obj.name == "Object 2"
-             and 'data-state="ok"' in planner.summary.content, timeout=20.0,
-             what=f"Object 2 planned: {planner.summary.content}")
+    wait_for(lambda: (o := session.view().outcome) is not None and o.seq != selected_plan.seq
+             and o.obj.name == "Object 2" and o.plan is not None
+             and 'data-state="ok"' in planner.summary.content
+             and attr(planner.summary.content, "data-waypoints") == str(o.plan.n),
+             timeout=30.0, what=f"Object 2 planned: {planner.summary.content}")
     n = session.view().outcome.plan.n
     assert n >= 2 and attr(planner.summary.content, "data-waypoints") == str(n)
-    wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=10.0,
+    wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=30.0,
              what=f"the Waypoints panel shows the plan: {waypoints.info.content}")
-    wait_for(lambda: "Object 2" in control.execute.target_md.content, timeout=10.0,
+    wait_for(lambda: "Object 2" in control.execute.target_md.content, timeout=30.0,
              what=f"Execute's target: {control.execute.target_md.content}")
     assert f"{n}-waypoint plan" in control.execute.target_md.content
 
@@ -160,7 +170,7 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
     told = len(operator.notes)
     user(control.execute.execute_btn, operator)
     assert any("Object 2" in f"{t} {b}" for t, b in operator.notes[told:]), operator.notes
-    wait_for(lambda: phase(control) in RUNNING, timeout=20.0, what="running")
+    wait_for(lambda: phase(control) in RUNNING, timeout=30.0, what="running")
 
     palms: list[tuple[float, float]] = []
     counted: set[str] = set()

@@ -7,6 +7,11 @@ Independent expectations: planar constant-curvature and Delta forward kinematics
 HELLO (in-process mock and the emulator process over a pty) reports 2N + 1 or 3N channels;
 headless trials through the simulated arm put the object in the bin
 (test_custom_robots_trials.py: they run on simulated time, so in the suite's parallel part).
+
+No test here asserts a wall-clock figure: waits have deadlines far above what they take (the
+suite's parallel part runs them beside another test on two busy cores), and the links and device
+watchdogs are patient (2 s for a STATE, 1 s for the device's watchdog: the most a device
+takes), as these tests are about channel counts and motion, not link timing.
 """
 
 from __future__ import annotations
@@ -31,8 +36,6 @@ from core.planning.paths import build_path, plan_path
 from hw_bridge.config import BridgeConfig
 from hw_bridge.interface import ReturnType, SerialHardware
 from hw_bridge.mock import MockHardware
-
-pytestmark = pytest.mark.timing
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = Path(__file__).resolve().parents[1] / "data" / "robots"
@@ -112,6 +115,7 @@ def test_soft_arm_mock_device_has_2n_plus_1_channels(name):
     arm = load(name)
     n = arm.n_segments
     hw = MockHardware(arm)
+    hw.config = dataclasses.replace(hw.config, link_timeout_s=2.0, watchdog_s=1.0)
     try:
         assert hw.configure() is ReturnType.OK, hw.fault  # HELLO answered with 2N + 1 motors
         assert hw.device.motors.position.shape == (2 * n + 1,)
@@ -119,7 +123,7 @@ def test_soft_arm_mock_device_has_2n_plus_1_channels(name):
         assert hw.write(np.zeros(13)) is ReturnType.ERROR  # the paper arm's 13: refused
         assert f"{2 * n + 1} finite counts" in hw.fault
         target = np.arange(2 * n + 1) * 10.0
-        end = time.monotonic() + 3.0
+        end = time.monotonic() + 30.0  # (about 0.1 s)
         while time.monotonic() < end and not np.array_equal(hw.positions(), target):
             assert hw.read() is ReturnType.OK and hw.write(target) is ReturnType.OK, hw.fault
             time.sleep(hw.config.period_s)
@@ -166,8 +170,8 @@ def test_emulator_process_answers_with_the_files_channel_count(name, shipped):
     arm = load(name)
     emu = Emulator(DATA / f"{name}.toml")
     try:
-        slow = dataclasses.replace(BridgeConfig.from_robot(arm), link_timeout_s=0.5,
-                                   watchdog_s=0.5)
+        slow = dataclasses.replace(BridgeConfig.from_robot(arm), link_timeout_s=2.0,
+                                   watchdog_s=1.0)
         hw = SerialHardware(slow, emu.port)
         assert hw.configure() is ReturnType.OK, hw.fault
         hw.cleanup()
@@ -253,12 +257,12 @@ def test_extensible_path_executes_on_the_mock_device(name):
     assert mp.motor_counts.shape[1] == 3 * n
     assert np.all(np.linalg.norm(mp.tips - mp.targets, axis=1) <= arm.ik.tolerance)
     hw = MockHardware(arm)
-    hw.config = dataclasses.replace(hw.config, link_timeout_s=0.5, watchdog_s=0.5)
+    hw.config = dataclasses.replace(hw.config, link_timeout_s=2.0, watchdog_s=1.0)
     runner = ExtensibleRunner(arm, lambda: hw).start()
     try:
-        assert runner.connecting is not None and runner.connecting.result(5) is None
+        assert runner.connecting is not None and runner.connecting.result(30) is None
         runner.bridge_controls.arm()  # connecting never arms: the operator's Arm does
-        end = time.monotonic() + 3.0
+        end = time.monotonic() + 30.0  # (about 0.1 s)
         while runner.snapshot.state != "holding" and time.monotonic() < end:
             time.sleep(0.02)
         assert runner.snapshot.state == "holding", runner.snapshot
@@ -308,7 +312,7 @@ def test_console_jogs_every_segment_of_the_file(name, monkeypatch):
             app.store.request(np.zeros(6 if n != 6 else 5), "jog")  # the paper arm's shape
         with app:
             state = app.store.request(q, "planner")
-            end = time.monotonic() + 3.0
+            end = time.monotonic() + 30.0  # (a few ms)
             while app.last_drawn_seq != state.seq and time.monotonic() < end:
                 time.sleep(0.01)
             assert app.last_drawn_seq == state.seq

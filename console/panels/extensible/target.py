@@ -19,6 +19,12 @@ the result or by why nothing moves (IK error, no answer within ``IK_TIMEOUT_S``,
 path, control lost, motors not armed): never silence. Only the operator may move the target
 (``operator_only``).
 
+viser runs field callbacks in its thread pool (two typed fields' callbacks may run at once) and
+the render thread answers new commands meanwhile: reading the typed fields, saying "Solving…" and
+submitting the target happen under one lock, as do the render thread's tip reset and every echo
+into the fields, so a target submitted later was read later and no echo lands between a read and
+its answer (a loaded machine lost a typed field so).
+
 Box obstacles (the Obstacles panel, ``console.panels.extensible.obstacles_boxes``): with boxes placed, the
 worker process solves the IK with them (the arm's body surface keeps the clearance from every
 box) and a route there whose straight rack-space legs -- what the hold-to-run set-point and the
@@ -96,6 +102,9 @@ class TargetPanel(Panel):
         self._hardware_note = ""  # why the motors will not follow, from the link's health
         self._target = tip.copy()
         self._typed = TypedFields(self.inputs)  # the echo of an answer skips a field just typed
+        # Typed reads + their answer, the render thread's tip reset and every echo: one at a time
+        # (re-entrant: writing a field calls its callback back with no client).
+        self._typing = threading.RLock()
         self._dragging = False
         self._moving_to: Array | None = None  # set-point handed to core.hold, until it arrives
         self._legs: tuple[int, list[Array]] = (0, [])  # (client id, route postures still to go)
@@ -140,14 +149,15 @@ class TargetPanel(Panel):
     def _on_typed(self, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own mirror of the target into the inputs
             return
-        target = np.array(self._typed.read()) / 1e3  # every field as typed now
-        if not np.all(np.isfinite(target)):
-            self.report_error("target must be three finite numbers (mm)")
-            return
-        self._target = target
-        self.gizmo.position = tuple(target)
-        self._say_solving(target)
-        self.worker.submit(target, True, event.client.client_id)
+        with self._typing:  # read and submitted in the same order as other fields' callbacks
+            target = np.array(self._typed.read()) / 1e3  # every field as typed now
+            if not np.all(np.isfinite(target)):
+                self.report_error("target must be three finite numbers (mm)")
+                return
+            self._target = target
+            self.gizmo.position = tuple(target)
+            self._say_solving(target)
+            self.worker.submit(target, True, event.client.client_id)
 
     def _say_solving(self, target: Array) -> None:
         """Answer a typed / released target at once: the solve may take a moment."""
@@ -209,8 +219,11 @@ class TargetPanel(Panel):
             if generation != self.worker.generation:
                 return
         self._route_len = len(legs)
-        self._publish(target, result, None)
+        # The move first (its set-point marks the commands to come as this panel's), then the
+        # answer: until it is published, "Solving…" keeps the render thread from taking a new
+        # command for someone else's and putting the target back on the tip.
         if self._start_leg(client_id, legs, "Not moved: you no longer hold control.", stops):
+            self._publish(target, result, None)
             self._show()
 
     def _start_leg(self, client_id: int, legs: list[Array], refused: str,
@@ -326,32 +339,34 @@ class TargetPanel(Panel):
 
     # -- display (render thread) -----------------------------------------------------------
     def on_state(self, state: ArmState) -> None:
-        command = self.app.store.command
-        if command.seq != self._synced_seq:
-            self._synced_seq = command.seq
-            mine = command.source == "target" or (command.source == "jog"
-                                                  and self._moving_to is not None)
-            if not mine and not self._dragging and self._latest[4] is None:
-                # Moved by jog / path / runner / STOP: the target rides on the tip (not while
-                # a typed target is being solved: its answer comes next).
-                self._target = self._tip(command.q)
-                self.gizmo.position = tuple(self._target)
-                self._publish(self._target, None, None)
-        self._show()
+        with self._typing:  # not between a typed field's read and its "Solving…"
+            command = self.app.store.command
+            if command.seq != self._synced_seq:
+                self._synced_seq = command.seq
+                mine = command.source == "target" or (command.source == "jog"
+                                                      and self._moving_to is not None)
+                if not mine and not self._dragging and self._latest[4] is None:
+                    # Moved by jog / path / runner / STOP: the target rides on the tip (not
+                    # while a typed target is being solved: its answer comes next).
+                    self._target = self._tip(command.q)
+                    self.gizmo.position = tuple(self._target)
+                    self._publish(self._target, None, None)
+            self._show()
 
     def _show(self) -> None:
-        n, target, result, error, info = self._latest
-        note = self._motors_note()
-        if n == self._shown and note == self._hardware_note:
-            return
-        self._shown, self._hardware_note = n, note
-        self._typed.show([mm_value(v) for v in target])
-        self.status.content = self._status_html(result, error, info, target, note)
-        if result is not None and not result.reachable and error is None:
-            self.miss.points = np.stack([result.tip, target])[None]
-            self.miss.visible = True
-        else:
-            self.miss.visible = False
+        with self._typing:  # the newest answer, never an older one over a field read since
+            n, target, result, error, info = self._latest
+            note = self._motors_note()
+            if n == self._shown and note == self._hardware_note:
+                return
+            self._shown, self._hardware_note = n, note
+            self._typed.show([mm_value(v) for v in target])
+            self.status.content = self._status_html(result, error, info, target, note)
+            if result is not None and not result.reachable and error is None:
+                self.miss.points = np.stack([result.tip, target])[None]
+                self.miss.visible = True
+            else:
+                self.miss.visible = False
 
     def _motors_note(self) -> str:
         """Why the motors will not follow the command, from the link supervisor's health (what
