@@ -3,8 +3,8 @@ the browser that asked sees, and loading never runs on the callback that asked f
 
 The huge files are written as repeated gzip members (a 1 MB block of zero bytes or short lines,
 compressed once), so a 1 GB recording is a few MB on disk and written in a few milliseconds.
-The one wall-clock claim ("within a second") is in test_recording_budget_timing.py, which runs
-alone (marked `timing`); the bounds here are far above what the reads take.
+The one-line gigabyte is test_recording_budget_timing.py's; the time a refusal takes is
+measured by benchmarks/bench_recording_budget.py, never asserted.
 """
 
 from __future__ import annotations
