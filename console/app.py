@@ -104,8 +104,8 @@ class ConsoleApp:
             default has none, and panels that need one say so).
         store: The console's state store, when a service built before the app needs it (it
             then carries ``initial`` and ``mirror_commands`` itself).
-        clock: Monotonic time source of the core, its hold-to-run and the panels' rate limits
-            (tests pass a simulated one).
+        clock: Monotonic time source of the core, its hold-to-run, the panels' rate limits and
+            the coalescing of refusals and notifications (tests pass a simulated one).
     """
 
     def __init__(self, robot: Robot, server: viser.ViserServer, *,
@@ -250,7 +250,7 @@ class ConsoleApp:
         """Tell ``client`` why it may not act (a notification only it sees); logs the refusal."""
         reason = exc.reason if isinstance(exc, NotOperator) else str(exc)
         key = (getattr(client, "client_id", client), action or reason)
-        now = time.monotonic()
+        now = self.core.clock()
         with self._notice_lock:  # a held button refuses 20 times a second: tell them once
             if now - self._refused_at.get(key, -1e9) < 2.0:
                 return
@@ -268,7 +268,7 @@ class ConsoleApp:
         body again within that many seconds is not repeated (a burst of STOP clicks shows one).
         """
         if coalesce_s > 0:
-            now = time.monotonic()
+            now = self.core.clock()
             with self._notice_lock:
                 if now - self._notified_at.get((title, body), -1e9) < coalesce_s:
                     return

@@ -93,6 +93,8 @@ class ClientGuard(MessageTypeChecks):
         refuse: ``refuse(client, reason, action)``: tell a browser why (coalesced by the app).
         refusal: ``refusal(action)``: the sentence for an operator-only ``action``.
         limits: What one browser may send.
+        clock: Monotonic time source of the rate limit, the flood window and the log coalescing
+            (tests pass a simulated one; ``clock`` is also an attribute they may replace).
     """
 
     def __init__(self, server: Any, *, is_operator: Callable[[int], bool],
@@ -105,7 +107,7 @@ class ClientGuard(MessageTypeChecks):
         self._is_operator = is_operator
         self._refuse = refuse
         self._refusal = refusal
-        self._clock = clock
+        self.clock = clock  # public: a test may stop the rate limit's time (tests/console)
         self._viewer_allowed: set[str] = set()
         self._clients: dict[int, ClientState] = {}
         self._logged: dict[tuple[int, str], list[float]] = {}
@@ -153,7 +155,7 @@ class ClientGuard(MessageTypeChecks):
             Disconnect: the client is to be disconnected (flood, undecodable frame).
         """
         lim = self.limits
-        now = self._clock()
+        now = self.clock()
         state = self._clients.get(client_id)
         if state is None:
             state = self._clients[client_id] = ClientState(lim.burst, now)
@@ -204,7 +206,7 @@ class ClientGuard(MessageTypeChecks):
         """Drop a message: count it, log it (coalesced), disconnect a client that keeps on."""
         self.counts[reason] += 1
         self.log(client_id, reason, detail)
-        now = self._clock()
+        now = self.clock()
         drops = state.drops
         drops.append(now)
         while drops and now - drops[0] > self.limits.flood_window:
@@ -215,7 +217,7 @@ class ClientGuard(MessageTypeChecks):
 
     def log(self, client_id: int, kind: str, detail: str) -> None:
         """One warning per client and kind every ``log_every`` s, saying how many were dropped."""
-        now = self._clock()
+        now = self.clock()
         entry = self._logged.setdefault((client_id, kind), [-1e18, 0])
         entry[1] += 1
         if now - entry[0] < self.limits.log_every:

@@ -4,6 +4,11 @@ Bursts (5 000 camera messages, 10 000 STOP clicks), a 10 MB message, frames that
 unknown ids and message types, wrong tokens -- each from a raw websocket client speaking viser's
 protocol (``tests/ws_client.py``), while the operator (answering the lease probes like a tab)
 keeps control and a second client keeps receiving.
+
+Time: the app's refusal and notification coalescing runs on a simulated clock that stands still
+(a burst is coalesced to one note whatever the machine's speed), and a burst is sent while the
+guard's own clock is stopped (:class:`StoppableClock`), so its token bucket admits exactly
+``burst`` messages; only the lease (7 s) and the probes run on real time.
 """
 
 from __future__ import annotations
@@ -25,19 +30,45 @@ from console.panels.common.jog import JogPanel
 from console.panels.common.session import SessionPanel
 from console.web.client_guard import GuardLimits
 from core.robots import load
-from tests.ws_client import CAMERA, RawClient, wait_for
-
-pytestmark = pytest.mark.timing
+from fakes import FakeClock
+from tests.ws_client import CAMERA, RawClient
+from tests.ws_client import wait_for as _wait_for
 
 SOFT = load("soft-arm")
 
 
+def wait_for(predicate: Any, timeout: float = 60.0, what: str = "condition") -> Any:
+    """``tests.ws_client.wait_for`` with a deadline generous enough for two busy cores (these
+    tests run beside others): each wait is for something that takes well under a second."""
+    return _wait_for(predicate, timeout, what)
+
+
+class StoppableClock:
+    """``time.monotonic`` that a test can stop (it then reads the instant it stopped at) and
+    start again: while stopped, the guard's token buckets do not refill."""
+
+    def __init__(self) -> None:
+        self.stopped_at: float | None = None
+
+    def __call__(self) -> float:
+        return time.monotonic() if self.stopped_at is None else self.stopped_at
+
+    def stop(self) -> None:
+        self.stopped_at = time.monotonic()
+
+    def start(self) -> None:
+        self.stopped_at = None
+
+
 @pytest.fixture
 def lab(tmp_path: Any) -> Iterator[tuple[viser.ViserServer, ConsoleApp, str]]:
+    """A lab console whose core clock is a :class:`FakeClock` (``app.core.clock``) and whose
+    guard's clock is a :class:`StoppableClock` (``app.guard.clock``)."""
     token = secrets.token_urlsafe(9)
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = ConsoleApp(SOFT, server, panels=(*DEFAULT_PANELS, SessionPanel),
-                     access=AccessControl(token), data_dir=tmp_path / "runs")
+                     access=AccessControl(token), data_dir=tmp_path / "runs", clock=FakeClock())
+    app.guard.clock = StoppableClock()
     app.lease.busy = lambda: True  # probed every 0.1 s, as while jogging: a flood must not starve it
     app.start()
     try:
@@ -63,7 +94,7 @@ def _operator(server: viser.ViserServer, app: ConsoleApp, token: str) -> RawClie
 
 
 def _close_code(client: RawClient) -> int | None:
-    exc = client.wait_closed(15.0)
+    exc = client.wait_closed(60.0)
     assert exc is not None, "the client was not disconnected"
     frame = exc.rcvd or exc.sent
     return None if frame is None else frame.code
@@ -90,19 +121,21 @@ def test_a_burst_disconnects_only_the_sender_and_the_operator_keeps_control(
         count = 5_000
     lim = GuardLimits()
     caplog.set_level(logging.WARNING, logger="console.web.client_guard")
-    t0 = time.monotonic()
-    for _ in range(count):
-        if not viewer.send(frame):
-            break
-    assert _close_code(viewer) == 1008
-    elapsed = time.monotonic() - t0
-    time.sleep(1.0)  # the operator's tab goes on answering
+    app.guard.clock.stop()  # no refill during the burst: exactly `burst` messages get through
+    try:
+        for _ in range(count):
+            if not viewer.send(frame):
+                break
+        assert _close_code(viewer) == 1008
+        # the operator's tab goes on answering (its bucket holds far more than these answers)
+        wait_for(lambda: app.lease.probes >= probes0 + 5, what="probes answered after a burst")
+    finally:
+        app.guard.clock.start()
     assert app.access.holder is not None and app.access.holder.client_id == op.client_id
-    assert app.lease.probes >= probes0 + 5
     assert op.alive() and watcher.alive()
-    assert app.stops - stops0 <= lim.burst + lim.rate * elapsed + 1  # the rest was dropped
+    assert app.stops - stops0 <= lim.burst  # the rest was dropped
     notes = watcher.received("NotificationShowMessage", lambda m: m["props"]["title"] == "STOP")
-    assert len(notes) <= 1  # coalesced: one per few seconds, not one per click
+    assert len(notes) <= 1  # coalesced: one per few seconds (of the app's clock), not per click
     wait_for(lambda: any("disconnected" in r.getMessage() and str(viewer.client_id)
                          in r.getMessage() for r in caplog.records), what="a log line")
     assert len(caplog.records) < 20  # coalesced log lines, not one per message
@@ -137,7 +170,7 @@ def test_a_10_mb_message_disconnects_only_the_sender(lab: tuple,
     wait_for(lambda: any("disconnected" in r.getMessage() for r in caplog.records),
              what="a log line")
     assert all(len(r.getMessage()) < 400 for r in caplog.records)  # no 21 MB log lines
-    time.sleep(0.5)
+    time.sleep(0.5)  # (a disconnect of the others would have come with the sender's)
     assert op.alive() and watcher.alive()
     assert app.access.holder is not None and app.access.holder.client_id == op.client_id
 
@@ -201,13 +234,22 @@ def test_a_short_burst_is_rate_limited_without_a_disconnect(lab: tuple) -> None:
     viewer = RawClient(server)
     _ready(app, viewer)
     frame = msgspec.msgpack.encode(CAMERA.as_serializable_dict())
-    rate0 = app.guard.counts["rate"]
-    for _ in range(400):
-        viewer.send(frame)
-    wait_for(lambda: app.guard.counts["rate"] > rate0, what="messages over the rate dropped")
-    time.sleep(0.5)
+    rate0, accepted0 = app.guard.counts["rate"], app.guard.counts["accepted"]
+    over = 400 - int(GuardLimits().burst)  # fewer than the flood's drops: no disconnect
+    app.guard.clock.stop()  # all 400 at one instant of the guard's clock, however slow the box
+    try:
+        for _ in range(400):
+            viewer.send(frame)
+        wait_for(lambda: app.guard.counts["rate"] - rate0 == over,
+                 what="the messages over the burst dropped")
+    finally:
+        app.guard.clock.start()
+    assert app.guard.counts["accepted"] - accepted0 == 400 - over
     assert viewer.alive()
-    assert app.guard.counts["rate"] - rate0 < 400 - GuardLimits().burst + 1
+    viewer.send(frame)  # and the viewer is still heard once its bucket refills
+    wait_for(lambda: app.guard.counts["accepted"] - accepted0 == 400 - over + 1,
+             what="a later message accepted")
+    assert viewer.alive() and app.guard.counts["rate"] - rate0 == over
 
 
 def test_wrong_tokens_from_one_browser_do_not_lock_out_another(lab: tuple) -> None:
@@ -218,15 +260,18 @@ def test_wrong_tokens_from_one_browser_do_not_lock_out_another(lab: tuple) -> No
     session = app.panel(SessionPanel)
     g, o = session.clients[guesser.client_id], session.clients[operator.client_id]
     assert g.token is not None and o.token is not None
+    clock: FakeClock = app.core.clock  # type: ignore[assignment]
     for i in range(app.access.max_failures + 2):
         guesser.update(g.token._impl.uuid, value=f"guess-{i}")
-        time.sleep(0.05)
+        wait_for(lambda: g.token.value == f"guess-{i}", what="the guess stored")
+        refusals = app.refusals
+        clock.t += 3.0  # past the refusal notes' coalescing: each refusal is counted
         guesser.update(g.take._impl.uuid, value=True)
-        time.sleep(0.1)
+        wait_for(lambda: app.refusals == refusals + 1, what="the guess refused")
     with pytest.raises(Exception, match="Too many"):
         app.access.take(guesser.client_id, token, address="127.0.0.1")
     operator.update(o.token._impl.uuid, value=token)
-    time.sleep(0.05)
+    wait_for(lambda: o.token.value == token, what="the operator's token stored")
     operator.update(o.take._impl.uuid, value=True)
     wait_for(lambda: app.access.holder is not None
              and app.access.holder.client_id == operator.client_id, what="operator in")
@@ -240,13 +285,15 @@ def test_a_viewers_jog_is_refused_in_the_panels_own_words(lab: tuple) -> None:
     _ready(app, viewer)
     plus = app.panel(JogPanel).jog_buttons[("kappa1", 1)]  # the "+" beside κ₁'s slider
     before = app.store.command
+    refused0 = app.guard.counts["refused"]
     for _ in range(5):
         viewer.send(_messages.GuiButtonHoldMessage(plus._impl.uuid, 20.0))
         time.sleep(0.05)
     viewer.update(plus._impl.uuid, value=True)
     note = wait_for(lambda: viewer.received("NotificationShowMessage"), what="a refusal")
     assert "Only the operator can jog — Olivia holds control" in note[0]["props"]["body"]
-    time.sleep(0.3)
+    wait_for(lambda: app.guard.counts["refused"] >= refused0 + 6, what="all six refused")
+    time.sleep(0.3)  # (a second note would have been sent by now)
     assert len(viewer.received("NotificationShowMessage")) == 1  # coalesced
     assert app.store.command is before
     assert op.alive()

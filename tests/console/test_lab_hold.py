@@ -17,7 +17,6 @@ from core.kinematics import delta as dk
 from core.kinematics import planar as pk
 from core.robots import load
 
-pytestmark = pytest.mark.timing
 
 SOFT = load("soft-arm")
 EXT = load("extensible")

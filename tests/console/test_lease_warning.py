@@ -14,7 +14,6 @@ from console.lease import LeaseMonitor
 from console.core.lease_limits import FIRST_ANSWER_S, LEASE_S, WARN_S
 from core.robots import load
 
-pytestmark = pytest.mark.timing
 
 
 class FakeHandle:
