@@ -64,14 +64,15 @@ def execute_target(session_view: SessionView) -> ExecuteTarget:
     if (out is not None and out.obj == obj and out.plan is not None and out.plan.success
             and out.plan.n > 0):
         plan = out.plan
-    obstacles = tuple(session_view.obstacles)
+    obstacles = session_view.plan_obstacles(obj.name)  # other objects are obstacles too
     if obstacles and (plan is None or tuple(plan.obstacles) != obstacles
                       or plan.obstacle_margin != session_view.clearance):
         # Only a plan the operator saw go around them runs (the controller's re-plans then keep
         # to the same obstacles and clearance: they travel with the plan).
         why = (f" ({out.refusal})" if out is not None and out.obj == obj and out.refusal
                else "")
-        raise ValueError(f"Obstacles are on the table: Execute needs the Grasp planner's plan "
+        what = ("Obstacles are" if session_view.obstacles else "Other objects are")
+        raise ValueError(f"{what} on the table: Execute needs the Grasp planner's plan "
                          f"around them for {obj.name}; press Plan grasp first{why}.")
     return ExecuteTarget(obj.name, obj.x, obj.y, obj.r, plan)
 

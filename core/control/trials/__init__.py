@@ -33,6 +33,7 @@ from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
 from core.kinematics.planar import forward_kinematics, point_in_frame
+from core.planning.obstacles import DEFAULT_CLEARANCE
 from core.planning.sides import mirror_xy, object_side
 from core.robots import Side, SoftArm, load
 
@@ -326,6 +327,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
                   planner: str = DEFAULT_PLANNER, object_time_limit_s: float = 150.0,
                   sim_overrides: dict[str, Any] | None = None,
                   bin_xy: Sequence[float] | None = None,
+                  clearance: float = DEFAULT_CLEARANCE,
                   observe: Callable[[Any], Any] | None = None) -> RowTrialResult:
     """Several objects taken to the bin one after another in one headless run.
 
@@ -337,7 +339,10 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     fails with the reason (as do planner refusals, lost tracking, ... and an object not
     released within ``object_time_limit_s``), and the row goes on with the next. ``bin_xy``
     puts the bin at a point on the table (:func:`core.control.row.bin_at`; ValueError with the
-    reason when it cannot be reached); by default the robot's ``[bin]``.
+    reason when it cannot be reached); by default the robot's ``[bin]``. The objects not yet
+    taken are obstacles for each object's plans and carry, kept ``clearance`` (m) from
+    (:mod:`core.control.row`), though the simulated table holds only the current one;
+    ValueError when the bin pose is closer than that to one of them.
     """
     row_objects = [RowObject(*(float(v) for v in obj)) for obj in objects]
     where = None if bin_xy is None else (float(bin_xy[0]), float(bin_xy[1]))
@@ -349,6 +354,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
         sim.p = sim.p.replace(**sim_overrides)
     stack = ControlStack(robot, 0.01, immediate(
         lambda req: plan_request(plan_fn, robot, req)))
+    stack.set_obstacles((), clearance)  # the row adds the objects not yet taken
     loop = SimLoop(sim, stack, 0.01)
     drop_radius = BinParams.from_robot(robot).drop_radius_m
     drops: dict[int, tuple[str, tuple[float, float]]] = {}
