@@ -7,7 +7,7 @@ has); it knows no viser and no app: it is built from the robot, the table rectan
 of a plan), an optional ``feed`` (recordings: :func:`console.recording.lab_feed.feed_grasp`) and
 a clock. Plans keep the arm and gripper ``clearance`` (m) from the obstacles
 (``core.planning.obstacles.Obstacle``) and from every other object on the table (an obstacle
-of its radius: :meth:`SessionView.plan_obstacles <console.core.grasp_state.SessionView.plan_obstacles>`).
+of its radius: :meth:`console.core.grasp_state.SessionView.plan_obstacles`).
 
 Threading: callers (GUI callbacks, tests) only call :class:`GraspSession` methods, which take a
 lock, record the request and wake one worker thread (started by :meth:`GraspSession.start`). The

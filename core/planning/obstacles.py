@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -111,7 +112,8 @@ def first_overlap(x: float, y: float, r: float, disks: Sequence) -> tuple[object
     return None
 
 
-def with_other_objects(obstacles: Sequence[Obstacle], others: Sequence) -> tuple[Obstacle, ...]:
+def with_other_objects(obstacles: Sequence[Obstacle],
+                       others: Sequence[Any]) -> tuple[Obstacle, ...]:
     """The disks a plan for one object keeps its clearance from: ``obstacles`` and then every
     other object on the table, each an obstacle disk of its own radius.
 

@@ -152,3 +152,14 @@ def test_the_trials_cli_takes_the_clearance_for_a_row_only(capsys):
         trials_main(["--objects-in-a-row", "1", "--object", *map(str, CUP),
                      "--clearance", "0.5"])
     assert "clearance must be between" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("side, seed", [("left", 0), ("right", 0), ("both", 5)])
+def test_drawn_rows_have_no_object_in_the_way_of_one_taken_before_it(side, seed):
+    """Each drawn object's approach from the straight arm keeps the clearance from every object
+    drawn after it (still on the table when it is taken), checked by forward kinematics."""
+    row = trials.draw_row_objects(ARM, 3, seed, R, side=side)
+    for k, (x, y, r) in enumerate(row):
+        plan = sides.plan_grasp_sided(ARM, np.zeros(ARM.n_segments), (x, y), r)
+        for later in row[k + 1:]:
+            assert swept_gap(plan.kappa_meas, plan.kappas, *later) >= DEFAULT_CLEARANCE - 1e-6

@@ -20,9 +20,9 @@ default), right (the right finger's quadrant), or both (alternating, left first)
 robot file's gripper has no finger for is refused. ``--time-limit`` is then per object;
 ``--bin X Y`` puts the bin at that point of the table (m) instead of the robot file's bin
 configuration. The objects not yet taken are obstacles for each object's plans and carry,
-kept ``--clearance`` (m, default 0.01) from. Prints one row per object (its side, released / failed and why), "k/N
-released" and the released count per side, or with ``--json`` one object ``{"row": [...],
-"released": k, "objects": N, "sides": {"left": {"released": k, "objects": n}, ...}, ...}``
+kept ``--clearance`` (m, default 0.01) from. Prints one row per object (its side, released /
+failed and why), "k/N released" and the released count per side, or with ``--json`` one
+object ``{"row": [...], "released": k, "objects": N, "sides": {"left": {"released": k, "objects": n}, ...}, ...}``
 (each row entry with its ``side``, the ``finger`` that held it and the simulated
 ``final_object`` position after the release).
 """
