@@ -6,7 +6,8 @@ has); it knows no viser and no app: it is built from the robot, the table rectan
 (:func:`console.core.table_area.table_extent`), where the arm is now (``kappa``, for the start
 of a plan), an optional ``feed`` (recordings: :func:`console.recording.lab_feed.feed_grasp`) and
 a clock. Plans keep the arm and gripper ``clearance`` (m) from the obstacles
-(``core.planning.obstacles.Obstacle``).
+(``core.planning.obstacles.Obstacle``) and from every other object on the table (an obstacle
+of its radius: :meth:`console.core.grasp_state.SessionView.plan_obstacles`).
 
 Threading: callers (GUI callbacks, tests) only call :class:`GraspSession` methods, which take a
 lock, record the request and wake one worker thread (started by :meth:`GraspSession.start`). The
@@ -44,7 +45,7 @@ from console.core.table_area import Extent
 from console.core.table_bin import TableBin
 from console.core.table_scene import TableObject, disk_overlap, validate_object
 from core.planning.feasibility import GraspRefused
-from core.planning.obstacles import Obstacle
+from core.planning.obstacles import Obstacle, with_other_objects
 from core.planning.reachability import ReachMap
 from core.planning.sides import SidedPlanner
 from core.robots import SoftArm
@@ -190,7 +191,9 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             if why is not None:
                 raise ValueError(why.replace("Not placed", "Not moved", 1))
             self._objects[i] = new
-            replan = (not live or self.live) and name == self._selected
+            # the selected object is re-planned (live while dragged); another one is one of its
+            # obstacles, so its plan is re-made once it is put down
+            replan = (not live or self.live) if name == self._selected else not live
             self._changed("objects", plan=live if replan else None)
 
     def remove(self, name: str) -> None:
@@ -369,18 +372,20 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             return Outcome(None, None, "No object selected: click on the table to place one.",
                            seq)
         kappa = np.asarray(self._kappa(), dtype=float)
+        others = [o for o in objects if o.name != obj.name]  # obstacles too: never swept through
+        obstacles = with_other_objects(settings[2], others)
+        names = tuple(o.name for o in obstacles[len(settings[2]):])
         try:
             plan = self.planner.plan(kappa, (obj.x, obj.y), obj.r, delta_d=settings[0],
-                                     weights=settings[1], obstacles=settings[2],
+                                     weights=settings[1], obstacles=obstacles,
                                      clearance=settings[3])
-            plan, note = plan_carry(self.robot, plan, obj, settings[4], settings[2],
-                                    settings[3])
+            plan, note = plan_carry(self.robot, plan, obj, settings[4], obstacles, settings[3])
         except GraspRefused as exc:
-            return Outcome(obj, None, str(exc), seq)
+            return Outcome(obj, None, str(exc), seq, others=names)
         except Exception as exc:  # a planner bug must not kill the worker
             log.exception("grasp planning failed")
             return Outcome(obj, None, f"The planner failed unexpectedly ({exc}).", seq)
-        return Outcome(obj, plan, None, seq, note)
+        return Outcome(obj, plan, None, seq, note, others=names)
 
     def _tell_planning(self, seconds: float) -> None:
         """The planning clock's thread: listeners show that a plan has run ``seconds``."""

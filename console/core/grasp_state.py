@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 from console.core.table_bin import TableBin
 from console.core.table_scene import TableObject
-from core.planning.obstacles import Obstacle
+from core.planning.obstacles import Obstacle, with_other_objects
 from core.planning.plan_types import GraspPlan
 from core.planning.reachability import ReachMap
 
@@ -34,6 +34,7 @@ class Outcome:
     refusal: str | None
     seq: int
     carry_note: str | None = None   # why the plan has no carry to the bin (grasp_carry)
+    others: tuple[str, ...] = ()    # the other objects the plan kept clear of, as obstacles
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,6 +57,14 @@ class SessionView:
     clearance: float = 0.0  # m, the planner keeps the arm this far from every obstacle
     planning_s: float | None = None  # s the running plan has taken so far (None: idle)
     show_reach: bool = True  # whether the reachability shading is shown
+
+    def plan_obstacles(self, name: str | None = None) -> tuple[Obstacle, ...]:
+        """What a plan for the object ``name`` (default: the selected one) keeps
+        ``clearance`` from: the obstacles and every other object on the table (each a disk of
+        its radius, :func:`core.planning.obstacles.with_other_objects`)."""
+        target = self.selected if name is None else name
+        return with_other_objects(self.obstacles,
+                                  [o for o in self.objects if o.name != target])
 
 
 # A listener of the session: the snapshot and the parts that changed (see the module docstring).

@@ -212,6 +212,17 @@ def _carry_words(plan: GraspPlan, note: str | None) -> str:
             f"; carry to the bin: {vias} via shape{'s' if vias > 1 else ''} (teal)")
 
 
+def _kept_from(n_obstacles: int, others: tuple[str, ...]) -> str:
+    """What a plan kept its clearance from, in words: the obstacles placed and the other
+    objects on the table (each an obstacle too)."""
+    placed = n_obstacles - len(others)
+    if not others:
+        return "the obstacles"
+    named = html.escape(", ".join(others))
+    objects = f"the other object{'s' if len(others) > 1 else ''} ({named})"
+    return f"the obstacles and {objects}" if placed > 0 else objects
+
+
 def planning_html(seconds: float) -> str:
     """What the planner summary shows while a plan takes longer than a moment."""
     return (f'<div data-testid="plan-summary" data-state="planning" data-waypoints="" '
@@ -233,7 +244,8 @@ def outcome_html(outcome: Outcome | None) -> str:
             body, state = f"<b>{plan.n} waypoints, {plan.total_ms:.1f} ms</b>", "ok"
             if plan.obstacles and plan.obstacle_path_clearance is not None:
                 gap = float(np.min(plan.obstacle_path_clearance))
-                body += (f"; the arm keeps ≥ {fmt_mm(gap, 0)} mm from the obstacles "
+                body += (f"; the arm keeps ≥ {fmt_mm(gap, 0)} mm from "
+                         f"{_kept_from(len(plan.obstacles), outcome.others)} "
                          f"(clearance {fmt_mm(plan.obstacle_margin, 0)} mm)")
             body += _carry_words(plan, outcome.carry_note)
         else:

@@ -13,6 +13,12 @@ must go through :meth:`ObjectRow.stop`: a stop the row does not know of looks li
 of the current object, and the row would go on.) A bin given to the row is the machine's for
 that row only. With obstacles (``stack.set_obstacles``) every object's carry to the bin keeps
 their clearance (:mod:`core.control.carry`), and a bin too close to one is refused at the start.
+The objects not yet moved are obstacles too: while object k is taken, every plan (the first,
+every re-plan and the carry) keeps the machine's clearance from objects k+1 .. N (each a disk of
+its radius, named "object j" by its place in the queue; :func:`row_obstacles`), so the arm never
+sweeps through an object still waiting on the table; a bin pose too close to one of them is
+refused at the start. The objects already taken (released, or failed and possibly moved) are
+not. The machine's own obstacles are put back when the row ends.
 
 The row is pure bookkeeping, called from the loop thread (the only one that touches the stack):
 :meth:`ObjectRow.start` and :meth:`ObjectRow.after_tick` return the object whose turn begins, so
@@ -33,6 +39,7 @@ import numpy as np
 from core.control.carry import check_bin
 from core.control.grasp_place import Phase
 from core.control.params import BinParams, StateMachineParams
+from core.planning.obstacles import Obstacle, with_other_objects
 from core.robots import SoftArm
 
 RowState = Literal["idle", "running", "done", "stopped"]
@@ -72,6 +79,15 @@ class ObjectOutcome:
         return self.status == "released"
 
 
+def row_obstacles(obstacles: Sequence[Any], objects: Sequence[RowObject],
+                  index: int) -> tuple[Obstacle, ...]:
+    """What the plans for ``objects[index]`` keep the clearance from: ``obstacles`` and the
+    objects after it in the queue (not yet moved), named "object j" (1-based queue place)."""
+    later = [Obstacle(f"object {j + 1}", o.x, o.y, o.r)
+             for j, o in enumerate(objects) if j > index]
+    return with_other_objects(tuple(obstacles), later)
+
+
 class ObjectRow:
     """A queue of objects taken to one bin, one after another, over a control stack's machine.
 
@@ -102,6 +118,7 @@ class ObjectRow:
         self.reason: str | None = None
         self._started_s = 0.0
         self._robot_bin: BinParams | None = None  # the machine's bin before the row
+        self._obstacles: tuple[Any, ...] = ()  # the machine's obstacles before the row
 
     # -- progress ------------------------------------------------------------------------------
     @property
@@ -122,9 +139,12 @@ class ObjectRow:
             raise RuntimeError(f"the row was already started ({self.state})")
         if not stack.armed:
             raise RuntimeError("row refused: the arm is not armed")
-        m = stack.machine  # a bin too close to an obstacle: ValueError before anything changes
+        m = stack.machine  # a bin too close to an obstacle or to an object not yet moved
+        # when an object is taken: ValueError before anything changes (the first object's
+        # obstacles include every later one's)
+        self._obstacles = tuple(getattr(m, "obstacles", ()))
         check_bin(m.robot, m.bin if self.bin_params is None else self.bin_params,
-                  getattr(m, "obstacles", ()), getattr(m, "clearance", 0.0))
+                  row_obstacles(self._obstacles, self.objects, 0), getattr(m, "clearance", 0.0))
         self._robot_bin = stack.machine.bin
         if self.bin_params is not None:
             stack.machine.bin = self.bin_params  # for this row only: put back when it ends
@@ -134,8 +154,16 @@ class ObjectRow:
     def _begin(self, stack: Any, index: int, t: float) -> RowObject:
         self.current = index
         self._started_s = t
+        self._set_obstacles(stack, row_obstacles(self._obstacles, self.objects, index))
         stack.start(t)
         return self.objects[index]
+
+    @staticmethod
+    def _set_obstacles(stack: Any, obstacles: tuple[Any, ...]) -> None:
+        """The machine's obstacles (its clearance kept), for its first plan and re-plans."""
+        m = stack.machine
+        if hasattr(m, "set_obstacles"):
+            m.set_obstacles(obstacles, getattr(m, "clearance", 0.0))
 
     def _record(self, stack: Any, status: Status, reason: str | None, t: float) -> None:
         m = stack.machine
@@ -171,6 +199,7 @@ class ObjectRow:
         if nxt >= len(self.objects):
             self.state, self.current = "done", None
             stack.machine.bin = self._robot_bin
+            self._set_obstacles(stack, self._obstacles)
             return None
         return self._begin(stack, nxt, t)
 
@@ -189,6 +218,7 @@ class ObjectRow:
         self.state, self.current, self.reason = state, None, reason
         if self._robot_bin is not None:
             stack.machine.bin = self._robot_bin
+            self._set_obstacles(stack, self._obstacles)
 
 
 def run_row(loop: Any, row: ObjectRow, place: Callable[[RowObject], None],

@@ -17,6 +17,9 @@ them.
   for the gripper, per obstacle.
 * :func:`check_obstacles` -- refuse bad obstacles (not finite, radius not positive, on the
   arm's base) with a message for the operator.
+* :func:`with_other_objects` -- the obstacles plus every other object on the table: a plan
+  for one object keeps the clearance from the objects it does not grasp too (the console, the
+  planner CLI's ``--other``, a row of objects and the trials).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -37,6 +41,7 @@ MAX_RADIUS = 0.5        # m, an obstacle larger than this is not something on a 
 MAX_CLEARANCE = 0.2     # m, largest clearance the planner accepts
 _INACTIVE = 10.0        # m added to a row that another row already covers
 NEAR_TOL = 1e-5         # m: a solve this close to its constraints is taken (paper: 2e-3)
+DEFAULT_CLEARANCE = 0.010   # m, the clearance of the planner CLI and the trials (as the console)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,6 +110,32 @@ def first_overlap(x: float, y: float, r: float, disks: Sequence) -> tuple[object
         if gap < 0.0:
             return d, gap
     return None
+
+
+def with_other_objects(obstacles: Sequence[Obstacle],
+                       others: Sequence[Any]) -> tuple[Obstacle, ...]:
+    """The disks a plan for one object keeps its clearance from: ``obstacles`` and then every
+    other object on the table, each an obstacle disk of its own radius.
+
+    Args:
+        obstacles: The obstacles placed on the table.
+        others: The objects other than the one being grasped: anything with ``x``, ``y`` and
+            ``r`` (m) and optionally a ``name`` (a table object's; else "Object k", k counting
+            ``others`` from 1). A name an obstacle already has gets " (object)" appended, so
+            the names stay unique (a refusal names the one in the way).
+
+    Returns:
+        The obstacles followed by the other objects, as :class:`Obstacle`.
+    """
+    out = list(obstacles)
+    names = {o.name for o in out}
+    for k, obj in enumerate(others, 1):
+        name = str(getattr(obj, "name", None) or f"Object {k}")
+        while name in names:
+            name += " (object)"
+        names.add(name)
+        out.append(Obstacle(name, float(obj.x), float(obj.y), float(obj.r)))
+    return tuple(out)
 
 
 def check_obstacles(obstacles: Sequence[Obstacle], model: ArmModel,

@@ -19,6 +19,7 @@ from console.panels.soft_arm.control_text import (
 from console.core.grasp_state import Outcome, SessionView
 from console.core.table_scene import TableObject
 from core.planning.grasp import plan_grasp
+from core.planning.obstacles import Obstacle
 from core.robots import load
 
 SOFT = load("soft-arm")
@@ -27,12 +28,16 @@ TWO = TableObject("Object 2", -0.13, 0.17, 0.0165)
 
 
 def session_view(selected: str | None, outcome: Outcome | None) -> SessionView:
-    return SessionView((ONE, TWO), selected, outcome, 0, False, 2.0, True, "off")
+    return SessionView((ONE, TWO), selected, outcome, 0, False, 2.0, True, "off",
+                       clearance=0.010)
 
 
 @pytest.fixture(scope="module")
 def plan_two():
-    plan = plan_grasp(SOFT, np.zeros(6), (TWO.x, TWO.y), TWO.r)
+    """Object 2's plan as the session makes it: around Object 1 (another object on the table
+    is an obstacle), with the session's clearance."""
+    plan = plan_grasp(SOFT, np.zeros(6), (TWO.x, TWO.y), TWO.r,
+                      obstacles=[Obstacle(ONE.name, ONE.x, ONE.y, ONE.r)], clearance=0.010)
     assert plan.success and plan.n >= 2
     return plan
 

@@ -155,15 +155,16 @@ def test_session_plans_refuses_inspects_and_plays(console):
 
 def test_live_replanning_is_throttled_to_the_newest_position(console):
     s = console.grasp_session
-    name = s.place(-0.25, 0.15)
+    # beyond Object 1 from the arm: its approach is clear of Object 1 (an obstacle for it)
+    name = s.place(-0.14, 0.33)
     wait_for(lambda: (o := s.view().outcome) and o.obj and o.obj.name == name)
     seq0 = s.view().outcome.seq
     t0 = time.monotonic()
     for k in range(60):                                   # a fast drag: 60 positions in ~0.3 s
-        s.update(name, x=-0.25 + 0.001 * k, live=True)
+        s.update(name, x=-0.14 + 0.001 * k, live=True)
         time.sleep(0.005)
-    s.update(name, x=-0.19, y=0.15)                       # release: one final plan
-    out = wait_for(lambda: (o := s.view().outcome) and o.obj.x == pytest.approx(-0.19) and o)
+    s.update(name, x=-0.08, y=0.33)                       # release: one final plan
+    out = wait_for(lambda: (o := s.view().outcome) and o.obj.x == pytest.approx(-0.08) and o)
     elapsed = time.monotonic() - t0
     plans = out.seq - seq0
     assert plans <= 2 + elapsed * 20.0 * 1.5              # LIVE_HZ = 20, plus the final plan

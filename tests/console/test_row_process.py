@@ -37,7 +37,9 @@ from tests.ws_client import wait_for
 # suite runs it beside another test on two busy cores (link gaps: benchmarks/link_gaps.py).
 PATIENT_LINK = {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500}
 
-OBJECT_2, OBJECT_3 = (-0.16, 0.28), (-0.08, 0.33)
+# C, then A: Object 1's approach keeps clear of both, C's of A (every object not yet taken is an
+# obstacle for the plans: D and E, further out, would be in the way of the approach to Object 1)
+OBJECT_2, OBJECT_3 = (-0.13, 0.17), (-0.26, 0.10)
 BIN_XY = (0.09, 0.40)  # clear of the objects and the straight arm (its box is 100 mm wide)
 ROW_TIMEOUT_S = 400.0
 

@@ -45,7 +45,8 @@ from tests.ws_client import wait_for
 PATIENT_LINK = {"bridge.watchdog_ms": 500, "bridge.link_timeout_ms": 500}
 
 OBJECT_2 = (-0.13, 0.17)  # the paper's spot C: 114 mm from the old Control panel object
-OBJECT_3 = (-0.08, 0.33)  # spot E
+OBJECT_3 = (-0.26, 0.10)  # spot A: clear of the approach to C (spot E is not: an obstacle
+#                           in its way, as every other object is, the plan for C is refused)
 OLD_CONTROL_OBJECT = (-0.16, 0.28)
 RUNNING = ("settling", "planning", "approach", "grasp", "move_to_bin", "release")
 CLEAN_S = 5.0

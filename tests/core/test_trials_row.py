@@ -39,17 +39,19 @@ def test_drawn_objects_are_reproducible_reachable_and_apart(arm):
 
 
 def test_row_trial_releases_the_reachable_and_says_why_the_other_failed(arm):
-    res = trials.run_row_trial(arm, [(-0.22, 0.20, R), (-0.6, 0.1, R), (-0.16, 0.28, R)], 2,
+    # D before B: the direct approach to B would sweep through D, still on the table (an
+    # obstacle then, test_other_objects_obstacles.py), the one to D keeps clear of B
+    res = trials.run_row_trial(arm, [(-0.16, 0.28, R), (-0.6, 0.1, R), (-0.22, 0.20, R)], 2,
                                object_time_limit_s=60.0)
     assert res.state == "done" and res.released == 2
     assert [o.status for o in res.objects] == ["released", "failed", "released"]
     assert res.objects[1].reason.startswith("planner refused")
-    assert [o.object.x for o in res.objects] == [-0.22, -0.6, -0.16]
+    assert [o.object.x for o in res.objects] == [-0.16, -0.6, -0.22]
     assert res.sim_s >= res.objects[-1].ended_s
     out = trials.row_json(res)
     assert (out["released"], out["objects"], out["state"]) == (2, 3, "done")
     assert [o["status"] for o in out["row"]] == ["released", "failed", "released"]
-    assert out["row"][0]["object"] == [-0.22, 0.2, R] and out["row"][1]["reason"] is not None
+    assert out["row"][0]["object"] == [-0.16, 0.28, R] and out["row"][1]["reason"] is not None
     assert out["bin"] is None and res.bin is None
     json.dumps(out)  # plain JSON
 

@@ -134,7 +134,7 @@ class ExecuteControls:
             fut = start(lambda: ctl.execute(plan, target.x, target.y, target.r,
                                             bin_params=table_bin))
         else:
-            obstacles, clearance = tuple(view.obstacles), float(view.clearance)
+            obstacles, clearance = view.plan_obstacles(target.name), float(view.clearance)
             fut = start(lambda: ctl.grasp_at(target.x, target.y, target.r, obstacles, clearance,
                                              bin_params=table_bin))
         fut.add_done_callback(lambda f: self._report(event, f, sent))

@@ -53,6 +53,15 @@ class ExecuteTarget:
         return f"{where} (no Grasp planner plan for it: the controller plans the approach)"
 
 
+def _same_disks(a: Any, b: Any) -> bool:
+    """Whether two lists of obstacle disks are the same (names, and centres and radii to a
+    nanometre: a right-side plan's were mirrored there and back, core.planning.sides)."""
+    a, b = tuple(a or ()), tuple(b or ())
+    return len(a) == len(b) and all(
+        p.name == q.name and max(abs(p.x - q.x), abs(p.y - q.y), abs(p.r - q.r)) < 1e-9
+        for p, q in zip(a, b))
+
+
 def execute_target(session_view: SessionView) -> ExecuteTarget:
     """The target of Execute from the grasp session's view (``console.scene.plan_view.SessionView``);
     ValueError (the operator's message) without a selected object."""
@@ -64,11 +73,14 @@ def execute_target(session_view: SessionView) -> ExecuteTarget:
     if (out is not None and out.obj == obj and out.plan is not None and out.plan.success
             and out.plan.n > 0):
         plan = out.plan
-    obstacles = tuple(session_view.obstacles)
-    if obstacles and (plan is None or tuple(plan.obstacles) != obstacles
-                      or plan.obstacle_margin != session_view.clearance):
+    around = session_view.plan_obstacles(obj.name)  # the obstacles and the other objects
+    if plan is not None and (not _same_disks(plan.obstacles, around) or (
+            around and plan.obstacle_margin != session_view.clearance)):
+        plan = None   # made for another table: not this one's plan
+    if session_view.obstacles and plan is None:
         # Only a plan the operator saw go around them runs (the controller's re-plans then keep
-        # to the same obstacles and clearance: they travel with the plan).
+        # to the same obstacles and clearance: they travel with the plan). Without obstacles
+        # the controller plans, around the other objects (the same disks and clearance).
         why = (f" ({out.refusal})" if out is not None and out.obj == obj and out.refusal
                else "")
         raise ValueError(f"Obstacles are on the table: Execute needs the Grasp planner's plan "

@@ -33,6 +33,8 @@ from core.control.sim import SoftArmSim
 from core.control.sim_loop import SimLoop
 from core.control.stack import ControlStack
 from core.kinematics.planar import forward_kinematics, point_in_frame
+from core.planning.feasibility import GraspRefused
+from core.planning.obstacles import DEFAULT_CLEARANCE
 from core.planning.sides import mirror_xy, object_side
 from core.robots import Side, SoftArm, load
 
@@ -249,7 +251,8 @@ def check_row_side(robot: SoftArm, side: str) -> None:
 
 
 def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float, side: str = "left",
-                     spacing_m: float = 0.02, max_draws: int = 2000) -> list[tuple[float, float, float]]:
+                     spacing_m: float = 0.02, max_draws: int = 2000,
+                     clearance: float = DEFAULT_CLEARANCE) -> list[tuple[float, float, float]]:
     """``n`` objects drawn reproducibly from ``seed`` among reachable spots on ``side``.
 
     Candidates are uniform over the left quadrant within the arm's reach (where the paper's
@@ -260,9 +263,13 @@ def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float, side: str
     :func:`core.planning.reachability.cell_status`, which plans on the object's side) plans a
     grasp for it from the straight arm, which is where the arm is at the start and after each
     release at the (straight) bin, and when it keeps ``spacing_m`` clear of the objects drawn
-    before it. ValueError for a side the gripper has no finger for (:func:`check_row_side`).
+    before it and ``clearance`` clear of their plans: the approach from the straight arm of
+    every object drawn before it and the straight carry from its grasp to the robot file's bin
+    (held object included), so that no object is in the way of one taken before it (the
+    objects not yet taken are obstacles, :mod:`core.control.row`). ValueError for a side the
+    gripper has no finger for (:func:`check_row_side`).
     """
-    from core.planning.reachability import PLANNABLE, cell_status, map_planner
+    from core.planning.reachability import map_planner
     if n < 1:
         raise ValueError(f"need at least one object, got {n}")
     check_row_side(robot, side)
@@ -271,19 +278,63 @@ def draw_row_objects(robot: SoftArm, n: int, seed: int, radius: float, side: str
     straight = np.zeros(robot.n_segments)
     base = np.asarray(robot.base_pose[:2], dtype=float)
     out: list[tuple[float, float, float]] = []
+    paths: list[_RowPath] = []
     for _ in range(max_draws):
         x, y = base + rng.uniform(0.0, robot.reach, 2) * (-1.0, 1.0)
         if np.hypot(x - base[0], y - base[1]) > robot.reach:
             continue
         if side == "right" or (side == "both" and len(out) % 2 == 1):
             x, y = mirror_xy(robot, (x, y))
+        x, y = round(float(x), 4), round(float(y), 4)
         if any(np.hypot(x - ox, y - oy) < radius + r + spacing_m for ox, oy, r in out):
             continue
-        if cell_status(planner, straight, float(x), float(y), radius) == PLANNABLE:
-            out.append((round(float(x), 4), round(float(y), 4), float(radius)))
+        if not all(p.clear_of(x, y, radius, clearance) for p in paths):
+            continue
+        try:
+            plan = planner.plan(straight, (x, y), radius)
+        except GraspRefused:
+            continue
+        if plan.success:
+            out.append((x, y, float(radius)))
+            paths.append(_RowPath.of(robot, plan, radius))
             if len(out) == n:
                 return out
     raise ValueError(f"found only {len(out)} of {n} reachable, separate spots in {max_draws} draws")
+
+
+@dataclasses.dataclass(frozen=True)
+class _RowPath:
+    """Where a drawn object's arm goes: its approach from the straight arm (waypoints) and its
+    straight carry to the robot file's bin, holding it."""
+
+    robot: SoftArm
+    approach: np.ndarray     # (k, N): the straight arm, then the waypoints
+    carry: np.ndarray        # (2, N): the grasp pose, the bin pose
+    held: Any                # core.planning.clear_path.HeldObject
+
+    @classmethod
+    def of(cls, robot: SoftArm, plan: Any, radius: float) -> "_RowPath":
+        from core.planning.clear_path import HeldObject
+        side = "right" if plan.side == "right" else "left"
+        chain = np.vstack([plan.kappa_meas[None], plan.kappas])
+        bin_kappa = BinParams.from_robot(robot).kappa_for(side)
+        return cls(robot, chain, np.vstack([plan.kappas[-1], bin_kappa]),
+                   HeldObject.at_finger(robot, radius, side))
+
+    def clear_of(self, x: float, y: float, r: float, clearance: float) -> bool:
+        """Whether the approach and the carry keep ``clearance`` from a disk (certified)."""
+        from core.control.carry import CARRY_PAD
+        from core.planning.arm_model import ArmModel
+        from core.planning.clear_path import ClearPathProblem
+        from core.planning.obstacles import GripperShape, Obstacle
+        model, grip = ArmModel.from_robot(self.robot), GripperShape.from_robot(self.robot)
+        disk = (Obstacle("candidate", x, y, r),)
+        approach = ClearPathProblem(model, grip, disk, clearance)
+        if float(approach.certify(self.approach[:-1], self.approach[1:]).min()) < 0.0:
+            return False
+        carry = ClearPathProblem(model, grip, disk, clearance, CARRY_PAD, self.held,
+                                 self.carry[0])
+        return float(carry.certify(self.carry[:1], self.carry[1:]).min()) >= 0.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -326,6 +377,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
                   planner: str = DEFAULT_PLANNER, object_time_limit_s: float = 150.0,
                   sim_overrides: dict[str, Any] | None = None,
                   bin_xy: Sequence[float] | None = None,
+                  clearance: float = DEFAULT_CLEARANCE,
                   observe: Callable[[Any], Any] | None = None) -> RowTrialResult:
     """Several objects taken to the bin one after another in one headless run.
 
@@ -337,7 +389,10 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
     fails with the reason (as do planner refusals, lost tracking, ... and an object not
     released within ``object_time_limit_s``), and the row goes on with the next. ``bin_xy``
     puts the bin at a point on the table (:func:`core.control.row.bin_at`; ValueError with the
-    reason when it cannot be reached); by default the robot's ``[bin]``.
+    reason when it cannot be reached); by default the robot's ``[bin]``. The objects not yet
+    taken are obstacles for each object's plans and carry, kept ``clearance`` (m) from
+    (:mod:`core.control.row`), though the simulated table holds only the current one;
+    ValueError when the bin pose is closer than that to one of them.
     """
     row_objects = [RowObject(*(float(v) for v in obj)) for obj in objects]
     where = None if bin_xy is None else (float(bin_xy[0]), float(bin_xy[1]))
@@ -349,6 +404,7 @@ def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int,
         sim.p = sim.p.replace(**sim_overrides)
     stack = ControlStack(robot, 0.01, immediate(
         lambda req: plan_request(plan_fn, robot, req)))
+    stack.set_obstacles((), clearance)  # the row adds the objects not yet taken
     loop = SimLoop(sim, stack, 0.01)
     drop_radius = BinParams.from_robot(robot).drop_radius_m
     drops: dict[int, tuple[str, tuple[float, float]]] = {}

@@ -19,9 +19,10 @@ N drawn from ``--seed`` among reachable spots (paper's object radius) on ``--sid
 default), right (the right finger's quadrant), or both (alternating, left first); a side the
 robot file's gripper has no finger for is refused. ``--time-limit`` is then per object;
 ``--bin X Y`` puts the bin at that point of the table (m) instead of the robot file's bin
-configuration. Prints one row per object (its side, released / failed and why), "k/N
-released" and the released count per side, or with ``--json`` one object ``{"row": [...],
-"released": k, "objects": N, "sides": {"left": {"released": k, "objects": n}, ...}, ...}``
+configuration. The objects not yet taken are obstacles for each object's plans and carry,
+kept ``--clearance`` (m, default 0.01) from. Prints one row per object (its side, released /
+failed and why), "k/N released" and the released count per side, or with ``--json`` one
+object ``{"row": [...], "released": k, "objects": N, "sides": {"left": {"released": k, "objects": n}, ...}, ...}``
 (each row entry with its ``side``, the ``finger`` that held it and the simulated
 ``final_object`` position after the release).
 """
@@ -44,6 +45,7 @@ from core.control.row import bin_at
 from core.control.trials import (SIDE_CHOICES, RowTrialResult, TrialResult, draw_row_objects,
                                  paper_locations, per_side, row_json, run_row_trial, run_trials,
                                  sided_objects, summary)
+from core.planning.obstacles import DEFAULT_CLEARANCE, check_clearance
 from core.robots import SoftArm, load
 from core.units import fmt_mm
 
@@ -136,8 +138,12 @@ def run_row_cli(a: argparse.Namespace, ap: argparse.ArgumentParser, robot: SoftA
                                        side=a.side or "left")
         except ValueError as exc:
             ap.error(f"--objects-in-a-row {n} --side {a.side or 'left'}: {exc}")
-    result = run_row_trial(robot, objects, a.seed, planner=a.planner, bin_xy=bin_xy,
-                           object_time_limit_s=a.time_limit, sim_overrides=overrides or None)
+    try:
+        result = run_row_trial(robot, objects, a.seed, planner=a.planner, bin_xy=bin_xy,
+                               object_time_limit_s=a.time_limit, clearance=a.clearance,
+                               sim_overrides=overrides or None)
+    except ValueError as exc:  # a bin pose too close to an object still on the table
+        ap.error(f"--objects-in-a-row {n}: {exc}")
     if a.json:
         print(json.dumps(row_json(result)))
     else:
@@ -174,6 +180,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                          "--object given, or N drawn from --seed among reachable spots")
     ap.add_argument("--bin", nargs=2, type=float, default=None, metavar=("X", "Y"),
                     help="with --objects-in-a-row: put the bin at this point of the table (m)")
+    ap.add_argument("--clearance", type=float, default=None, metavar="M",
+                    help="with --objects-in-a-row: what each object's plans keep from the "
+                         f"objects not yet taken (m, default {DEFAULT_CLEARANCE:g})")
     a = ap.parse_args(argv)
     if a.record is not None and (a.record.suffix != ".mcap" or a.record.exists()):
         ap.error(f"--record {a.record}: need a new file ending in .mcap")
@@ -200,9 +209,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(r)) or r <= 0:
                 ap.error(f"--object {x} {y} {r}: need finite X Y and R > 0")
     if a.objects_in_a_row is not None:
+        if a.clearance is None:
+            a.clearance = DEFAULT_CLEARANCE
+        try:
+            check_clearance(a.clearance)
+        except ValueError as exc:
+            ap.error(f"--clearance {a.clearance}: {exc}")
         return run_row_cli(a, ap, robot, overrides)
     if a.bin is not None:
         ap.error("--bin applies to --objects-in-a-row only")
+    if a.clearance is not None:
+        ap.error("--clearance applies to --objects-in-a-row only (a trial has one object)")
     repeats = 5 if a.repeats is None else a.repeats
     if a.object:
         objects = [(f"#{i + 1}", o) for i, o in enumerate(a.object)]
