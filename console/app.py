@@ -142,6 +142,7 @@ class ConsoleApp:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._notice_lock = threading.Lock()
+        self._refusal_notes: dict[Any, Any] = {}  # client id -> its refusal's notification
 
         self.data_root = Path("runs" if data_dir is None else data_dir)
         self._data: DataDir | None = None
@@ -259,8 +260,35 @@ class ConsoleApp:
                 self._refused_at.clear()
         self.refusals += 1
         self.recorder.action(f"refused: {action or reason}", client)
-        if client is not None and hasattr(client, "add_notification"):
-            client.add_notification("Not allowed", reason, color="red", auto_close_seconds=8.0)
+        self.show_refusal(client, "Not allowed", reason)
+
+    def show_refusal(self, client: Any, title: str, message: str) -> None:
+        """Tell ``client`` (only) why something was refused, until its next action: the
+        notification does not close by itself (a refusal read 8 s later must still be there);
+        the client's next refusal replaces it and its next action (:meth:`clear_refusal`,
+        called by ``operator_only``) removes it."""
+        if client is None or not hasattr(client, "add_notification"):
+            return
+        self.clear_refusal(client)
+        try:
+            note = client.add_notification(title, message, color="red", auto_close_seconds=None)
+        except Exception:  # a client that just left
+            log.debug("refusal to client %s failed", getattr(client, "client_id", client))
+            return
+        with self._notice_lock:
+            self._refusal_notes[getattr(client, "client_id", id(client))] = note
+
+    def clear_refusal(self, client: Any) -> None:
+        """Remove ``client``'s standing refusal (its next action is under way)."""
+        if client is None:
+            return
+        with self._notice_lock:
+            note = self._refusal_notes.pop(getattr(client, "client_id", id(client)), None)
+        if note is not None and hasattr(note, "remove"):
+            try:
+                note.remove()
+            except Exception:  # a client that just left
+                log.debug("removing a refusal failed")
 
     def notify_all(self, title: str, body: str, color: str = "blue",
                    coalesce_s: float = 0.0) -> None:

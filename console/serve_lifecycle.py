@@ -6,7 +6,9 @@
   ``--next-free-port`` is given (then it says loudly where it went).
 * :class:`Lifecycle`: SIGTERM / SIGINT while starting end the process at once (exit 128 + n;
   the children follow by :mod:`hw_bridge.parent_watch`), instead of after a start-up that may
-  take long; once serving, they ask for the ordinary shutdown.
+  take long; once serving, they ask for the ordinary shutdown. The children never see a
+  terminal's Ctrl-C (SIGINT is blocked before they start: :meth:`Lifecycle.install`), so it
+  ends quietly: one line from serve.py, no child tracebacks.
 * :meth:`Lifecycle.shutdown` runs the shutdown steps in order but gives them ``budget`` s in all
   (a browser that never answers can hold viser's close handshake for seconds); past that it says
   so and exits - the control process and the emulator follow within 1 s and the device's
@@ -52,13 +54,36 @@ class Lifecycle:
         self._serving = False
 
     def install(self) -> "Lifecycle":
-        """Handlers for SIGTERM and SIGINT (main thread only)."""
+        """Handlers for SIGTERM and SIGINT (main thread only, before any thread or child).
+
+        Ctrl-C in a terminal sends SIGINT to the whole foreground process group: serve.py and
+        every child (control process, planner workers, device emulator), whose tracebacks and
+        exit reports would then flood the terminal while the parent is stopping them in order.
+        So SIGINT is blocked here, in the main thread: threads started later inherit the mask,
+        and so does every child they start (the mask survives fork and exec), which therefore
+        never sees the terminal's SIGINT and is stopped by this process (or, should it die, by
+        ``hw_bridge.parent_watch``). This process takes it with ``sigwait`` on a thread of its
+        own.
+        """
         signal.signal(signal.SIGTERM, self._on_signal)
-        signal.signal(signal.SIGINT, self._on_signal)
+        signal.signal(signal.SIGINT, self._on_signal)  # (a thread started before this one)
+        if hasattr(signal, "pthread_sigmask"):
+            # multiprocessing starts its resource tracker on the first child and then unblocks
+            # SIGINT in the thread that started it: start it now, before blocking.
+            from multiprocessing import resource_tracker
+            resource_tracker.ensure_running()
+            signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+            threading.Thread(target=self._take_sigint, name="sigint", daemon=True).start()
         return self
+
+    def _take_sigint(self) -> None:
+        while True:
+            self._on_signal(signal.sigwait({signal.SIGINT}), None)
 
     def _on_signal(self, signum: int, frame: Any) -> None:
         if self._serving:
+            if not self.done.is_set():
+                self._say(f"{signal.Signals(signum).name}: shutting down")
             self.done.set()
             return
         self._say(f"{signal.Signals(signum).name} while starting: exiting now")

@@ -273,6 +273,8 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         world.close()
         planner.close()
         del runner, stack  # free ruckig objects before interpreter teardown
+        gc.unfreeze()  # (what gc.freeze() kept, cycles among it included, is freed now: a
+        gc.collect()   # ruckig object left for the teardown makes nanobind report a leak)
 
 
 class ControlProcess(LoopProcess):

@@ -16,10 +16,32 @@ class FakeClient:
         self.client_id = cid
         self.notes: list[tuple[str, str]] = []
         self.colors: list[str | None] = []
+        self.shown: list[FakeNote] = []
 
-    def add_notification(self, title: str, body: str, **kw: object) -> None:
+    def add_notification(self, title: str, body: str, **kw: object) -> "FakeNote":
         self.notes.append((title, body))
         self.colors.append(kw.get("color"))  # type: ignore[arg-type]
+        note = FakeNote(self, title, body, kw.get("auto_close_seconds"))  # type: ignore[arg-type]
+        self.shown.append(note)
+        return note
+
+    @property
+    def shown_now(self) -> list[tuple[str, str]]:
+        """(title, body) of the notifications still on screen: not removed, and not closing by
+        themselves (those with ``auto_close_seconds`` are gone after it, whatever happens)."""
+        return [(n.title, n.body) for n in self.shown if not n.removed and n.auto_close is None]
+
+
+class FakeNote:
+    """A notification handle: ``remove()`` takes it off the screen."""
+
+    def __init__(self, client: FakeClient, title: str, body: str,
+                 auto_close: float | None) -> None:
+        self.title, self.body, self.auto_close = title, body, auto_close
+        self.removed = False
+
+    def remove(self) -> None:
+        self.removed = True
 
 
 class ScopedClient(FakeClient):

@@ -96,6 +96,7 @@ class ConsoleCore:
         self._generation = 0
         self._stop_seq = -1  # commands at or before this seq are never forwarded
         self._held = False  # an explicit STOP holds the arm until the next motion
+        self._rested = False  # the loop's view was seen at rest since that STOP
         self._expected: set[str] = set()
         self._forwarded_seq = store.command.seq  # commands from before the core are not sent
         self._seen_fault: str | None = None
@@ -123,7 +124,8 @@ class ConsoleCore:
             self.hold.cancel(latch=latch)
             self._stop_seq = self.store.command.seq  # STOP's own command and all before it
             self._quietly(self.arm.stop, reason)
-            self._held = self._held or "stop" in reason.lower()
+            if "stop" in reason.lower() and not self._held:
+                self._held, self._rested = True, False
             self.stops += 1
             self.stop_log.append(StopRecord(self.clock(), time.time(), reason,
                                             self.access.name_of(who)))
@@ -151,10 +153,16 @@ class ConsoleCore:
     @property
     def holding_after_stop(self) -> bool:
         """Whether an explicit STOP holds the arm (until the next motion: a jog, a set-point,
-        a started motion, or the arm seen moving again)."""
+        a started motion, or the arm seen moving *again*: the loop's view is seen at rest after
+        the STOP first, since the views that arrive just after it still show the motion STOP
+        ended, which would otherwise read as a new one and end the hold at once)."""
         with self._lock:
-            if self._held and (self.hold.active or self.arm.moving()):
-                self._held = False
+            if self._held:
+                moving = self.arm.moving()
+                if self.hold.active or (moving and self._rested):
+                    self._held = False
+                elif not moving:
+                    self._rested = True
             return self._held
 
     def _on_control_change(self, new: Operator | None, previous: Operator | None,

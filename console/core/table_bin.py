@@ -54,6 +54,21 @@ class TableBin:
         return {"x": float(self.x), "y": float(self.y), "r": float(self.drop_radius)}
 
 
+def robot_file_drops(robot: Any, radius: float | None = None) -> list[tuple[str, float, float]]:
+    """Where the robot file's ``[bin]`` drops an object of ``radius`` (m; default the robot's
+    nominal object) when no bin is placed: ``(finger side, x, y)`` per finger of the gripper,
+    the held object's centre with the arm in the ``[bin]`` pose (m)."""
+    from core.control.params import BinParams
+    from core.control.row import bin_drop_point
+    r = robot.capture.nominal_object_radius if radius is None else float(radius)
+    params = BinParams.from_robot(robot)
+    drops = []
+    for side in tuple(robot.gripper.sides):
+        x, y = bin_drop_point(robot, params.kappa_for(side), r, side)
+        drops.append((side, float(x), float(y)))
+    return drops
+
+
 def locate_bin(robot: Any, x: float, y: float) -> TableBin:
     """The bin at ``(x, y)``; ValueError with the reason when the arm cannot hold an object
     over it (out of reach, on the arm, not a finite point)."""

@@ -1,5 +1,8 @@
 """The bin in the 3D scene, so every browser sees where "Clear table into bin" takes the objects:
-an open box (:data:`console.core.table_bin.BIN_COLOR`) with a "Bin" label, or nothing.
+an open box (:data:`console.core.table_bin.BIN_COLOR`) with a "Bin" label; with no bin
+placed, where the robot file's ``[bin]`` drops the objects instead (Execute and the row go there
+then): the same box dimmed (:data:`ROBOT_FILE_OPACITY`) at each finger's drop point, labelled
+"robot file's bin".
 
 The grasp session keeps the bin (:class:`console.core.table_bin.TableBin`); the grasp layers
 (:class:`console.scene.grasp_layers.GraspSceneView`) draw it here when it changed.
@@ -9,25 +12,44 @@ from __future__ import annotations
 
 from typing import Any
 
-from console.core.table_bin import BIN_COLOR, BIN_HEIGHT, TableBin, open_box_mesh
+from console.core.table_bin import (BIN_COLOR, BIN_HEIGHT, TableBin, open_box_mesh,
+                                    robot_file_drops)
+
+ROBOT_FILE_OPACITY = 0.35  # the robot file's bin, drawn while no bin is placed
+ROBOT_FILE_LABEL = "robot file's bin"
 
 
 class BinView:
-    """The bin in the 3D scene: an open box (``BIN_COLOR``) with a "Bin" label, or nothing."""
+    """The bin in the 3D scene: an open box (``BIN_COLOR``) with a "Bin" label; with no bin
+    placed and ``robot`` given, the robot file's bin dimmed (see the module docstring)."""
 
-    def __init__(self, scene: Any) -> None:
+    def __init__(self, scene: Any, robot: Any = None) -> None:
         self.scene = scene
         self.shown: TableBin | None = None
         self.box: Any = None
         self._half = 0.0
         self.label = scene.add_label("/row/bin/label", "Bin", position=(0.0, 0.0, 0.0),
                                      visible=False, anchor="bottom-center")
+        self.defaults: list[Any] = []  # the robot file's bin: boxes and labels
+        if robot is not None:
+            drops = robot_file_drops(robot)
+            v, f = open_box_mesh(float(robot.bin.drop_radius_m))
+            for side, x, y in drops:
+                name = ROBOT_FILE_LABEL + (f" ({side} finger)" if len(drops) > 1 else "")
+                self.defaults.append(scene.add_mesh_simple(
+                    f"/row/robot_file_bin/{side}/box", v, f, color=BIN_COLOR, side="double",
+                    opacity=ROBOT_FILE_OPACITY, cast_shadow=False, position=(x, y, 0.0)))
+                self.defaults.append(scene.add_label(
+                    f"/row/robot_file_bin/{side}/label", name,
+                    position=(x, y, BIN_HEIGHT + 0.01), anchor="bottom-center"))
 
     def draw(self, table_bin: TableBin | None) -> None:
         """Show ``table_bin`` (None hides the bin); does nothing when it did not change."""
         if table_bin == self.shown:
             return
         self.shown = table_bin
+        for node in self.defaults:  # the robot file's bin stands in while none is placed
+            node.visible = table_bin is None
         if table_bin is None:
             if self.box is not None:
                 self.box.visible = False

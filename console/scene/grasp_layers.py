@@ -51,7 +51,7 @@ class GraspSceneView:
         self.session = session
         self.plan_scene = PlanScene(server, robot)
         self.carry_layer = CarryLayer(server, robot)  # a final plan's carry to the bin
-        self.bin_view = BinView(server.scene)
+        self.bin_view = BinView(server.scene, robot)
         self.obstacle_layer = ObstacleLayer(server)
         self.gizmo_handler: GizmoHandler | None = None
         session.add_listener(self.on_change)

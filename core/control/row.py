@@ -289,7 +289,7 @@ def _bin_pose(robot: SoftArm, x: float, y: float, r: float, side: Literal["left"
     try:
         plan = plan_grasp_sided(robot, np.zeros(robot.n_segments), (x, y), r, side=side)
     except GraspRefused as exc:
-        raise ValueError(f"the bin at {where} cannot be reached: {finger}{exc}") from None
+        raise ValueError(f"{finger}{exc.about(f'bin at {where}')}") from None
     if len(plan.status) == 0 or plan.status[-1] != "ok":
         raise ValueError(f"the bin at {where} cannot be reached: {finger}no arm shape puts the "
                          "gripper over it")

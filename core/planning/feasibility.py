@@ -35,12 +35,27 @@ class GraspRefused(ValueError):
         super().__init__(message)
         self.reason = reason
 
+    def about(self, noun: str) -> GraspRefused:
+        """The same refusal worded for what was really asked about (the planner words it for
+        "the object"; the bin, placed by planning an object's grasp at its point, says "the
+        bin"): ``noun`` replaces "the object" in the message."""
+        text = str(self).replace("The object", f"The {noun}").replace("the object", f"the {noun}")
+        return GraspRefused(self.reason, text)
+
     def __reduce__(self):  # pickled as it was built: a refusal crosses the planning process
         return (type(self), (self.reason, str(self)))
 
 
-def _cm(v: float) -> str:
-    return f"{100.0 * v:.1f} cm"
+def _mm(v: float) -> str:
+    """A distance (m) as the screen shows it: mm, one decimal."""
+    return f"{1e3 * v:.1f} mm"
+
+
+def _beyond(dist: float, reach: float) -> str:
+    """How far ``dist`` lies past ``reach`` (m), worded so that it never reads as equal: below
+    0.1 mm it says "less than 0.1 mm" rather than printing two equal figures."""
+    excess = dist - reach
+    return "less than 0.1 mm" if excess < 0.5e-4 else _mm(excess)
 
 
 def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, radius: float,
@@ -54,32 +69,33 @@ def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, ra
     if radius > g.max_object_radius:
         raise GraspRefused(
             "too_large",
-            f"The object is too large for the gripper: its diameter is {_cm(2 * radius)}, the "
-            f"gripper closes around objects up to {_cm(2 * g.max_object_radius)} across.")
+            f"The object is too large for the gripper: its diameter is {_mm(2 * radius)}, the "
+            f"gripper closes around objects up to {_mm(2 * g.max_object_radius)} across.")
     dist = abs(center - model.base)
     if dist < radius + base_keepout:
         raise GraspRefused(
             "on_base",
-            f"The object is on the arm's base ({_cm(dist)} from it); place it at least "
-            f"{_cm(radius + base_keepout)} away.")
+            f"The object is on the arm's base ({_mm(dist)} from it); place it at least "
+            f"{_mm(radius + base_keepout)} away.")
     final_offset = abs(complex(g.w_off_along, 2.0 * g.g_off + radius))
     reach = float(model.lengths.sum()) + final_offset
     if dist > reach:
         raise GraspRefused(
             "out_of_reach",
-            f"The object is out of reach: it is {_cm(dist)} from the arm's base and the gripper "
-            f"can reach around objects of this size at most {_cm(reach)} away.")
+            f"The object is out of reach: it is {_mm(dist)} from the arm's base, "
+            f"{_beyond(dist, reach)} beyond the {_mm(reach)} at which the gripper can still "
+            f"reach around an object of this size.")
     arm_gap = model.clearance_py(kappa_meas.tolist(), center, radius)
     if arm_gap < 0.0:
         raise GraspRefused(
             "on_arm",
-            f"The object overlaps the arm where it stands now (by {_cm(-arm_gap)}); move the "
+            f"The object overlaps the arm where it stands now (by {_mm(-arm_gap)}); move the "
             f"object or the arm first.")
     grip_gap = gripper_clearance(model, kappa_meas, center, radius, g.length, g.half_width)
     if grip_gap < 0.0:
         raise GraspRefused(
             "on_gripper",
-            f"The object overlaps the gripper where it stands now (by {_cm(-grip_gap)}); move "
+            f"The object overlaps the gripper where it stands now (by {_mm(-grip_gap)}); move "
             f"the object or the arm first.")
 
 

@@ -250,6 +250,20 @@ def test_the_holding_after_stop_state_ends_with_the_next_motion() -> None:
     assert not core.holding_after_stop
 
 
+def test_a_stop_during_a_motion_holds_though_the_loops_next_views_still_show_it() -> None:
+    """A viewer's STOP while the arm moves: the loop's views just after it still show the
+    motion (the runner has not yet acted on the STOP). That is not "moving again": the phase
+    stays "holding after STOP" once the arm rests, and only motion after that rest ends it."""
+    core, arm, *_ = make()
+    arm.is_moving = True  # a path runs
+    core.stop_motion("STOP pressed by Bob (viewer)")
+    assert core.holding_after_stop  # the view from before the STOP took effect
+    arm.is_moving = False  # the runner stopped
+    assert core.holding_after_stop
+    arm.is_moving = True  # moving again after the rest
+    assert not core.holding_after_stop
+
+
 # -- the supervisors' rules, against stand-ins of the loop processes ---------------------------
 
 def done() -> cf.Future:

@@ -1,5 +1,5 @@
 """Execute says where the object goes: seen in a walk through the console, with no bin placed
-Execute dropped the object at the robot file's ``[bin]`` (the arm straight), which is not drawn,
+Execute dropped the object at the robot file's ``[bin]`` (the arm straight), then not drawn,
 so the operator could not tell where it would go. The Control panel's target line and the
 Execute notification name the drop point of each finger (closed form below: the straight arm's
 tip, the gripper's offsets), and once a bin is placed, that bin."""
@@ -18,10 +18,10 @@ def test_execute_names_the_robot_files_bin_until_a_bin_is_placed(rig) -> None:
     # 2 g_off + r to the finger's side, w_off_along beyond the tip.
     side = (2 * SOFT.gripper.g_off + 0.02) * 1e3
     ahead = (sum(SOFT.lengths) + SOFT.gripper.w_off_along) * 1e3
-    expected = (f"no bin placed: into the robot file's bin (not drawn), dropped at "
+    expected = (f"no bin placed: into the robot file's bin (drawn dimmed on the table), dropped at "
                 f"({-side:.0f}, {ahead:.0f}) mm (left finger) or ({side:.0f}, {ahead:.0f}) mm "
                 f"(right finger); place a bin in the Objects panel to choose")
-    assert expected.startswith("no bin placed: into the robot file's bin (not drawn), dropped "
+    assert expected.startswith("no bin placed: into the robot file's bin (drawn dimmed on the table), dropped "
                                "at (-40, 411) mm")
     control.execute._show_target()
     assert expected in control.execute.target_md.content.replace("&#x27;", "'")

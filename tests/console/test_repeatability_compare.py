@@ -217,3 +217,24 @@ def test_a_request_older_than_the_newest_stop_moves_nothing(server) -> None:
     assert fake.jobs == {} and 'data-state="stopped"' in panel.table.content
     assert "Stopped." in panel.status.content
     panel.close()
+
+
+def test_the_verdict_waits_for_all_n_moves_of_each_loop() -> None:
+    """After 1 of 5 closed-loop moves its spread is 0 (one tip): no "beats ... (∞× smaller)"
+    then, but "1 of 5"; with all 5 of each the verdict comes; a run that ended short has none."""
+    from console.panels.extensible.repeatability_view import (Comparison, RepeatabilityResult,
+                                                              comparison_html, verdict)
+    rng = np.random.default_rng(3)
+    point = np.asarray(POINT, dtype=float)
+    opened = RepeatabilityResult(point, point + rng.normal(0, 2e-3, (5, 3)), 5)
+    one = RepeatabilityResult(point, point[None] + 1e-4, 5, closed_loop=True)
+    c = Comparison(point, 5, EXT.n_segments, True, open=opened, closed=one)
+    line = verdict(c)
+    assert "1 of 5 closed-loop moves" in line and "beats" not in line and "∞" not in line, line
+    assert "1 of 5" in comparison_html(c)
+    full = RepeatabilityResult(point, point + rng.normal(0, 1e-4, (5, 3)), 5, closed_loop=True)
+    assert verdict(Comparison(point, 5, EXT.n_segments, True, open=opened, closed=full)
+                   ).startswith("✔ Closed loop beats open loop")
+    stopped = Comparison(point, 5, EXT.n_segments, True, open=opened, closed=one,
+                         message="closed loop: stopped", finished=True)
+    assert verdict(stopped).startswith("No verdict") and "1 of 5" in verdict(stopped)

@@ -165,7 +165,7 @@ def test_a_click_places_the_bin_the_arm_can_hold_an_object_over(rig):
     # Out of reach: refused with the reason, the bin stays where it was.
     click_at(objects_panel, operator, 0.6, 0.1)
     wait_for(lambda: any(t == "Bin" for t, _ in operator.notes))
-    assert any("Not placed: the bin at (600, 100) mm cannot be reached" in b
+    assert any("Not placed: The bin at (600, 100) mm is out of reach" in b
                for _, b in operator.notes)
     time.sleep(0.2)
     assert app.grasp_session.view().bin == table_bin

@@ -171,6 +171,7 @@ def operator_only(callback: Any = None, *, panel: Panel | None = None,
                 owner.app.refuse(client, exc, what)
                 owner.on_refused(event)
                 return False
+            owner.app.clear_refusal(client)  # the operator's next action: the last refusal goes
             return True
 
         if inspect.iscoroutinefunction(fn):

@@ -67,6 +67,14 @@ class PanelHost(Protocol):
         """Tell ``client`` why it may not act."""
         ...
 
+    def show_refusal(self, client: Any, title: str, message: str) -> None:
+        """Tell ``client`` why something was refused, shown until its next action."""
+        ...
+
+    def clear_refusal(self, client: Any) -> None:
+        """Remove ``client``'s standing refusal (its next action is under way)."""
+        ...
+
     def notify_all(self, title: str, body: str, color: str = "blue",
                    coalesce_s: float = 0.0) -> None:
         """A notification on every connected browser."""

@@ -205,10 +205,24 @@ def _table_i_rows(segments: int) -> str:
 
 
 def verdict(c: Comparison) -> str:
-    """One line: how the closed loop did against the open loop (empty until both measured)."""
+    """One line: how the closed loop did against the open loop (empty until both measured).
+
+    The spread and mean error need every requested move: until each loop has them the line
+    says "k of n" moves measured and no verdict (a spread of one move is 0, which would make
+    the closed loop "beat" the open loop infinitely after its first move); a run that ended
+    short says that it gives no verdict.
+    """
     o, k = c.stats("open"), c.stats("closed")
     if o is None or k is None:
         return ""
+    n = c.requested
+    short = [(loop, len(r.tips)) for loop, r in (("open", c.open), ("closed", c.closed))
+             if r is not None and len(r.tips) < n]
+    if short:
+        counts = ", ".join(f"{got} of {n} {loop}-loop moves" for loop, got in short)
+        if c.finished:
+            return f"No verdict: the run ended with {counts} measured."
+        return f"Verdict after all {n} moves of each loop: {counts} measured so far."
     ratio = o.mean_spread / k.mean_spread if k.mean_spread > 0 else math.inf
     better = k.mean_spread < o.mean_spread and k.mean_error < o.mean_error
     times = "∞" if math.isinf(ratio) else f"{ratio:.1f}"

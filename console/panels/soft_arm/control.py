@@ -143,21 +143,17 @@ class ControlPanel(Panel):
         fut.add_done_callback(lambda f: self.report_done(event, f))
 
     def refuse_action(self, event: Any, title: str, message: str) -> None:
-        client = client_of(event)
-        if client is not None:
-            client.add_notification(title, message, color="red", auto_close_seconds=8.0)
+        self.app.show_refusal(client_of(event), title, message)
 
     def is_disarmed(self) -> bool:
         view = self.ctl.view
         c = None if view is None else view.snapshot.control
         return c is None or not c.armed
 
-    @staticmethod
-    def report_done(event: Any, fut: Any) -> None:
+    def report_done(self, event: Any, fut: Any) -> None:
         exc = fut.exception()
-        client = client_of(event)
-        if exc is not None and client is not None:
-            client.add_notification("Refused", str(exc), color="red", auto_close_seconds=8.0)
+        if exc is not None:
+            self.app.show_refusal(client_of(event), "Refused", str(exc))
 
     # -- the pump: loop snapshot -> view, history, the measured arm to the store ---------------
     def _pump_loop(self) -> None:

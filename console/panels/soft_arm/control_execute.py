@@ -33,20 +33,15 @@ from hw_bridge.soft_arm_process import ARM_FIRST
 
 def bin_sentence(robot: Any, table_bin: Any, radius: float) -> str:
     """Where Execute takes an object of ``radius`` (m): into ``table_bin`` (a placed
-    ``console.core.table_bin.TableBin``), else into the robot file's ``[bin]``, which is not drawn,
-    so the drop point of each finger is named."""
+    ``console.core.table_bin.TableBin``), else into the robot file's ``[bin]`` (drawn dimmed on
+    the table by ``console.scene.bin_view.BinView``), whose drop point of each finger is named."""
     if table_bin is not None:
         return f"into the {table_bin.describe()}"
-    from core.control.params import BinParams
-    from core.control.row import bin_drop_point
-    params = BinParams.from_robot(robot)
-    sides = tuple(robot.gripper.sides)
-    points = []
-    for side in sides:
-        x, y = bin_drop_point(robot, params.kappa_for(side), radius, side)
-        finger = f" ({side} finger)" if len(sides) > 1 else ""
-        points.append(f"({x * 1e3:.0f}, {y * 1e3:.0f}) mm{finger}")
-    return ("no bin placed: into the robot file's bin (not drawn), dropped at "
+    from console.core.table_bin import robot_file_drops
+    drops = robot_file_drops(robot, radius)
+    points = [f"({x * 1e3:.0f}, {y * 1e3:.0f}) mm" + (f" ({side} finger)" if len(drops) > 1 else "")
+              for side, x, y in drops]
+    return ("no bin placed: into the robot file's bin (drawn dimmed on the table), dropped at "
             + " or ".join(points) + "; place a bin in the Objects panel to choose")
 
 

@@ -101,8 +101,7 @@ class ObjectsPanel(Panel):
 
     # -- callbacks (thin) ------------------------------------------------------------------
     def _error(self, event, message: str) -> None:
-        if event.client is not None:
-            event.client.add_notification("Objects", message, color="red", auto_close_seconds=6)
+        self.app.show_refusal(event.client, "Objects", message)
 
     def _on_scene_click(self, event) -> None:
         mode = self.click_place.value
@@ -135,9 +134,8 @@ class ObjectsPanel(Panel):
             if found is not None:
                 self.session.set_bin(found)
                 self.app.recorder.action(f"bin placed: {found.describe()}", client)
-            elif client is not None:
-                client.add_notification("Bin", f"Not placed: {error}", color="red",
-                                        auto_close_seconds=8)
+            else:
+                self.app.show_refusal(client, "Bin", f"Not placed: {error}")
         half = self.app.robot.bin.drop_radius_m
         on = (bin_overlap(point[0], point[1], half, self.session.view().obstacles)
               or bin_on_arm(self.app.robot, point[0], point[1], half))

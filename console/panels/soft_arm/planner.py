@@ -71,7 +71,7 @@ class PlannerPanel(Panel):
 
     def _notify(self, event, message: str) -> None:
         if event.client is not None:
-            event.client.add_notification("Planner", message, color="red", auto_close_seconds=6)
+            self.app.show_refusal(event.client, "Planner", message)
 
     @operator_only(action="change the planner")
     def _on_delta_d(self, event) -> None:
