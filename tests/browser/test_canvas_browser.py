@@ -174,7 +174,7 @@ def _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, artifacts_d
         box.press("Enter")
     wait_state(page, ("refused",))
     text = summary(page).inner_text()
-    assert "Refused" in text and "out of reach" in text and "cm from the arm's base" in text
+    assert "Refused" in text and "out of reach" in text and " mm from the arm's base" in text
     assert wp.get_attribute("data-index") == ""          # nothing left to inspect
     page.screenshot(path=str(artifacts_dir / "grasp-refused.png"))
 
