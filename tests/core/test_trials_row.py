@@ -90,7 +90,7 @@ def test_cli_row_json_with_given_objects_and_a_placed_bin(capsys):
     (["--objects-in-a-row", "0"], "must be >= 1"),
     (["--objects-in-a-row", "2", "--repeats", "3"], "do not apply"),
     (["--objects-in-a-row", "2", "--time-limit", "0"], "--time-limit"),
-    (["--objects-in-a-row", "2", "--bin", "0.3", "0.3"], "the bin at (300, 300) mm cannot be reached"),
+    (["--objects-in-a-row", "2", "--bin", "0.3", "0.3"], "The bin at (300, 300) mm is out of reach"),
     (["--bin", "0.15", "0.25"], "--bin applies to --objects-in-a-row only"),
 ])
 def test_cli_row_rejects_bad_arguments(capsys, argv, message):

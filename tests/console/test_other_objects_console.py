@@ -22,7 +22,10 @@ from ws_client import wait_for
 ROBOT = load("soft-arm")
 R = ROBOT.capture.nominal_object_radius
 CUP = TableObject("Object 1", -0.2, 0.2, R)
-IN_THE_WAY = TableObject("Object 2", -0.10, 0.25, 0.015)  # where the direct approach sweeps
+# Within the clearance of the direct approach (3.9 mm from it), yet a clear plan is found at
+# once: a scene the planner solves far inside its CPU budget, so load cannot turn it into a
+# refusal (one squarely across the approach takes ~4 s of the 4 s budget: tests/core has those).
+IN_THE_WAY = TableObject("Object 2", -0.12, 0.22, 0.015)
 AWAY = (0.2, 0.25)   # on the right, nowhere near the left approach
 
 
@@ -81,7 +84,7 @@ def test_a_plan_goes_around_another_object_in_its_way_and_straight_once_it_is_mo
     assert target.plan is plan and tuple(target.plan.obstacles) == s.view().plan_obstacles()
 
     # Object 2 is put down out of the way: Object 1 is re-planned, now the direct way, which
-    # would have swept through where Object 2 stood (so the detour above was for it)
+    # passes within the clearance of where Object 2 stood (so the detour above was for it)
     s.update(IN_THE_WAY.name, x=AWAY[0], y=AWAY[1])
     moved = _planned(s, after=out.seq)
     direct = moved.plan
@@ -98,7 +101,7 @@ def test_the_same_scene_without_the_other_object_plans_the_direct_way(session):
     plan = out.plan
     assert plan.success and not plan.obstacles and out.others == ()
     o = IN_THE_WAY
-    assert swept_gap(plan.kappa_meas, plan.kappas, o.x, o.y, o.r) < 0.0  # through it
+    assert swept_gap(plan.kappa_meas, plan.kappas, o.x, o.y, o.r) < 0.010  # within clearance
     assert "other object" not in outcome_html(out)
     assert s.view().plan_obstacles() == ()
     target = execute_target(s.view())   # no obstacles: the plan, if any, is not required
