@@ -57,7 +57,7 @@ def _cli_plan(capsys, *extra: str) -> dict:
 def test_the_planner_cli_plans_around_another_object_and_straight_without_it(capsys):
     plan = _cli_plan(capsys, "--other", *map(str, IN_THE_WAY))
     assert plan["success"] and plan["obstacle_margin"] == DEFAULT_CLEARANCE == 0.010
-    assert plan["obstacles"] == [{"name": "Object 2", "x": -0.10, "y": 0.25, "r": 0.015}]
+    assert plan["obstacles"] == [{"name": "Object 2", "x": -0.12, "y": 0.22, "r": 0.015}]
     assert swept_gap(plan["kappa_meas"], plan["kappas"], *IN_THE_WAY) >= 0.010 - 1e-6
     direct = _cli_plan(capsys)
     assert direct["success"] and not direct["obstacles"]
