@@ -22,6 +22,7 @@ from console.core.state import StateStore
 from console.core.table_scene import TableObject, parse_scene, scene_from_json, scene_to_json
 from core.planning.obstacles import Obstacle
 from core.robots import load
+from arm_gaps import dense_gap, swept
 from fakes import FakeClient
 from test_planner_console import click_at, gated, user, wait_for  # noqa: F401 (fixture)
 
@@ -313,28 +314,6 @@ def test_a_placed_obstacle_is_drawn_and_recorded_before_its_re_plan_ends(gated):
     wait_for(lambda: any(k == "plan" for k, _ in logged))
 
 
-def _dense_gap(kappas: np.ndarray, x: float, y: float, r: float) -> np.ndarray:
-    """Arm (backbone +- half-width, straight gripper +- its half-width) to disk gap, from the
-    planar kinematics sampled densely (independent of the planner's own clearance check)."""
-    from core.kinematics import planar
-
-    bb = planar.sample_backbone(kappas, ROBOT.lengths, 64, ROBOT.base_pose)
-    body = np.hypot(bb[..., 0] - x, bb[..., 1] - y).min(axis=-1) - ROBOT.half_width
-    tip = bb[..., -1, :]
-    s = np.linspace(0.0, ROBOT.gripper.length, 65)
-    gx = tip[..., 0:1] + s * np.cos(tip[..., 2:3])
-    gy = tip[..., 1:2] + s * np.sin(tip[..., 2:3])
-    grip = np.hypot(gx - x, gy - y).min(axis=-1) - ROBOT.gripper.half_width
-    return np.minimum(body, grip) - r
-
-
-def _swept(kappa_meas: np.ndarray, kappas: np.ndarray) -> np.ndarray:
-    """Every configuration on the straight lines in kappa between waypoints (201 per leg)."""
-    chain = np.vstack([kappa_meas, kappas])
-    tau = np.linspace(0.0, 1.0, 201)
-    return chain[:-1, None, :] + tau[:, None] * (chain[1:] - chain[:-1])[:, None, :]
-
-
 def test_an_obstacle_clicked_between_arm_and_object_is_planned_around(gated):
     """A click with "Table click places: Obstacle" between the straight arm (x = 0) and Object 1,
     then Plan grasp: every arm and gripper point between waypoints keeps the clearance from it,
@@ -363,10 +342,10 @@ def test_an_obstacle_clicked_between_arm_and_object_is_planned_around(gated):
     plan, clearance = out.plan, s.view().clearance
     assert clearance == pytest.approx(0.010)
     assert plan.success, plan.summary()
-    gaps = _dense_gap(_swept(plan.kappa_meas, plan.kappas), obs.x, obs.y, obs.r)
+    gaps = dense_gap(ROBOT, swept(plan.kappa_meas, plan.kappas), obs.x, obs.y, obs.r)
     assert gaps.min() >= clearance - 1e-9, gaps.min()
     plain = plan_grasp(ROBOT, plan.kappa_meas, plan.center, plan.radius)
-    assert _dense_gap(_swept(plain.kappa_meas, plain.kappas), obs.x, obs.y, obs.r).min() \
+    assert dense_gap(ROBOT, swept(plain.kappa_meas, plain.kappas), obs.x, obs.y, obs.r).min() \
         < clearance
     summary = outcome_html(out)
     assert 'data-state="ok"' in summary and "from the obstacles" in summary

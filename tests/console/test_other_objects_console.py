@@ -6,6 +6,7 @@ sampled backbone and gripper (planar forward kinematics) along every line betwee
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -15,36 +16,19 @@ from console.core.table_area import table_extent
 from console.core.table_scene import TableObject
 from console.panels.soft_arm.control_text import execute_target
 from console.scene.plan_view import outcome_html
-from core.kinematics import planar
 from core.robots import load
+from arm_gaps import swept_gap as arm_swept_gap
 from ws_client import wait_for
 
 ROBOT = load("soft-arm")
 R = ROBOT.capture.nominal_object_radius
+swept_gap = functools.partial(arm_swept_gap, ROBOT)  # (kappa_meas, kappas, x, y, r) -> m
 CUP = TableObject("Object 1", -0.2, 0.2, R)
 # Within the clearance of the direct approach (3.9 mm from it), yet a clear plan is found at
 # once: a scene the planner solves far inside its CPU budget, so load cannot turn it into a
 # refusal (one squarely across the approach takes ~4 s of the 4 s budget: tests/core has those).
 IN_THE_WAY = TableObject("Object 2", -0.12, 0.22, 0.015)
 AWAY = (0.2, 0.25)   # on the right, nowhere near the left approach
-
-
-def swept_gap(kappa_meas: np.ndarray, kappas: np.ndarray, x: float, y: float,
-              r: float) -> float:
-    """Smallest gap (m) between the arm (backbone +- half-width, straight gripper +- its
-    half-width) and a disk, over the straight lines in kappa from ``kappa_meas`` through every
-    waypoint (201 configurations a line, 64 backbone samples a segment)."""
-    chain = np.vstack([kappa_meas, kappas])
-    tau = np.linspace(0.0, 1.0, 201)[:, None, None]
-    k = (chain[:-1] + tau * (chain[1:] - chain[:-1])).reshape(-1, chain.shape[1])
-    bb = planar.sample_backbone(k, ROBOT.lengths, 64, ROBOT.base_pose)
-    body = np.hypot(bb[..., 0] - x, bb[..., 1] - y).min(axis=-1) - ROBOT.half_width
-    tip = bb[..., -1, :]
-    s = np.linspace(0.0, ROBOT.gripper.length, 65)
-    gx = tip[..., 0:1] + s * np.cos(tip[..., 2:3])
-    gy = tip[..., 1:2] + s * np.sin(tip[..., 2:3])
-    grip = np.hypot(gx - x, gy - y).min(axis=-1) - ROBOT.gripper.half_width
-    return float(np.minimum(body, grip).min() - r)
 
 
 @pytest.fixture

@@ -6,46 +6,31 @@ the same scene without it plans the direct way, too close to where it stood."""
 
 from __future__ import annotations
 
+import functools
 import json
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from arm_gaps import swept_gap as arm_swept_gap
 from core import robots
 from core.control import trials
 from core.control.grasp_place import GraspAndPlace, Phase, immediate
 from core.control.row import ObjectRow, RowObject, row_obstacles
 from core.control.trials.__main__ import main as trials_main
-from core.kinematics import planar
 from core.planning import sides
 from core.planning.grasp.__main__ import main as grasp_main
 from core.planning.obstacles import DEFAULT_CLEARANCE, Obstacle, with_other_objects
 
 ARM = robots.load("soft-arm")
 R = ARM.capture.nominal_object_radius
+swept_gap = functools.partial(arm_swept_gap, ARM)  # (kappa_meas, kappas, x, y, r) -> m
 CUP = (-0.2, 0.2, R)
 # Within the clearance of the direct approach to CUP (3.9 mm from it), yet a clear plan is found
 # at once (0.01 s of CPU): one squarely across the approach takes ~4 s of the planner's 4 s CPU
 # budget and is refused now and then on a loaded machine.
 IN_THE_WAY = (-0.12, 0.22, 0.015)
-
-
-def swept_gap(kappa_meas, kappas, x: float, y: float, r: float) -> float:
-    """Smallest gap (m) between the arm (backbone +- half-width, straight gripper +- its
-    half-width) and a disk, over the straight lines in kappa from ``kappa_meas`` through every
-    waypoint (201 configurations a line, 64 backbone samples a segment)."""
-    chain = np.vstack([np.asarray(kappa_meas, float), np.asarray(kappas, float)])
-    tau = np.linspace(0.0, 1.0, 201)[:, None, None]
-    k = (chain[:-1] + tau * (chain[1:] - chain[:-1])).reshape(-1, chain.shape[1])
-    bb = planar.sample_backbone(k, ARM.lengths, 64, ARM.base_pose)
-    body = np.hypot(bb[..., 0] - x, bb[..., 1] - y).min(axis=-1) - ARM.half_width
-    tip = bb[..., -1, :]
-    s = np.linspace(0.0, ARM.gripper.length, 65)
-    gx = tip[..., 0:1] + s * np.cos(tip[..., 2:3])
-    gy = tip[..., 1:2] + s * np.sin(tip[..., 2:3])
-    grip = np.hypot(gx - x, gy - y).min(axis=-1) - ARM.gripper.half_width
-    return float(np.minimum(body, grip).min() - r)
 
 
 def _cli_plan(capsys, *extra: str) -> dict:
