@@ -4,7 +4,6 @@ size (``artifacts/layout/``) for people to look at."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any
 
@@ -20,8 +19,13 @@ TABS = {"soft-arm": ("Operate", "Hardware", "Experiments", "Session"),
 SHOT_SIZES = ("desktop", "tablet")
 
 # True when the element's centre is on screen and nothing else (a notification, the 3D
-# canvas) is drawn over it there: what a person can see and press without scrolling.
-_ON_SCREEN = """el => {
+# canvas) is drawn over it there: what a person can see and press without scrolling. The element
+# is found in the same call: the header is one HTML block that viser replaces whenever a field
+# changes, so an element found in one round trip and measured in the next can be a detached old
+# one (zero size: a failed run, 2026-12-04).
+_ON_SCREEN = """find => {
+    const el = find();
+    if (el === null || el === undefined) return false;
     const r = el.getBoundingClientRect();
     const x = r.left + r.width / 2, y = r.top + r.height / 2;
     if (r.width <= 0 || r.height <= 0 || x < 0 || y < 0
@@ -36,8 +40,21 @@ def drawn(page: Any) -> None:
     page.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
 
 
-def _on_screen(page: Any, locator: Any) -> bool:
-    return bool(locator.first.evaluate(_ON_SCREEN))
+FIND = {
+    "STOP": """() => [...document.querySelectorAll('button')]
+                    .find(b => b.textContent.includes('STOP') && b.textContent.includes('(Esc)'))""",
+    "the phase": """() => document.querySelector('[data-testid="header-phase"]')""",
+}
+
+
+def _on_screen(page: Any, what: str) -> bool:
+    """Whether ``what`` (a key of :data:`FIND`) is on screen and uncovered, measured in one call
+    in the page; it may take up to 5 s to become so (a tab's panels settling)."""
+    try:
+        page.wait_for_function(f"() => ({_ON_SCREEN})({FIND[what]})", timeout=5_000)
+    except PlaywrightError:
+        return False
+    return True
 
 
 @pytest.mark.parametrize("robot", ["soft-arm", "extensible"])
@@ -69,10 +86,14 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
             close_notices(page)
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
-                time.sleep(0.5)  # the tab's panels settle (two animation frames were too few)
-                assert _on_screen(page, stop), f"STOP is off screen or covered: {size}, {tab}"
-                assert _on_screen(page, phase), f"the phase is off screen: {size}, {tab}"
+                drawn(page)
+                shot = shots / f"{robot}-{size}-{tab.lower()}.png"
+                for what in FIND:
+                    if not _on_screen(page, what):
+                        page.screenshot(path=str(shot))
+                        raise AssertionError(f"{what} is off screen or covered: {size}, {tab} "
+                                             f"(see {shot})")
                 assert page.evaluate("() => scrollY") == 0
-                page.screenshot(path=str(shots / f"{robot}-{size}-{tab.lower()}.png"))
+                page.screenshot(path=str(shot))
     finally:
         context.close()
