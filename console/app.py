@@ -177,6 +177,10 @@ class ConsoleApp:
                 cache_dirs=(self.data_root / "cache",))
             self.grasp_scene = GraspSceneView(server, robot, self.grasp_session)
             self.grasp_session.start()
+            # A recording starts with the table and plan as they are (else logged on change).
+            grasp = self.grasp_session
+            self.recorder.add_start_hook(lambda: feed_grasp(
+                self.recorder, grasp.view(), {"objects", "obstacles", "plan"}))
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         for panel_cls in DEFAULT_PANELS if panels is None else panels:
             self.add_panel(panel_cls)

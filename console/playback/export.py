@@ -12,11 +12,13 @@ the viewer's client bundle with the scene embedded as base64, opened straight fr
   back with viser's timeline. viser 1.1.1 makes a scene and its serializer only with a
   ``ViserServer``, so that scene is a private one on 127.0.0.1 (an ephemeral port no browser is
   told of, stopped again); the console's own server and its browsers never see it.
-  Its markers (phase changes, faults, STOP, operator actions: ``console.playback.replay_markers``) are a
-  label in the scene that changes at each marker's time and a list in the page. The table as the
-  operator set it up -- objects, obstacles with their clearance rings and the bin, from the
-  recording's ``objects`` records (:func:`draw_recorded_table`) -- is drawn as it was at each
-  time, so the file shows what the operator saw.
+  Its markers (the log's sentences: phase changes, faults, STOP, operator actions;
+  ``console.playback.replay_markers``) are a label in the scene that changes at each marker's
+  time and a collapsible list beside the view (never over it). The table as the operator set it
+  up -- objects, obstacles with their clearance rings, the bin -- and the plan (approach circles,
+  numbered waypoints, the arm at the grasp), from the recording's ``objects`` and ``plan``
+  records (:class:`console.playback.recorded_scene.RecordedScene`), are drawn as they were at
+  each time, so the file shows what the operator saw.
 
 :func:`external_urls` lists the http(s) URLs in a file, to check it needs nothing online.
 """
@@ -30,13 +32,11 @@ import numpy as np
 import viser
 
 from console.core.model import ArmModel, model_for
-from console.core.table_bin import BIN_COLOR, BIN_HEIGHT, open_box_mesh
-from console.playback.replay_markers import current_marker, markers_html, markers_of
+from console.playback.recorded_scene import RecordedScene
+from console.playback.replay_markers import current_marker, markers_of, with_markers
 from console.recording.recorder import Recording
 from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
-from console.scene.obstacle_view import draw_recorded_obstacles, recorded_disk
-from console.scene.plan_view import OBJECT_COLOR, OBJECT_SEL_COLOR, object_mesh
 from console.scene.stage import add_lights, add_table, setup_camera, setup_theme, table_extent
 from core.robots import Robot
 
@@ -65,47 +65,6 @@ def draw_overlay(scene: viser.SceneApi, data: dict[str, Any], root: str = "/over
     color = tuple(int(c) for c in data.get("color", (200, 40, 160)))[:3]
     segments = np.stack([pts[:-1], pts[1:]], axis=1)
     return scene.add_line_segments(f"{root}/{name}", segments, color, thickness=0.004)
-
-
-def draw_recorded_table(scene: viser.SceneApi, data: dict[str, Any] | None,
-                        root: str = "/recorded") -> list[Any]:
-    """Draw a recorded ``objects`` record's table under ``root``: the objects (cylinders in the
-    Objects panel's colours), the obstacles (``console.scene.obstacle_view``'s look, clearance rings
-    included) and the bin (an open box with its label). Bad entries are skipped. Returns the
-    nodes (the caller removes them when the record changes)."""
-    if not data:
-        return []
-    nodes = draw_recorded_obstacles(scene, data, f"{root}/obstacles")
-    for i, o in enumerate(data.get("objects") or []):
-        disk = recorded_disk(o)
-        if disk is None:
-            continue
-        x, y, r = disk
-        v, f = object_mesh(r)
-        color = OBJECT_SEL_COLOR if o.get("name") == data.get("selected") else OBJECT_COLOR
-        nodes.append(scene.add_mesh_simple(f"{root}/objects/body_{i}", v, f, color=color,
-                                           position=(x, y, 0.0), cast_shadow=False))
-    disk = recorded_disk(data.get("bin"))
-    if disk is not None:
-        x, y, r = disk
-        v, f = open_box_mesh(r)
-        nodes.append(scene.add_mesh_simple(f"{root}/bin/box", v, f, color=BIN_COLOR,
-                                           side="double", position=(x, y, 0.0),
-                                           cast_shadow=False))
-        nodes.append(scene.add_label(f"{root}/bin/label", "Bin",
-                                     position=(x, y, BIN_HEIGHT + 0.01), anchor="bottom-center"))
-    return nodes
-
-
-def recorded_table_until(rec: Recording, t: float) -> dict[str, Any] | None:
-    """The newest ``objects`` record (objects, obstacles, clearance, bin) at or before ``t``."""
-    found = None
-    for e in rec.events:
-        if e.t > t:
-            break
-        if e.kind == "objects" and isinstance(e.data, dict):
-            found = e.data
-    return found
 
 
 def draw_stage(server: viser.ViserServer, robot: Robot) -> ArmView[ArmModel]:
@@ -139,15 +98,14 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
         grid = np.arange(0.0, duration + 1e-9, 1.0 / rate) if duration > 0 else np.zeros(1)
         markers = markers_of(rec)
         grid = np.union1d(grid, [m.t for m in markers if 0.0 <= m.t <= duration])
-        grid = np.union1d(grid, [e.t for e in rec.events  # the table changes at its records
-                                 if e.kind == "objects" and 0.0 <= e.t <= duration])
+        grid = np.union1d(grid, [e.t for e in rec.events  # the table and plan change there
+                                 if e.kind in ("objects", "plan") and 0.0 <= e.t <= duration])
         label = server.scene.add_label("/markers/label", "", position=(0.0, -0.06, 0.12),
                                        visible=False)
         shown = -1
         last_q: np.ndarray | None = None
         drawn: dict[str, int] = {}
-        table: dict[str, Any] | None = None
-        table_nodes: list[Any] = []
+        recorded = RecordedScene(server.scene, robot)
         pending = 0.0
         prev_t = 0.0
         for t in grid:
@@ -158,8 +116,7 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
             changed_overlays = {k: v for k, v in overlays.items() if drawn.get(k) != id(v)}
             found = current_marker(markers, float(t))
             new_marker = found is not None and found[0] != shown
-            recorded = recorded_table_until(rec, float(t))
-            new_table = recorded is not table
+            new_table = recorded.changes_at(rec, float(t))
             if last_q is not None and np.array_equal(q, last_q) and not changed_overlays \
                     and not new_marker and not new_table:
                 continue
@@ -167,10 +124,7 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
                 serializer.insert_sleep(pending)
                 pending = 0.0
             with server.atomic():
-                if new_table:
-                    for node in table_nodes:
-                        node.remove()
-                    table, table_nodes = recorded, draw_recorded_table(server.scene, recorded)
+                recorded.show(rec, float(t))
                 view.update(q)
                 for name, data in changed_overlays.items():
                     draw_overlay(server.scene, data)
@@ -182,9 +136,6 @@ def recording_html(robot: Robot, rec: Recording, *, fps: float = 15.0,
             last_q = q
         if pending > 0:
             serializer.insert_sleep(pending)
-        page = serializer.as_html(dark_mode=dark_mode)
-        if markers and "</body>" in page:
-            page = page.replace("</body>", markers_html(markers) + "</body>", 1)
-        return page
+        return with_markers(serializer.as_html(dark_mode=dark_mode), markers)
     finally:
         server.stop()

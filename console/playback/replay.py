@@ -1,10 +1,15 @@
-"""Per-browser replay of a recording: a ghost arm and a timeline only that browser sees.
+"""Per-browser replay of a recording: the run as it was, in a scene only that browser sees.
 
 Each connected client gets a :class:`ReplaySession` with its own (client-scoped) widgets --
-recording picker, Load, Play/Pause, timeline slider (seek), speed -- and, once a recording is
-loaded, its own translucent ghost arm under ``/replay`` in ``client.scene``. Replaying never
-commands the arm and never changes what other browsers see, so a viewer may replay freely.
-One :class:`ReplayPlayer` thread advances every playing session.
+recording picker (the newest recording first and picked), Load, Play/Pause, timeline slider
+(seek), speed, the log -- and, once a recording is loaded, its own scene under ``/replay`` in
+``client.scene``: a translucent ghost arm at the recorded configuration, and the table and plan
+as they were recorded at that time (objects, obstacles, bin, approach circles, numbered
+waypoints: :class:`console.playback.recorded_scene.RecordedScene`). The log shows what happened
+up to that time as sentences with times ("12.4 s  Armed", "30.1 s  Phase: approach → grasp":
+:mod:`console.playback.replay_log`). Replaying never commands the arm and never changes what
+other browsers see, so a viewer may replay freely. One :class:`ReplayPlayer` thread advances
+every playing session.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import BadFileName, DataDir
 from console.playback.export import draw_overlay, recording_html
-from console.scene.obstacle_view import draw_recorded_obstacles
+from console.playback.recorded_scene import RecordedScene
 from console.recording.recorder import SUFFIXES, Recorder, Recording, load_recording
 from console.playback.replay_markers import (COLORS, Marker, current_marker, markers_of,
                                              next_marker, previous_marker)
@@ -33,6 +38,7 @@ GHOST_COLOR = (150, 150, 160)
 GHOST_OPACITY = 0.55
 SPEEDS = ("0.25x", "0.5x", "1x", "2x", "4x")
 NONE = "(no recordings yet)"
+LOG_LINES = 8  # the log shows this many sentences up to the replay's time
 
 
 class ReplayHost(Protocol):
@@ -64,8 +70,7 @@ class ReplaySession:
         self.playing = False
         self.speed = 1.0
         self.markers: list[Marker] = []
-        self._obstacles_shown: dict | None = None
-        self._obstacle_nodes: list = []
+        self.recorded = RecordedScene(client.scene, app.robot, "/replay/recorded")
         self._lock = threading.Lock()
         gui = client.gui
         self.folder = gui.add_folder("Replay", order=order, expand_by_default=False)
@@ -93,11 +98,25 @@ class ReplaySession:
         self.export_btn.on_click(lambda e: self.export())
 
     def _file_options(self) -> tuple[str, ...]:
-        names = [n for suffix in SUFFIXES for n in self.app.data.list("recordings", suffix)]
-        return tuple(names) if names else (NONE,)
+        """The recordings (both formats), newest first."""
+        folder = self.app.data.folder("recordings")
+        found: list[tuple[float, str]] = []
+        for suffix in SUFFIXES:
+            for name in self.app.data.list("recordings", suffix):
+                try:
+                    found.append((folder.joinpath(name).stat().st_mtime, name))
+                except OSError:  # deleted meanwhile
+                    continue
+        found.sort(key=lambda f: f[0], reverse=True)
+        return tuple(n for _, n in found) if found else (NONE,)
 
     def refresh_files(self) -> None:
-        self.files.options = self._file_options()
+        """Re-read the recordings; a new one (just saved) becomes the picked one."""
+        before = set(self.files.options)
+        options = self._file_options()
+        self.files.options = options
+        if any(n not in before for n in options) and options[0] != NONE:
+            self.files.value = options[0]
 
     def _tell(self, title: str, body: str, color: str = "blue") -> None:
         self.client.add_notification(title, body, color=color, auto_close_seconds=8.0)
@@ -143,6 +162,7 @@ class ReplaySession:
             return False
         with self._lock:
             self.rec, self.pos, self.playing = rec, 0.0, False
+            self.recorded.clear()
             if self.ghost is None:
                 self.ghost = make_arm_view(self.client.scene, self.app.model, root="/replay",
                                            method="vertices", dead_band=None)  # one browser:
@@ -220,16 +240,9 @@ class ReplaySession:
                 ghost.update(rec.q_at(pos))
                 for data in rec.overlays_until(pos).values():
                     draw_overlay(self.client.scene, data, root="/replay/overlays")
-                obstacles = rec.obstacles_until(pos)
-                if obstacles is not self._obstacles_shown:     # the recorded obstacles
-                    for node in self._obstacle_nodes:
-                        node.remove()
-                    self._obstacles_shown = obstacles
-                    self._obstacle_nodes = draw_recorded_obstacles(
-                        self.client.scene, obstacles, "/replay/obstacles")
+                self.recorded.show(rec, pos)  # the table and plan as recorded then
                 if move_slider:
                     self.timeline.value = round(pos, 3)
-                lines = [f"{e.t:7.1f} s · {e.who}: {e.text}" for e in rec.events_until(pos)]
                 found = current_marker(self.markers, pos)
                 marker = "" if found is None else (
                     f'<br><small data-testid="replay-marker" data-index="{found[0]}" '
@@ -239,8 +252,7 @@ class ReplaySession:
                     f'<small data-testid="replay-info" data-t="{pos:.3f}">{rec.name} · '
                     f"{pos:.1f} / {rec.duration:.1f} s · "
                     f"{'playing' if self.playing else 'paused'} {self.speed:g}x</small>"
-                    + marker
-                    + "".join(f"<br><small>{_escape(line)}</small>" for line in lines))
+                    + marker + log_html(self.markers, pos))
 
     def export(self) -> None:
         rec = self.rec
@@ -269,6 +281,23 @@ class ReplaySession:
 
 def _escape(text: str) -> str:
     return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def log_html(markers: list[Marker], t: float, k: int = LOG_LINES) -> str:
+    """The last ``k`` log sentences at or before ``t``, one line each ("12.4 s  Armed"; the
+    newest in bold), or a line saying nothing happened yet."""
+    found = current_marker(markers, t)
+    if found is None:
+        return '<div data-testid="replay-log"><small>Log: nothing yet.</small></div>'
+    end = found[0] + 1
+    rows = []
+    for i in range(max(0, end - k), end):
+        m = markers[i]
+        weight = "font-weight:600;" if i == end - 1 else ""
+        rows.append(f'<div data-t="{m.t:.3f}" data-category="{m.category}" '
+                    f'style="white-space:pre-wrap;{weight}color:{COLORS[m.category]}">'
+                    f"<small>{_escape(m.label)}</small></div>")
+    return '<div data-testid="replay-log">' + "".join(rows) + "</div>"
 
 
 class ReplayPlayer:

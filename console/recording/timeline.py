@@ -61,6 +61,19 @@ class Recording:
     sources: list[str]
     events: list[Event]
 
+    _event_times: list[float] = dataclasses.field(init=False, repr=False, default_factory=list)
+    _by_kind: dict[str, tuple[list[float], list[dict[str, Any]]]] = dataclasses.field(
+        init=False, repr=False, default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.events.sort(key=lambda e: e.t)  # stable: records logged at one time keep order
+        self._event_times = [e.t for e in self.events]
+        for e in self.events:  # records with dict data, per kind (the table, the plan, ...)
+            if isinstance(e.data, dict):
+                times, datas = self._by_kind.setdefault(e.kind, ([], []))
+                times.append(e.t)
+                datas.append(e.data)
+
     @property
     def duration(self) -> float:
         return float(self.times[-1]) if len(self.times) else 0.0
@@ -74,8 +87,15 @@ class Recording:
 
     def events_until(self, t: float, k: int = 5) -> list[Event]:
         """The last ``k`` events at or before ``t``."""
-        i = bisect.bisect_right([e.t for e in self.events], t)
+        i = bisect.bisect_right(self._event_times, t)
         return self.events[max(0, i - k):i]
+
+    def latest(self, kind: str, t: float) -> dict[str, Any] | None:
+        """The data of the newest record of ``kind`` at or before ``t`` whose data is a dict
+        (None before any): the table (``objects``) or the plan (``plan``) as it was then."""
+        times, datas = self._by_kind.get(kind, ((), ()))
+        i = bisect.bisect_right(times, t)
+        return datas[i - 1] if i else None
 
     def obstacles_until(self, t: float) -> dict[str, Any] | None:
         """The newest ``objects`` record at or before ``t`` that lists obstacles (its data:

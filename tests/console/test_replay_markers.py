@@ -60,7 +60,8 @@ def test_markers_jump_and_show_the_recorded_configuration(app) -> None:
     cats = [(m.category, m.who) for m in session.markers]
     assert cats == [("action", "Bea"), ("phase", "server"), ("fault", "server"),
                     ("stop", "Bea")]
-    assert [m.text for m in session.markers][1:3] == ["phase approach", "fault: link lost"]
+    assert [m.text for m in session.markers] == ["Took control by Bea", "Phase: approach",
+                                                 "Fault: link lost", "STOP pressed by Bea"]
     assert list(slider_marks(session.timeline)) == \
         [round(m.t, 3) for m in session.markers]
     assert not session.next_btn.disabled
