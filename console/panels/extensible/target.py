@@ -74,6 +74,7 @@ Array = npt.NDArray[np.float64]
 TARGET_COLOR = (235, 130, 30)
 MISS_COLOR = (210, 40, 40)
 PENDING_OPACITY = 0.35  # the typed target not yet applied: a dimmed ball
+SAME_TARGET_M = 6e-5  # m: typed fields this close to the target are the target (0.1 mm steps)
 IK_TIMEOUT_S = 20.0  # s: a solve takes < 1 s unloaded; past this the worker is restarted
 _AXES = ("x", "y", "z")
 BLOCKED = "Blocked by the boxes: "  # an error message that starts so is shown as "blocked"
@@ -178,7 +179,8 @@ class TargetPanel(Panel):
             if target is None:
                 return
             # Typed back to the target (or a field's callback late after Go): nothing pending.
-            same = bool(np.allclose(target, self._target, rtol=0, atol=1e-7))
+            # (Within the fields' rounding: they show the target to 0.1 mm.)
+            same = bool(np.allclose(target, self._target, rtol=0, atol=SAME_TARGET_M))
             self._pending = None if same else target
             self._show()
 
