@@ -12,6 +12,10 @@ the header render its state and call its methods):
   :class:`~console.core.access.AccessControl` listener), a held jog whose renewals stopped
   (hold-to-run expiry), a link fault and a dead loop process (the watcher in :meth:`tick`) all
   end here, the same for both arms.
+* **Jog speed.** Held jogs and the Jog panel's set-points run at the operator's jog speed
+  (``hold.jog_speed``, started at the arm model's ``jog_speed``: 20 mm/s at the extensible
+  arm's tip), never a panel's choice; the Jog panel's field only asks
+  ``hold.set_jog_speed``.
 * **Motion routes.** New commanded states in the store (jog, sliders, Straighten, set-points,
   the demo) that are not the loop's own reach the arm through ``arm.forward`` (the supervisor
   decides whether the arm takes one now); never one made at or before the latest STOP, and
@@ -78,7 +82,8 @@ class ConsoleCore:
         arm: The arm's loop behind :class:`ArmSupervisor` (default: from ``services``).
         clock: Monotonic time source of the core and its hold-to-run (tests pass a fake one;
             it must be the one ``access`` uses, since hold-to-run reads its heartbeats).
-        hold: Extra :class:`HoldToRun` arguments (``expiry``, ``rate_hz``, ...).
+        hold: Extra :class:`HoldToRun` arguments (``expiry``, ``rate_hz``, ...); ``jog_speed``
+            defaults to the arm model's (the Jog panel's speed a class can follow).
     """
 
     def __init__(self, store: StateStore, services: ConsoleServices, access: AccessControl,
@@ -90,6 +95,7 @@ class ConsoleCore:
         self.recorder = recorder
         self.arm: ArmSupervisor = arm if arm is not None else supervisor_for(services)
         self.clock = clock
+        hold.setdefault("jog_speed", store.model.jog_speed)  # the arm's (extensible: 20 mm/s)
         self.hold = HoldToRun(store, allowed=access.is_operator, heard=access.last_heard,
                               clock=clock, on_expired=self._on_hold_expired, **hold)
         self._lock = threading.RLock()

@@ -18,7 +18,12 @@ the commanded configuration itself, at ``rate_hz``, from its own thread:
 Both are capped on the server: every step is clamped to the robot's soft limits
 (``ArmModel.set_coordinate`` / ``clamp``) and scaled down so that no point of the arm (segment
 ends and, on the soft arm, the gripper's far end) moves faster than ``tip_speed`` (250 mm/s),
-measured with the forward kinematics of ``core.kinematics``. :meth:`HoldToRun.cancel` (STOP, a
+measured with the forward kinematics of ``core.kinematics``. The Jog panel's motions (held jogs,
+and set-points asked for with ``move_to(..., jog=True)``: its sliders, Straighten, Retract) are
+slower still: no arm point faster than the operator's *jog speed* (:attr:`HoldToRun.jog_speed`,
+set with :meth:`HoldToRun.set_jog_speed` within :attr:`HoldToRun.jog_speed_limits`; the console
+core starts it at the arm model's ``jog_speed``: 20 mm/s on the extensible arm, a speed a class
+can follow). :meth:`HoldToRun.cancel` (STOP, a
 lost lease) ends all motion and latches: a button still held keeps renewing into nothing until
 it is released (its click arrives on mouse-up) and pressed again, or has sent no renewal for
 ``latch_gap`` s (a release whose click never arrived). A held jog that ends because its renewals
@@ -29,6 +34,7 @@ stopped (not a release) is reported to ``on_expired``: the console core
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 import time
 from typing import Callable
@@ -40,11 +46,13 @@ from console.core.model import ArmModel, Coordinate, ExtensibleModel, SoftArmMod
 from console.core.state import ArmState, StateStore
 from core.kinematics import delta as dk
 from core.kinematics import planar as pk
+from core.units import fmt_mm
 
 Array = npt.NDArray[np.float64]
 HOLD_SOURCE = "jog-hold"
 MOVE_SOURCE = "jog"
 STOP_SOURCE = "stop"
+JOG_SPEED_MIN = 0.001  # m/s: the slowest jog speed an operator may set (1 mm/s)
 
 
 def arm_points(model: ArmModel, q: npt.ArrayLike) -> Array:
@@ -97,6 +105,7 @@ class _Move:
     client_id: int
     target: Array
     requested: float  # clock time of the request (the first sign of life)
+    jog: bool = False  # a Jog panel set-point: at the jog speed
 
 
 class HoldToRun:
@@ -111,6 +120,8 @@ class HoldToRun:
         expiry: A hold not renewed for this long stops; a set-point move without a heartbeat
             for this long holds (s).
         tip_speed: Largest speed of any arm point (m/s).
+        jog_speed: Largest speed of any arm point in held jogs and ``jog=True`` set-points
+            (m/s), within :attr:`jog_speed_limits`; None: ``tip_speed``.
         rate_hz: Steps per second while moving.
         sweep_s: Time a held jog takes to sweep a coordinate's whole range (before the cap).
         latch_gap: After a STOP, a held button counts as released after this long without a
@@ -122,8 +133,9 @@ class HoldToRun:
 
     def __init__(self, store: StateStore, *, allowed: Callable[[int], bool] = lambda _: True,
                  heard: Callable[[int], float | None] | None = None, expiry: float = 0.3,
-                 tip_speed: float = 0.25, rate_hz: float = 50.0, sweep_s: float = 4.0,
-                 latch_gap: float = 2.0, clock: Callable[[], float] = time.monotonic,
+                 tip_speed: float = 0.25, jog_speed: float | None = None,
+                 rate_hz: float = 50.0, sweep_s: float = 4.0, latch_gap: float = 2.0,
+                 clock: Callable[[], float] = time.monotonic,
                  on_expired: Callable[[str], None] | None = None) -> None:
         if expiry <= 0 or tip_speed <= 0 or rate_hz <= 0 or sweep_s <= 0:
             raise ValueError("expiry, tip_speed, rate_hz and sweep_s must be > 0")
@@ -139,6 +151,9 @@ class HoldToRun:
         self._clock = clock
         self.on_expired = on_expired
         self._cond = threading.Condition()
+        self._jog_speed = tip_speed
+        if jog_speed is not None:
+            self.set_jog_speed(jog_speed)
         self._hold: _Hold | None = None
         self._move: _Move | None = None
         self._latched: dict[tuple[int, str, int], float] = {}
@@ -148,6 +163,40 @@ class HoldToRun:
         self.last_note = ""
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+
+    # -- the jog speed -----------------------------------------------------------------------
+
+    @property
+    def jog_speed(self) -> float:
+        """Largest speed of any arm point in held jogs and jog set-points (m/s)."""
+        return self._jog_speed
+
+    @property
+    def jog_speed_limits(self) -> tuple[float, float]:
+        """(slowest, fastest) jog speed an operator may set (m/s): 1 mm/s up to the arm
+        model's ``max_jog_speed`` (the extensible arm's tip speed limit), at most the cap."""
+        top = self.model.max_jog_speed
+        return JOG_SPEED_MIN, self.tip_speed if top is None else min(top, self.tip_speed)
+
+    def set_jog_speed(self, speed: float) -> float:
+        """Set the jog speed (m/s; a jog under way goes on at it); returns it.
+
+        Raises:
+            ValueError: ``speed`` is not a number within :attr:`jog_speed_limits` (said in
+                mm/s); the jog speed stays as it was.
+        """
+        lo, hi = self.jog_speed_limits
+        try:
+            value = float(speed)
+        except (TypeError, ValueError):
+            raise ValueError(f"the jog speed must be a number of mm/s, got {speed!r}") from None
+        if not math.isfinite(value) or not lo - 1e-12 <= value <= hi + 1e-12:
+            shown = f"{fmt_mm(value, 1)} mm/s" if math.isfinite(value) else repr(speed)
+            raise ValueError(f"the jog speed must be between {fmt_mm(lo, 0)} and "
+                             f"{fmt_mm(hi, 0)} mm/s, not {shown}")
+        with self._cond:
+            self._jog_speed = min(max(value, lo), hi)
+        return self._jog_speed
 
     # -- requests (GUI callbacks) -------------------------------------------------------------
 
@@ -191,8 +240,9 @@ class HoldToRun:
                 for key in [k for k in table if k[0] == client_id]:
                     del table[key]
 
-    def move_to(self, client_id: int, target: npt.ArrayLike) -> bool:
-        """Move towards ``target`` (validated and clamped) at the capped speed; False if refused.
+    def move_to(self, client_id: int, target: npt.ArrayLike, *, jog: bool = False) -> bool:
+        """Move towards ``target`` (validated and clamped) at the capped speed (``jog``: at the
+        jog speed, for the Jog panel's sliders, Straighten and Retract); False if refused.
 
         Raises:
             ValueError: ``target`` is not a valid configuration; nothing changes.
@@ -201,7 +251,7 @@ class HoldToRun:
         with self._cond:
             if not self.allowed(client_id):
                 return False
-            self._move = _Move(client_id, q, self._clock())
+            self._move = _Move(client_id, q, self._clock(), jog)
             self._hold = None
             self._last_tick = None
             self._last_seq = self.store.command.seq
@@ -274,7 +324,8 @@ class HoldToRun:
             dt = self.period if self._last_tick is None else min(now - self._last_tick,
                                                                  2 * self.period)
             self._last_tick = now
-            max_disp = self.tip_speed * dt
+            jogging = h is not None or (m is not None and m.jog)
+            max_disp = min(self.tip_speed, self._jog_speed if jogging else self.tip_speed) * dt
             done = False
 
             def step(q: Array) -> tuple[Array, str | None]:

@@ -30,6 +30,9 @@ from core.robots import ExtensibleArm, Robot, SoftArm
 
 Array = npt.NDArray[np.float64]
 _EPS = 1e-12
+# Jog speed of the extensible arm at start (m/s, fastest arm point: the tip, mostly): slow enough
+# for a class to follow a held jog (the full rack speed swept the tip ~255 mm in 2 s, issue 31).
+EXTENSIBLE_JOG_SPEED = 0.02
 _SUB = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
 
 
@@ -60,6 +63,10 @@ class ArmModel(ABC):
     robot: Robot
     shape: tuple[int, ...]
     coordinates: tuple[Coordinate, ...]
+    # The Jog panel's speed (m/s of the fastest arm point) the console starts with, and the most
+    # the operator may set; None: hold-to-run's own cap (``console.core.hold_to_run``).
+    jog_speed: float | None = None
+    max_jog_speed: float | None = None
 
     def zero(self) -> Array:
         """The all-zero configuration (straight arm; retracted for the extensible arm)."""
@@ -154,6 +161,8 @@ class ExtensibleModel(ArmModel):
     def __init__(self, robot: ExtensibleArm) -> None:
         self.robot = robot
         self.shape = (robot.n_segments, 3)
+        self.max_jog_speed = robot.tip_speed  # the arm's own tip speed limit (limits.tip_speed)
+        self.jog_speed = min(EXTENSIBLE_JOG_SPEED, robot.tip_speed)
         beta = dk.rack_angles(robot.phi)
         # d rack_j / d(dx, dy, dL), shape (3 coords, 3 racks).
         self.rack_gradient = np.stack([-np.cos(beta), -np.sin(beta), np.ones(3)])

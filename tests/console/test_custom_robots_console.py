@@ -121,6 +121,7 @@ def test_three_segment_extensible_arm_reaches_a_typed_target(
         target, readout = app.panel(TargetPanel), app.panel(ReadoutPanel)
         for handle, value in zip(target.inputs, target_mm):
             assert tab.update(handle._impl.uuid, value=float(value))
+        assert tab.update(target.go._impl.uuid, value=True)  # x, y, z together
         check_reached(app, tab, target, readout, arm, target_mm)
     finally:
         tab.close()

@@ -1,5 +1,5 @@
 """The shipped extensible arm's console flows, without a browser: typed tip target, path run, and
-the measured tip on the device emulator.
+the measured tip on the device emulator (a typed target is x, y, z and Go).
 
 ``serve.build`` (what ``serve.py --robot extensible`` runs, in this process) composes every panel
 of the arm. A raw websocket client (a real tab to the lease) types the tip target; the buttons
@@ -102,8 +102,10 @@ def attr(html: str, name: str) -> str:
 
 
 def type_target(client: RawClient, target: Any, xyz_mm: np.ndarray) -> None:
+    """Type x, y, z and press Go (typing alone moves nothing)."""
     for handle, value in zip(target.inputs, xyz_mm):
         assert client.update(handle._impl.uuid, value=float(value))
+    assert client.update(target.go._impl.uuid, value=True)
 
 
 def test_typed_target_moves_the_tip_and_the_jog_sliders(tab: Callable[..., Any]) -> None:

@@ -151,9 +151,10 @@ def test_unreachable_target_names_the_closest_reachable_tip_without_negative_zer
 
 
 def test_a_typed_field_is_not_overwritten_by_the_echo_of_the_field_typed_before_it(server):
-    """Typing x then y: viser stores y before y's callback runs; the panel's echo of x's answer
+    """Typing x then y: viser stores y before y's callback runs; the panel's echo of an answer
     (target with the old y) came in between in a CI run and wrote the old y back, so y's
-    callback solved for the old y. The echo now leaves a field typed since alone."""
+    callback solved for the old y. The echo now leaves a field typed since alone (and writes
+    no field while a typed target is pending); Go solves for every field as typed."""
     from fakes import FakeClient, console_app, user
 
     from console.core.access import AccessControl
@@ -169,13 +170,21 @@ def test_a_typed_field_is_not_overwritten_by_the_echo_of_the_field_typed_before_
         app.access.take(op.client_id, "tok", name="Alice")
         x_in, y_in, z_in = panel.inputs
         y0, z0 = float(y_in.value), float(z_in.value)
-        user(x_in, op, 120.0)                         # x typed: solved for (120, y0, z0)
+        x0 = float(x_in.value)
+        user(x_in, op, 120.0)                         # x typed: pending (120, y0, z0)
+        assert solves == []                           # typing alone solves and moves nothing
+        user(panel.go, op)                            # Go: solved for (120, y0, z0)
         np.testing.assert_allclose(solves[-1] * 1e3, (120.0, y0, z0))
         y_in._impl.value = y0 - 60.0                  # y typed: stored, its callback queued
         panel._publish(solves[-1], None, None, "x's answer")
         panel._show()                                 # the echo of x's answer
         assert float(y_in.value) == y0 - 60.0
-        user(y_in, op)                                # y's callback
+        user(y_in, op)                                # y's callback: pending, not solved
+        assert len(solves) == 1
+        panel._publish(np.array([x0, y0, z0]) / 1e3, None, None, "a tip reset")
+        panel._show()                                 # an echo while pending: fields kept
+        assert [float(h.value) for h in panel.inputs] == [120.0, y0 - 60.0, z0]
+        user(panel.go, op)
         np.testing.assert_allclose(solves[-1] * 1e3, (120.0, y0 - 60.0, z0))
         # Fields the panel has shown again follow its answers: back on the tip, all three.
         user(panel.to_tip, op)

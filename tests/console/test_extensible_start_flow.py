@@ -5,7 +5,8 @@ not, without a browser.
 the lease (typing, holding a jog button as the browser does) and FakeClient clicks with that tab's
 id. From the start pose (``ExtensibleModel.initial``: straight, racks at mid-range) the header says
 idle; a held Δx₁ + jog moves the tip (at start it used to be refused: retracted, every rack at
-rack_min); a typed target is answered by the field's own callback (before any solve) and reached;
+rack_min); a typed target is shown pending by the field's own callback (nothing moves), and Go
+reaches it;
 Preview draws the requested path at once and ends in a planned preview; after Retract a held
 Δx₁ − is clamped with a note; nothing shown reads "-0". Was the flow of
 tests/browser/test_browser_jog.py, which keeps the page's hold buttons and what the
@@ -74,14 +75,20 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     wait_for(lambda: not app.hold.active, timeout=30.0, what="the jog to end")
     assert np.asarray(app.store.command.q)[0, 0] > 0.0  # Δx₁, the way of the button
 
-    # A typed target is answered by the field's callback itself ("Solving…"), then reached.
+    # A typed target is answered by the field's callback itself (pending: nothing moves until
+    # Go), then Go reaches it.
     aim = np.array([0.0, 0.0, 250.0])
     assert solve_tip_ik(ROBOT, aim / 1e3).reachable
     x_in, y_in, z_in = target.inputs
     x_in._impl.value, y_in._impl.value = 0.0, 0.0  # typed, their callbacks not yet run
+    seq = app.store.command.seq
     user(z_in, operator, 250.0)
-    assert attr(target.status.content, "data-state") != "idle", target.status.content
+    assert attr(target.status.content, "data-state") == "pending", target.status.content
+    assert attr(target.status.content, "data-pending-mm") == "0.0,0.0,250.0"
+    assert app.store.command.seq == seq and app.hold.target() is None  # nothing moved
+    user(target.go, operator)
     assert attr(target.status.content, "data-target-mm") == "0.0,0.0,250.0"
+    assert attr(target.status.content, "data-state") != "pending", target.status.content
     wait_for(lambda: np.abs(readout_tip(readout) - aim).max() <= 1.0, timeout=40.0,
              what=f"the tip at the typed target ({target.status.content})")
     assert attr(target.status.content, "data-state") == "reachable", target.status.content

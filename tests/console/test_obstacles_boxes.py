@@ -363,6 +363,7 @@ def test_a_typed_shelf_and_a_typed_target_over_it_are_reached_clear_of_it(gated,
     assert float(state_of(info, "clearance-mm")) == 20.0
     for handle, value in zip(target.inputs, target_mm):
         user(handle, op, value)
+    user(target.go, op)  # x, y, z together
     aimed = ",".join(f"{v:.1f}" for v in target_mm)
     wait_for(lambda: state_of(target.status.content, "target-mm") == aimed
              and state_of(target.status.content) in ("reachable", "blocked", "error"),

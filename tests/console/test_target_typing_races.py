@@ -1,5 +1,7 @@
 """The tip target takes every typed field, whatever the panel's other threads do meanwhile.
 
+Typing only sets the pending target (nothing is submitted); Go submits all three fields.
+
 A browser's x, y, z arrive as three messages; viser stores each value, then runs its callback in
 its thread pool, so two field callbacks may run at once, and the render thread may answer a new
 command (the runner's posture on Arm: the target rides on the tip) at the same moment. Before,
@@ -8,7 +10,8 @@ thread could come between: a callback that read (x, old z) could submit after th
 (x, z), and a tip reset between a read and its "Solving…" was echoed over the typed x. A console
 test lost a typed z (the arm went to (100, 0, 460) for (100, 0, 300)) and a typed x so, on a
 loaded machine. Here the first callback is held right after it read the fields, the others are
-let run meanwhile, and the target submitted last must hold every typed field.
+let run meanwhile; nothing is submitted by typing, and the target Go submits must hold every
+typed field.
 """
 
 from __future__ import annotations
@@ -73,6 +76,10 @@ def test_typed_fields_reach_the_target_past_a_concurrent_field_and_a_tip_reset(s
         for t in (x_thread, *others):
             t.join(30)
             assert not t.is_alive()
+        assert submitted == []  # typed, not applied
+        np.testing.assert_allclose([float(h.value) for h in panel.inputs], typed)
+        user(panel.go, op)
+        assert len(submitted) == 1
         np.testing.assert_allclose(submitted[-1], typed)
         np.testing.assert_allclose([float(h.value) for h in panel.inputs], typed)
     finally:

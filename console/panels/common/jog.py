@@ -16,8 +16,11 @@ each slider and its − / + out on one grid row with a small style sheet (:func:
 HTML widget of the panel) keyed on the widgets' ids. A browser without CSS ``:has()`` shows
 the same buttons stacked under their slider: the same row order, only taller.
 
-All motion goes through ``app.core.hold`` (``console.core.hold_to_run.HoldToRun``), capped at
-250 mm/s for every arm point and clamped to the soft limits:
+All motion goes through ``app.core.hold`` (``console.core.hold_to_run.HoldToRun``), clamped to
+the soft limits and no arm point faster than the *jog speed* (the field "Jog speed (mm/s)" at
+the top of the panel, within 1 mm/s and the arm's limit; the console core starts it at 20 mm/s on
+the extensible arm, at the 250 mm/s cap on the soft arm). The field only asks the core
+(``hold.set_jog_speed``), which refuses a bad value with a message; the panel keeps no speed:
 
 * The − / + buttons hold to jog: the arm moves only while the button is held
   (viser's ``on_hold`` renews the jog 20 times a second; a jog expires 300 ms after its last
@@ -49,7 +52,7 @@ from console.core.state import ArmState
 from console.panels.common.events import target_of
 from console.web.widgets import widget_id
 from console.panels.common.disarmed import disarmed_note
-from core.units import MM_PER_M, fmt_deg
+from core.units import MM_PER_M, fmt_deg, fmt_mm
 
 HOLD_HZ = 20.0
 MINUS, PLUS = "−", "+"
@@ -136,6 +139,13 @@ class JogPanel(Panel):
         self.sliders: dict[str, viser.GuiSliderHandle[float]] = {}
         self.jog_buttons: dict[tuple[str, int], viser.GuiButtonHandle] = {}
         self.rows: list[JogRow] = []
+        lo, hi = self.app.core.hold.jog_speed_limits
+        self.speed = self.gui.add_number(
+            "Jog speed (mm/s)", round(self.app.core.hold.jog_speed * MM_PER_M, 1),
+            min=round(lo * MM_PER_M, 1), max=round(hi * MM_PER_M, 1), step=1.0,
+            hint=f"Fastest any point of the arm moves while jogging ({fmt_mm(lo, 0)}–"
+                 f"{fmt_mm(hi, 0)} mm/s): held − / +, the sliders, Straighten and Retract.")
+        self.speed.on_update(self._on_speed)
         current_segment = -1
         container = None
         for coord in model.coordinates:
@@ -198,6 +208,25 @@ class JogPanel(Panel):
         self._sync_sliders(self._base())
         return True
 
+    @operator_only(action="change the jog speed")
+    def _on_speed(self, event: viser.GuiEvent) -> None:
+        if event.client is None:  # our own mirror of the core's speed
+            return
+        hold = self.app.core.hold
+        try:
+            applied = hold.set_jog_speed(float(self.speed.value) / MM_PER_M)
+        except ValueError as exc:
+            self.note.content = f"⚠ Jog speed not changed: {exc}."
+        else:
+            self.note.content = f"Jog speed {fmt_mm(applied, 0)} mm/s."
+        self._sync_speed()
+
+    def _sync_speed(self) -> None:
+        """Show the core's jog speed in the field (after a refused or clamped value)."""
+        shown = round(self.app.core.hold.jog_speed * MM_PER_M, 1)
+        if self.speed.value != shown:
+            self.speed.value = shown
+
     @operator_only(action="jog")
     def _on_slider(self, coord: Coordinate, event: viser.GuiEvent) -> None:
         if event.client is None:  # our own mirror of the state into the slider
@@ -213,7 +242,7 @@ class JogPanel(Panel):
             requested = float(handle.value) / scale
             target, note = model.set_coordinate(self._base(), coord, requested)
             note = note or model.limit_note(target, coord)
-            self.app.core.hold.move_to(event.client.client_id, target)
+            self.app.core.hold.move_to(event.client.client_id, target, jog=True)
         applied = float(target[coord.index])
         if abs(applied - requested) > 1e-9:
             # Snap back to what the limits allow, within the slider's range: the bending limit
@@ -226,7 +255,7 @@ class JogPanel(Panel):
         if event.client is None or self._refused_disarmed():
             return
         with self._target_lock:
-            self.app.core.hold.move_to(event.client.client_id, fn(self._base()))
+            self.app.core.hold.move_to(event.client.client_id, fn(self._base()), jog=True)
         self._sync_sliders(self.app.core.hold.target())
 
     def _on_hold(self, coord: Coordinate, direction: int, event: viser.GuiEvent) -> None:
@@ -241,6 +270,8 @@ class JogPanel(Panel):
         # viser already showed the viewer's slider value to everyone: put the arm's back.
         if isinstance(target_of(event), viser.GuiSliderHandle):
             self._sync_sliders(self._base())
+        if target_of(event) is self.speed:
+            self._sync_speed()
 
     def _sync_sliders(self, q: np.ndarray | None) -> None:
         if q is None:

@@ -1,10 +1,18 @@
-"""Tip-target panel: drag a gizmo (or type x, y, z) and the extensible arm's tip follows by IK.
+"""Tip-target panel: drag a gizmo (or type x, y, z and press Go) and the extensible arm's tip
+follows by IK.
+
+Typed x, y, z are applied together, by **Go** (issue 31: a move per typed field sent the arm
+through targets nobody asked for). Typing only changes the *pending* target: a dimmed ball in the
+view and a status line that says it is not applied yet; nothing moves. Go reads the three fields
+at once and moves to exactly that target (one move: one IK solve, one set-point, or one route
+past the boxes); a field that is not a finite number gets a clear message and moves nothing.
+"Target ← current tip" or a drag of the gizmo discards a pending target.
 
 A transform control in the 3D view holds the tip target. While the operator drags it, a worker
 thread (``console.panels.extensible.target_worker``) has the tip IK
 (``core.kinematics.delta_ik.solve_tip_ik``) solved, warm-started from the posture being moved to,
 without restarts, at most ``LIVE_HZ`` times a second on the newest target only; on release (and
-for typed targets) it solves once more with restarts. The solve itself runs in a ``spawn``-ed
+on Go) it solves once more with restarts. The solve itself runs in a ``spawn``-ed
 worker process (started on the first solve), never in the console's process: there a CPU-bound
 solve holds the GIL the extensible runner's 100 Hz loop needs (measured: an IK thread next to the
 runner tripped the serial link's write timeout within seconds). The solution
@@ -14,16 +22,17 @@ sliders show it. With the hardware runner started, the motors follow the command
 link is not armed (its health, as the Hardware panel shows it) the status says the motors will
 not follow. An unreachable target moves the arm to the closest feasible configuration; the
 panel names that tip, how far it is from the target, and a red line in the view joins them.
-A typed or released target is answered at once ("Solving the IK for (x, y, z) mm…"), then by
+A target released or sent by Go is answered at once ("Solving the IK for (x, y, z) mm…"), then by
 the result or by why nothing moves (IK error, no answer within ``IK_TIMEOUT_S``, a running
 path, control lost, motors not armed): never silence. Only the operator may move the target
 (``operator_only``).
 
-viser runs field callbacks in its thread pool (two typed fields' callbacks may run at once) and
-the render thread answers new commands meanwhile: reading the typed fields, saying "Solving…" and
-submitting the target happen under one lock, as do the render thread's tip reset and every echo
-into the fields, so a target submitted later was read later and no echo lands between a read and
-its answer (a loaded machine lost a typed field so).
+viser runs field callbacks in its thread pool (two typed fields' callbacks and Go's may run at
+once) and the render thread answers new commands meanwhile: reading the typed fields, setting the
+pending target, saying "Solving…" and submitting the target happen under one lock, as do the
+render thread's tip reset and every echo into the fields (none while a target is pending: the
+fields then hold it), so a target submitted later was read later and no echo lands between a
+read and its answer (a loaded machine lost a typed field so).
 
 Box obstacles (the Obstacles panel, ``console.panels.extensible.obstacles_boxes``): with boxes placed, the
 worker process solves the IK with them (the arm's body surface keeps the clearance from every
@@ -64,6 +73,8 @@ from core.units import fmt_deg, fmt_mm, mm_value, mm_xyz
 Array = npt.NDArray[np.float64]
 TARGET_COLOR = (235, 130, 30)
 MISS_COLOR = (210, 40, 40)
+PENDING_OPACITY = 0.35  # the typed target not yet applied: a dimmed ball
+SAME_TARGET_M = 6e-5  # m: typed fields this close to the target are the target (0.1 mm steps)
 IK_TIMEOUT_S = 20.0  # s: a solve takes < 1 s unloaded; past this the worker is restarted
 _AXES = ("x", "y", "z")
 BLOCKED = "Blocked by the boxes: "  # an error message that starts so is shown as "blocked"
@@ -87,20 +98,29 @@ class TargetPanel(Panel):
             position=tuple(tip))
         self.ball = scene.add_icosphere("/target/ball", radius=0.012, color=TARGET_COLOR,
                                         cast_shadow=False)
+        self.pending_ball = scene.add_icosphere(
+            "/target_pending", radius=0.012, color=TARGET_COLOR, opacity=PENDING_OPACITY,
+            cast_shadow=False, visible=False)
         self.miss = scene.add_line_segments("/target_miss", np.zeros((1, 2, 3)), MISS_COLOR,
                                             thickness=3.0, thickness_units="screen",
                                             visible=False)
         self.follow = self.gui.add_checkbox(
             "Follow while dragging", True,
             hint="Solve the IK live while the gizmo moves (else only on release).")
-        self.inputs = [self.gui.add_number(f"Target {a} (mm)", mm_value(v), step=0.1,
-                                           hint=f"Tip target {a} in mm; the arm moves on change.")
-                       for a, v in zip(_AXES, tip)]
+        self.inputs = [self.gui.add_number(
+            f"Target {a} (mm)", mm_value(v), step=0.1,
+            hint=f"Tip target {a} in mm; nothing moves until Go (x, y, z together).")
+            for a, v in zip(_AXES, tip)]
+        self.go = self.gui.add_button("Go", hint="Move the tip to the typed x, y, z (IK within "
+                                                 "the rack and bending limits).")
         self.to_tip = self.gui.add_button("Target ← current tip",
-                                          hint="Put the target back on the arm's tip.")
+                                          hint="Put the target back on the arm's tip (and "
+                                               "discard a typed target not applied).")
         self.status = self.gui.add_html(self._status_html(None, None))
         self._hardware_note = ""  # why the motors will not follow, from the link's health
         self._target = tip.copy()
+        self._pending: Array | None = None  # typed, not applied (Go): the fields hold it
+        self._shown_pending: tuple[float, ...] | None = None
         self._typed = TypedFields(self.inputs)  # the echo of an answer skips a field just typed
         # Typed reads + their answer, the render thread's tip reset and every echo: one at a time
         # (re-entrant: writing a field calls its callback back with no client).
@@ -119,6 +139,7 @@ class TargetPanel(Panel):
         self.gizmo.on_update(self._on_gizmo)
         for handle in self.inputs:
             handle.on_update(self._on_typed)
+        self.go.on_click(self._on_go)
         self.to_tip.on_click(lambda _: self._reset_to_tip())
         self.app.server.on_client_connect(lambda _: self._warm_up())
 
@@ -138,6 +159,9 @@ class TargetPanel(Panel):
         if event.client is None:
             return
         target = np.asarray(event.target.position, dtype=float)
+        if self._pending is not None:  # the gizmo is the new target: a typed one goes
+            with self._typing:
+                self._pending = None
         self._target = target
         self._dragging = event.phase != "end"
         if event.phase == "end":
@@ -147,17 +171,44 @@ class TargetPanel(Panel):
 
     @operator_only(action="move the tip target")
     def _on_typed(self, event: viser.GuiEvent) -> None:
+        """A typed field: the pending target (all three fields as typed now); nothing moves."""
         if event.client is None:  # our own mirror of the target into the inputs
             return
-        with self._typing:  # read and submitted in the same order as other fields' callbacks
-            target = np.array(self._typed.read()) / 1e3  # every field as typed now
-            if not np.all(np.isfinite(target)):
-                self.report_error("target must be three finite numbers (mm)")
+        with self._typing:  # read in the same order as other fields' callbacks and Go
+            target = self._read_fields()
+            if target is None:
                 return
+            # Typed back to the target (or a field's callback late after Go): nothing pending.
+            # (Within the fields' rounding: they show the target to 0.1 mm.)
+            same = bool(np.allclose(target, self._target, rtol=0, atol=SAME_TARGET_M))
+            self._pending = None if same else target
+            self._show()
+
+    @operator_only(action="move the tip target")
+    def _on_go(self, event: viser.GuiEvent) -> None:
+        """Go: the three typed fields together, solved once and moved to."""
+        if event.client is None:
+            return
+        with self._typing:  # read and submitted in the same order as the fields' callbacks
+            target = self._read_fields()
+            if target is None:
+                return
+            self._pending = None
             self._target = target
             self.gizmo.position = tuple(target)
             self._say_solving(target)
             self.worker.submit(target, True, event.client.client_id)
+
+    def _read_fields(self) -> Array | None:
+        """Every field as typed now (m); None after saying why when one is not a finite
+        number (the fields go back to the target, nothing pending, nothing moves)."""
+        target = np.array(self._typed.read()) / 1e3
+        if np.all(np.isfinite(target)):
+            return target
+        self._pending = None
+        self.report_error("Not moved: the target must be three finite numbers x, y, z (mm).")
+        self._typed.show([mm_value(v) for v in self._target], typed_too=True)
+        return None
 
     def _say_solving(self, target: Array) -> None:
         """Answer a typed / released target at once: the solve may take a moment."""
@@ -167,14 +218,19 @@ class TargetPanel(Panel):
     def on_refused(self, event: Any) -> None:
         """A viewer moved the gizmo or an input: put them back where the target is."""
         self.gizmo.position = tuple(self._target)
-        self._typed.show([mm_value(v) for v in self._target], typed_too=True)
+        with self._typing:
+            shown = self._target if self._pending is None else self._pending
+            self._typed.show([mm_value(v) for v in shown], typed_too=True)
 
     def _reset_to_tip(self) -> None:
-        tip = self._tip(self.app.store.command.q)
-        self._target = tip
-        self.gizmo.position = tuple(tip)
-        self._publish(tip, None, None)
-        self._show()  # nothing else changes, so no frame would show it
+        with self._typing:
+            tip = self._tip(self.app.store.command.q)
+            self._pending = None  # a typed target not applied is discarded
+            self._target = tip
+            self.gizmo.position = tuple(tip)
+            self._publish(tip, None, None)
+            self._typed.show([mm_value(v) for v in tip], typed_too=True)
+            self._show()  # nothing else changes, so no frame would show it
 
     def on_stopped(self) -> None:
         """Worker thread, after the console core stopped motion (STOP, a lost lease...; the
@@ -357,11 +413,17 @@ class TargetPanel(Panel):
         with self._typing:  # the newest answer, never an older one over a field read since
             n, target, result, error, info = self._latest
             note = self._motors_note()
-            if n == self._shown and note == self._hardware_note:
+            pending = self._pending
+            key = None if pending is None else tuple(float(v) for v in pending)
+            if n == self._shown and note == self._hardware_note and key == self._shown_pending:
                 return
-            self._shown, self._hardware_note = n, note
-            self._typed.show([mm_value(v) for v in target])
-            self.status.content = self._status_html(result, error, info, target, note)
+            self._shown, self._hardware_note, self._shown_pending = n, note, key
+            if pending is None:  # (while a target is pending the fields hold it)
+                self._typed.show([mm_value(v) for v in target])
+            else:
+                self.pending_ball.position = tuple(pending)
+            self.pending_ball.visible = pending is not None
+            self.status.content = self._status_html(result, error, info, target, note, pending)
             if result is not None and not result.reachable and error is None:
                 self.miss.points = np.stack([result.tip, target])[None]
                 self.miss.visible = True
@@ -382,7 +444,7 @@ class TargetPanel(Panel):
 
     def _status_html(self, result: TipIKResult | None, error: str | None,
                      info: str | None = None, target: Array | None = None,
-                     note: str = "") -> str:
+                     note: str = "", pending: Array | None = None) -> str:
         if error is not None and error.startswith(BLOCKED):
             body = (f"<b style='color:#c92a2a'>⚠ {html.escape(BLOCKED.strip())}</b> "
                     f"{html.escape(error[len(BLOCKED):])}. Not moved.")
@@ -392,7 +454,8 @@ class TargetPanel(Panel):
         elif info is not None:
             body, state = html.escape(info), "solving"
         elif result is None:
-            body, state = "Drag the gizmo (orange ball) or type x, y, z (mm).", "idle"
+            body, state = ("Drag the gizmo (orange ball), or type x, y, z (mm) and press Go.",
+                           "idle")
         elif result.reachable:
             body = (f"Target {mm_xyz(result.tip)} mm reachable (IK error "
                     f"{fmt_mm(result.error, 2)} mm): the tip goes there.")
@@ -412,13 +475,20 @@ class TargetPanel(Panel):
                     f"tip, {mm_xyz(result.tip)} mm, <b>{fmt_mm(result.error, 1)} mm</b> from the "
                     "target (red line to the target).")
             state = "unreachable"
+        if pending is not None:  # typed, not applied: said first, the last answer below it
+            body = (f"<b>Pending target {mm_xyz(pending)} mm, not applied</b>: press "
+                    "<b>Go</b> to move the tip there (nothing moves until then; "
+                    "“Target ← current tip” discards it).<br>"
+                    f"<span style='opacity:.7'>{body}</span>")
+            state = "pending"
         if note:
             body += f"<br><b style='color:#e67700'>⚠ {html.escape(note)}</b>"
         distance = "" if result is None else f"{fmt_mm(result.error, 3)}"
         clear = "" if result is None or not result.nearest_box else fmt_mm(result.clearance, 2)
         aimed = "" if target is None else ",".join(fmt_mm(v, 1) for v in target)  # never "-0"
+        waiting = "" if pending is None else ",".join(fmt_mm(v, 1) for v in pending)
         return (f'<div data-testid="target-status" data-state="{state}" '
-                f'data-target-mm="{aimed}" '
+                f'data-target-mm="{aimed}" data-pending-mm="{waiting}" '
                 f'data-motors="{"still" if note else "follow"}" '
                 f'data-error-mm="{distance}" data-clearance-mm="{clear}" '
                 f'data-route="{self._route_len}" style="font-size:0.85em">{body}</div>')
