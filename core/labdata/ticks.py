@@ -186,8 +186,8 @@ class TickBatch:
 class TickRing:
     """A fixed ring of tick rows: one writer (the loop thread), one reader (:meth:`drain`).
 
-    ``capacity`` ticks are kept between drains (4096: 41 s at 100 Hz); older ones are counted
-    as dropped. Writing is a handful of stores into a preallocated row; the count is bumped
+    ``capacity - 1`` ticks are kept between drains (4096: 41 s at 100 Hz; the writer may be
+    writing the slot after them while a drain copies); older ones are counted as dropped. Writing is a handful of stores into a preallocated row; the count is bumped
     last, so a reader never sees a half-written row.
     """
 

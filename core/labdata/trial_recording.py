@@ -53,7 +53,7 @@ class TrialSampler:
         self._loop = LoopRecords(with_state=True)
         self._obj: np.ndarray | None = None
         self._ticks = 0
-        self._ring = TickRing(SoftArmTicks(n_segments), TICK_BATCH)
+        self._ring = TickRing(SoftArmTicks(n_segments), TICK_BATCH + 1)
         self.records: list[dict[str, Any]] = []
 
     def __call__(self, snap: Any) -> bool:
