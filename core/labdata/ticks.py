@@ -56,12 +56,19 @@ class TickLayout(Protocol):
 
 
 def _put(row: Array, at: int, n: int, values: Any) -> None:
-    """``row[at:at+n] = values`` (NaN when None or of another size)."""
+    """``row[at:at+n] = values`` (NaN when None or of another size); the loop thread's
+    per-tick cost, so no array is made here."""
     if values is None:
         row[at:at + n] = NAN
         return
-    v = np.asarray(values, dtype=float).reshape(-1)
-    row[at:at + n] = v if v.size == n else NAN
+    if isinstance(values, np.ndarray) and values.ndim != 1:
+        values = values.reshape(-1)
+    try:
+        if len(values) != n:  # (numpy would broadcast a single value over the slot)
+            raise ValueError
+        row[at:at + n] = values
+    except (ValueError, TypeError):
+        row[at:at + n] = NAN
 
 
 def _values(row: Array, at: int, n: int, digits: int) -> list[float] | None:
