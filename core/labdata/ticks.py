@@ -95,11 +95,11 @@ class SoftArmTicks:
         if control is None:
             row[at:self.width] = NAN
             return False, "none"
-        _put(row, at, n, control.kappa_target)
-        _put(row, at + n, n, control.kappa_ref)
-        _put(row, at + 2 * n, n, control.kappa_meas)
+        _put(row, at, n, getattr(control, "kappa_target", None))
+        _put(row, at + n, n, getattr(control, "kappa_ref", None))
+        _put(row, at + 2 * n, n, getattr(control, "kappa_meas", None))
         _put(row, at + 3 * n, self.m, commands)  # what was written (None: nothing this tick)
-        return bool(control.armed), str(control.phase)
+        return bool(getattr(control, "armed", False)), str(getattr(control, "phase", "none"))
 
     def fields(self, row: Array) -> dict[str, Any]:
         n, at, out = self.n, COMMON, {}

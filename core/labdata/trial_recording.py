@@ -67,12 +67,14 @@ class TrialSampler:
         for rec in self._loop.records(snap):
             if sample or rec["kind"] in ("phase", "fault"):
                 rec["t"] = float(snap.t)
+                self.flush()  # the ticks up to this one first: log times never decrease
                 self.records.append(rec)
         c = snap.control
         if sample and c is not None and c.object_xy is not None:
             xy = np.asarray(c.object_xy, dtype=float)
             if self._obj is None or float(np.hypot(*(xy - self._obj))) > 0.001:
                 self._obj = xy
+                self.flush()
                 self.records.append({"kind": "objects", "t": float(snap.t), "data": {
                     "objects": [{"name": "object", "x": float(xy[0]), "y": float(xy[1]),
                                  "r": None}]}})
@@ -82,7 +84,7 @@ class TrialSampler:
         """Every tick on the tick channel (no timing: the clock is simulated)."""
         c = None if snap is None else snap.control
         t = (self._ticks - 1) * self.period_s if snap is None else float(snap.t)
-        self._ring.add(self._ticks, t, None, None if c is None else c.commands, c)
+        self._ring.add(self._ticks, t, None, getattr(c, "commands", None), c)
         if self._ring.written % TICK_BATCH == 0:
             self.flush()
 
