@@ -150,6 +150,10 @@ class ConsoleApp:
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
+        for loop_process in (self.services.soft_control, self.services.extensible_runner):
+            listeners = getattr(loop_process, "tick_listeners", None)
+            if listeners is not None:  # every loop tick into recordings (100 Hz)
+                listeners.append(self.recorder.on_ticks)
         self.core = ConsoleCore(self.store, self.services, self.access, self.recorder,
                                 clock=clock)
         self.lease = LeaseMonitor(server, self.access, busy=lambda: self.core.hold.active)
@@ -344,6 +348,10 @@ class ConsoleApp:
         self.lease.stop(timeout)
         self.core.stop(timeout)
         self.recorder.stop()
+        for loop_process in (self.services.soft_control, self.services.extensible_runner):
+            listeners = getattr(loop_process, "tick_listeners", None)
+            if listeners is not None and self.recorder.on_ticks in listeners:
+                listeners.remove(self.recorder.on_ticks)
         if self.grasp_session is not None:
             self.grasp_session.close()
         if self._thread is not None:

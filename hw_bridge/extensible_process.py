@@ -105,6 +105,7 @@ def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: A
     watch_parent()  # the console died (any signal): SIGKILL this one, its children follow
     if opts.cpus is not None:  # start-up off the real-time CPU; the loop moves there later
         pin_process(opts.cpus.other)
+    from core.labdata.ticks import TickRing, layout_for
     from core.robots import load
     from hw_bridge.extensible_runner import ExtensibleRunner
     from hw_bridge.realtime import helper_priority as realtime_helper_priority
@@ -127,6 +128,7 @@ def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: A
         runner._on_result(result)
         replies.put(("result", result))
     runner.streamer.on_result = on_result
+    runner.loop.tick_ring = TickRing(layout_for(robot))  # every tick, sent with the views
     stop = threading.Event()
     on_cpus = "" if opts.cpus is None else f" on CPU {format_cpus(opts.cpus.realtime)}"
 
@@ -143,6 +145,9 @@ def _child(robot_source: str, opts: ExtensibleOptions, commands: Any, replies: A
             replies.put(("view", ExtensibleView(runner.snapshot, runner.bridge_controls.health(),
                                                 runner.port, loop.scheduling + on_cpus, stats,
                                                 tuple(loop.slow_ticks))))
+            ticks = loop.tick_ring.drain()
+            if ticks is not None:
+                replies.put(("ticks", ticks))
             n += 1
             if helper_priority and n % int(opts.publish_hz) == 1:  # queue feeders start lazily
                 promote_threads(helper_priority)

@@ -172,6 +172,9 @@ class LoopRunner:
         self._buf = np.zeros((6, _STATS_WINDOW))  # period err, latency, read, update, write, work
         self.slow_ticks: collections.deque[SlowTick] = collections.deque(maxlen=64)
         self.snapshot = LoopSnapshot(0, 0.0, None, 0.0, 0.0, 0.0, 0.0, 0.0, 0, None)
+        # Every tick's row for the lab (core.labdata.ticks.TickRing; None: not kept). Filled
+        # by this loop only; another thread drains it.
+        self.tick_ring: Any = None
 
     # -- commands ------------------------------------------------------------------------------
     def submit(self, fn: Callable[[Any, float], Any]) -> cf.Future:
@@ -275,6 +278,10 @@ class LoopRunner:
         if missed or late > _SLOW_MS or work_ms > _SLOW_MS:
             self.slow_ticks.append(SlowTick(self.ticks, t, late, (t_read - w0) / 1e6,
                                             read_ms, update_ms, write_ms, missed))
+        ring = self.tick_ring
+        if ring is not None:
+            ring.add(self.ticks, t, reading, commands, control,
+                     (late, period, work_ms, read_ms, update_ms, write_ms), missed)
 
     def next_deadline_ns(self) -> int:
         t0 = self.clock_ns() if self._t0 is None else self._t0

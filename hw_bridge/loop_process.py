@@ -11,7 +11,8 @@ Parent side, :class:`LoopProcess`: typed commands (:mod:`hw_bridge.commands`) go
 with an id, and :meth:`LoopProcess.send` returns a Future that the child's reply resolves (with
 the loop's error, if it refused); the child publishes a view (``("view", v)``), newest in
 :attr:`LoopProcess.view` (a reference swap, no lock for readers) and its age in
-:meth:`LoopProcess.view_age`; other messages go to :meth:`LoopProcess.on_message`. A dead or
+:meth:`LoopProcess.view_age`, and every loop tick in batches (``("ticks", b)``) to
+:attr:`LoopProcess.tick_listeners`; other messages go to :meth:`LoopProcess.on_message`. A dead or
 silent child is replaced by :meth:`LoopProcess.restart` (a new one, disarmed, same arguments). Child side, :func:`serve_commands` reads the queue until the
 parent says stop or goes away, and :func:`reply_when_done` answers a command once the loop ran it.
 """
@@ -64,6 +65,9 @@ class LoopProcess:
         self._lock = threading.Lock()
         self._restart_lock = threading.Lock()
         self._at_exit = False
+        #: ``fn(batch)`` for every ``core.labdata.ticks.TickBatch`` the child sends (every loop
+        #: tick, in order; on the reader thread: only enqueue there).
+        self.tick_listeners: list[Callable[[Any], None]] = []
 
     def spawn(self, target: Callable[..., None], args: tuple[Any, ...]) -> None:
         """Start ``target(*args)`` in the child (``args`` include this handle's
@@ -158,6 +162,9 @@ class LoopProcess:
             if msg[0] == "view":
                 self.view = msg[1]
                 self._view_at = self.clock()
+            elif msg[0] == "ticks":
+                for fn in list(self.tick_listeners):
+                    fn(msg[1])
             elif msg[0] == "failed":
                 self._failure = msg[1]
             elif msg[0] == "reply":

@@ -24,7 +24,9 @@ channel (``"emulator"``), MockHardware with the same plant (``"mock"``), or a re
   thread, so the loop never waits on the emulator's scene channel), and STOP ends the row;
 * the child publishes a :class:`ControlView` (the loop snapshot, recent stats, the true object,
   the gripper finger for drawing and the newest row's report) at ``publish_hz``;
-  :attr:`ControlProcess.view` is the newest one (a reference swap, no lock for readers).
+  :attr:`ControlProcess.view` is the newest one (a reference swap, no lock for readers); with
+  each view go the loop's ticks since the last one (a ``core.labdata.ticks.TickBatch``, every
+  tick, for recordings: :attr:`LoopProcess.tick_listeners`).
 """
 
 from __future__ import annotations
@@ -85,6 +87,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
         opts = dataclasses.replace(opts, emulator_args=(
             *opts.emulator_args, "--cpus", format_cpus(opts.cpus.realtime)))
     from core.control.row_stack import RowControlStack
+    from core.labdata.ticks import TickRing, layout_for
     from core.robots import load
     from hw_bridge.loop import LoopRunner
     from hw_bridge.planner_process import ProcessPlanner
@@ -111,6 +114,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     planner = ProcessPlanner(robot_source, cpus=None if opts.cpus is None else opts.cpus.other)
     stack = RowControlStack(robot, 0.01, planner)
     runner = LoopRunner(world.device, stack, 0.01)
+    runner.tick_ring = TickRing(layout_for(robot))  # every tick, sent with the views
 
     def place(x: float, y: float, r: float) -> None:
         if world.kind == "sim":
@@ -214,6 +218,9 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
                                obj_xy, radius, captured, finger, world.kind, link, fault,
                                tuple(runner.slow_ticks), stack.row_report())
             replies.put(("view", view))
+            ticks = runner.tick_ring.drain()
+            if ticks is not None:
+                replies.put(("ticks", ticks))
             n += 1
             if helper_priority and n % int(publish_hz) == 1:  # queue feeders start lazily
                 promote_threads(helper_priority)

@@ -95,6 +95,8 @@ class Recorder:
         self._t0 = 0.0
         self._start_ns = 0
         self.path: Path | None = None
+        self._tick_offset_ns: int | None = None  # on_ticks: log ns of the loop's t = 0
+        self._tick_last = 0.0  # on_ticks: the newest tick index recorded
 
     @property
     def recording(self) -> bool:
@@ -127,6 +129,7 @@ class Recorder:
             if self.suffix == SUFFIX:
                 q.put(header)
             self.path, self._queue, self.dropped, self.lines = path, q, 0, 0
+            self._tick_offset_ns, self._tick_last = None, 0.0
             self._thread = threading.Thread(target=self._write, args=(path, q, header),
                                             name="console-recorder", daemon=True)
             self._thread.start()
@@ -176,6 +179,26 @@ class Recorder:
             if command is not None:
                 record["command"] = np.asarray(command.q).tolist()
             self._put(record)
+
+    def on_ticks(self, batch: Any) -> None:
+        """Record a batch of the arm loop's ticks (``core.labdata.ticks.TickBatch``, from the
+        loop process's reader thread): MCAP recordings only, never the live taps.
+
+        A tick's log time is the loop's own time plus one offset per loop run (fixed by the
+        first batch: the arrival time less its newest tick's loop time; again after a restart
+        of the loop), so the ticks keep the loop's 10 ms spacing."""
+        q = self._queue
+        if q is None or self.suffix != MCAP_SUFFIX or len(batch.rows) == 0:
+            return
+        t_last = float(batch.rows[-1, 1])
+        first_tick = float(batch.rows[0, 0])
+        if self._tick_offset_ns is None or first_tick <= self._tick_last:  # new loop run
+            self._tick_offset_ns = time.time_ns() - int(t_last * 1e9)
+        self._tick_last = float(batch.rows[-1, 0])
+        try:
+            q.put_nowait({"kind": "ticks", "batch": batch, "offset_ns": self._tick_offset_ns})
+        except queue.Full:
+            self.dropped += 1
 
     def add_tap(self, fn: Callable[[dict[str, Any], int], None]) -> None:
         """Also hand every record, recording or not, to ``fn(record, ns)`` (ns: the console's

@@ -1,9 +1,11 @@
-"""``python -m core.labdata convert OLD.jsonl.gz NEW.mcap`` and ``info FILE.mcap``.
+"""``python -m core.labdata convert OLD.jsonl.gz NEW.mcap``, ``info FILE.mcap`` and
+``export FILE.mcap --out DIR``.
 
 ``convert`` turns a recording in the older gzip'd JSON-lines format into an MCAP recording with
 the same records (the replay shows the same run) plus the lab channels (3D scene, tip pose,
 log); the robot is the one named in the old header (``--robot`` to override). ``info`` prints
-the channels, schema names and message counts of an MCAP file.
+the channels, schema names and message counts of an MCAP file. ``export`` writes one table per
+channel (CSV and Parquet, units in the column names: :mod:`core.labdata.export`).
 """
 
 from __future__ import annotations
@@ -121,6 +123,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     c.add_argument("--robot", help="robot name or TOML (default: the one in the old header)")
     i = sub.add_parser("info", help="channels, schemas and message counts of an .mcap file")
     i.add_argument("file", type=Path)
+    e = sub.add_parser("export", help="one table per channel (CSV and Parquet) in a folder")
+    e.add_argument("file", type=Path)
+    e.add_argument("--out", type=Path, required=True, help="folder for the tables (created)")
     a = ap.parse_args(argv)
     try:
         if a.cmd == "convert":
@@ -128,6 +133,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 ap.error(f"{a.new}: the new file must end with .mcap")
             n = convert(a.old, a.new, a.robot)
             print(f"{a.old} -> {a.new}: {n} records")
+        elif a.cmd == "export":
+            from core.labdata.export import export
+            files = export(a.file, a.out)
+            print(f"{a.file} -> {a.out}: {len(files) // 2} tables (CSV and Parquet)")
         else:
             print(json.dumps(info(a.file), indent=1))
     except (ValueError, OSError) as exc:

@@ -61,6 +61,10 @@ LINK = ChannelSpec("/link/health", S.LINK)
 ACTIONS = ChannelSpec("/operator/actions", S.ACTION)
 FAULTS = ChannelSpec("/faults", S.FAULT)
 EVENTS = ChannelSpec("/events", S.LOG)
+#: Every 100 Hz loop tick (``core.labdata.ticks``): written by recordings, not streamed live.
+SOFT_ARM_TICKS = ChannelSpec("/control/ticks", S.SOFT_ARM_TICK)
+EXTENSIBLE_TICKS = ChannelSpec("/control/extensible_ticks", S.EXTENSIBLE_TICK)
+TICK_CHANNELS: tuple[ChannelSpec, ...] = (SOFT_ARM_TICKS, EXTENSIBLE_TICKS)
 
 #: Every fixed channel (``/console/<kind>`` channels are made on demand with :func:`spec_for`).
 CHANNELS: tuple[ChannelSpec, ...] = (CONFIGURATION, TIP, ARM_SCENE, OBJECTS, OBJECT_SCENE, PLAN,
@@ -79,7 +83,7 @@ LOG_INFO, LOG_WARNING, LOG_ERROR = 2, 3, 4
 
 def spec_for(topic: str) -> ChannelSpec:
     """The channel of ``topic`` (a fixed one, or a ``/console/<kind>`` record channel)."""
-    for spec in CHANNELS:
+    for spec in CHANNELS + TICK_CHANNELS:
         if spec.topic == topic:
             return spec
     if topic.startswith("/console/"):

@@ -4,7 +4,9 @@ No threads here (the console's Recorder calls :class:`McapLog` from its writer t
 CLI from its main thread). A file holds JSON-encoded channels with JSON schemas (see
 :mod:`core.labdata.channels`), chunked and zstd-compressed, and one metadata record
 ``softarm.recording`` with the header (robot, kind, shape, who started it, start time in ns).
-Log times are the console's clock in ns since the epoch, never decreasing within a file.
+Log times are the console's clock in ns since the epoch, never decreasing within a file, except
+on the 100 Hz tick channels (:mod:`core.labdata.ticks`), whose log time is each tick's own loop
+time (a batch arrives up to a publish period after its first tick).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from core.labdata.channels import ArmGeometry, ChannelSpec, json_safe, messages_for, spec_for
+from core.labdata.ticks import TickBatch, tick_messages
 
 PROFILE = ""  # plain JSON channels (no ROS profile)
 LIBRARY = "softarm-console"
@@ -80,10 +83,11 @@ class McapLog:
         """Log time of ``t`` s after the start, never before the last one written."""
         return max(self.start_ns + int(round(float(t) * 1e9)), self.last_ns)
 
-    def write(self, topic: str, message: dict[str, Any], ns: int) -> None:
-        """One channel message at log time ``ns`` (clamped so log times never decrease)."""
+    def write(self, topic: str, message: dict[str, Any], ns: int, clamp: bool = True) -> None:
+        """One channel message at log time ``ns`` (clamped so log times never decrease, unless
+        ``clamp`` is False: a tick's own time, which may be a little older than the last)."""
         cid = self._channel(spec_for(topic))
-        ns = max(int(ns), self.last_ns)
+        ns = max(int(ns), self.last_ns) if clamp else int(ns)
         seq = self._seq.get(cid, 0)
         self._seq[cid] = seq + 1
         try:
@@ -92,12 +96,21 @@ class McapLog:
             text = json.dumps(json_safe(message), separators=(",", ":"), allow_nan=False)
         self._writer.add_message(cid, log_time=ns, publish_time=ns, sequence=seq,
                                  data=text.encode("utf-8"))
-        self.last_ns = ns
+        self.last_ns = max(self.last_ns, ns)
         self.messages += 1
+
+    def ticks(self, batch: TickBatch, offset_ns: int) -> None:
+        """Every row of ``batch`` on its arm's tick channel at log time ``offset_ns`` plus its
+        loop time (``core.labdata.ticks``)."""
+        for topic, ns, msg in tick_messages(batch, lambda t: offset_ns + round(t * 1e9)):
+            self.write(topic, msg, ns, clamp=False)
 
     def record(self, rec: dict[str, Any]) -> None:
         """Write console record ``rec`` on its channels, at its ``ns`` (epoch ns) if it has one,
         else ``t`` s after the start."""
+        if rec.get("kind") == "ticks":  # {"batch": TickBatch, "offset_ns": log ns of t = 0}
+            self.ticks(rec["batch"], int(rec["offset_ns"]))
+            return
         ns = int(rec["ns"]) if "ns" in rec else self.ns_of(rec.get("t", 0.0))
         for topic, msg in messages_for(rec, ns, self.arm):
             self.write(topic, msg, ns)

@@ -155,3 +155,33 @@ FAULT: Schema = _object(
 RECORD: Schema = _object(
     "softarm.Record", "Any other console record: its kind and free-form data",
     {"timestamp": TIME, "kind": TEXT, "who": WHO, "client": CLIENT, "data": {}})
+
+_TICK_COMMON: dict[str, Schema] = {
+    "timestamp": TIME,
+    "tick": {"type": "integer", "minimum": 1,
+             "description": "the loop's tick index since it started (consecutive)"},
+    "t_s": {"type": "number", "description": "the loop's own time of this tick (s)"},
+    "phase": TEXT, "armed": BOOL,
+    "late_ms": {"type": "number", "description": "wake-up after the deadline (ms)"},
+    "period_ms": {"type": "number", "description": "since the previous tick started (ms)"},
+    "work_ms": NUMBER, "read_ms": NUMBER, "update_ms": NUMBER, "write_ms": NUMBER,
+    "missed": {"type": "integer", "minimum": 0,
+               "description": "deadlines skipped after this tick (overruns)"}}
+_TICK_NOTE = (" Timing fields are omitted where the loop has no real clock (trials on the "
+              "simulated clock); a value not known this tick is omitted, never null.")
+SOFT_ARM_TICK: Schema = _object(
+    "softarm.SoftArmTick",
+    "Every tick of the soft arm's 100 Hz loop: curvature target, trajectory reference and "
+    "measurement per segment (1/m), the command written to the device (cylinder volume counts, "
+    "2N+1 channels), the state machine's phase and the tick's timing (ms)." + _TICK_NOTE,
+    {**_TICK_COMMON,
+     "kappa_target_1_per_m": _array(NUMBER), "kappa_reference_1_per_m": _array(NUMBER),
+     "kappa_measured_1_per_m": _array(NUMBER), "command_counts": _array(NUMBER)})
+EXTENSIBLE_TICK: Schema = _object(
+    "softarm.ExtensibleTick",
+    "Every tick of the extensible arm's 100 Hz loop: motor demand written and encoders read "
+    "(counts), measured segment deltas (dx, dy, dL per segment, m), measured tip (x, y, z, m), "
+    "the runner's state and the tick's timing (ms)." + _TICK_NOTE,
+    {**_TICK_COMMON,
+     "demand_counts": _array(INTEGER), "encoder_counts": _array(INTEGER),
+     "delta_measured_m": _array(NUMBER), "tip_measured_m": _array(NUMBER)})

@@ -4,7 +4,8 @@ Each trial runs as in :func:`core.control.trials.run_trials` (same seeds: ``seed
 worker processes or in-process) with a :class:`TrialSampler` watching every loop tick; the
 trials are then written one after the other into one MCAP file through the same writer and
 channels as the console's recordings (:class:`core.labdata.mcap_file.McapLog`): the measured
-and reference curvature, the 3D scene, the object, control phase, loop timing and faults, with an
+and reference curvature, the 3D scene, the object, control phase, loop timing and faults, every
+loop tick on ``/control/ticks`` (:mod:`core.labdata.ticks`, without timing), with an
 operator-action marker where each trial starts and ends (its result). Log time is the
 simulated clock, laid out from the wall-clock start of the run, trials 1 s apart.
 """
@@ -22,9 +23,11 @@ from core.control.planner_spec import DEFAULT_PLANNER
 from core.labdata.channels import ArmGeometry
 from core.labdata.mcap_file import McapLog
 from core.labdata.telemetry import LoopRecords
+from core.labdata.ticks import SoftArmTicks, TickRing
 from core.robots import load
 
 GAP_S = 1.0
+TICK_BATCH = 500  # ticks per ``ticks`` record (5 s of simulated time)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,42 +47,63 @@ class TrialSampler:
     ``core.control.stack.Telemetry`` (or None) by a loop that passes only that (no timing then).
     """
 
-    def __init__(self, hz: float = 10.0, period_s: float = 0.01) -> None:
+    def __init__(self, hz: float = 10.0, period_s: float = 0.01, n_segments: int = 6) -> None:
         self.every = max(1, round(1.0 / (hz * period_s)))
+        self.period_s = period_s
         self._loop = LoopRecords(with_state=True)
         self._obj: np.ndarray | None = None
         self._ticks = 0
+        self._ring = TickRing(SoftArmTicks(n_segments), TICK_BATCH + 1)
         self.records: list[dict[str, Any]] = []
 
     def __call__(self, snap: Any) -> bool:
         self._ticks += 1
+        if snap is not None and not hasattr(snap, "control"):  # bare telemetry
+            snap = _Tick(self._ticks, float(snap.t), snap)
+        self._tick_row(snap)
         if snap is None:
             return False
-        if not hasattr(snap, "control"):  # bare telemetry
-            snap = _Tick(self._ticks, float(snap.t), snap)
         sample = snap.tick % self.every == 0
         for rec in self._loop.records(snap):
             if sample or rec["kind"] in ("phase", "fault"):
                 rec["t"] = float(snap.t)
+                self.flush()  # the ticks up to this one first: log times never decrease
                 self.records.append(rec)
         c = snap.control
         if sample and c is not None and c.object_xy is not None:
             xy = np.asarray(c.object_xy, dtype=float)
             if self._obj is None or float(np.hypot(*(xy - self._obj))) > 0.001:
                 self._obj = xy
+                self.flush()
                 self.records.append({"kind": "objects", "t": float(snap.t), "data": {
                     "objects": [{"name": "object", "x": float(xy[0]), "y": float(xy[1]),
                                  "r": None}]}})
         return False  # never ends the run
+
+    def _tick_row(self, snap: Any) -> None:
+        """Every tick on the tick channel (no timing: the clock is simulated)."""
+        c = None if snap is None else snap.control
+        t = (self._ticks - 1) * self.period_s if snap is None else float(snap.t)
+        self._ring.add(self._ticks, t, None, getattr(c, "commands", None), c)
+        if self._ring.written % TICK_BATCH == 0:
+            self.flush()
+
+    def flush(self) -> None:
+        """Move the ticks not yet in :attr:`records` there (one ``ticks`` record)."""
+        batch = self._ring.drain()
+        if batch is not None:
+            self.records.append({"kind": "ticks", "t": float(batch.rows[0, 1]), "batch": batch})
 
 
 def _recorded_trial(job: tuple) -> tuple[Any, list[dict[str, Any]]]:
     from core.control import trials
 
     robot_src, obj, seed, label, planner, limit, overrides, hz = job
-    sampler = TrialSampler(hz)
-    result = trials.run_trial(load(robot_src), obj, seed, label=label, planner=planner,
+    robot = load(robot_src)
+    sampler = TrialSampler(hz, n_segments=robot.n_segments)
+    result = trials.run_trial(robot, obj, seed, label=label, planner=planner,
                               time_limit_s=limit, sim_overrides=overrides, observe=sampler)
+    sampler.flush()
     return result, sampler.records
 
 
@@ -126,6 +150,9 @@ def record_trials(path: str | Path, robot_src: str,
             log.record({"kind": "objects", "who": who, "t": offset, "data": {
                 "objects": [{"name": result.label or f"#{i + 1}", "x": x, "y": y, "r": r}]}})
             for rec in records:
+                if rec["kind"] == "ticks":  # every loop tick, at its simulated time
+                    log.ticks(rec["batch"], start_ns + round(offset * 1e9))
+                    continue
                 if rec["kind"] == "objects":  # the object as it moves: its radius is known
                     rec["data"]["objects"][0]["r"] = r
                 log.record({**rec, "t": offset + rec["t"]})
