@@ -57,7 +57,7 @@ def read(page, testid: str) -> float:
     return float(page.locator(f'[data-testid="{testid}"]').inner_text().replace("⚠", ""))
 
 
-def wait_for_readout(page, expected: dict[str, float], timeout: float = 5.0) -> None:
+def wait_for_readout(page, expected: dict[str, float], timeout: float = 20.0) -> None:
     """Poll the readout cells until each is within READOUT_TOL of ``expected``."""
     def actual() -> dict[str, float]:
         return {k: read(page, k) for k in expected}
@@ -214,6 +214,13 @@ def _extensible_typed_jogs_follow_the_kinematics_and_clamp(page: Any, app: Conso
     robot = app.robot
     start = ExtensibleModel(robot).initial()  # straight, every rack at mid-range
     assert np.all(start[:, :2] == 0.0)
+    # The extensible arm jogs at 20 mm/s by default (a class can follow it); these moves are
+    # hundreds of mm: the operator types the fastest jog speed into its field first.
+    speed = page.locator("label", has_text="Jog speed (mm/s)").first.get_attribute("for")
+    box = page.locator(f'[id="{speed}"]')
+    box.fill("100")
+    box.press("Tab")
+    wait_until("the jog speed taken", lambda: app.core.hold.jog_speed == pytest.approx(0.1), 10)
     app.store.request(start, "test")
     wait_for_readout(page, {"tip-0": 0.0, "tip-1": 0.0,
                             "tip-2": dk.tip_position(robot, start)[2] * 1e3})
