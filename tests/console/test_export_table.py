@@ -86,7 +86,9 @@ def test_a_recorded_run_export_draws_its_obstacles_bin_and_objects(tmp_path):
     body = positions(payload, "/recorded/obstacles/body_0")
     assert [xyz for _, xyz in body] == [pytest.approx((POST.x, POST.y, 0.0)),
                                         pytest.approx((MOVED.x, MOVED.y, 0.0))]
-    assert body[1][0] - body[0][0] == pytest.approx(0.4, abs=0.15)
+    # at least the 0.4 s slept between them, to a frame at 10 fps (how much more is the
+    # machine's scheduling: a loaded run had 0.62 s)
+    assert body[1][0] - body[0][0] >= 0.4 - 0.1
     # Its body has the last obstacle's radius; its ring is the radius plus the clearance.
     verts = binary(payload, buffers, "/recorded/obstacles/body_0", "vertices", 3)
     assert np.hypot(verts[:, 0], verts[:, 1]).max() == pytest.approx(MOVED.r, abs=1e-6)

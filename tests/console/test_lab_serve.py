@@ -26,7 +26,7 @@ def start(*args: str) -> list[str]:
                 break
     finally:
         proc.terminate()
-        proc.communicate(timeout=10)
+        proc.communicate(timeout=60)  # however long a loaded box takes
     assert proc.returncode == 0, lines
     return lines
 
