@@ -109,16 +109,23 @@ class MockHardware(SerialHardware):
 
     The device persists across reconnects (like a real board), so a tripped watchdog stays
     latched until the next ARM. Call :meth:`shutdown` to stop the device thread.
+
+    Args:
+        robot: The robot whose motors the device emulates.
+        n_motors: Overrides the robot's motor count.
+        clock: Monotonic seconds, read by the host side and the device alike (tests pass a
+            clock they can stop, to check the link's timeouts without the wall clock).
     """
 
-    def __init__(self, robot: Robot, n_motors: int | None = None):
+    def __init__(self, robot: Robot, n_motors: int | None = None,
+                 clock: Callable[[], float] = time.perf_counter):
         config = BridgeConfig.from_robot(robot, n_motors=n_motors)
         emu = EmulatorConfig.from_robot(robot)
         self.device = DeviceCore(MotorBank(config.n_motors, emu.motor_speed_counts),
-                                 config.watchdog_s, config.period_s, now=time.perf_counter())
-        self.runner = DeviceRunner(self.device)
+                                 config.watchdog_s, config.period_s, now=clock())
+        self.runner = DeviceRunner(self.device, clock)
         self.transport: DeviceTransport | None = None
-        super().__init__(config, "mock://", transport_factory=self._open)
+        super().__init__(config, "mock://", transport_factory=self._open, clock=clock)
 
     def _open(self, port: str, baud: int) -> DeviceTransport:
         self.transport = DeviceTransport(self.runner)

@@ -15,8 +15,6 @@ import pytest
 from hw_bridge.cpu_partition import (CpuPartition, format_cpus, online_cpus, parse_cpus,
                                      pin_tree, process_cpus)
 
-pytestmark = pytest.mark.timing
-
 REPO = Path(__file__).resolve().parents[2]
 needs_two_cpus = pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2,
                                     reason="a partition needs two CPUs")
@@ -70,7 +68,7 @@ def test_pin_process_moves_every_thread_and_later_ones_inherit() -> None:
 def test_pin_tree_moves_descendants_but_not_the_skipped_subtree() -> None:
     tree = subprocess.Popen(["sh", "-c", "sleep 30 & sleep 30 & wait"])
     try:
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 20
         kids: list[int] = []
         while len(kids) < 2 and time.monotonic() < deadline:
             kids = [int(p) for p in Path(f"/proc/{tree.pid}/task/{tree.pid}/children")
@@ -139,7 +137,7 @@ def test_control_process_runs_the_loop_and_emulator_on_the_real_time_cpu() -> No
                 prios = sorted(os.sched_getparam(int(t)).sched_priority
                                for t in os.listdir(f"/proc/{pid}/task"))
                 return prios[-1] == 50 and all(emulator_priority < q < 50 for q in prios[:-1])
-            deadline = time.monotonic() + 5  # threads started lazily are promoted each second
+            deadline = time.monotonic() + 20  # threads started lazily are promoted each second
             while not helpers_ordered() and time.monotonic() < deadline:
                 time.sleep(0.2)
             assert helpers_ordered()

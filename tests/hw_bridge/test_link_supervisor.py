@@ -3,6 +3,7 @@ the mock's port, Disconnect blocking Arm until a Connect, and what the arm's str
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import pytest
@@ -13,8 +14,6 @@ from hw_bridge.interface import LifecycleState
 from hw_bridge.link_supervisor import (DISARMED, DISCONNECTED, MOCK_PORT, LinkRefused,
                                        LinkSupervisor, open_serial)
 from hw_bridge.mock import MockHardware
-
-pytestmark = pytest.mark.timing
 
 ROBOT = load("extensible")
 
@@ -33,6 +32,10 @@ class Strategy:
 @pytest.fixture
 def mock() -> Any:
     hw = MockHardware(ROBOT)
+    # Nothing streams DEMANDs here: with the shipped 50 ms watchdog the device would trip
+    # between an Arm and the next check whenever a busy machine stalls the test that long.
+    # 1 s (the longest a CONFIG may set) keeps what is checked independent of the wall clock.
+    hw.config = dataclasses.replace(hw.config, watchdog_s=1.0)
     try:
         yield hw
     finally:

@@ -1,5 +1,9 @@
 """Loop runner: sim-clock determinism, overrun counting and skipping (injected clock), command
-queue from another thread, planning in another process, the hardware adapter."""
+queue from another thread, planning in another process, the hardware adapter.
+
+The schedule is checked on :class:`SimClock` only; the one real-time thread test waits (20 s
+deadlines) without timing anything. Real-time figures (period error, overruns) are
+benchmarks/bench_control_loop.py's."""
 
 import threading
 import time
@@ -14,8 +18,6 @@ from core.control.stack import ControlStack
 from hw_bridge.loop import LoopRunner, SimClock
 from hw_bridge.loop_devices import HardwareDevice, SimDevice
 from hw_bridge.planner_process import ProcessPlanner
-
-pytestmark = pytest.mark.timing
 
 MS = 1_000_000
 
@@ -233,13 +235,13 @@ def test_real_time_thread_runs_and_stops(arm):
     runner = LoopRunner(SimDevice(sim), stack, 0.01)  # real clock
     runner.start()
     try:
-        runner.arm().result(timeout=5)
-        runner.goto(np.full(6, 2.0)).result(timeout=5)
-        deadline = time.monotonic() + 5
+        runner.arm().result(timeout=20)
+        runner.goto(np.full(6, 2.0)).result(timeout=20)
+        deadline = time.monotonic() + 20
         while runner.ticks < 30 and time.monotonic() < deadline:
             time.sleep(0.01)
     finally:
-        runner.stop()
+        runner.stop(timeout=20)
     assert not runner.running and runner.ticks >= 30
     n = runner.ticks
     time.sleep(0.05)
@@ -292,7 +294,7 @@ def test_a_dead_planning_process_fails_one_plan_with_a_reason_and_is_replaced(ar
             fut = planner(req)
         assert planner.restarts == 1
         with pytest.raises(RuntimeError, match="planning process had ended"):
-            fut.result(timeout=1)
+            fut.result(timeout=20)
         plan = planner(req).result(timeout=60)  # the new worker plans
         assert np.allclose(plan.center, [-0.22, 0.2])
     finally:
@@ -383,11 +385,11 @@ def test_hardware_device_adapter_prepressurises_and_stops_on_link_loss(arm):
 
 
 def test_hardware_device_reads_mock_hardware(arm):
-    from hw_bridge.interface import ReturnType
-    from hw_bridge.mock import MockHardware
-    hw = MockHardware(arm)
+    from mock_lockstep import Lockstep
+    rig = Lockstep(arm)  # the link's clock stops after the handshake: no 40 ms race
+    hw = rig.hw
     try:
-        assert hw.configure() is ReturnType.OK and hw.activate() is ReturnType.OK
+        rig.connect_and_arm()
         dev = HardwareDevice(hw, StraightMocap(arm), arm.n_segments, object_radius=0.0165)
         reading = dev.read(0.0)  # right after activate: telemetry is fresh
         assert reading is not None, dev.fault

@@ -1,5 +1,5 @@
-"""hw_bridge.parent_watch: pool workers and waited-for subprocesses end within 1 s of their
-parent's SIGKILL, and a worker started from a short-lived thread does not die with that thread
+"""hw_bridge.parent_watch: pool workers and waited-for subprocesses end after their parent's
+SIGKILL (waited for with a generous deadline; no timing mark), and a worker started from a short-lived thread does not die with that thread
 (the reason the pools watch getppid instead of PR_SET_PDEATHSIG)."""
 
 from __future__ import annotations
@@ -17,10 +17,7 @@ import pytest
 from hw_bridge.parent_watch import exit_reason
 
 ROOT = Path(__file__).resolve().parents[2]
-pytestmark = [
-    pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux prctl/proc"),
-    pytest.mark.timing,
-]
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux prctl/proc")
 
 HOST = textwrap.dedent("""
     import concurrent.futures as cf, multiprocessing, os, subprocess, sys, threading, time
@@ -69,8 +66,11 @@ def test_children_outlive_their_starting_thread_but_not_their_parent(tmp_path):
     finally:
         os.kill(host.pid, signal.SIGKILL)
         host.wait(5)
-    time.sleep(1.0)
-    left = [pid for pid in (worker, sleeper) if alive(pid)]
+    deadline = time.monotonic() + 20.0  # ends well under 1 s when idle; generous under load
+    left = [worker, sleeper]
+    while left and time.monotonic() < deadline:
+        time.sleep(0.05)
+        left = [pid for pid in left if alive(pid)]
     for pid in left:
         os.kill(pid, signal.SIGKILL)
     assert left == []
