@@ -8,7 +8,9 @@ only thread that draws into these layers), redraws from the parts that changed
 objects with their drag gizmos and the plan with its inspected waypoint and the reachability
 shading (:class:`console.scene.plan_view.PlanScene`), the obstacles
 (:class:`console.scene.obstacle_view.ObstacleLayer`) and a final plan's carry to the bin
-(:class:`console.scene.carry_view.CarryLayer`), all in one ``server.atomic()`` change.
+(:class:`console.scene.carry_view.CarryLayer`), all in one ``server.atomic()`` change. While
+the arm runs a task the plan it executes is drawn by :class:`console.scene.run_view.RunScene`
+(from the loop's view, part ``run``) and the operator's own plan, when it is another, dimmed.
 
 A gizmo event goes to :attr:`GraspSceneView.gizmo_handler` (the Objects panel's operator-only
 handler, which calls ``session.drag(name, x, y, live=...)``); without one a browser's drag is
@@ -28,6 +30,7 @@ from console.scene.bin_view import BinView
 from console.scene.carry_view import CarryLayer
 from console.scene.obstacle_view import ObstacleLayer
 from console.scene.plan_view import PlanScene
+from console.scene.run_view import RunScene
 from core.planning.reachability import ReachMap
 from core.robots import SoftArm
 
@@ -53,6 +56,7 @@ class GraspSceneView:
         self.carry_layer = CarryLayer(server, robot)  # a final plan's carry to the bin
         self.bin_view = BinView(server.scene, robot)
         self.obstacle_layer = ObstacleLayer(server)
+        self.run_scene = RunScene(server, robot)  # the plan the arm executes (the loop's)
         self.gizmo_handler: GizmoHandler | None = None
         session.add_listener(self.on_change)
 
@@ -71,11 +75,17 @@ class GraspSceneView:
             self.plan_scene.sync_objects(list(view.objects), view.selected, self.on_gizmo)
         if "obstacles" in changed:
             self.obstacle_layer.sync(view.obstacles, view.obstacle_selected, view.clearance)
-        if changed & {"plan", "inspect"}:
+        if changed & {"plan", "inspect", "run"}:
             plan = view.outcome.plan if view.outcome else None
-            self.plan_scene.draw_plan(plan, view.index, view.trail, view.trail_from)
-            if "plan" in changed:
-                self.carry_layer.draw(plan)
+            run = view.run
+            if run is not None and run.plan is not None and not view.running_other_plan():
+                plan = None  # the arm runs this very plan: drawn once, by the run layer
+            self.plan_scene.draw_plan(plan, view.index, view.trail, view.trail_from,
+                                      dim=run is not None)
+            if changed & {"plan", "run"}:
+                self.carry_layer.draw(plan if run is None else None)
+        if "run" in changed:
+            self.run_scene.draw(view.run)
         if "reach" in changed and isinstance(view.reach, ReachMap):
             self.plan_scene.draw_reach(view.reach, view.show_reach, self.session.table_extent)
 

@@ -45,6 +45,7 @@ class ExecutingPlan:
         center: The object's centre the plan was made for (x, y), m.
         carry: (m, N) the targets of the carry to the bin, the bin pose last.
         replans: How many times the machine re-planned (0: the first plan).
+        started_t: Loop time (s) the task began (its settling, or the given plan's start).
     """
 
     kappas: Array
@@ -52,6 +53,7 @@ class ExecutingPlan:
     center: tuple[float, float]
     carry: Array
     replans: int = 0
+    started_t: float = 0.0
 
     @property
     def n(self) -> int:
@@ -78,9 +80,12 @@ def executing_plan(machine: Any) -> ExecutingPlan | None:
     carry = machine.carry.targets if machine.carry is not None else getattr(plan, "carry", None)
     if carry is None:
         carry = machine.bin.kappa_for(plan_side(plan, center))
+    events = machine.events
+    started = float(events[0][0]) if events else float(machine.times.get("start", 0.0))
     return ExecutingPlan(kappas.copy(), np.asarray(plan.palm_poses, float).copy(),
                          (float(center[0]), float(center[1])),
-                         np.atleast_2d(np.asarray(carry, float)).copy(), int(machine.replans))
+                         np.atleast_2d(np.asarray(carry, float)).copy(), int(machine.replans),
+                         started)
 
 
 class LegTimer:
@@ -91,31 +96,33 @@ class LegTimer:
     """
 
     def __init__(self, robot: SoftArm) -> None:
-        lim = robot.trajectory
-        self.n = len(lim.max_velocity)
-        self._otg = Ruckig(self.n)
-        self._inp = InputParameter(self.n)
-        self._inp.max_velocity = lim.max_velocity.tolist()
-        self._inp.max_acceleration = lim.max_acceleration.tolist()
-        self._inp.max_jerk = lim.max_jerk.tolist()
-        self._inp.synchronization = (Synchronization.Phase if lim.synchronization == "phase"
-                                     else Synchronization.Time)
-        self._traj = Trajectory(self.n)
+        self.limits = robot.trajectory
+        self.n = len(self.limits.max_velocity)
 
     def leg(self, a: npt.ArrayLike, b: npt.ArrayLike) -> float:
         """Seconds of the reference's rest-to-rest motion from ``a`` to ``b`` (1/m)."""
         a, b = np.asarray(a, float), np.asarray(b, float)
         if np.max(np.abs(a - b)) < 1e-9:
             return 0.0
-        self._inp.current_position = a.tolist()
-        self._inp.current_velocity = [0.0] * self.n
-        self._inp.current_acceleration = [0.0] * self.n
-        self._inp.target_position = b.tolist()
-        self._inp.target_velocity = [0.0] * self.n
-        self._inp.target_acceleration = [0.0] * self.n
-        if self._otg.calculate(self._inp, self._traj) not in (Result.Working, Result.Finished):
+        # ruckig's objects live only for this call: none is left for the interpreter's
+        # teardown (where nanobind reports them as leaked).
+        lim, n = self.limits, self.n
+        inp, traj = InputParameter(n), Trajectory(n)
+        inp.max_velocity = lim.max_velocity.tolist()
+        inp.max_acceleration = lim.max_acceleration.tolist()
+        inp.max_jerk = lim.max_jerk.tolist()
+        inp.synchronization = (Synchronization.Phase if lim.synchronization == "phase"
+                               else Synchronization.Time)
+        inp.current_position = a.tolist()
+        inp.current_velocity = [0.0] * n
+        inp.current_acceleration = [0.0] * n
+        inp.target_position = b.tolist()
+        inp.target_velocity = [0.0] * n
+        inp.target_acceleration = [0.0] * n
+        result = Ruckig(n).calculate(inp, traj)
+        if result not in (Result.Working, Result.Finished):
             raise ValueError("no trajectory between these curvatures")
-        return float(self._traj.duration)
+        return float(traj.duration)
 
     def path(self, start: npt.ArrayLike, targets: Sequence[npt.ArrayLike] | Array) -> float:
         """Seconds through ``targets`` one after another from ``start``, resting at each."""
