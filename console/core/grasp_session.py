@@ -118,6 +118,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         self.planning_clock: PlanningClock | None = None   # "planning for n s" from 0.5 s on
         self._thread: threading.Thread | None = None
         self._run_view: RunView | None = None  # what the arm runs (the loop's view)
+        self._run_listeners: list[Callable[[RunView | None], None]] = []
 
     def start(self) -> GraspSession:
         """Start the worker (it plans the first object at once) and ask for the reachability
@@ -227,14 +228,30 @@ class GraspSession(ObstacleEdits, WaypointInspection):
 
     def set_run(self, run: RunView | None) -> None:
         """What the arm runs now, from the loop's published view
-        (:func:`console.core.run_state.run_of`); listeners are told (part ``run``) when its plan,
-        waypoint or object changed or it began or ended, not for its times alone."""
+        (:func:`console.core.run_state.run_of`); run listeners at once and listeners (part
+        ``run``) are told when its plan, waypoint or object changed or it began or ended, not
+        for its times alone."""
         with self._cond:
             old = self._run_view
             self._run_view = run
-            if (old is None) != (run is None) or (run is not None and old is not None
-                                                  and old.key() != run.key()):
+            changed = (old is None) != (run is None) or (
+                run is not None and old is not None and old.key() != run.key())
+            if changed:
                 self._changed("run")
+            listeners = list(self._run_listeners) if changed else []
+        for fn in listeners:  # at once, on the caller's thread: never behind a running plan
+            try:
+                fn(run)
+            except Exception:
+                log.exception("run listener %r failed", fn)
+
+    def add_run_listener(self, fn: Callable[[RunView | None], None]) -> None:
+        """Call ``fn(run)`` on :meth:`set_run`'s thread (the Control panel's display thread,
+        one thread) whenever what the arm runs changed, so the plan being run is drawn at once
+        even while the worker plans the operator's next one (the ``run`` part follows when it
+        is free)."""
+        with self._cond:
+            self._run_listeners.append(fn)
 
     def request_plan(self) -> None:
         with self._cond:

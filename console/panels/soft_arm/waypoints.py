@@ -130,6 +130,7 @@ class WaypointsPanel(Panel):
         self.move_button.on_click(self._on_move)
         self._shown: tuple | None = None
         s.add_listener(lambda view, _changed: self.refresh(view))
+        s.add_run_listener(lambda _run: self._show_run(s.view()))  # at once, not after a plan
         self.refresh(s.view())
 
     @operator_only(action="step through the waypoints")
@@ -171,6 +172,13 @@ class WaypointsPanel(Panel):
         elif target is self.trail:
             self.trail.value = view.trail
 
+    def _show_run(self, view: SessionView) -> None:
+        """The line saying where the arm is (hidden while it runs nothing)."""
+        text = run_html(view)
+        if text != self.run_info.content:
+            self.run_info.content = text
+        self.run_info.visible = view.run is not None
+
     def refresh(self, view: SessionView) -> None:
         """Grasp worker thread: mirror the inspection state into the widgets."""
         plan = view.outcome.plan if view.outcome else None
@@ -180,8 +188,7 @@ class WaypointsPanel(Panel):
         if key == self._shown:
             return
         self._shown = key
-        self.run_info.content = run_html(view)
-        self.run_info.visible = run is not None
+        self._show_run(view)
         self.slider.max = max(n, 2)
         self.slider.disabled = n < 2
         if int(self.slider.value) != view.index + 1:
