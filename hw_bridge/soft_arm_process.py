@@ -76,6 +76,7 @@ class ControlView:
     fault: str | None = None
     slow_ticks: tuple[SlowTick, ...] = ()  # the loop's latest late / long ticks
     row: Any = None  # core.control.row_stack.RowReport of the newest row (None before one)
+    executing: Any = None  # core.control.run_estimate.ExecutingPlan the machine runs, or None
 
 
 def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz: float,
@@ -209,6 +210,22 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
     def scheduling() -> str:  # what the loop thread got, and where it runs
         return runner.scheduling + on_cpus
 
+    from core.control.run_estimate import executing_plan
+    shown_plan: list[Any] = [None, None]  # (what it was built from, the ExecutingPlan)
+
+    def executing() -> Any:
+        """The plan the machine executes, built again only when it changed (a reference
+        read of the loop thread's machine: plan, carry and re-plans are replaced, never
+        edited in place)."""
+        m = stack.machine
+        key = (m.plan, m.plan_center is None, m.carry, m.replans, m.bin)
+        if shown_plan[0] is None or any(a is not b for a, b in zip(key, shown_plan[0])):
+            try:
+                shown_plan[:] = [key, executing_plan(m)]
+            except (AttributeError, TypeError, ValueError):  # mid-change: the next publish
+                return shown_plan[1]
+        return shown_plan[1]
+
     def publish() -> None:
         n = 0
         while not stop.wait(1.0 / publish_hz):
@@ -216,7 +233,7 @@ def _child(robot_source: str, seed: int, commands: Any, replies: Any, publish_hz
             fault = fault or runner.fault
             view = ControlView(runner.snapshot, runner.stats(last=stats_ticks), scheduling(),
                                obj_xy, radius, captured, finger, world.kind, link, fault,
-                               tuple(runner.slow_ticks), stack.row_report())
+                               tuple(runner.slow_ticks), stack.row_report(), executing())
             replies.put(("view", view))
             ticks = runner.tick_ring.drain()
             if ticks is not None:

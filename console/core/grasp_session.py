@@ -37,6 +37,7 @@ import numpy.typing as npt
 from console.core.grasp_carry import plan_carry
 from console.core.grasp_inspection import WaypointInspection
 from console.core.grasp_obstacles import DEFAULT_CLEARANCE, ObstacleEdits
+from console.core.run_state import RunView
 from console.core.grasp_state import LIVE_HZ, PARTS, GraspListener, Outcome, SessionView
 from console.core.planning_clock import PlanningClock
 from console.core.reach_job import (REACH_STEP, SHIPPED_CACHE, ReachCache, ReachOutcome,
@@ -116,6 +117,8 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         self._next_tick = 0.0
         self.planning_clock: PlanningClock | None = None   # "planning for n s" from 0.5 s on
         self._thread: threading.Thread | None = None
+        self._run_view: RunView | None = None  # what the arm runs (the loop's view)
+        self._run_listeners: list[Callable[[RunView | None], None]] = []
 
     def start(self) -> GraspSession:
         """Start the worker (it plans the first object at once) and ask for the reachability
@@ -137,7 +140,8 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                                self._playing, self._speed, self._trail, self._reach,
                                self._reach_note, self._trail_from, self._bin,
                                tuple(self._obstacles), self._obstacle_selected,
-                               self.clearance, show_reach=self.show_reach)
+                               self.clearance, show_reach=self.show_reach,
+                               run=self._run_view)
 
     def add_listener(self, fn: GraspListener) -> None:
         """Call ``fn(view, changed)`` on the worker thread after every change (the snapshot
@@ -221,6 +225,33 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         with self._cond:
             self._bin = table_bin
             self._changed("objects", "bin")
+
+    def set_run(self, run: RunView | None) -> None:
+        """What the arm runs now, from the loop's published view
+        (:func:`console.core.run_state.run_of`); run listeners at once and listeners (part
+        ``run``) are told when its plan, waypoint or object changed or it began or ended, not
+        for its times alone."""
+        with self._cond:
+            old = self._run_view
+            self._run_view = run
+            changed = (old is None) != (run is None) or (
+                run is not None and old is not None and old.key() != run.key())
+            if changed:
+                self._changed("run")
+            listeners = list(self._run_listeners) if changed else []
+        for fn in listeners:  # at once, on the caller's thread: never behind a running plan
+            try:
+                fn(run)
+            except Exception:
+                log.exception("run listener %r failed", fn)
+
+    def add_run_listener(self, fn: Callable[[RunView | None], None]) -> None:
+        """Call ``fn(run)`` on :meth:`set_run`'s thread (the Control panel's display thread,
+        one thread) whenever what the arm runs changed, so the plan being run is drawn at once
+        even while the worker plans the operator's next one (the ``run`` part follows when it
+        is free)."""
+        with self._cond:
+            self._run_listeners.append(fn)
 
     def request_plan(self) -> None:
         with self._cond:

@@ -7,7 +7,9 @@ The parts (``changed``) a listener of :class:`console.core.grasp_session.GraspSe
   selected one or the clearance;  ``bin``: the bin;
 * ``plan``: a new outcome;  ``inspect``: the inspected waypoint, playback or the trail;
 * ``reach``: the reachability map (or its progress) or whether its shading is shown;
-* ``planning``: only ``planning_s`` (a plan has run that long; nothing else is new).
+* ``planning``: only ``planning_s`` (a plan has run that long; nothing else is new);
+* ``run``: what the arm runs (:class:`console.core.run_state.RunView`: its plan, waypoint or
+  object changed, or it began or ended).
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
+from console.core.run_state import RunView
 from console.core.table_bin import TableBin
 from console.core.table_scene import TableObject
 from core.planning.obstacles import Obstacle, with_other_objects
@@ -22,7 +25,8 @@ from core.planning.plan_types import GraspPlan
 from core.planning.reachability import ReachMap
 
 LIVE_HZ = 20.0   # at most this many live re-plans a second while an object is dragged
-PARTS = frozenset({"objects", "obstacles", "bin", "plan", "inspect", "reach", "planning"})
+PARTS = frozenset({"objects", "obstacles", "bin", "plan", "inspect", "reach", "planning",
+                   "run"})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -57,6 +61,16 @@ class SessionView:
     clearance: float = 0.0  # m, the planner keeps the arm this far from every obstacle
     planning_s: float | None = None  # s the running plan has taken so far (None: idle)
     show_reach: bool = True  # whether the reachability shading is shown
+    run: RunView | None = None  # what the arm runs (from the loop's view), None: no task
+
+    def running_other_plan(self) -> bool:
+        """Whether the arm runs a plan other than the newest one here (the operator's next
+        plan, drawn apart until executed)."""
+        run = self.run
+        if run is None:
+            return False
+        plan = self.outcome.plan if self.outcome is not None else None
+        return run.plan is None or plan is None or not run.plan.same_waypoints(plan.kappas)
 
     def plan_obstacles(self, name: str | None = None) -> tuple[Obstacle, ...]:
         """What a plan for the object ``name`` (default: the selected one) keeps

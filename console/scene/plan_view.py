@@ -43,6 +43,7 @@ CIRCLE_SEL_COLOR, GHOST_SEL_COLOR = (10, 230, 60), (245, 120, 20)
 PALM_COLOR, CAPTURE_COLOR = (200, 40, 60), (70, 140, 235)
 OBJECT_COLOR, OBJECT_SEL_COLOR = (150, 95, 200), (205, 60, 160)
 REACH_COLORS = {PLANNABLE: (80, 200, 110), FAILS: (235, 170, 60)}
+DIM_COLOR = (170, 170, 170)  # the operator's next plan while the arm runs another
 
 
 def _show_lines(handle: Any, segments: Array) -> None:
@@ -86,6 +87,13 @@ class PlanScene:
         self.capture = scene.add_mesh_simple("/grasp/plan/capture", v, f, color=CAPTURE_COLOR,
                                              opacity=0.35, visible=False, cast_shadow=False,
                                              receive_shadow=False, side="double")
+        # The operator's next plan while the arm runs another: grey, thin, no numbers.
+        self.dim_circles = scene.add_line_segments("/grasp/plan/next_circles", empty, DIM_COLOR,
+                                                   thickness=0.0015, visible=False)
+        self.dim_palms = scene.add_point_cloud("/grasp/plan/next_palms", np.zeros((1, 3)),
+                                               DIM_COLOR, point_size=0.008,
+                                               point_shape="circle", visible=False)
+        self.dimmed = False  # whether the plan is drawn as the next one (apart, grey)
         self.labels: dict[str, list[Any]] = {"circles": [], "waypoints": []}
         self.reach: list = []
         self.objects: dict[str, tuple[Any, Any, float]] = {}   # name -> (gizmo, body, radius)
@@ -97,15 +105,28 @@ class PlanScene:
         return self._ghosts.handle
 
     def draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
-                  trail_from: int = 0) -> None:
-        """Show ``plan`` (None hides the plan layer); the trail starts at ``trail_from``."""
+                  trail_from: int = 0, dim: bool = False) -> None:
+        """Show ``plan`` (None hides the plan layer); the trail starts at ``trail_from``.
+        ``dim``: the arm runs another plan, so this one (the operator's next) is drawn apart:
+        grey circles and palm points only, no ghost arms or numbers."""
         with self.server.atomic():          # one change in the browser, where it can be
-            self._draw_plan(plan, index, trail, trail_from)
+            self._draw_plan(plan, index, trail, trail_from, dim)
 
     def _draw_plan(self, plan: GraspPlan | None, index: int, trail: bool,
-                   trail_from: int) -> None:
+                   trail_from: int, dim: bool = False) -> None:
         handles = (self.circles, self.circles_failed, self.circle_sel, self.ghosts,
                    self.ghost_sel, self.palms, self.palm_sel, self.capture)
+        self.dimmed = dim and plan is not None and plan.n > 0
+        if self.dimmed:
+            for h in handles:
+                h.visible = False
+            self._draw_labels({"circles": [], "waypoints": []})
+            g = plan_geometry(self.robot, plan, index, False)
+            _show_lines(self.dim_circles, g["circles"])
+            self.dim_palms.points = g["palms"]
+            self.dim_palms.visible = True
+            return
+        self.dim_circles.visible = self.dim_palms.visible = False
         if plan is None or plan.n == 0:
             for h in handles:
                 h.visible = False

@@ -89,6 +89,7 @@ def test_three_objects_are_cleared_into_a_clicked_bin(quick_soft_app: Any) -> No
     time.sleep(0.3)
     assert control.ctl.view.row is None
 
+    session_objects = session.view().objects
     user(control.arm_btn, operator)
     wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
              what=f"armed (told the operator: {operator.notes})")
@@ -98,6 +99,9 @@ def test_three_objects_are_cleared_into_a_clicked_bin(quick_soft_app: Any) -> No
     wait_for(lambda: 'data-state="running"' in control.row.status.content, what="shown running")
 
     seen: list[int] = []  # k of the header's "object k of 3: <phase>", in the order seen
+    centres: dict[int, set[tuple[float, float]]] = {}  # k -> centres of the plans the loop ran
+    drawn: set[str] = set()  # the 3D view's label of the plan the arm runs (issue 31.1)
+    bar: list[float] = []  # the progress bar's values (issue 31.3)
     end = time.monotonic() + ROW_TIMEOUT_S
     while control.ctl.view.row.running:
         assert time.monotonic() < end, f"row still running: {control.ctl.view.row}"
@@ -105,7 +109,25 @@ def test_three_objects_are_cleared_into_a_clicked_bin(quick_soft_app: Any) -> No
         now = [k for k in (1, 2, 3) if f"object {k} of 3: " in text]
         if now and (not seen or seen[-1] != now[0]):
             seen.append(now[0])
+        view = control.ctl.view
+        ex, c = view.executing, view.snapshot.control
+        if ex is not None and view.row.running and c.n_waypoints:
+            assert ex.n == c.n_waypoints  # the published plan is the one the machine counts
+            centres.setdefault(view.row.current + 1, set()).add(ex.center)
+        shown = app.grasp_scene.run_scene.shown
+        if shown is not None and shown.plan is not None:
+            drawn.add(app.grasp_scene.run_scene.label.text.split(" · ")[0])
+        if control.progress.bar.visible:
+            bar.append(control.progress.bar.value)
         time.sleep(0.05)
+    # Each object's plans were made for that object (the positions clicked, within the 10 mm
+    # the machine tolerates before re-planning), and the 3D view named each in turn.
+    where = {1: (session_objects[0].x, session_objects[0].y), 2: OBJECT_2, 3: OBJECT_3}
+    assert sorted(centres) == [1, 2, 3], centres
+    for k, cs in centres.items():
+        assert all(abs(x - where[k][0]) < 0.01 and abs(y - where[k][1]) < 0.01 for x, y in cs)
+    assert {f"Arm: Object {k} (object {k} of 3)" for k in (1, 2, 3)} <= drawn, drawn
+    assert bar and max(bar) > 66.0 and min(bar) < 34.0, (min(bar), max(bar))
     report = control.ctl.view.row
     assert report.state == "done", report
     assert report.released == 3 and [o.status for o in report.outcomes] == ["released"] * 3

@@ -38,7 +38,10 @@ from console.panels.common.base import Panel, operator_only
 from console.panels.common.loop_header import LoopSource, news_of
 from console.panels.soft_arm.control_execute import ExecuteControls
 from console.panels.soft_arm.control_plots import ControlPlots
+from console.panels.soft_arm.control_progress import ProgressControls
 from console.panels.soft_arm.control_row import RowControls
+from console.core.run_state import RunView, run_of
+from core.control.run_estimate import LegTimer
 from console.panels.soft_arm.control_text import (
     IDLE_PHASES,
     fault_markdown,
@@ -103,6 +106,8 @@ class ControlPanel(Panel):
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
         self.execute = ExecuteControls(self)  # what Execute acts on, Execute, Click to grasp
         self.row = RowControls(self)  # "Clear table into bin" and the row's status
+        self.progress = ProgressControls(gui)  # the running task's progress and time left
+        self._timer = LegTimer(self.app.robot)  # times the plan's legs (this panel's threads)
         self.kappa_md = gui.add_markdown("")
         self.loop_md = gui.add_markdown("<small>loop: –</small>")
         self.plots = ControlPlots(gui, self.app.robot.n_segments, int(HISTORY_S * PUMP_HZ))
@@ -263,6 +268,7 @@ class ControlPanel(Panel):
                 f"<small>loop: {html.escape(trouble)}</small>"
             for btn in (self.arm_btn, self.disarm_btn, self.execute.execute_btn, self.row.button):
                 btn.disabled = True
+            self._show_run(None)  # the loop's view is not the arm now: no plan drawn as running
             return
         if view is None:
             failure = getattr(self.ctl, "failure", None)
@@ -272,8 +278,11 @@ class ControlPanel(Panel):
         c = view.snapshot.control
         self.state_md.content = state_html(view, self.execute.target)
         target = self.execute.target
+        run = self._show_run(view)
         shown = self.app.loop_header or self.app.header  # the loop header checks the view's age
-        shown.show("phase", *(self.row.header(view) or header_phase(view, target)))
+        phase, tone = self.row.header(view) or header_phase(view, target)
+        known = run is not None and run.row_remaining_s is not None  # else: no time to tell
+        shown.show("phase", f"{phase} · {run.time_text()}" if known else phase, tone)
         self.row.show(view)
         self.execute.show(view)  # a released single grasp's object leaves the table
         shown.show("link", *header_link(view))
@@ -307,6 +316,20 @@ class ControlPanel(Panel):
                                     f"{st.work_ms_p99:.3f} ms</small>")
         self._draw_scene(view)
         self._draw_plots()
+
+    def _show_run(self, view: ControlView | None) -> RunView | None:
+        """What the arm runs, from the loop's view: to the grasp session (the 3D view and the
+        Waypoints panel draw it from there) and to the progress bar and line."""
+        run = None
+        if view is not None:
+            sent = self.row.sent_for(view.row)
+            target = self.execute.target
+            run = run_of(view, self.app.robot, self._timer,
+                         None if sent is None else sent.names,
+                         None if target is None else target.name)
+        self.app.soft_arm_grasp().set_run(run)
+        self.progress.show(run)
+        return run
 
     def _draw_scene(self, view: Any) -> None:
         c = view.snapshot.control

@@ -26,7 +26,9 @@ import viser
 
 from console.panels.common.base import operator_only
 from console.panels.soft_arm.control_text import IDLE_PHASES, ExecuteTarget, execute_target, table_point
+from console.core.run_state import fmt_seconds
 from console.core.table_scene import validate_object
+from core.control.run_estimate import LegTimer, plan_seconds
 from console.panels.common.events import client_of
 from hw_bridge.soft_arm_process import ARM_FIRST
 
@@ -71,6 +73,7 @@ class ExecuteControls:
     def __init__(self, panel: Any) -> None:
         self.panel, self.app = panel, panel.app
         gui = panel.gui
+        self._timer = LegTimer(panel.app.robot)  # the estimate's (the grasp session's thread)
         self.target_md = gui.add_html(self._target_html())
         self.execute_btn = gui.add_button(
             "Execute grasp-and-place", icon=viser.Icon.PLAYER_PLAY,
@@ -85,18 +88,46 @@ class ExecuteControls:
         panel.app.server.scene.on_click()(self._on_scene_click)
         self.target: ExecuteTarget | None = None  # what the last Execute acts on
         self.sent: SentGrasp | None = None  # taken off the table once the arm released it
-        self.app.soft_arm_grasp().add_listener(lambda _view, _changed: self._show_target())
+        self.app.soft_arm_grasp().add_listener(
+            lambda _view, changed: changed != {"planning"} and self._show_target())
 
     def _target_html(self) -> str:
-        """Which object Execute would act on now (the Objects panel's selection)."""
+        """Which object Execute would act on now (the Objects panel's selection), how long it
+        would take (estimated from the plan) and, while the arm runs a task, that this is the
+        next one, not the running one."""
+        estimate = ""
         try:
             view = self.app.soft_arm_grasp().view()
             target = execute_target(view)
+            seconds = self.estimate(target, view.bin)
+            estimate = "" if seconds is None else f"{seconds:.1f}"
             text = html.escape(f"Execute acts on {target.describe()}; "
                                f"{bin_sentence(self.app.robot, view.bin, target.r)}")
+            text += ("; ≈ " + fmt_seconds(seconds) + " (estimated from the plan)"
+                     if seconds is not None else "; time estimated once planned")
+            if view.run is not None:
+                busy = view.run.object_text() or "a task"
+                text = html.escape(f"The arm is running {busy}; next: ") + text
         except ValueError as exc:
             text = html.escape(str(exc))
-        return f'<small data-testid="control-target">{text}</small>'
+        return f'<small data-testid="control-target" data-estimate="{estimate}">{text}</small>'
+
+    def estimate(self, target: ExecuteTarget, table_bin: Any) -> float | None:
+        """Estimated seconds of Execute with ``target``'s plan from where the arm is
+        (:func:`core.control.run_estimate.plan_seconds`); None without a plan (the controller
+        plans the approach: not known before)."""
+        plan = target.plan
+        if plan is None:
+            return None
+        view = getattr(self.panel.ctl, "view", None)
+        c = None if view is None else view.snapshot.control
+        now = (np.asarray(plan.kappas, float)[0] if c is None else
+               c.kappa_meas if c.kappa_meas is not None else c.kappa_ref)
+        carry = plan.carry
+        if carry is None:
+            bin_params = self.app.robot.bin if table_bin is None else table_bin.params()
+            carry = bin_params.kappa_for(plan.side or "left")
+        return plan_seconds(self.app.robot, self._timer, now, plan.kappas, carry)
 
     def _show_target(self) -> None:
         text = self._target_html()

@@ -5,6 +5,9 @@ waypoints already passed). The inspected waypoint is highlighted in the 3D view 
 arm, bright circle, palm point, and the capture region at the final one) and listed here with
 its kappa, phi, r_a and gaps to the object and, with obstacles, to them (mm and degrees). "Move
 arm here" commands the waypoint's configuration. Shown from the start, so it and the Grasp planner tell the same plan.
+While the arm runs a task, a line at the top says where the ARM is (the loop's waypoint and
+object, :mod:`console.core.run_state`); when it executes this very plan the waypoint shown is
+the arm's, and when it runs another, the plan here is headed "Next plan (not running)".
 
 Everything here is operator-only, browsing included: the inspected waypoint, playback, speed
 and trail are drawn in the 3D view every browser shares, so a viewer stepping through the
@@ -14,6 +17,7 @@ trail edit snaps back; viewers watch the operator's inspection.
 
 from __future__ import annotations
 
+import html
 import math
 from typing import Any
 
@@ -32,13 +36,41 @@ def obstacle_rows(plan: Any, k: int) -> list[tuple[str, str]]:
                              f"{plan.obstacle_margin * 1e3:.0f} mm)")]
 
 
+def run_html(view: SessionView) -> str:
+    """What the arm runs, from the loop's view (``data-testid="waypoint-run"`` with the
+    executing waypoint, its plan's length and the object): empty when it runs nothing."""
+    run = view.run
+    if run is None:
+        return ""
+    wp = "" if run.waypoint is None else str(run.waypoint + 1)
+    n = "" if run.plan is None else str(run.plan.n)
+    name = html.escape(run.name or "", quote=True)
+    what = run.object_text()
+    mine = not view.running_other_plan()
+    below = ("the plan below" if mine else
+             "its plan is drawn in colour; the plan below (grey in the 3D view) is the next "
+             "one, run by Execute")
+    return (f'<div data-testid="waypoint-run" data-index="{wp}" data-count="{n}" '
+            f'data-object="{name}" data-mine="{int(mine)}" style="font-size:0.85em">'
+            f"<b>Arm at {html.escape(run.waypoint_text())}</b>"
+            f"{' of ' + html.escape(what) if what else ''} ({below})</div>")
+
+
 def waypoint_html(view: SessionView) -> str:
-    """The inspected waypoint, in words and numbers (with test ids)."""
+    """The inspected waypoint, in words and numbers (with test ids); while the arm executes
+    this very plan, the waypoint it goes to (the loop's, not the inspected one)."""
     plan = view.outcome.plan if view.outcome else None
     if plan is None or plan.n == 0:
         return '<div data-testid="waypoint-info" data-index="" style="font-size:0.85em">' \
                "No plan to inspect.</div>"
     k = view.index
+    run = view.run
+    title = "Waypoint"
+    if run is not None and not view.running_other_plan():
+        if run.waypoint is not None:
+            k, title = min(run.waypoint, plan.n - 1), "Arm at waypoint"
+    elif run is not None:
+        title = "Next plan (not running): waypoint"
     kappa = ", ".join(f"{v:.2f}" for v in plan.kappas[k])
     tag = " (inserted)" if plan.inserted[k] else ""
     status = plan.status[k]
@@ -59,7 +91,7 @@ def waypoint_html(view: SessionView) -> str:
                    for a, b in rows)
     return (f'<div data-testid="waypoint-info" data-index="{k + 1}" data-count="{plan.n}" '
             f'data-ra="{plan.radii[k]:.6f}" style="font-size:0.85em">'
-            f"<b>Waypoint {k + 1} of {plan.n}</b>{tag}<table>{body}</table></div>")
+            f"<b>{title} {k + 1} of {plan.n}</b>{tag}<table>{body}</table></div>")
 
 
 class WaypointsPanel(Panel):
@@ -72,6 +104,7 @@ class WaypointsPanel(Panel):
     def build(self) -> None:
         self.session = self.app.soft_arm_grasp()
         s = self.session
+        self.run_info = self.gui.add_html("", visible=False)  # what the arm runs now
         self.prev_button = self.gui.add_button("Previous waypoint")
         self.next_button = self.gui.add_button("Next waypoint")
         self.slider = self.gui.add_slider("Waypoint", min=1, max=2, step=1, initial_value=1,
@@ -97,6 +130,7 @@ class WaypointsPanel(Panel):
         self.move_button.on_click(self._on_move)
         self._shown: tuple | None = None
         s.add_listener(lambda view, _changed: self.refresh(view))
+        s.add_run_listener(lambda _run: self._show_run(s.view()))  # at once, not after a plan
         self.refresh(s.view())
 
     @operator_only(action="step through the waypoints")
@@ -138,14 +172,23 @@ class WaypointsPanel(Panel):
         elif target is self.trail:
             self.trail.value = view.trail
 
+    def _show_run(self, view: SessionView) -> None:
+        """The line saying where the arm is (hidden while it runs nothing)."""
+        text = run_html(view)
+        if text != self.run_info.content:
+            self.run_info.content = text
+        self.run_info.visible = view.run is not None
+
     def refresh(self, view: SessionView) -> None:
         """Grasp worker thread: mirror the inspection state into the widgets."""
         plan = view.outcome.plan if view.outcome else None
         n = plan.n if plan is not None else 0
-        key = (id(plan), view.index, view.playing)
+        run = view.run
+        key = (id(plan), view.index, view.playing, None if run is None else run.key())
         if key == self._shown:
             return
         self._shown = key
+        self._show_run(view)
         self.slider.max = max(n, 2)
         self.slider.disabled = n < 2
         if int(self.slider.value) != view.index + 1:
