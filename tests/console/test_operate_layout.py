@@ -7,9 +7,11 @@ loop's statistics and plots folded; extensible arm the tip target, then the path
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
+import viser
 
 from console.panel_sets import DEFAULT_PANELS
 from console.panels.common.view import ViewPanel
@@ -146,3 +148,66 @@ def test_extensible_operate_starts_with_the_target_then_paths(server: Any) -> No
                       panels=(*DEFAULT_PANELS, *EXTENSIBLE_PANELS, ViewPanel))
     assert _folders(app) == [("Tip target", True), ("Paths", True), ("View", False),
                              ("Obstacles (boxes)", False), ("Jog", False), ("Readout", False)]
+
+
+# -- narrow screens -------------------------------------------------------------------------
+
+VISER_CLIENT = Path(viser.__file__).parent / "client" / "src"
+
+
+def test_the_control_panel_is_docked_beside_the_3d_view(server: Any, monkeypatch: Any) -> None:
+    """Docked (not floating over it), the panel never covers the arm framed in the 3D view."""
+    from viser._gui_handles import MainPanelHandle
+
+    docked: list[str] = []
+    monkeypatch.setattr(MainPanelHandle, "dock_right", lambda self: docked.append("right"))
+    monkeypatch.setattr(MainPanelHandle, "dock_left", lambda self: docked.append("left"))
+    console_app(SOFT, server, panels=())
+    assert docked == ["right"]
+
+
+def test_a_theme_with_an_unknown_dock_is_refused(tmp_path: Path) -> None:
+    from console.scene.theme import THEME_FILE, load_theme
+
+    text = THEME_FILE.read_text(encoding="utf-8")
+    assert 'control_dock = "right"' in text
+    bad = tmp_path / "theme.toml"
+    bad.write_text(text.replace('control_dock = "right"', 'control_dock = "top"'))
+    with pytest.raises(ValueError, match=r"\[gui\] control_dock"):
+        load_theme(bad)
+    bad.write_text(text.replace('control_dock = "right"', 'control_dock = "float"'))
+    assert load_theme(bad).control_dock == "float"
+
+
+@pytest.mark.skipif(not (VISER_CLIENT / "ControlPanel" / "BottomPanel.tsx").exists(),
+                    reason="viser's client source is not installed")
+def test_the_phone_style_targets_the_sheet_viser_draws_on_phones() -> None:
+    """Read against viser's own client source: phones (Mantine's xs breakpoint, 36 em by
+    default) get a bottom sheet 20 em wide, at most 60 % high; the style matches exactly those
+    inline styles, on phones only, and makes the sheet 16 em wide and at most 50 % high."""
+    import re
+
+    from console.web.phone_sheet import phone_sheet_css
+
+    sheet = (VISER_CLIENT / "ControlPanel" / "BottomPanel.tsx").read_text(encoding="utf-8")
+    app = (VISER_CLIENT / "App.tsx").read_text(encoding="utf-8")
+    assert "(max-width: ${mantineTheme.breakpoints.xs})" in app
+    assert 'maxHeight: "60%"' in sheet and sheet.count('width: "20em"') == 2
+    css = phone_sheet_css()
+    assert css.startswith("<style>@media (max-width: 36em) {") and css.endswith("}</style>")
+    assert '[style*="max-height: 60%"]' in css and '[style^="width: 20em"]' in css
+    assert re.search(r"\{width:16em!important;max-height:50%!important\}", css)
+    with pytest.raises(ValueError, match="width"):
+        phone_sheet_css(width_em=30)
+    with pytest.raises(ValueError, match="height"):
+        phone_sheet_css(max_height_pct=90)
+
+
+def test_the_console_carries_the_phone_style(server: Any) -> None:
+    from console.web.phone_sheet import phone_sheet_css
+
+    console_app(SOFT, server, panels=())
+    root = server.gui._container_handle_from_uuid["root"]
+    styles = [h for h in root._children.values()
+              if getattr(h, "content", None) == phone_sheet_css()]
+    assert len(styles) == 1
