@@ -4,9 +4,10 @@ A :class:`CameraPose` is where a camera stands, what it looks at and its field o
 :func:`presets` gives each robot kind's named poses (soft arm: *Perspective* and *Top-down*;
 extensible arm: *Perspective*, *Front* and *Side*); the first one is the console's initial
 camera (``console.scene.stage.setup_camera``) and *Reset view* goes back to it. Poses are computed from
-the robot's reach (``span``, m) and the table rectangle, for a canvas of a given aspect ratio,
-with the look-at point shifted right so the framed region sits in the part of the canvas the
-control panel (docked on the right, about a quarter of a wide window) leaves free.
+the robot's reach (``span``, m) and the table rectangle, for a canvas of a given aspect ratio.
+The control panel is docked beside the canvas (``console.scene.stage.setup_theme``), so the
+whole canvas is free (:data:`PANEL_FRACTION` 0; a panel floating over the canvas's right
+would need the look-at point shifted right by that share).
 
 Pure numpy: no viser here; :func:`apply` sets a browser's camera from a pose.
 """
@@ -23,8 +24,8 @@ import numpy.typing as npt
 Vec3 = tuple[float, float, float]
 Kind = Literal["planar", "delta"]
 FOV = math.radians(50.0)          # vertical field of view of every preset
-DEFAULT_ASPECT = 1.6              # a 1600 x 1000 window, when the browser's is not known yet
-PANEL_FRACTION = 0.25             # share of a wide canvas under the docked control panel
+DEFAULT_ASPECT = 1.28             # the 3D view of a 1600 x 1000 window beside the docked panel
+PANEL_FRACTION = 0.0              # share of the canvas under the control panel: none, docked
 MARGIN = 1.08                     # framed region plus this much room around it
 
 

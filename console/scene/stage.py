@@ -20,17 +20,32 @@ from console.scene.camera import apply as apply_camera
 from console.scene.camera import presets as camera_presets
 from console.scene.theme import ConsoleTheme, load_theme
 from console.core.table_area import arm_span, table_extent  # noqa: F401 (the app's stage)
+from console.web.phone_sheet import phone_sheet_css
 from console.web.share_tunnel import disable_share_tunnel
 from core.robots import Robot
 
 
+PHONE_CSS_ORDER = 99.0  # the style sheet's place in the control panel: last, after the tabs
+
+
 def setup_theme(server: viser.ViserServer, robot_name: str) -> ConsoleTheme:
-    """Close the share tunnel, apply ``static/theme.toml`` and the panel label; the theme."""
+    """Close the share tunnel, apply ``static/theme.toml`` (colours, the panel's width and dock)
+    and the panel label, and add the phone sheet's style; the theme."""
     gui = server.gui
     disable_share_tunnel(server)
     theme = load_theme()  # static/theme.toml: colours and the panel label
     gui.configure_theme(show_share_button=False, show_logo=False,
                         brand_color=theme.brand_color, control_width=theme.control_width)
+    # Docked, the panel takes its own strip of the window and the 3D view the rest, so the
+    # arm (framed in the middle of the view) is never behind the panel, at any width down to
+    # viser's phone layout (a bottom sheet below 576 px). Floating, it covers the view's right.
+    if theme.control_dock == "right":
+        gui.main_panel.dock_right()
+    elif theme.control_dock == "left":
+        gui.main_panel.dock_left()
+    # Phones get viser's bottom sheet instead: narrower and shorter, the arm beside and above
+    # it (console.web.phone_sheet; a style sheet only, after the header and the tabs).
+    gui.add_html(phone_sheet_css(), order=PHONE_CSS_ORDER)
     gui.set_panel_label(theme.label_for(robot_name))
     return theme
 

@@ -21,6 +21,8 @@ THEME_FILE = STATIC_DIR / "theme.toml"
 
 RGB = tuple[int, int, int]
 ControlWidth = Literal["small", "medium", "large"]
+ControlDock = Literal["right", "left", "float"]
+DOCKS: tuple[str, ...] = ("right", "left", "float")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,6 +37,7 @@ class ConsoleTheme:
     grid_section_color: RGB
     sky_color: RGB
     ground_color: RGB
+    control_dock: ControlDock = "right"  # docked: the 3D view is the window beside the panel
 
     def label_for(self, robot_name: str) -> str:
         """The control panel's title for a robot."""
@@ -62,6 +65,10 @@ def load_theme(path: str | Path = THEME_FILE) -> ConsoleTheme:
     if width not in ("small", "medium", "large"):
         raise ValueError(f"{path}: [gui] control_width must be small, medium or large, "
                          f"got {width!r}")
+    dock = gui.get("control_dock", "right")
+    if dock not in DOCKS:
+        raise ValueError(f"{path}: [gui] control_dock must be right, left or float, "
+                         f"got {dock!r}")
     label = gui.get("panel_label")
     if not isinstance(label, str) or not label.strip():
         raise ValueError(f"{path}: [gui] panel_label must be a non-empty string")
@@ -71,4 +78,4 @@ def load_theme(path: str | Path = THEME_FILE) -> ConsoleTheme:
         grid_cell_color=_rgb(table, "table", "grid_cell_color", path),
         grid_section_color=_rgb(table, "table", "grid_section_color", path),
         sky_color=_rgb(table, "lights", "sky_color", path),
-        ground_color=_rgb(table, "lights", "ground_color", path))
+        ground_color=_rgb(table, "lights", "ground_color", path), control_dock=dock)

@@ -131,6 +131,7 @@ class JogPanel(Panel):
 
     title = "Jog"
     order = 20.0
+    expand_by_default = False  # below the task's panels, one click away
 
     def build(self) -> None:
         model = self.app.model

@@ -106,6 +106,7 @@ class ReadoutPanel(Panel):
 
     title = "Readout"
     order = 25.0
+    expand_by_default = False  # the numbers behind the drawn arm: diagnostics, folded
 
     def build(self) -> None:
         self.html = self.gui.add_html(self._render(self.app.store.display))

@@ -129,7 +129,7 @@ class ViewPanel(Panel):
     """Camera presets, measuring tool, trails and the legend (see the module docstring)."""
 
     title = "View"
-    order = 90.0
+    order = 4.0  # right below the task's panels (Control; Paths), one click to open
     expand_by_default = False
 
     def build(self) -> None:

@@ -62,7 +62,8 @@ class BoxObstaclesPanel(Panel):
     """Box obstacles: add / select / update / remove, clearance, table clicks, save and load."""
 
     title = "Obstacles (boxes)"
-    order = 7.0
+    order = 8.0  # editing: below the task's panels and View, folded
+    expand_by_default = False
     kinds = ("delta",)
 
     def build(self) -> None:

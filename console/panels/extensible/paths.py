@@ -67,7 +67,7 @@ class PathsPanel(Panel):
     """Path choice, preview, execute / stop, progress and tip-error plot."""
 
     title = "Paths"
-    order = 10.0
+    order = 3.0  # right below the tip target
     kinds = ("delta",)
 
     def build(self) -> None:

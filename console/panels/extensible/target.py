@@ -84,7 +84,7 @@ class TargetPanel(Panel):
     """Gizmo and typed tip target, solved by the tip IK within the rack and bending limits."""
 
     title = "Tip target"
-    order = 5.0
+    order = 2.0  # first in Operate, then Paths
     kinds = ("delta",)
     _route_len = 1  # postures of the last route moved along (1: straight there)
 

@@ -11,7 +11,9 @@ Widgets: Arm / Disarm, what Execute acts on, *Execute grasp-and-place*, *Click t
 state machine's state and reason, a hardware fault in bold (every browser is told once; nothing
 re-arms until the operator does), one line of link health (device, lifecycle state, armed, round
 trip p99, lost demands), measured vs target kappa per segment in numbers, and the live plots of
-:mod:`console.panels.soft_arm.control_plots` (tracking error per segment, loop timing). STOP is the
+:mod:`console.panels.soft_arm.control_plots` (tracking error per segment, loop timing); the last
+four sit in the folder *Loop diagnostics*, collapsed, so Arm and Execute sit right below the
+Grasp planner's *Plan grasp* at the top of Operate. STOP is the
 header's (any client; it runs the console core's ``stop_motion``, which freezes the arm whether or
 not this panel exists).
 
@@ -92,7 +94,7 @@ class ControlPanel(Panel):
     """Arm, Execute, STOP, click-to-grasp, state and live plots for the soft arm."""
 
     title = "Control"
-    order = 15.0
+    order = 3.0  # right below the Grasp planner's Plan grasp: Plan, Arm, Execute together
     kinds = ("planar",)
 
     def build(self) -> None:
@@ -101,16 +103,21 @@ class ControlPanel(Panel):
         r0 = self.app.robot.capture.nominal_object_radius
         self.state_md = gui.add_markdown("**State:** –")
         self.fault_md = gui.add_markdown("", visible=False)
-        self.link_md = gui.add_markdown("<small>link: –</small>")
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
         self.execute = ExecuteControls(self)  # what Execute acts on, Execute, Click to grasp
         self.row = RowControls(self)  # "Clear table into bin" and the row's status
         self.progress = ProgressControls(gui)  # the running task's progress and time left
         self._timer = LegTimer(self.app.robot)  # times the plan's legs (this panel's threads)
-        self.kappa_md = gui.add_markdown("")
-        self.loop_md = gui.add_markdown("<small>loop: –</small>")
-        self.plots = ControlPlots(gui, self.app.robot.n_segments, int(HISTORY_S * PUMP_HZ))
+        # Diagnostics (link health, κ numbers, loop statistics, the live plots) are folded: the
+        # header already shows the link and phase, and a demo needs Plan, Arm and Execute.
+        self.diagnostics = gui.add_folder("Loop diagnostics", expand_by_default=False)
+        with self.diagnostics:
+            self.link_md = gui.add_markdown("<small>link: –</small>")
+            self.kappa_md = gui.add_markdown("")
+            self.loop_md = gui.add_markdown("<small>loop: –</small>")
+            self.plots = ControlPlots(gui, self.app.robot.n_segments,
+                                      int(HISTORY_S * PUMP_HZ))
         scene = self.app.server.scene
         self.obj_mesh = scene.add_cylinder("/control/object", radius=r0, height=0.03,
                                            color=OBJECT_COLOR, position=(0.0, 0.0, 0.015),

@@ -5,7 +5,10 @@ and load them.
 selects the object under it or places a new one there, *Obstacle* the same for obstacles (the
 panel's "Obstacles" folder, :mod:`console.panels.soft_arm.obstacle_editor`, lists and edits them), *Bin*
 places the bin that "Clear table into bin" (Control panel) takes every object to, *Nothing*
-leaves the table alone. Objects: each object carries a transform gizmo in the 3D view
+leaves the table alone. The choice, the selected object and a line about the objects stay in
+view; typing, adding, removing, saving and loading sit in the folder *Edit objects* and the
+obstacles in *Obstacles*, both collapsed (a first demo places objects by clicking).
+Objects: each object carries a transform gizmo in the 3D view
 (:mod:`console.scene.grasp_layers`) to drag it in x and y (the planner re-plans live while it
 moves, see ``console.panels.soft_arm.planner``). The number boxes show and
 edit the selected object, in mm (SI inside: the session keeps metres); "Add object" places one
@@ -56,7 +59,7 @@ class ObjectsPanel(Panel):
     """Table objects: click / type / drag, remove, save and load."""
 
     title = "Objects"
-    order = 5.0
+    order = 5.0  # below Plan (Grasp planner), Arm and Execute (Control) and the View folder
     kinds = ("planar",)
 
     def build(self) -> None:
@@ -72,16 +75,22 @@ class ObjectsPanel(Panel):
         self.selected = self.gui.add_dropdown(
             "Selected", [o.name for o in view.objects] or ["(none)"],
             initial_value=view.selected or "(none)")
-        self.x = self.gui.add_number("x (mm)", mm(first.x) if first else -200.0, step=1.0)
-        self.y = self.gui.add_number("y (mm)", mm(first.y) if first else 200.0, step=1.0)
-        self.r = self.gui.add_number("radius (mm)", mm(first.r) if first else 16.5,
-                                     min=2.0, max=200.0, step=0.5)
-        self.add_button = self.gui.add_button("Add object", hint="New object at the typed x, y, r.")
-        self.remove_button = self.gui.add_button("Remove object", color="red")
-        self.save_button = self.gui.add_button("Save scene", hint="Download the objects as JSON.")
-        self.load_button = self.gui.add_upload_button("Load scene", mime_type="application/json",
-                                                      hint="Upload a scene JSON file.")
         self.info = self.gui.add_html("")
+        # Typing, adding, removing, saving and loading are editing: folded (a first demo
+        # places objects by clicking the table), as are the obstacles below.
+        self.editing = self.gui.add_folder("Edit objects", expand_by_default=False)
+        with self.editing:
+            self.x = self.gui.add_number("x (mm)", mm(first.x) if first else -200.0, step=1.0)
+            self.y = self.gui.add_number("y (mm)", mm(first.y) if first else 200.0, step=1.0)
+            self.r = self.gui.add_number("radius (mm)", mm(first.r) if first else 16.5,
+                                         min=2.0, max=200.0, step=0.5)
+            self.add_button = self.gui.add_button("Add object",
+                                                  hint="New object at the typed x, y, r.")
+            self.remove_button = self.gui.add_button("Remove object", color="red")
+            self.save_button = self.gui.add_button("Save scene",
+                                                   hint="Download the objects as JSON.")
+            self.load_button = self.gui.add_upload_button(
+                "Load scene", mime_type="application/json", hint="Upload a scene JSON file.")
         self.obstacles = ObstacleEditor(self, self.session, self._error)
         self._click_mode = self.click_place.value
         self._fields = {id(h): h.value for h in (self.x, self.y, self.r)}

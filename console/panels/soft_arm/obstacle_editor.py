@@ -43,7 +43,7 @@ class ObstacleEditor:
         self._error = error
         gui = panel.gui
         view = self.session.view()
-        self.folder = gui.add_folder("Obstacles", expand_by_default=True)
+        self.folder = gui.add_folder("Obstacles", expand_by_default=False)  # editing: folded
         with self.folder:
             self.selected = gui.add_dropdown(
                 "Obstacle", [o.name for o in view.obstacles] or [NONE],

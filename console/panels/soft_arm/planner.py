@@ -1,8 +1,10 @@
-"""Planner panel: "Plan grasp", the planner's settings and the outcome in plain words.
+"""Planner panel: "Plan grasp" at the top of Operate, naming the object it plans for, the outcome
+in plain words, and the planner's settings folded away (a first demo needs none of them).
 
 The panel works on the console's :class:`console.core.grasp_session.GraspSession`
 (``app.soft_arm_grasp()``, shared with the Objects and Waypoints panels; ``GraspSession`` is
-re-exported here): "Plan grasp", delta_d (mm; metres inside) and weight inputs, the clearance (mm) every plan keeps
+re-exported here): "Plan grasp", the selected object's name (``data-testid="plan-for"``), the
+outcome, the reachability note, and, in the folder *Planner settings* (collapsed), delta_d (mm; metres inside) and weight inputs, the clearance (mm) every plan keeps
 between the arm (gripper included) and every obstacle, live re-plan
 and shading toggles, and the outcome ("5 waypoints, 1.3 ms", or why not). The panel shows the
 session's outcome from the start (a plan made before the panel existed is not hidden).
@@ -25,14 +27,29 @@ from console.panels.common.base import Panel, operator_only
 from console.scene.plan_view import outcome_html, planning_html
 from core.planning.reachability import ReachMap
 
-__all__ = ["GraspSession", "PlannerPanel", "outcome_html"]
+__all__ = ["GraspSession", "PlannerPanel", "outcome_html", "plan_for_html"]
+
+
+def plan_for_html(view: SessionView) -> str:
+    """Which object Plan grasp plans for: the selected one by name, where it lies and its
+    diameter (mm), or what to do when none is selected (``data-testid="plan-for"``)."""
+    chosen = next((o for o in view.objects if o.name == view.selected), None)
+    if chosen is None:
+        text = ("No object selected: click the table to place one (Objects: "
+                "<i>Table click places</i>).")
+        name = ""
+    else:
+        name = html.escape(chosen.name)
+        text = (f"Object: <b>{name}</b> at ({chosen.x * 1e3:.0f}, {chosen.y * 1e3:.0f}) mm, "
+                f"⌀ {2 * chosen.r * 1e3:.0f} mm")
+    return f'<small data-testid="plan-for" data-object="{name}">{text}</small>'
 
 
 class PlannerPanel(Panel):
     """Plan the selected object's grasp; settings; the outcome in plain words."""
 
     title = "Grasp planner"
-    order = 6.0
+    order = 2.0  # first in Operate: Plan, then the Control panel's Arm and Execute
     kinds = ("planar",)
 
     def build(self) -> None:
@@ -40,6 +57,28 @@ class PlannerPanel(Panel):
         s = self.session
         self.plan_button = self.gui.add_button(
             "Plan grasp", hint="Plan the approach to the selected object (Algorithm 1).")
+        self.plan_for = self.gui.add_html(plan_for_html(s.view()))
+        self.summary = self.gui.add_html(outcome_html(s.view().outcome))
+        self.reach_note = self.gui.add_html("<small>Reachability map: computing…</small>")
+        self.settings = self.gui.add_folder("Planner settings", expand_by_default=False)
+        with self.settings:
+            self._build_settings()
+        self.plan_button.on_click(self.operator_only(lambda _: s.request_plan(), "plan a grasp"))
+        self.delta_d.on_update(self._on_delta_d)
+        self.weights.on_update(self._on_weights)
+        self.clearance.on_update(self._on_clearance)
+        self.live.on_update(self.operator_only(
+            lambda e: e.client and s.configure(live=self.live.value), "change the planner"))
+        self.reach.on_update(self.operator_only(
+            lambda e: e.client and s.configure(show_reach=self.reach.value),
+            "change the shading"))
+        self._shown = None
+        s.add_listener(lambda view, _changed: self.refresh(view))
+        self.refresh(s.view())  # a plan finished before the listener was added is shown too
+
+    def _build_settings(self) -> None:
+        """Δd, weights, clearance, live re-plan and shading (inside *Planner settings*)."""
+        s = self.session
         self.delta_d = self.gui.add_number("Δd (mm)", round(s.delta_d * 1e3, 1), min=5.0,
                                            max=300.0, step=5.0,
                                            hint="Allowable incremental distance between "
@@ -54,20 +93,6 @@ class PlannerPanel(Panel):
         self.reach = self.gui.add_checkbox("Reachability shading", s.show_reach,
                                            hint="Green: a grasp can be planned from the straight "
                                                 "arm; amber: reachable, approach fails.")
-        self.summary = self.gui.add_html(outcome_html(s.view().outcome))
-        self.reach_note = self.gui.add_html("<small>Reachability map: computing…</small>")
-        self.plan_button.on_click(self.operator_only(lambda _: s.request_plan(), "plan a grasp"))
-        self.delta_d.on_update(self._on_delta_d)
-        self.weights.on_update(self._on_weights)
-        self.clearance.on_update(self._on_clearance)
-        self.live.on_update(self.operator_only(
-            lambda e: e.client and s.configure(live=self.live.value), "change the planner"))
-        self.reach.on_update(self.operator_only(
-            lambda e: e.client and s.configure(show_reach=self.reach.value),
-            "change the shading"))
-        self._shown = None
-        s.add_listener(lambda view, _changed: self.refresh(view))
-        self.refresh(s.view())  # a plan finished before the listener was added is shown too
 
     def _notify(self, event, message: str) -> None:
         if event.client is not None:
@@ -133,6 +158,9 @@ class PlannerPanel(Panel):
         if text != self._shown:
             self._shown = text
             self.summary.content = text
+        target = plan_for_html(view)
+        if target != self.plan_for.content:
+            self.plan_for.content = target
         if isinstance(view.reach, ReachMap):
             note = ("<small>Shading: <span style='color:#2f9e44'>green</span> = a grasp can be "
                     "planned from the straight arm (object ⌀ "

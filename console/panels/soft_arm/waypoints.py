@@ -99,6 +99,7 @@ class WaypointsPanel(Panel):
 
     title = "Waypoints"
     order = 7.0
+    expand_by_default = False  # inspecting a plan step by step: not what a first demo needs
     kinds = ("planar",)
 
     def build(self) -> None:
