@@ -27,6 +27,14 @@ def wait_until(what: str, fn: Callable[[], Any], timeout: float = 10.0,
         raise AssertionError(f"{exc}: {show()}") from None
 
 
+def open_folder(page: Any, title: str, inside: Any, timeout_ms: float = 30_000) -> None:
+    """Unfold the folder titled ``title`` (Operate folds editing and diagnostics) unless
+    ``inside`` (a locator of something in it) already shows; wait until it does."""
+    if not inside.first.is_visible():
+        page.get_by_text(title, exact=True).first.click()
+    inside.first.wait_for(state="visible", timeout=timeout_ms)
+
+
 def open_tab(page: Any, name: str, timeout_ms: float = 60_000) -> None:
     """Click the tab ``name`` (Operate, Hardware, Experiments, Session) and wait until it shows
     (notifications piled over it are closed, and the click goes through what covers it)."""

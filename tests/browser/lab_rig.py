@@ -9,7 +9,7 @@ from typing import Any, Callable, Iterator
 
 import pytest
 
-from browser_tabs import open_tab
+from browser_tabs import open_folder, open_tab
 from core.robots import load
 from tests import ws_client
 
@@ -98,8 +98,9 @@ def session_button(page: Any, name: str) -> Any:
 
 def jog_button(page: Any, label: str, sign: str) -> Any:
     """The hold-to-jog button ``sign`` ("−" or "+") beside the Jog slider labelled ``label``
-    (opens the Operate tab, where the Jog panel is)."""
+    (opens the Operate tab, where the Jog panel is, and unfolds the panel)."""
     open_tab(page, "Operate")
+    open_folder(page, "Jog", page.locator("label", has_text=label))  # folded by default
     uid = page.locator("label", has_text=label).first.get_attribute("for")
     assert uid, f"no slider labelled {label!r}"
     # The slider's box, then the two button boxes after it in the same row of the folder.

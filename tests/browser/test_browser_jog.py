@@ -20,7 +20,7 @@ from typing import Any, Iterator
 import numpy as np
 import pytest
 
-from browser_tabs import close_notices, open_tab, wait_until
+from browser_tabs import close_notices, open_folder, open_tab, wait_until
 from console.app import ConsoleApp
 from console.core.hold_to_run import HOLD_SOURCE
 from console.core.model import ExtensibleModel
@@ -111,8 +111,9 @@ def jog_page(request: Any, browser: Any, server: Any) -> Iterator[tuple[Any, Con
         page.goto(f"http://127.0.0.1:{server.get_port()}/")
         open_tab(page, "Operate", 60_000)
         page.get_by_text("Jog", exact=True).first.wait_for()
-        page.locator('[data-testid="tip-readout"]').first.wait_for()
         close_notices(page)
+        open_folder(page, "Jog", page.get_by_text("Jog speed (mm/s)"))  # folded by default
+        open_folder(page, "Readout", page.locator('[data-testid="tip-readout"]'))
         yield page, app
     finally:
         context.close()

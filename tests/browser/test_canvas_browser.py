@@ -24,7 +24,8 @@ from typing import Any, Iterator
 import numpy as np
 import pytest
 import viser.transforms as vtf
-from browser_tabs import click_scene, close_notices_until_none, open_tab, wait_until
+from browser_tabs import (click_scene, close_notices_until_none, open_folder, open_tab,
+                          wait_until)
 
 from core.planning.grasp import plan_grasp
 from core.robots import load
@@ -152,6 +153,7 @@ def _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, artifacts_d
 
     wp = page.locator('[data-testid="waypoint-info"]')
     assert wp.get_attribute("data-index") == "1"
+    open_folder(page, "Waypoints", page.get_by_role("button", name="Next waypoint"))  # folded
     for _ in range(expected.n - 1):
         page.get_by_role("button", name="Next waypoint").click()
     page.wait_for_function(
@@ -168,6 +170,7 @@ def _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, artifacts_d
     page.screenshot(path=str(artifacts_dir / "grasp-waypoint.png"))
 
     # Typing a position out of reach re-plans the selected object and says why it cannot work.
+    open_folder(page, "Edit objects", number(page, "x (mm)"))  # folded by default
     for label, value in (("x (mm)", "600"), ("y (mm)", "600")):
         box = number(page, label)
         box.fill(value)

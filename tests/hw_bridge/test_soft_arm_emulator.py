@@ -224,7 +224,6 @@ def test_under_cpu_hogs_the_default_link_moves_the_arm_and_a_loss_stops_it_with_
     reached = 0
     try:
         wait_for(lambda: ctl.view.link.state == "inactive", timeout=60, what="configured link")
-        ctl.arm().result(30)
         k = 1.0  # 1/m: a swing of 2/m takes about 3 s at the shipped trajectory limits
         end = time.monotonic() + 20.0
         sign = 1.0
@@ -238,8 +237,15 @@ def test_under_cpu_hogs_the_default_link_moves_the_arm_and_a_loss_stops_it_with_
             v = ctl.view
             assert not v.link.armed and not v.snapshot.control.armed, "armed itself"
             losses.append(v.fault)
-            ctl.arm().result(30)  # the operator's act
+            armed()  # the operator's act
 
+        def armed() -> None:  # Arm, then wait for the view to say so: it can lag the answer,
+            ctl.arm().result(30)  # and a stale view's old fault read as a new loss once
+            wait_for(lambda: (v := ctl.view).fault is None and v.link.armed
+                     and v.snapshot.control is not None and v.snapshot.control.armed,
+                     timeout=30.0, what="the view armed after the operator's Arm")
+
+        armed()
         while time.monotonic() < end:
             target = np.full(SOFT.n_segments, sign * k)
             try:
