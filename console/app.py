@@ -62,7 +62,7 @@ from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import DataDir
 from console.core.grasp_session import GraspSession
-from console.panels.common.header import ConsoleHeader
+from console.panels.common.header import ConsoleHeader, ViewerLine
 from console.core.hold_to_run import HoldToRun
 from console.lease import LeaseMonitor
 from console.panels.common.loop_header import LoopHeader, LoopSource
@@ -157,6 +157,8 @@ class ConsoleApp:
         self.core = ConsoleCore(self.store, self.services, self.access, self.recorder,
                                 clock=clock)
         self.lease = LeaseMonitor(server, self.access, busy=lambda: self.core.hold.active)
+        # Each viewer's page: one line atop saying who operates and how to get control.
+        self.viewer_line = ViewerLine(server, self.access, stopped=lambda: self.stopped)
         self.access.add_listener(self._on_control_change)  # after the core's: it stops first
         server.on_client_connect(self.access.grant_if_free)
 
@@ -319,7 +321,11 @@ class ConsoleApp:
 
     def _on_control_change(self, new: Operator | None, previous: Operator | None,
                            reason: str) -> None:
-        """Tell every browser that nobody holds control (the core has stopped the arm)."""
+        """Tell every browser that nobody holds control (the core has stopped the arm); show each
+        browser its role's controls (viewers: operator-only ones disabled) and viewer line."""
+        if not self.stopped:
+            self.guard.viewer_props.resend()
+            self.viewer_line.refresh()
         if previous is not None:
             if new is None:
                 self.notify_all("Control released", f"{reason}. The arm was stopped; nobody "

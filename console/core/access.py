@@ -170,6 +170,16 @@ class AccessControl:
         return (f"Only the operator can {action} — {holder.name} holds control; ask them or "
                 f"{how} (Session panel).")
 
+    def viewer_note(self) -> str:
+        """The line atop a viewer's page: who operates and how to get control (plain text)."""
+        holder = self.holder
+        how = ("press Take control in the Session tab with the operator token (printed where "
+               "serve.py runs)" if self.needs_token else "press Take control in the Session tab")
+        if holder is None:
+            return f"You are viewing: nobody operates. To operate, {how}."
+        return (f"You are viewing: {holder.name} operates. To operate, ask {holder.name}, "
+                f"then {how}.")
+
     def check(self, client: Any, action: str = "do that") -> None:
         """Allow ``action`` for ``client`` only if it holds control.
 

@@ -54,6 +54,7 @@ from typing import Any, Callable
 
 from console.web.client_message_checks import ClientState, MessageTypeChecks
 from console.web.client_values import GuardLimits, Refused, check_fields, short
+from console.web.viewer_props import ViewerProps
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +114,10 @@ class ClientGuard(MessageTypeChecks):
         self._logged: dict[tuple[int, str], list[float]] = {}
         self.counts: collections.Counter[str] = collections.Counter()
         setattr(server._websock_server, _GUARD, self)  # the receive loop's route here
+        # What browsers are shown follows the same policy: viewers see operator-only widgets
+        # disabled (console.web.viewer_props); a change of holder calls viewer_props.resend().
+        self.viewer_props = ViewerProps(server, viewer_may_use=self.viewer_may_use,
+                                        is_operator=is_operator)
         server.on_client_disconnect(self._forget)
 
     # -- policy ------------------------------------------------------------------------------
@@ -125,6 +130,8 @@ class ClientGuard(MessageTypeChecks):
             if key is None:
                 raise TypeError(f"not a viser widget handle: {handle!r}")
             self._viewer_allowed.add(str(key))
+        if self.server.get_clients():  # a browser may have been sent these as disabled
+            self.viewer_props.resend([str(getattr(h._impl, "uuid", "")) for h in handles])
 
     def viewer_allowed(self, handle: Any) -> bool:
         """Whether ``handle`` is one a viewer may use (see :meth:`allow_viewers`)."""

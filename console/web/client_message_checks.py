@@ -59,8 +59,14 @@ class MessageTypeChecks:
             handle = getattr(client.gui, registry).get(uuid)
         return handle, False
 
+    def viewer_may_use(self, key: str) -> bool:
+        """Whether viewers may use the shared widget ``key`` (uuid, or a gizmo's name): rule 4's
+        one list, read here for what browsers send and by ``console.web.viewer_props`` for what
+        they are shown (the others are drawn disabled for viewers)."""
+        return key in self._viewer_allowed
+
     def _may_use(self, client_id: int, handle: Any, shared: bool, key: str) -> bool:
-        return (not shared or key in self._viewer_allowed or self._is_operator(client_id))
+        return not shared or self.viewer_may_use(key) or self._is_operator(client_id)
 
     def _refuse_use(self, client_id: int, handle: Any, label: str, is_button: bool) -> None:
         self.counts["refused"] += 1

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
-from console.web import receive_guard, shared_sends, shared_windows
+from console.web import receive_guard, shared_sends, shared_windows, viewer_props
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,4 +39,6 @@ PATCHES: tuple[Patch, ...] = (
           shared_sends.frames_shared, shared_sends.unshare_frames),
     Patch("AsyncMessageBuffer._window_loop windows shared by clients", shared_windows.install,
           shared_windows.installed, shared_windows.uninstall),
+    Patch("AsyncMessageBuffer.window_generator: viewers get operator-only widgets disabled",
+          viewer_props.install, viewer_props.installed, viewer_props.uninstall),
 )

@@ -305,8 +305,8 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
              what="every edit refused")
 
     def restored() -> set[str]:
-        return {m["uuid"] for m in viewer.received("GuiUpdateMessage",
-                                                   lambda m: m["uuid"] in targets)}
+        return {m["uuid"] for m in viewer.received(
+            "GuiUpdateMessage", lambda m: m["uuid"] in targets and "value" in m["updates"])}
 
     inputs = {u for u, h in targets.items() if not h._impl.is_button}
     # (the viewer's copy of its old values and the notes arrive after the refusals are counted)
@@ -314,7 +314,10 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
     notes = wait_for(lambda: viewer.received("NotificationShowMessage"), what="a refusal note")
     assert _changed(before, {u: _snapshot(h) for u, h in shared.items()}) == {}
     assert np.array_equal(app.store.command.q, q0) and app.store.command.seq == seq0
-    assert watcher.received("GuiUpdateMessage", lambda m: m["uuid"] in targets) == []
+    # (value updates: a panel may disable or enable a button meanwhile, e.g. while the loop
+    # is slow to answer, and viewers are sent operator-only buttons disabled, issue 31.4)
+    assert watcher.received("GuiUpdateMessage", lambda m: m["uuid"] in targets
+                            and "value" in m["updates"]) == []
     assert restored() == inputs
     notes = viewer.received("NotificationShowMessage")
     assert notes and all("operator" in m["props"]["body"] for m in notes)
@@ -340,13 +343,16 @@ def test_a_viewer_cannot_tick_click_to_grasp(console: tuple, trio: tuple) -> Non
         pytest.skip("the Control panel is the soft arm's")
     op, viewer, watcher = trio
     box = app.panel(ControlPanel).execute.click_mode
+    # (value updates only: viewers are also sent the box disabled, issue 31.4)
+    def values(client: RawClient) -> list[dict[str, Any]]:
+        return client.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid
+                               and "value" in m["updates"])
+
     viewer.update(box._impl.uuid, value=True)
-    wait_for(lambda: viewer.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid),
-             what="the viewer's box unticked again")
+    wait_for(lambda: values(viewer), what="the viewer's box unticked again")
     assert box.value is False
-    assert viewer.received("GuiUpdateMessage",
-                           lambda m: m["uuid"] == box._impl.uuid)[-1]["updates"] == {"value": False}
-    assert watcher.received("GuiUpdateMessage", lambda m: m["uuid"] == box._impl.uuid) == []
+    assert values(viewer)[-1]["updates"] == {"value": False}
+    assert values(watcher) == []
 
 
 def test_a_radius_of_1e308_never_reaches_the_arm(console: tuple, trio: tuple) -> None:

@@ -105,3 +105,69 @@ class ConsoleHeader:
         who = self.core.access.name_of(client)
         self.core.stop_motion(f"STOP pressed by {who}", client)
         self._notify_all("STOP", f"{who} stopped the arm.", color="red", coalesce_s=3.0)
+
+
+class ViewerLine:
+    """One line at the very top of every viewer's page: who operates and how to get control.
+
+    Each browser gets its own line (``client.gui``, above STOP); the operator's is hidden.
+    Operator-only controls are drawn disabled for viewers by ``console.web.viewer_props``; this
+    line says why. :meth:`refresh` re-renders every browser's line (after a change of holder).
+
+    Args:
+        server: The viser server (its connects and disconnects).
+        access: The operator lock (``console.core.access.AccessControl``): who holds control
+            and :meth:`~console.core.access.AccessControl.viewer_note`'s wording.
+        stopped: Whether the console is shutting down (no GUI updates then).
+    """
+
+    def __init__(self, server: viser.ViserServer, access: Any, *,
+                 stopped: Callable[[], bool] = lambda: False) -> None:
+        self._access = access
+        self._stopped = stopped
+        self._lock = threading.Lock()
+        self._lines: dict[int, Any] = {}
+        server.on_client_connect(self._on_connect)
+        server.on_client_disconnect(self._on_disconnect)
+        for client in list(server.get_clients().values()):
+            self._on_connect(client)
+
+    def _on_connect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            if client.client_id in self._lines or self._stopped():
+                return
+            content, visible = self._render(client.client_id)
+            self._lines[client.client_id] = client.gui.add_html(content, order=0.05,
+                                                                visible=visible)
+
+    def _on_disconnect(self, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self._lines.pop(client.client_id, None)
+
+    def _render(self, client_id: int) -> tuple[str, bool]:
+        if self._access.is_operator(client_id):
+            return "", False
+        return ('<div data-testid="viewer-line" style="font-size:0.85em;padding:0.3em 0.75em;'
+                'background:#fff3bf;border-radius:4px">'
+                f"{html.escape(self._access.viewer_note())}</div>"), True
+
+    def text(self, client_id: int) -> str:
+        """The line browser ``client_id`` shows (empty for the operator and unknown browsers)."""
+        with self._lock:
+            line = self._lines.get(client_id)
+            return "" if line is None or not line.visible else str(line.content)
+
+    def refresh(self) -> None:
+        """Re-render every browser's line (who operates, whether it is theirs to hide)."""
+        with self._lock:
+            if self._stopped():
+                return
+            for cid, line in list(self._lines.items()):
+                content, visible = self._render(cid)
+                try:
+                    if line.content != content:
+                        line.content = content
+                    if line.visible != visible:
+                        line.visible = visible
+                except Exception:  # the client just left
+                    continue
