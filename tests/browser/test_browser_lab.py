@@ -22,7 +22,7 @@ import pytest
 from console.core.hold_to_run import HOLD_SOURCE
 
 pytest.register_assert_rewrite("lab_rig")
-from browser_tabs import open_tab  # noqa: E402
+from browser_tabs import open_tab, wait_until  # noqa: E402
 from lab_rig import (field, jog_button, lab,  # noqa: E402,F401 (lab: fixture)
                      notifications, press, session_button, stop_button, wait_for)
 
@@ -50,15 +50,19 @@ def test_viewer_is_refused_and_stop_from_the_viewer_stops_the_operators_motion(
     bob.mouse.up()
     wait_for(lambda: any("Only the operator can jog — Alice holds control; ask them or take "
                          "control with the token" in n for n in notifications(bob)))
-    session_button(bob, "Run demo motion").click()
-    wait_for(lambda: any("Only the operator can run the demo motion" in n
-                         for n in notifications(bob)))
+    # Operator-only buttons are shown disabled to a viewer (a crafted click is refused by the
+    # server: tests/console/test_viewer_sees_disabled.py), and a line says who operates.
+    demo = session_button(bob, "Run demo motion")
+    wait_until("Run demo motion disabled for the viewer", demo.is_disabled, 30)
     open_tab(bob, "Operate")
     execute = bob.get_by_role("button", name="Execute grasp-and-place")  # the Control panel's
     execute.scroll_into_view_if_needed()
-    execute.click()
-    wait_for(lambda: any("Only the operator can run grasp-and-place — Alice holds control"
-                         in n for n in notifications(bob)))
+    wait_until("Execute disabled for the viewer", execute.is_disabled, 30)
+    wait_until("the viewer told who operates",
+               lambda: "You are viewing: Alice operates" in bob.locator("body").inner_text(), 30)
+    open_tab(alice, "Operate")
+    assert not alice.get_by_role("button", name="Execute grasp-and-place").is_disabled()
+    assert "You are viewing" not in alice.locator("body").inner_text()
     assert app.store.command is before and not app.services.demo.running
     view = app.services.soft_control.view  # the control process: never armed, no task started
     assert view is None or view.snapshot.control is None or (
