@@ -71,7 +71,7 @@ class ReplaySession:
         self.speed = 1.0
         self.markers: list[Marker] = []
         self.recorded = RecordedScene(client.scene, app.robot, "/replay/recorded")
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # advance() draws under it
         gui = client.gui
         self.folder = gui.add_folder("Replay", order=order, expand_by_default=False)
         with self.folder:
@@ -221,15 +221,21 @@ class ReplaySession:
         self.speed = float(value.rstrip("x")) if value in SPEEDS else 1.0
 
     def advance(self, dt: float) -> None:
+        """Move the replay on by ``dt`` s of wall time (at its speed) and draw it; at the end the
+        last pose is drawn before ``playing`` turns False, so whoever reads it stopped sees the
+        arm at the end."""
         with self._lock:
             if self.rec is None or not self.playing:
                 return
             self.pos += dt * self.speed
-            if self.pos >= self.rec.duration:
+            ended = self.pos >= self.rec.duration
+            if ended:
                 self.pos = self.rec.duration
+            self.draw()
+            if ended:
                 self.playing = False
                 self.play_btn.label = "Play replay"
-        self.draw()
+                self.draw(move_slider=False)  # the info line says "paused"
 
     def draw(self, move_slider: bool = True) -> None:
         with self._lock:

@@ -81,3 +81,29 @@ def test_seek_play_and_export_a_recording(app) -> None:
     assert len(exports) == 1 and exports[0].name.startswith("replay-")
     assert [(name, len(content)) for name, content in client.downloads] == [
         (exports[0].name, exports[0].stat().st_size)]
+
+
+def test_a_replay_that_ends_shows_its_last_pose_before_it_says_it_stopped(app) -> None:
+    """Whoever sees ``playing`` turn False (a page, a test) sees the arm at the end already: the
+    last pose is drawn before the replay says it stopped (a fresh clone's run read the ghost
+    between the two and found the previous frame)."""
+    name, qs = record(app)
+    client = ScopedClient(app.server)
+    session = ReplaySession(app, client, order=50.0)  # type: ignore[arg-type]
+    assert session.load(name)
+    rec = session.rec
+    assert rec is not None and session.ghost is not None
+    end = pk.forward_kinematics(qs[-1], SOFT.lengths, SOFT.base_pose)[-1, :2]
+    seen: list[tuple[bool, bool]] = []  # (still playing, the ghost at the end) per ghost update
+    update = session.ghost.update
+
+    def watched(q):  # type: ignore[no-untyped-def]
+        update(q)
+        seen.append((session.playing, bool(np.allclose(tip_of(session), end, atol=1e-5))))
+
+    session.ghost.update = watched  # type: ignore[method-assign]
+    session.toggle()
+    session.advance(10.0)
+    assert not session.playing and session.pos == rec.duration
+    assert seen and seen[-1][1]
+    assert (True, True) in seen, seen  # the end drawn while the replay still said "playing"
