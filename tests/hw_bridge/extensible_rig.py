@@ -41,8 +41,10 @@ SLACK_S = 1.0  # link timeout, device watchdog and write timeout of the links he
 
 
 def tolerant() -> BridgeConfig:
+    # a just-started emulator on a busy box can take longer than the shipped 500 ms to answer
+    # HELLO (a fresh clone's run: "no HELLO answer ... within 500 ms")
     return dataclasses.replace(BridgeConfig.from_robot(ROBOT), link_timeout_s=SLACK_S,
-                               watchdog_s=SLACK_S)
+                               watchdog_s=SLACK_S, hello_timeout_s=10 * SLACK_S)
 
 
 def serial_to(port: str) -> SerialHardware:
