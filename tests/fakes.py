@@ -2,8 +2,25 @@
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import contextlib
 from typing import Any, Iterator
+
+
+class SyncPool:
+    """A worker pool that runs the call at once, here (what the spawned worker would return):
+    for panels whose IK or planning runs in a process pool."""
+
+    def submit(self, fn: Any, *args: Any, **kwargs: Any) -> cf.Future:
+        fut: cf.Future = cf.Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except Exception as exc:  # noqa: BLE001
+            fut.set_exception(exc)
+        return fut
+
+    def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
+        pass
 
 
 class FakeClient:

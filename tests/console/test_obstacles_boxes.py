@@ -5,7 +5,6 @@ with the box's name when blocked), and are recorded (read back with the ``mcap``
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import json
 import re
 
@@ -16,7 +15,7 @@ from core.kinematics import box_clearance as bc
 from core.kinematics import delta as dk
 from core.planning.box_scene import BoxScene, scene_from_json, scene_to_json
 from core.robots import load
-from fakes import FakeRunner, user
+from fakes import FakeRunner, SyncPool, user
 
 EXT = load("extensible")
 
@@ -27,21 +26,6 @@ def type_box(panel, client, name, centre_mm, size_mm):
         user(h, client, v)
     for h, v in zip(panel.size, size_mm):
         user(h, client, v)
-
-
-class SyncPool:
-    """A worker pool that runs the call at once, here (what the spawned worker would return)."""
-
-    def submit(self, fn, *args, **kwargs) -> cf.Future:
-        fut: cf.Future = cf.Future()
-        try:
-            fut.set_result(fn(*args, **kwargs))
-        except Exception as exc:  # noqa: BLE001
-            fut.set_exception(exc)
-        return fut
-
-    def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
-        pass
 
 
 @pytest.fixture

@@ -13,14 +13,13 @@ does, never by how long it takes.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import dataclasses
 import re
 from typing import Any
 
 import numpy as np
 import pytest
-from fakes import FakeClient, FakeClock, FakeRunner, console_app, user
+from fakes import FakeClient, FakeClock, FakeRunner, SyncPool, console_app, user
 from ws_client import wait_for
 
 from console.core.access import AccessControl
@@ -29,21 +28,6 @@ from core.robots import load
 
 EXT = load("extensible")
 TYPED_MM = (120.0, -60.0, 350.0)  # reachable: IK solves it exactly
-
-
-class SyncPool:
-    """The IK worker process, run at once in the calling thread."""
-
-    def submit(self, fn: Any, *args: Any, **kwargs: Any) -> cf.Future:
-        fut: cf.Future = cf.Future()
-        try:
-            fut.set_result(fn(*args, **kwargs))
-        except Exception as exc:  # noqa: BLE001
-            fut.set_exception(exc)
-        return fut
-
-    def shutdown(self, wait: bool = True, cancel_futures: bool = False) -> None:
-        pass
 
 
 class CountingRunner(FakeRunner):
