@@ -58,9 +58,18 @@ def _beyond(dist: float, reach: float) -> str:
     return "less than 0.1 mm" if excess < 0.5e-4 else _mm(excess)
 
 
+CONTACT_TOLERANCE_M = 0.001
+"""How far an object may seem to overlap the arm or gripper as they stand and still be planned
+for (m): an object the arm touches (pushed by a finger, or lying against the gripper after a
+failed grasp, when the state machine re-plans from there) is measured up to a few marker-noise
+sigmas (0.3 mm each) inside it. Deeper overlap is refused: the object is really on the arm."""
+
+
 def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, radius: float,
                   base_keepout: float) -> None:
-    """Geometric checks that need no optimisation; raise :class:`GraspRefused` on failure."""
+    """Geometric checks that need no optimisation; raise :class:`GraspRefused` on failure.
+
+    An object touching the arm or gripper (overlap up to :data:`CONTACT_TOLERANCE_M`) passes."""
     if not (math.isfinite(center.real) and math.isfinite(center.imag) and math.isfinite(radius)):
         raise GraspRefused("bad_input", "The object position and radius must be finite numbers.")
     if radius <= 0.0:
@@ -86,13 +95,13 @@ def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, ra
             f"{_beyond(dist, reach)} beyond the {_mm(reach)} at which the gripper can still "
             f"reach around an object of this size.")
     arm_gap = model.clearance_py(kappa_meas.tolist(), center, radius)
-    if arm_gap < 0.0:
+    if arm_gap < -CONTACT_TOLERANCE_M:
         raise GraspRefused(
             "on_arm",
             f"The object overlaps the arm where it stands now (by {_mm(-arm_gap)}); move the "
             f"object or the arm first.")
     grip_gap = gripper_clearance(model, kappa_meas, center, radius, g.length, g.half_width)
-    if grip_gap < 0.0:
+    if grip_gap < -CONTACT_TOLERANCE_M:
         raise GraspRefused(
             "on_gripper",
             f"The object overlaps the gripper where it stands now (by {_mm(-grip_gap)}); move "

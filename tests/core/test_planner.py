@@ -187,6 +187,43 @@ def test_refusals_say_why_in_plain_words(center, radius, reason, words):
     assert words in str(exc.value)
 
 
+def _gripper_gap(kappa, center, radius):
+    """Gap (m) between a disk and the straight gripper (a segment from the tip along its heading,
+    widened by its half-width), from the kinematics module and plain geometry."""
+    tip = planar.forward_kinematics(kappa, L, ARM.base_pose)[-1]
+    root, heading = np.asarray(tip[:2]), np.array([math.cos(tip[2]), math.sin(tip[2])])
+    along = float(np.clip((np.asarray(center) - root) @ heading, 0.0, G.length))
+    return float(np.hypot(*(np.asarray(center) - root - along * heading))) - G.half_width - radius
+
+
+@pytest.mark.parametrize("center", [(-0.20, 0.20), (-0.08, 0.33), (0.15, 0.25)])
+def test_an_object_touching_the_gripper_is_planned_for_deeper_overlap_refused(center):
+    # After a failed grasp the object lies against the gripper, measured up to ~1 mm inside it
+    # (marker noise); the state machine re-plans from there and must get a plan, not a refusal.
+    from core.planning.sides import plan_grasp_sided
+    r = 0.0165
+    at = plan_grasp_sided(ARM, STRAIGHT, center, r).kappas[-1]  # the gripper around the object
+    gap = _gripper_gap(at, center, r)
+    assert gap > 0.004
+    tip = planar.forward_kinematics(at, L, ARM.base_pose)[-1]
+    heading = np.array([math.cos(tip[2]), math.sin(tip[2])])
+    rel = np.asarray(center) - tip[:2]
+    normal = rel - (rel @ heading) * heading
+    normal /= np.hypot(*normal)
+    for overlap in (0.0001, 0.0009):
+        pushed = np.asarray(center) - (gap + overlap) * normal
+        assert _gripper_gap(at, pushed, r) == pytest.approx(-overlap, abs=1e-9)
+        plan = plan_grasp_sided(ARM, at, pushed, r)
+        side = 1.0 if plan.side == "left" else -1.0
+        end_tip = planar.forward_kinematics(plan.kappas[-1], L, ARM.base_pose)[-1]
+        w = planar.point_in_frame(end_tip, (G.w_off_along, side * G.g_off))
+        assert np.hypot(*(np.asarray(w) - pushed)) == pytest.approx(r + G.g_off, abs=TOL)
+        assert _gripper_gap(plan.kappas[-1], pushed, r) > 0.0
+    with pytest.raises(GraspRefused) as exc:
+        plan_grasp_sided(ARM, at, np.asarray(center) - (gap + 0.003) * normal, r)
+    assert exc.value.reason == "on_gripper" and "by 3.0 mm" in str(exc.value)
+
+
 def test_refused_object_within_the_reach_bound_has_no_final_configuration():
     # Behind the base: inside the crude reach bound but no arm shape gets the gripper around it.
     with pytest.raises(GraspRefused) as exc:
