@@ -59,17 +59,21 @@ def _beyond(dist: float, reach: float) -> str:
 
 
 CONTACT_TOLERANCE_M = 0.001
-"""How far an object may seem to overlap the arm or gripper as they stand and still be planned
-for (m): an object the arm touches (pushed by a finger, or lying against the gripper after a
-failed grasp, when the state machine re-plans from there) is measured up to a few marker-noise
-sigmas (0.3 mm each) inside it. Deeper overlap is refused: the object is really on the arm."""
+"""How far an object may seem to overlap the arm or the gripper's fingers as they stand and
+still be planned for (m): an object the arm touches (pushed by it during an approach, when the
+state machine re-plans from there) is measured up to a few marker-noise sigmas (0.3 mm each)
+inside it. Deeper overlap is refused: the object is really on the arm."""
 
 
 def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, radius: float,
                   base_keepout: float) -> None:
     """Geometric checks that need no optimisation; raise :class:`GraspRefused` on failure.
 
-    An object touching the arm or gripper (overlap up to :data:`CONTACT_TOLERANCE_M`) passes."""
+    An object touching the arm or the gripper passes: the overlap checks allow
+    :data:`CONTACT_TOLERANCE_M`, and the gripper as it stands is its fingers (the robot file's
+    ``[sim.gripper] finger_half_width``, 8 mm on the soft arm), not the wider drawn and planned
+    gripper (``[gripper] half_width``, 12 mm): an object the fingers pushed lies against them,
+    which the drawn gripper would count as a 4 mm overlap."""
     if not (math.isfinite(center.real) and math.isfinite(center.imag) and math.isfinite(radius)):
         raise GraspRefused("bad_input", "The object position and radius must be finite numbers.")
     if radius <= 0.0:
@@ -100,7 +104,8 @@ def check_request(robot, model: ArmModel, kappa_meas: Array, center: complex, ra
             "on_arm",
             f"The object overlaps the arm where it stands now (by {_mm(-arm_gap)}); move the "
             f"object or the arm first.")
-    grip_gap = gripper_clearance(model, kappa_meas, center, radius, g.length, g.half_width)
+    fingers = min(g.half_width, robot.sim.gripper.finger_half_width)
+    grip_gap = gripper_clearance(model, kappa_meas, center, radius, g.length, fingers)
     if grip_gap < -CONTACT_TOLERANCE_M:
         raise GraspRefused(
             "on_gripper",

@@ -187,40 +187,46 @@ def test_refusals_say_why_in_plain_words(center, radius, reason, words):
     assert words in str(exc.value)
 
 
-def _gripper_gap(kappa, center, radius):
+def _gripper_gap(kappa, center, radius, half_width):
     """Gap (m) between a disk and the straight gripper (a segment from the tip along its heading,
-    widened by its half-width), from the kinematics module and plain geometry."""
+    widened by ``half_width``), from the kinematics module and plain geometry."""
     tip = planar.forward_kinematics(kappa, L, ARM.base_pose)[-1]
     root, heading = np.asarray(tip[:2]), np.array([math.cos(tip[2]), math.sin(tip[2])])
     along = float(np.clip((np.asarray(center) - root) @ heading, 0.0, G.length))
-    return float(np.hypot(*(np.asarray(center) - root - along * heading))) - G.half_width - radius
+    return float(np.hypot(*(np.asarray(center) - root - along * heading))) - half_width - radius
 
 
 @pytest.mark.parametrize("center", [(-0.20, 0.20), (-0.08, 0.33), (0.15, 0.25)])
-def test_an_object_touching_the_gripper_is_planned_for_deeper_overlap_refused(center):
-    # After a failed grasp the object lies against the gripper, measured up to ~1 mm inside it
-    # (marker noise); the state machine re-plans from there and must get a plan, not a refusal.
+def test_an_object_the_fingers_pushed_is_planned_for_deeper_overlap_refused(center):
+    # An approach that brushes the object pushes it (the simulated plant: it ends against the
+    # 8 mm fingers, which the 12 mm drawn gripper would overlap by 4 mm); the state machine
+    # re-plans from there and must get a plan, not a refusal.
+    from core.control.sim import SoftArmSim
     from core.planning.sides import plan_grasp_sided
-    r = 0.0165
+    r, fingers = 0.0165, ARM.sim.gripper.finger_half_width
+    assert G.half_width - fingers == pytest.approx(0.004)
     at = plan_grasp_sided(ARM, STRAIGHT, center, r).kappas[-1]  # the gripper around the object
-    gap = _gripper_gap(at, center, r)
+    gap = _gripper_gap(at, center, r, fingers)
     assert gap > 0.004
     tip = planar.forward_kinematics(at, L, ARM.base_pose)[-1]
     heading = np.array([math.cos(tip[2]), math.sin(tip[2])])
     rel = np.asarray(center) - tip[:2]
     normal = rel - (rel @ heading) * heading
     normal /= np.hypot(*normal)
-    for overlap in (0.0001, 0.0009):
-        pushed = np.asarray(center) - (gap + overlap) * normal
-        assert _gripper_gap(at, pushed, r) == pytest.approx(-overlap, abs=1e-9)
-        plan = plan_grasp_sided(ARM, at, pushed, r)
+    sim = SoftArmSim(ARM, kappa0=at)
+    sim.place_object(*(np.asarray(center) - (gap + 0.006) * normal), r)  # pushed out at once
+    pushed = sim.obj.xy.copy()
+    assert _gripper_gap(at, pushed, r, fingers) == pytest.approx(0.0, abs=3e-4)  # touching
+    assert _gripper_gap(at, pushed, r, G.half_width) < -0.0035
+    for xy in (pushed, pushed - 0.0009 * normal):  # touching, and marker noise further in
+        plan = plan_grasp_sided(ARM, at, xy, r)
         side = 1.0 if plan.side == "left" else -1.0
         end_tip = planar.forward_kinematics(plan.kappas[-1], L, ARM.base_pose)[-1]
         w = planar.point_in_frame(end_tip, (G.w_off_along, side * G.g_off))
-        assert np.hypot(*(np.asarray(w) - pushed)) == pytest.approx(r + G.g_off, abs=TOL)
-        assert _gripper_gap(plan.kappas[-1], pushed, r) > 0.0
+        assert np.hypot(*(np.asarray(w) - xy)) == pytest.approx(r + G.g_off, abs=TOL)
+        assert _gripper_gap(plan.kappas[-1], xy, r, G.half_width) > 0.0
     with pytest.raises(GraspRefused) as exc:
-        plan_grasp_sided(ARM, at, np.asarray(center) - (gap + 0.003) * normal, r)
+        plan_grasp_sided(ARM, at, pushed - 0.003 * normal, r)
     assert exc.value.reason == "on_gripper" and "by 3.0 mm" in str(exc.value)
 
 
