@@ -24,6 +24,7 @@ import viser
 
 import ws_client
 from fakes import FakeClient, console_app, user
+from robot_files import robot_copy
 from console.core.access import AccessControl
 from console.core.hardware_setup import attach
 from console.core.model import model_for
@@ -38,6 +39,12 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="re
 
 SOFT = load("soft-arm")
 EXT = load("extensible")
+# A link patient with a starved process (the shipped 40 ms link timeout and 500 ms HELLO wait
+# tripped on a loaded machine: "connected to a new emulator, disarmed not reached in 60 s"):
+# these tests are about what a killed process leaves and how the console reconnects, not about
+# the shipped link timing (tests/hw_bridge/test_link_supervisor.py, on a stopped clock).
+PATIENT_LINK = {"bridge.watchdog_ms": 1000, "bridge.link_timeout_ms": 800,
+                "bridge.hello_timeout_ms": 5000}
 SLOW = 60.0  # s: generous, for a loaded machine; no test asserts a wall-clock bound
 
 
@@ -80,10 +87,10 @@ def new_emulator(parent: int, dead: int) -> bool:
 
 
 @pytest.fixture
-def console(request: pytest.FixtureRequest) -> Iterator[tuple[Any, FakeClient]]:
+def console(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[tuple[Any, FakeClient]]:
     """serve.py's console for the arm ``request.param`` on the device emulator, with the
     Control (soft arm) and Hardware panels; an operator holding control."""
-    robot = request.param
+    robot = load(robot_copy(request.param.name, tmp_path, PATIENT_LINK))
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     store = StateStore(model_for(robot), mirror_commands=robot.kind != "delta")
     services = attach(robot, store, "emulator", None, cpus=None)
@@ -265,7 +272,8 @@ def test_extensible_emulator_killed_mid_motion_then_reconnected(console) -> None
     hw.port_text.value = old_port
     user(hw.connect_btn, op)
     wait_for(lambda: new_emulator(os.getpid(), dead) and controls.health().fault is None
-             and controls.health().state == "inactive", "connected to a new emulator, disarmed")
+             and controls.health().state == "inactive",
+             "connected to a new emulator, disarmed")
     assert app.services.hardware.port_path == runner.port == controls.emulator.path
     assert runner.snapshot.state == "disarmed"
     ext_arm_and_move(app)

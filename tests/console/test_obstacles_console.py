@@ -314,7 +314,11 @@ def test_a_placed_obstacle_is_drawn_and_recorded_before_its_re_plan_ends(gated):
         # on four busy workers took longer than this test waited).
         click_at(op, operator, *OUT_OF_THE_WAY)
         wait_for(lambda: any(k == "objects" and d["obstacles"] for k, d in logged))
-        assert planning.is_set() and not release.is_set()   # the re-plan is still running
+        # the re-plan may begin a moment after the obstacle is recorded (its pool's thread; a
+        # loaded run read `planning` before the planner was called): it cannot end before
+        # `release`, so the obstacle was recorded before the re-plan's end either way
+        wait_for(planning.is_set)
+        assert not release.is_set()   # the re-plan is still running
         assert not any(k == "plan" for k, _ in logged[1:])
     finally:
         release.set()

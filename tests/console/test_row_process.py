@@ -49,7 +49,11 @@ def quick_soft_app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[
     """Objects + Control panels on the control process of the quick soft arm, a token console
     (the test's client takes control with it)."""
     monkeypatch.setattr(planner.GraspSession, "compute_reach", False)  # (no part here)
-    robot = load(robot_copy("soft-arm", tmp_path, {**QUICK_MOTION, **PATIENT_LINK}))
+    # No stick-slip: at three times the shipped speed it made approaches brush their objects on a
+    # loaded machine (pushed over 10 mm, re-planned there; see tests/hw_bridge/test_soft_arm_row.py
+    # quick_robot); this test is about what the console shows of a row.
+    robot = load(robot_copy("soft-arm", tmp_path,
+                            {**QUICK_MOTION, **PATIENT_LINK, "sim.stall_rate_hz": 0.0}))
     server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = console_app(robot, server, panels=(ObjectsPanel, ControlPanel), soft_control="process",
                       access=AccessControl("tok"))

@@ -37,14 +37,19 @@ Q0 = np.array([[0.0, 0.0, 0.03], [0.0, 0.0, 0.03]])  # a little extended: short 
 TIP_TOL = 0.003  # m: "within a few mm"
 
 
-SLACK_S = 1.0  # link timeout, device watchdog and write timeout of the links here
+# link timeout and write timeout of the links here: 1 s lost the link of the slipping
+# repeatability test on a loaded machine ("no valid STATE for 1008 ms"); the device's watchdog
+# stays at its most, 1 s (hw_bridge/device.py refuses a longer one)
+SLACK_S = 3.0
+WATCHDOG_S = 1.0
+HELLO_S = 10.0  # HELLO answer, and the disarmed link's timeout: within the tests' 20 s waits
 
 
 def tolerant() -> BridgeConfig:
     # a just-started emulator on a busy box can take longer than the shipped 500 ms to answer
     # HELLO (a fresh clone's run: "no HELLO answer ... within 500 ms")
     return dataclasses.replace(BridgeConfig.from_robot(ROBOT), link_timeout_s=SLACK_S,
-                               watchdog_s=SLACK_S, hello_timeout_s=10 * SLACK_S)
+                               watchdog_s=WATCHDOG_S, hello_timeout_s=HELLO_S)
 
 
 def serial_to(port: str) -> SerialHardware:
