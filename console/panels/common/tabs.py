@@ -13,6 +13,8 @@ from typing import Any
 
 import viser
 
+from console.web.tab_order import order_tabs, tab_labels
+
 TAB_ORDER: tuple[str, ...] = ("Operate", "Hardware", "Experiments", "Session")
 
 
@@ -42,10 +44,8 @@ class ConsoleTabs:
                 self._group = self._gui.add_tab_group(order=self._order)
             handle = self._group.add_tab(name)  # no icons: the four labels fit on one row
             self._tabs[name] = handle
-            # viser shows tabs in the order they were added; keep TAB_ORDER instead (the
-            # handle list is the group's one source of truth for its tab tuples).
-            self._group._tab_handles.sort(key=lambda h: TAB_ORDER.index(h._label))
-            self._group._rebuild_tab_props()
+            # viser shows tabs in the order they were added; keep TAB_ORDER instead
+            order_tabs(self._group, TAB_ORDER)
             return handle
 
     @property
@@ -54,4 +54,4 @@ class ConsoleTabs:
         with self._lock:
             if self._group is None:
                 return ()
-            return tuple(h._label for h in self._group._tab_handles)
+            return tab_labels(self._group)
