@@ -138,7 +138,10 @@ def arm_in_view(page: Any, app: Any, size: str) -> str | None:
 
 @pytest.mark.parametrize("robot", ["soft-arm", "extensible"])
 def test_stop_and_phase_need_no_scrolling_and_the_arm_is_clear_of_the_panel_at_any_size(
-        browser: Any, served_console: Any, artifacts_dir: Path, robot: str) -> None:
+        browser: Any, served_console: Any, artifacts_dir: Path, robot: str,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from console.core.grasp_session import GraspSession
+    monkeypatch.setattr(GraspSession, "compute_reach", False)  # (the shading: not here)
     app = served_console(robot, start=True)
     url = f"http://127.0.0.1:{app.server.get_port()}/"
     if app.grasp_session is not None:  # the selected object's approach circles drawn
