@@ -75,6 +75,12 @@ class WindowFit:
             framed = self._framed.get(client_id)
             return None if framed is None else framed.size
 
+    def framed_pose(self, client_id: int) -> CameraPose | None:
+        """Where the console last put (or found) a browser's camera (None: not framed yet)."""
+        with self._lock:
+            framed = self._framed.get(client_id)
+            return None if framed is None else framed.pose
+
     def on_camera(self, client: Any, camera: Any) -> CameraPose | None:
         """A browser reported its camera: frame it for its canvas if that changed and the
         camera is where the console put it; the pose it was moved to (None: left alone)."""
