@@ -73,6 +73,8 @@ from console.recording.lab_feed import feed_grasp
 from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
 from console.scene.grasp_layers import GraspSceneView
+from console.scene.camera import presets_for_window
+from console.scene.window_fit import WindowFit
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
 from console.panels.common.tabs import ConsoleTabs
@@ -188,6 +190,12 @@ class ConsoleApp:
             self.recorder.add_start_hook(lambda: feed_grasp(
                 self.recorder, grasp.view(), {"objects", "obstacles", "plan"}))
         self.camera_presets = setup_camera(server, robot, self.model.kind)
+        # Each browser's camera framed for its own window (a tablet's, a phone's).
+        kind, span, table = self.model.kind, self.arm_reach(), self.table_rectangle()
+        self.window_fit = WindowFit(
+            server, self.camera_presets[0],
+            lambda w, h: presets_for_window(kind, span, table, w, h)[0],
+            stopped=lambda: self.stopped)
         for panel_cls in DEFAULT_PANELS if panels is None else panels:
             self.add_panel(panel_cls)
 

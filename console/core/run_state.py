@@ -35,8 +35,8 @@ class RunView:
         index: The object's place in a row (0-based), None for a single grasp.
         count: How many objects the row takes (1 for a single grasp).
         remaining_s: Estimated seconds to the release of this object (None: not known yet).
-        row_remaining_s: The same for the whole row (the later objects counted as this one's
-            whole estimate each); equals ``remaining_s`` for a single grasp.
+        row_remaining_s: The same for the whole row: this object's and the objects not yet
+            begun (:func:`row_seconds`); equals ``remaining_s`` for a single grasp.
         fraction: Done, 0..1 (of the row for a row).
     """
 
@@ -114,7 +114,32 @@ def run_of(view: Any, robot: SoftArm, timer: LegTimer, names: tuple[str, ...] | 
     if in_row:
         k, n = int(row.current or 0), int(row.n)
         name = names[k] if names is not None and k < len(names) else None
-        later = (n - k - 1) * (elapsed + left) if left is not None else None
-        return RunView(c.phase, plan, waypoint, name, k, n, left,
-                       None if later is None else left + later, (k + done_here) / n)
+        total, here = row_seconds(row, k, n, float(c.t), left, elapsed)
+        return RunView(c.phase, plan, waypoint, name, k, n, left, total,
+                       (k + (done_here if here is None else here)) / n)
     return RunView(c.phase, plan, waypoint, single, None, 1, left, left, done_here)
+
+
+def row_seconds(row: Any, k: int, n: int, t: float, left: float | None,
+                elapsed: float) -> tuple[float | None, float | None]:
+    """The row's remaining seconds with object ``k`` (0-based) of ``n`` under way at loop time
+    ``t``, and (when estimated from the row's pace) the share of object ``k`` done.
+
+    Each object not yet begun takes the row's own pace: the mean time its finished objects
+    took (``row.outcomes``: loop-time start and end), from the bin to the bin; before the first
+    is finished, the current object's whole estimate (``elapsed`` + ``left``). While the current
+    object has no plan yet (``left`` None: settling, planning) its remaining time is that pace
+    less the time since the previous object ended. None while nothing is known (the first
+    object, before its plan)."""
+    spans = [o.ended_s - o.started_s for o in getattr(row, "outcomes", ())
+             if o.started_s is not None and o.ended_s is not None and o.ended_s >= o.started_s]
+    pace = sum(spans) / len(spans) if spans else (None if left is None else elapsed + left)
+    if pace is None:
+        return None, None
+    here: float | None = None
+    if left is None:  # between objects: this one's plan is being made
+        ends = [o.ended_s for o in row.outcomes if o.ended_s is not None]
+        since = max(0.0, t - max(ends)) if ends else 0.0
+        left = max(0.0, pace - since)
+        here = 1.0 - left / pace if pace > 0 else 0.0
+    return left + (n - k - 1) * pace, here

@@ -2,12 +2,13 @@
 
 A :class:`CameraPose` is where a camera stands, what it looks at and its field of view.
 :func:`presets` gives each robot kind's named poses (soft arm: *Perspective* and *Top-down*;
-extensible arm: *Perspective*, *Front* and *Side*); the first one is the console's initial
-camera (``console.scene.stage.setup_camera``) and *Reset view* goes back to it. Poses are computed from
-the robot's reach (``span``, m) and the table rectangle, for a canvas of a given aspect ratio.
-The control panel is docked beside the canvas (``console.scene.stage.setup_theme``), so the
-whole canvas is free (:data:`PANEL_FRACTION` 0; a panel floating over the canvas's right
-would need the look-at point shifted right by that share).
+extensible arm: *Perspective*, *Front*, *Side* and *Top-down*); the first one is the console's
+initial camera (``console.scene.stage.setup_camera``) and *Reset view* goes back to it. Poses are
+computed from the robot's reach (``span``, m) and the table rectangle, for a canvas of a given
+aspect ratio; the control panel never covers the canvas (docked beside it, ``static/theme.toml``;
+on a phone the canvas is the part above viser's bottom sheet, ``console.web.phone_sheet``).
+:func:`presets_for_window` takes a browser's canvas size in pixels, and
+``console.scene.window_fit`` re-frames each browser's camera for its own window.
 
 Pure numpy: no viser here; :func:`apply` sets a browser's camera from a pose.
 """
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Literal
+from typing import Any, Literal, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -25,7 +26,6 @@ Vec3 = tuple[float, float, float]
 Kind = Literal["planar", "delta"]
 FOV = math.radians(50.0)          # vertical field of view of every preset
 DEFAULT_ASPECT = 1.28             # the 3D view of a 1600 x 1000 window beside the docked panel
-PANEL_FRACTION = 0.0              # share of the canvas under the control panel: none, docked
 MARGIN = 1.08                     # framed region plus this much room around it
 
 
@@ -51,99 +51,90 @@ def _vec(v: npt.ArrayLike) -> Vec3:
     return (float(a[0]), float(a[1]), float(a[2]))
 
 
-def free_fraction(aspect: float) -> float:
-    """Share of the canvas width the docked control panel leaves free (all of a tall canvas's
-    is not free either: viser's panel keeps its width, so a narrow window loses more)."""
-    return max(0.55, 1.0 - PANEL_FRACTION * DEFAULT_ASPECT / max(aspect, 0.5))
-
-
-def frame_sphere(name: str, centre: npt.ArrayLike, radius: float, direction: npt.ArrayLike,
-                 aspect: float = DEFAULT_ASPECT, fov: float = FOV) -> CameraPose:
-    """A pose looking along ``-direction`` (from the eye towards ``centre``) at which a sphere of
-    ``radius`` around ``centre`` fits in the canvas left of the control panel."""
-    c = np.asarray(centre, dtype=float)
+def _axes(direction: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], ...]:
+    """Unit (back, forward, right, up) of a camera looking along ``-direction``, +z up."""
     back = np.asarray(direction, dtype=float)
     back = back / np.linalg.norm(back)                                 # centre -> eye
-    free = free_fraction(aspect)
-    tan_v = math.tan(fov / 2)
-    tan_h = tan_v * aspect * free                                      # half-width left free
-    dist = MARGIN * radius / math.sin(math.atan(min(tan_v, tan_h)))
     forward = -back
     right = np.cross(forward, (0.0, 0.0, 1.0))
     if np.linalg.norm(right) < 1e-9:                                  # looking straight down
         right = np.array([1.0, 0.0, 0.0])
     right /= np.linalg.norm(right)
-    # The free part's centre is (1 - free) of a half-width left of the canvas centre: look that
-    # far right of the sphere's centre so the sphere appears there.
-    shift = (1.0 - free) * dist * tan_v * aspect
-    look = c + right * shift
-    return CameraPose(name, _vec(look + back * dist), _vec(look), fov=fov)
+    return back, forward, right, np.cross(right, forward)
 
 
-def frame_points(name: str, points: npt.ArrayLike, direction: npt.ArrayLike,
-                 aspect: float = DEFAULT_ASPECT, fov: float = FOV,
-                 table: tuple[float, float, float, float] | None = None) -> CameraPose:
-    """The nearest pose looking along ``-direction`` that shows every point of ``points`` in
-    the canvas left of the control panel (a bisection on the distance). With ``table``, the
-    look-at point (the orbit centre) is kept on the table, the view moved along with it."""
+def _fit(points: npt.ArrayLike, direction: npt.ArrayLike, aspect: float,
+         fov: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """The nearest camera looking along ``-direction`` that shows every point in the canvas
+    (shrunk by :data:`MARGIN` about its centre): (eye, orbit centre). The orbit centre is the
+    point of the view axis nearest the points' centre.
+
+    At a distance ``D`` behind the points' centre ``c`` and moved ``(sx, sy)`` sideways, a point
+    with offsets ``(u, v, w)`` along (right, up, forward) from ``c`` is at screen x
+    ``(u - sx) / ((w + D) tan_h)``: each point bounds ``sx`` (and ``sy``) to an interval, and the
+    points fit when those intervals meet; the smallest such ``D`` is found by bisection and the
+    camera moved to the middle of the intervals there.
+    """
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     c = (pts.min(0) + pts.max(0)) / 2
-    back = np.asarray(direction, dtype=float)
-    back = back / np.linalg.norm(back)
-    forward = -back
-    right = np.cross(forward, (0.0, 0.0, 1.0))
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    free = free_fraction(aspect)
+    back, forward, right, up = _axes(direction)
+    rel = pts - c
+    u, v, w = rel @ right, rel @ up, rel @ forward
     tan_v = math.tan(fov / 2)
-    x_max = 1.0 - 2.0 * (1.0 - free)
+    tan_h = tan_v * aspect
+    edge = 1.0 / MARGIN                                               # of the half-width
 
-    def pose_at(dist: float) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-        look = c + right * (1.0 - free) * dist * tan_v * aspect
-        return look + back * dist, look
-
-    def fits(dist: float) -> bool:
-        eye, _ = pose_at(dist)
-        d = pts - eye
-        depth = d @ forward
+    def shifts(dist: float) -> tuple[float, float] | None:
+        depth = w + dist
         if np.any(depth <= 1e-6):
-            return False
-        x = (d @ right) / (depth * tan_v * aspect)
-        y = (d @ up) / (depth * tan_v)
-        return bool(np.all(np.abs(y) <= 1 / MARGIN) and np.all(x >= -1 / MARGIN)
-                    and np.all(x <= x_max - (1 - 1 / MARGIN)))
+            return None
+        kx, ky = depth * tan_h * edge, depth * tan_v * edge
+        sx_lo, sx_hi = np.max(u - kx), np.min(u + kx)
+        sy_lo, sy_hi = np.max(v - ky), np.min(v + ky)
+        if sx_lo > sx_hi or sy_lo > sy_hi:
+            return None
+        return (float(sx_lo + sx_hi) / 2, float(sy_lo + sy_hi) / 2)
 
     size = float(np.linalg.norm(pts.max(0) - pts.min(0))) or 1.0
     lo, hi = 0.0, size
-    while not fits(hi):
-        hi *= 2
-        if hi > 1e3 * size:
-            break
-    for _ in range(40):
+    while shifts(hi) is None:
+        lo, hi = hi, hi * 2
+        if hi > 1e4 * size:
+            raise ValueError("cannot frame these points")
+    for _ in range(50):
         mid = (lo + hi) / 2
-        lo, hi = (lo, mid) if fits(mid) else (mid, hi)
-    eye, look = pose_at(hi)
-    if table is not None:
-        x0, x1, y0, y1 = table
-        moved = np.array([min(max(look[0], x0), x1), min(max(look[1], y0), y1), look[2]])
-        eye, look = eye + (moved - look), moved
+        lo, hi = (lo, mid) if shifts(mid) is not None else (mid, hi)
+    sx, sy = shifts(hi) or (0.0, 0.0)
+    look = c + right * sx + up * sy
+    return look + back * hi, look
+
+
+def frame_points(name: str, points: npt.ArrayLike, direction: npt.ArrayLike,
+                 aspect: float = DEFAULT_ASPECT, fov: float = FOV) -> CameraPose:
+    """The nearest pose looking along ``-direction`` that shows every point of ``points`` in
+    the canvas. Its look-at point (the orbit centre) is on the view axis, nearest the points."""
+    eye, look = _fit(points, direction, aspect, fov)
     return CameraPose(name, _vec(eye), _vec(look), fov=fov)
+
+
+def _sphere(centre: npt.ArrayLike, radius: float, n: int = 96) -> npt.NDArray[np.float64]:
+    """``n`` points spread evenly over a sphere (a Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    z = 1 - 2 * i / n
+    phi = math.pi * (1 + 5 ** 0.5) * i
+    r = np.sqrt(1 - z * z)
+    return np.asarray(centre, float) + radius * np.stack(
+        [r * np.cos(phi), r * np.sin(phi), z], -1)
 
 
 def frame_top_down(name: str, x: tuple[float, float], y: tuple[float, float],
                    aspect: float = DEFAULT_ASPECT, fov: float = FOV) -> CameraPose:
     """Straight down on the table rectangle ``x`` by ``y`` (+y up on screen), fitted into the
-    canvas left of the control panel."""
-    w, h = x[1] - x[0], y[1] - y[0]
-    free = free_fraction(aspect)
-    tan_v = math.tan(fov / 2)
-    height = MARGIN * max(h / 2 / tan_v, w / 2 / (tan_v * aspect * free))
-    shift = (1.0 - free) * height * tan_v * aspect
-    look = np.array([(x[0] + x[1]) / 2 + shift, (y[0] + y[1]) / 2, 0.0])
+    canvas."""
+    corners = [(xi, yi, 0.0) for xi in x for yi in y]
     # A hair south of the vertical: the view direction and +z up then define the screen's up
     # as +y (exactly vertical, viser and the orbit controls pick one of their own).
-    eye = look + np.array([0.0, -1e-3 * height, height])
-    return CameraPose(name, _vec(eye), _vec(look), fov=fov)
+    return frame_points(name, corners, (0.0, -1e-3, 1.0), aspect, fov)
 
 
 def presets(kind: Kind | str, span: float, table: tuple[float, float, float, float],
@@ -166,10 +157,11 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
                                  (0.3 * span, 0.32 * span, 0.0))
         if abs(aspect - DEFAULT_ASPECT) > 0.05:
             # Another window shape: the same direction, fitted to the reach (the initial
-            # camera cannot know the window; "Reset view" still goes back to it).
+            # camera cannot know the window; console.scene.window_fit re-frames each
+            # browser's camera with its own).
             reach = [(sx * span, sy * span, 0.0) for sx in (-1, 1) for sy in (-0.25, 1)]
             perspective = frame_points("Perspective", reach, np.subtract(
-                perspective.position, perspective.look_at), aspect, table=table)
+                perspective.position, perspective.look_at), aspect)
         # Top-down: the arm's reach, x in [-span, span], y from just behind the base to span.
         top = frame_top_down("Top-down", (-span, span), (-0.25 * span, span), aspect)
         return (perspective, top)
@@ -177,18 +169,33 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
     # mid-range racks (about half of that tall) and bends from there. Frame that working volume
     # (full extension just fits), so the arm fills a good part of the view, not the whole table.
     centre = (0.0, 0.0, 0.45 * span)
-    radius = 0.52 * span
-    return (frame_sphere("Perspective", centre, radius, (0.75, -1.0, 0.55), aspect),
-            frame_sphere("Front", centre, radius, (0.0, -1.0, 0.12), aspect),
-            frame_sphere("Side", centre, radius, (1.0, 0.0, 0.12), aspect),
+    volume = np.vstack([_sphere(centre, 0.52 * span), [(0.0, 0.0, span)]])  # with the full top
+    return (frame_points("Perspective", volume, (0.75, -1.0, 0.55), aspect),
+            frame_points("Front", volume, (0.0, -1.0, 0.12), aspect),
+            frame_points("Side", volume, (1.0, 0.0, 0.12), aspect),
             frame_top_down("Top-down", (max(x0, -0.55 * span), min(x1, 0.55 * span)),
                            (max(y0, -0.55 * span), min(y1, 0.55 * span)), aspect))
+
+
+def presets_for_window(kind: Kind | str, span: float, table: tuple[float, float, float, float],
+                       width_px: float, height_px: float) -> tuple[CameraPose, ...]:
+    """:func:`presets` for a browser canvas of ``width_px`` x ``height_px`` (0 x 0: not known
+    yet, the wide window's presets). The control panel never covers the canvas (docked beside
+    it; on phones the canvas is above the sheet: ``console.web.phone_sheet``), so the canvas's
+    aspect is all a pose needs."""
+    if width_px > 0 and height_px > 0 and math.isfinite(width_px / height_px):
+        return presets(kind, span, table, width_px / height_px)
+    return presets(kind, span, table)
 
 
 def preset(kind: Kind | str, name: str, span: float, table: tuple[float, float, float, float],
            aspect: float = DEFAULT_ASPECT) -> CameraPose:
     """The pose called ``name`` (ValueError naming the choices if there is none)."""
-    poses = presets(kind, span, table, aspect)
+    return pick(presets(kind, span, table, aspect), name)
+
+
+def pick(poses: Sequence[CameraPose], name: str) -> CameraPose:
+    """The pose of ``poses`` called ``name`` (ValueError naming the choices if there is none)."""
     for pose in poses:
         if pose.name == name:
             return pose

@@ -21,6 +21,13 @@ into the right value for each browser (the new operator's enabled, the old one's
 Because the correction travels in the same ordered stream as every other GUI message, no
 earlier message can overtake it. A role that cannot be read counts as a viewer (fails closed).
 
+The 3D view's drag gizmos (transform controls: the objects', the bin's, the obstacles', the
+extensible arm's tip target) only ever move things for the operator: for viewers a gizmo's
+creation message and any later update of its handles (``SceneNodeUpdateMessage`` of
+``disable_axes`` / ``disable_sliders`` / ``disable_rotations``) go out with all three handles
+disabled, so a viewer's browser draws the gizmo without anything to drag. :meth:`resend` sends
+the gizmos' true handles again too.
+
 The server's state is never changed: ``handle.disabled`` stays the panel's own truth. Per-client
 buffers (a browser's own widgets) are not filtered. Nothing is applied on import
 (``console.web.install`` applies it; :func:`uninstall` undoes it for tests).
@@ -39,6 +46,8 @@ log = logging.getLogger(__name__)
 _FILTER = "_console_viewer_props"  # on a broadcast buffer: its ViewerProps
 _VIEWER_FORM = "_console_viewer_form"  # on a message: its form for viewers (shared by all)
 _UPDATES = frozenset({"GuiUpdateMessage", "CommandUpdateMessage"})
+_GIZMO = "TransformControlsMessage"
+_GIZMO_HANDLES = ("disable_axes", "disable_sliders", "disable_rotations")  # all True: none
 
 
 class ViewerProps:
@@ -90,10 +99,12 @@ class ViewerProps:
             return kept
         kind = type(message).__name__
         uuid = getattr(message, "uuid", None)
-        if not isinstance(uuid, str):
-            return message
         form = message
-        if kind in _UPDATES:
+        if kind == _GIZMO or kind == "SceneNodeUpdateMessage":
+            form = self._gizmo_form(message, kind)
+        elif not isinstance(uuid, str):
+            return message
+        elif kind in _UPDATES:
             updates = message.updates
             if ("disabled" in updates and not updates["disabled"]
                     and not self._may_use(uuid)):
@@ -109,6 +120,24 @@ class ViewerProps:
         message.__dict__[_VIEWER_FORM] = form
         return form
 
+    def _gizmo_form(self, message: Any, kind: str) -> Any:
+        """A transform control's creation or update as viewers get it: no handle to drag."""
+        name = getattr(message, "name", None)
+        if not isinstance(name, str):
+            return message
+        if kind == _GIZMO:
+            props = message.props
+            if all(getattr(props, h, True) for h in _GIZMO_HANDLES):
+                return message
+            return _replaced(message, props=dataclasses.replace(
+                props, **{h: True for h in _GIZMO_HANDLES}))
+        updates = message.updates
+        if not any(h in updates and not updates[h] for h in _GIZMO_HANDLES) \
+                or name not in self.server.scene._handle_from_transform_controls_name:
+            return message
+        return _replaced(message, updates={**updates, **{h: True for h in _GIZMO_HANDLES
+                                                          if h in updates}})
+
     def _may_use(self, uuid: str) -> bool:
         try:
             return bool(self._viewer_may_use(uuid))
@@ -120,8 +149,9 @@ class ViewerProps:
 
     def resend(self, uuids: Sequence[str] | None = None) -> int:
         """Broadcast the true ``disabled`` of the shared widgets (all, or ``uuids``) once more,
-        for each connection to receive its own form of it (after a change of holder, or of the
-        viewer policy). Returns the messages queued."""
+        and, when all are resent, the drag gizmos' true handles, for each connection to receive
+        its own form of it (after a change of holder, or of the viewer policy). Returns the
+        messages queued."""
         from viser import _messages
 
         gui = self.server.gui
@@ -139,7 +169,20 @@ class ViewerProps:
                 make = _messages.CommandUpdateMessage if command else _messages.GuiUpdateMessage
                 queue(make(uuid, {"disabled": bool(disabled)}))
                 sent += 1
+            if uuids is None:
+                sent += self._resend_gizmos()
         return sent
+
+    def _resend_gizmos(self) -> int:
+        """Queue each shared transform control's true handles (in ``server.atomic()``)."""
+        from viser import _messages
+
+        scene = self.server.scene
+        gizmos = dict(scene._handle_from_transform_controls_name)
+        for name, handle in gizmos.items():
+            scene._queue_scene_message(_messages.SceneNodeUpdateMessage(
+                name, {h: bool(getattr(handle, h)) for h in _GIZMO_HANDLES}))
+        return len(gizmos)
 
 
 def _replaced(message: Any, **changes: Any) -> Any:

@@ -1,15 +1,27 @@
 """Issue #18: STOP and the arm's phase are on screen without scrolling at desktop, tablet and
 phone sizes, on every tab, for both default consoles; every tab is shot at desktop and tablet
-size (``artifacts/layout/``) for people to look at."""
+size (``artifacts/layout/``) for people to look at.
+
+Issue #31: at each size the arm (the soft arm with its object and the planned approach circles)
+is in the 3D view and not behind the control panel. The arm's points are projected with the
+camera the browser reports to the console (its pose, field of view and canvas size, read on the
+server side of the console built in this process), their bounding box on the page compared with
+the canvas's and the panel's rectangles as the page measures them.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+import viser.transforms as vtf
 from browser_tabs import close_notices, open_tab
 from playwright.sync_api import Error as PlaywrightError
+
+from tests.ws_client import wait_for
 
 pytestmark = pytest.mark.browser
 
@@ -57,10 +69,83 @@ def _on_screen(page: Any, what: str) -> bool:
     return True
 
 
+# The page rectangles of the 3D canvas and of the control panel (the outermost box holding
+# STOP that does not also hold the canvas: docked beside it, or viser's phone sheet over it).
+_RECTS = """() => {
+    const canvas = [...document.querySelectorAll('canvas')]   // the 3D view's (WebGL) canvas
+        .filter(c => !(c.getAttribute('style') || '').includes('pointer-events: none'))
+        .sort((a, b) => b.clientWidth * b.clientHeight - a.clientWidth * a.clientHeight)[0];
+    const stop = [...document.querySelectorAll('button')].find(b => b.textContent.includes('STOP'));
+    if (!canvas || !stop) return null;
+    let panel = stop;
+    while (panel.parentElement && !panel.parentElement.contains(canvas)) panel = panel.parentElement;
+    const box = e => { const r = e.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom]; };
+    return {canvas: box(canvas), panel: box(panel)};
+}"""
+
+
+def scene_points(app: Any) -> np.ndarray:
+    """World points (m) of what must stay in view: the arm's drawn surfaces at its shown pose;
+    for the soft arm also each object's rim and the plan's approach circles."""
+    g = app.view.geometry(np.asarray(app.store.display.q))
+    parts = [g[k] for k in ("body", "gripper", "backbone", "platforms") if k in g]
+    parts += list(g.get("racks", []))
+    if app.grasp_scene is not None:
+        a = np.linspace(0.0, 2 * math.pi, 24)
+        for o in app.grasp_session.view().objects:
+            parts.append(np.stack([o.x + o.r * np.cos(a), o.y + o.r * np.sin(a), 0 * a], -1))
+        circles = app.grasp_scene.plan_scene.circles
+        assert circles.visible, "no approach circles drawn"
+        parts.append(circles.points)
+    return np.concatenate([np.asarray(p, float).reshape(-1, 3) for p in parts])
+
+
+def on_page(camera: Any, points: np.ndarray, canvas: list[float]) -> tuple[float, ...]:
+    """Bounding box (left, top, right, bottom, page px) of ``points`` seen by a browser's
+    reported camera (viser's camera frame is OpenCV's: x right, y down, z forward)."""
+    rot = vtf.SO3(np.asarray(camera.wxyz)).as_matrix()
+    local = (points - np.asarray(camera.position, float)) @ rot         # camera coordinates
+    assert np.all(local[:, 2] > 0), "part of the arm is behind the camera"
+    t = math.tan(camera.fov / 2)
+    w, h = canvas[2] - canvas[0], canvas[3] - canvas[1]
+    px = canvas[0] + (local[:, 0] / local[:, 2] / (t * w / h) + 1) / 2 * w
+    py = canvas[1] + (local[:, 1] / local[:, 2] / t + 1) / 2 * h
+    return float(px.min()), float(py.min()), float(px.max()), float(py.max())
+
+
+def arm_in_view(page: Any, app: Any, size: str) -> str | None:
+    """None when the arm's box is inside the canvas and clear of the panel, else why not."""
+    rects = page.evaluate(_RECTS)
+    if rects is None:
+        return "no canvas or panel yet"
+    canvas, panel = rects["canvas"], rects["panel"]
+    clients = list(app.server.get_clients().values())
+    camera = clients[0].camera
+    # (The reported size is the drawing buffer's: CSS pixels times the page's adaptive pixel
+    # ratio; its aspect is the canvas's.)
+    aspect = (canvas[2] - canvas[0]) / (canvas[3] - canvas[1])
+    if abs(camera.image_width / max(camera.image_height, 1) / aspect - 1) > 0.02:
+        return f"the camera reported a {camera.image_width}x{camera.image_height} canvas"
+    box = on_page(camera, scene_points(app), canvas)
+    where = f"{size}: the arm at {[round(v) for v in box]}"
+    if not (box[0] >= canvas[0] and box[1] >= canvas[1] and box[2] <= canvas[2]
+            and box[3] <= canvas[3]):
+        return f"{where} is not all in the 3D view {[round(v) for v in canvas]}"
+    if box[0] < panel[2] and panel[0] < box[2] and box[1] < panel[3] and panel[1] < box[3]:
+        return f"{where} is behind the panel {[round(v) for v in panel]}"
+    return None
+
+
 @pytest.mark.parametrize("robot", ["soft-arm", "extensible"])
-def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
-        browser: Any, console_server: Any, artifacts_dir: Path, robot: str) -> None:
-    url = console_server(robot, "--no-token")
+def test_stop_and_phase_need_no_scrolling_and_the_arm_is_clear_of_the_panel_at_any_size(
+        browser: Any, served_console: Any, artifacts_dir: Path, robot: str,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from console.core.grasp_session import GraspSession
+    monkeypatch.setattr(GraspSession, "compute_reach", False)  # (the shading: not here)
+    app = served_console(robot, start=True)
+    url = f"http://127.0.0.1:{app.server.get_port()}/"
+    if app.grasp_session is not None:  # the selected object's approach circles drawn
+        app.grasp_session.request_plan()
     shots = artifacts_dir / "layout"
     shots.mkdir(exist_ok=True)
     context = browser.new_context(viewport={"width": 1600, "height": 1000})
@@ -84,6 +169,18 @@ def test_stop_and_phase_need_no_scrolling_at_any_size_on_any_tab(
             page.wait_for_function("w => innerWidth === w", arg=width)
             drawn(page)
             close_notices(page)
+            open_tab(page, "Operate")
+            why: list[str | None] = [None]
+
+            def clear(size: str = size) -> bool:
+                why[0] = arm_in_view(page, app, size)
+                return why[0] is None
+            try:
+                wait_for(clear, 20, "the arm in view", interval=0.1)
+            except AssertionError:
+                shot = shots / f"{robot}-{size}-arm.png"
+                page.screenshot(path=str(shot))
+                raise AssertionError(f"{why[0]} (see {shot})") from None
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
                 drawn(page)

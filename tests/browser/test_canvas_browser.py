@@ -82,19 +82,14 @@ def table_point(cam: Any, px: float, py: float, width: float, height: float) -> 
     return (o + s * d)[:2]
 
 
-def project(point, width: float, height: float) -> tuple[float, float]:
-    """Pixel of a world point for the console's initial camera (console.app._setup_camera)."""
-    span = ROBOT.n_segments * ROBOT.segment_length + ROBOT.gripper.length
-    eye = np.array([0.55 * span, -1.25 * span, 1.75 * span])
-    look = np.array([0.3 * span, 0.32 * span, 0.0])
-    f = (look - eye) / np.linalg.norm(look - eye)
-    r = np.cross(f, [0.0, 0.0, 1.0])
-    r /= np.linalg.norm(r)
-    u = np.cross(r, f)
-    d = np.asarray(point, float) - eye
-    t = math.tan(math.radians(50.0) / 2)
-    x, y = (d @ r) / ((d @ f) * t * width / height), (d @ u) / ((d @ f) * t)
-    return (x + 1) / 2 * width, (1 - y) / 2 * height
+def project(cam: Any, point, width: float, height: float) -> tuple[float, float]:
+    """Canvas pixel of a world point for the browser's camera (its pose and field of view as the
+    browser reports them; viser's camera frame is OpenCV's: x right, y down, z forward)."""
+    local = vtf.SO3(np.asarray(cam.wxyz)).as_matrix().T @ (
+        np.asarray(point, float) - np.asarray(cam.position, float))
+    t = math.tan(cam.fov / 2)
+    x, y = local[0] / (local[2] * t * width / height), local[1] / (local[2] * t)
+    return (x + 1) / 2 * width, (y + 1) / 2 * height
 
 
 def summary(page):
@@ -113,12 +108,13 @@ def number(page, label: str):
     return page.get_by_label(label, exact=True)
 
 
-def _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, artifacts_dir: Path) -> None:
+def _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, cam: Any,
+                                                              artifacts_dir: Path) -> None:
     info = page.locator('[data-testid="objects-info"]')
     assert info.inner_text().startswith("1 object")
     box = page.locator("canvas").first.bounding_box()
     target = (-0.15, 0.25)
-    px, py = project((*target, 0.0), box["width"], box["height"])
+    px, py = project(cam, (*target, 0.0), box["width"], box["height"])
     # A software-rendered page busy drawing sometimes drops a canvas click before viser turns
     # it into a scene click (no event reaches the server, no refusal either): click again,
     # as a person would, at most twice more.
@@ -194,9 +190,15 @@ def test_click_to_place_and_plan_then_top_down_and_two_clicks_measure_a_distance
     client = wait_for(lambda: len(server.get_clients()) == 1 and the_client(server), 30,
                       "client")
     wait_for(lambda: client.camera._state.update_timestamp != 0.0, 30, "camera reported")
+    # The console frames each browser's camera for its window (console.scene.window_fit):
+    # click once the browser reports the camera where the console put it.
+    wait_for(lambda: (pose := app.window_fit.framed_pose(client.client_id)) is not None
+             and np.allclose(client.camera.position, pose.position, atol=1e-3), 30,
+             "the camera framed for this window")
     close_notices_until_none(page)                                  # none over the canvas
     page.set_default_timeout(90_000)                                # a loaded CI machine
-    _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, artifacts_dir)
+    _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, client.camera,
+                                                               artifacts_dir)
     page.get_by_text("View", exact=True).click()                    # the folder opens
     page.get_by_role("button", name="Top-down").click()
 
@@ -252,7 +254,7 @@ def test_click_to_place_and_plan_then_top_down_and_two_clicks_measure_a_distance
     page.screenshot(path=str(artifacts_dir / "view-measured.png"))
 
     page.get_by_role("button", name="Reset view").click()
-    first = app.camera_presets[0]
+    first = app.window_fit.framed_pose(client.client_id)            # framed for this window
     wait_for(lambda: np.allclose(client.camera.position, first.position, atol=0.01), 30,
              "the camera back where the console opened")
     page.get_by_role("button", name="Clear measurement").click()

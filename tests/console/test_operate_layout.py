@@ -183,8 +183,10 @@ def test_a_theme_with_an_unknown_dock_is_refused(tmp_path: Path) -> None:
                     reason="viser's client source is not installed")
 def test_the_phone_style_targets_the_sheet_viser_draws_on_phones() -> None:
     """Read against viser's own client source: phones (Mantine's xs breakpoint, 36 em by
-    default) get a bottom sheet 20 em wide, at most 60 % high; the style matches exactly those
-    inline styles, on phones only, and makes the sheet 16 em wide and at most 50 % high."""
+    default) get a bottom sheet 20 em wide, at most 60 % high, and the 3D view's box (flex-grow
+    1, height 100 %) fills the window; the style matches exactly those inline styles, on phones
+    only, and makes the sheet the window's width and at most 50 % high, the view the other 50 %
+    above it."""
     import re
 
     from console.web.phone_sheet import phone_sheet_css
@@ -195,10 +197,11 @@ def test_the_phone_style_targets_the_sheet_viser_draws_on_phones() -> None:
     assert 'maxHeight: "60%"' in sheet and sheet.count('width: "20em"') == 2
     css = phone_sheet_css()
     assert css.startswith("<style>@media (max-width: 36em) {") and css.endswith("}</style>")
+    assert "backgroundColor: darkMode" in app and "flexGrow: 1,\n            height: \"100%\"" in app
     assert '[style*="max-height: 60%"]' in css and '[style^="width: 20em"]' in css
-    assert re.search(r"\{width:16em!important;max-height:50%!important\}", css)
-    with pytest.raises(ValueError, match="width"):
-        phone_sheet_css(width_em=30)
+    assert re.search(r"\{width:100%!important;max-height:50%!important\}", css)
+    assert re.search(r'div\[style\*="flex-grow: 1"\]\[style\*="height: 100%"\]:has\(canvas\)'
+                     r"\{flex:0 0 auto!important;width:100%!important;height:50%!important\}", css)
     with pytest.raises(ValueError, match="height"):
         phone_sheet_css(max_height_pct=90)
 

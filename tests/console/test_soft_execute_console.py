@@ -208,3 +208,31 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
     assert d2 < PALM_MM and d_old > d2 + 30.0, (palm, d2, d_old)
     assert not any(title in ("Not allowed", "Refused") for title, _ in operator.notes), \
         operator.notes
+
+
+def test_arm_and_disarm_are_recorded_as_the_operators_actions(console: Any) -> None:
+    """Arm and Disarm reach /operator/actions with who pressed them; the replay's log reads
+    "Arm pressed by tester" (before, a replay said "Armed" without who)."""
+    from console.playback.replay_log import action_sentence
+
+    app = console
+    control = app.panel(ControlPanel)
+    operator = operator_of(app)
+    actions: list[tuple[str, Any]] = []
+    record = app.recorder.action
+
+    def spy(what: str, client: Any = None, **extra: Any) -> None:
+        actions.append((what, client))
+        record(what, client, **extra)
+    app.recorder.action = spy
+    wait_for(lambda: phase(control) == "idle", timeout=30.0,
+             what="the control process's first view")
+    user(control.arm_btn, operator)
+    wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
+             what=f"armed (told: {operator.notes})")
+    user(control.disarm_btn, operator)
+    wait_for(lambda: not control.ctl.view.snapshot.control.armed, timeout=30.0,
+             what=f"disarmed (told: {operator.notes})")
+    pressed = [(what, client) for what, client in actions if "pressed" in what]
+    assert pressed == [("arm pressed", operator), ("disarm pressed", operator)], actions
+    assert action_sentence("arm pressed", "tester") == ("action", "Arm pressed by tester")

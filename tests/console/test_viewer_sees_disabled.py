@@ -178,3 +178,73 @@ def test_the_console_shows_viewers_who_operates_and_disables_add_object() -> Non
     finally:
         app.stop()
         server.stop()
+
+
+# -- the 3D view's drag gizmos ---------------------------------------------------------------
+
+HANDLES = ("disable_axes", "disable_sliders", "disable_rotations")
+
+
+def gizmo_draggable(client: RawClient, name: str) -> bool | None:
+    """Whether ``client``'s browser draws gizmo ``name`` with any handle to drag, replayed from
+    its creation message's props and every later props update, in order (None: never sent)."""
+    state: dict[str, bool] | None = None
+    with client._lock:
+        messages = list(client.messages)
+    for m in messages:
+        if m.get("name") != name:
+            continue
+        props = m.get("props")
+        if m.get("type") == "TransformControlsMessage" and isinstance(props, dict):
+            state = {h: bool(props[h]) for h in HANDLES}
+        updates = m.get("updates")
+        if state is not None and m.get("type") == "SceneNodeUpdateMessage" \
+                and isinstance(updates, dict):
+            state.update({h: bool(updates[h]) for h in HANDLES if h in updates})
+    return None if state is None else not all(state.values())
+
+
+def draggable(client: RawClient, name: str, expected: bool, what: str) -> None:
+    wait_for(lambda: gizmo_draggable(client, name) is expected, 20.0, what)
+
+
+def test_viewers_get_the_gizmos_without_handles_and_a_holder_change_flips_them(guarded) -> None:
+    server, guard, role, _, _ = guarded
+    gizmo = server.scene.add_transform_controls("/objects/gizmo", disable_rotations=True,
+                                                disable_sliders=True)
+    a, b = RawClient(server), RawClient(server)
+    role["operator"] = a.client_id
+    guard.viewer_props.resend()
+    try:
+        draggable(a, "/objects/gizmo", True, "a (operator) can drag the gizmo")
+        draggable(b, "/objects/gizmo", False, "b (viewer) has no handle to drag")
+        gizmo.disable_axes = True   # the panel's own: nothing to drag for anyone
+        draggable(a, "/objects/gizmo", False, "the operator: disabled by the panel")
+        gizmo.disable_axes = False
+        draggable(a, "/objects/gizmo", True, "the operator: enabled again")
+        draggable(b, "/objects/gizmo", False, "the viewer: still nothing to drag")
+        role["operator"] = b.client_id  # b takes control
+        guard.viewer_props.resend()
+        draggable(a, "/objects/gizmo", False, "a, now a viewer: nothing to drag")
+        draggable(b, "/objects/gizmo", True, "b, now the operator, can drag")
+        assert gizmo.disable_axes is False  # the server's truth is untouched
+    finally:
+        a.close()
+        b.close()
+
+
+def test_upstream_viser_sends_a_viewer_a_draggable_gizmo(guarded) -> None:
+    server, _, role, _, _ = guarded
+    server.scene.add_transform_controls("/bin/gizmo")
+    role["operator"] = -1
+    with upstream_viser("window_generator"):
+        viewer = RawClient(server)
+        try:
+            draggable(viewer, "/bin/gizmo", True, "upstream: the viewer can drag the gizmo")
+        finally:
+            viewer.close()
+    viewer = RawClient(server)
+    try:
+        draggable(viewer, "/bin/gizmo", False, "patched: nothing to drag for the viewer")
+    finally:
+        viewer.close()

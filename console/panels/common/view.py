@@ -144,7 +144,7 @@ class ViewPanel(Panel):
                                              hint=f"Your camera (only yours) to the {name} view.")
                         for name in names}
         self.reset = gui.add_button(RESET, icon=viser.Icon.HOME,
-                                    hint="Your camera back to how the console opened.")
+                                    hint="Your camera back to the first view, framed for your window.")
         self.measure = gui.add_button(
             "Measure distance", icon=viser.Icon.RULER_MEASURE,
             hint="Then click two points on the table: the distance is shown to everyone. "
@@ -180,16 +180,14 @@ class ViewPanel(Panel):
 
     # -- camera ------------------------------------------------------------------------------
     def pose_for(self, client: Any, name: str) -> camera.CameraPose:
-        """The preset ``name`` fitted to ``client``'s window (or the initial camera for Reset)."""
-        if name == RESET:
-            return self.app.camera_presets[0]
+        """The preset ``name`` (or Reset's, the first) fitted to ``client``'s window: its
+        canvas's aspect and the part the control panel leaves free."""
         try:
-            aspect = float(client.camera.aspect)
-        except (AssertionError, ZeroDivisionError, AttributeError):  # no camera message yet
-            aspect = camera.DEFAULT_ASPECT
-        if not np.isfinite(aspect) or aspect <= 0:
-            aspect = camera.DEFAULT_ASPECT
-        return camera.preset(self.kind, name, self.span, self.table, aspect)
+            width, height = int(client.camera.image_width), int(client.camera.image_height)
+        except (AssertionError, AttributeError, TypeError, ValueError):  # no camera message yet
+            width = height = 0
+        poses = camera.presets_for_window(self.kind, self.span, self.table, width, height)
+        return poses[0] if name == RESET else camera.pick(poses, name)
 
     def move_camera(self, client: Any, name: str) -> camera.CameraPose:
         """Move ``client``'s camera (theirs only) to the preset ``name``."""

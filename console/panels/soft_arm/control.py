@@ -147,10 +147,13 @@ class ControlPanel(Panel):
 
     # -- callbacks (thin: enqueue to the loop) -----------------------------------------------
     def _arm(self, event: Any = None) -> None:
+        # An operator action in recordings (/operator/actions): the replay's log says who armed.
+        self.app.recorder.action("arm pressed", client_of(event))
         fut = self.app.core.start_motion(self.ctl.arm)  # a refusal (link down, Disconnected) is told to this operator
         fut.add_done_callback(lambda f: self.report_done(event, f))
 
     def _disarm(self, event: Any = None) -> None:
+        self.app.recorder.action("disarm pressed", client_of(event))
         fut = self.ctl.disarm()
         fut.add_done_callback(lambda f: self.report_done(event, f))
 

@@ -1,0 +1,71 @@
+"""The row's remaining time (console.core.run_state.run_of) against a simulated row of three on
+core's simulated clock (SimLoop, no wall clock): from the first object's plan to the last
+release the time left is always known, also while a later object settles and is planned (before,
+"estimating" between objects), and elapsed + left stays within FACTOR of the row's duration."""
+
+from __future__ import annotations
+
+import types
+
+import pytest
+
+from console.core.run_state import row_seconds, run_of
+from core import robots
+from core.control.row import bin_at
+from core.control.row_stack import RowControlStack
+from core.control.run_estimate import LegTimer, executing_plan
+from tests.core.test_control_row import B, D, E, _armed_loop
+
+FACTOR = 1.2  # the stated bound: (elapsed + left) / the row's duration within [1/FACTOR, FACTOR]
+
+
+def test_a_rows_time_left_counts_the_objects_not_yet_begun_and_holds_between_objects():
+    arm = robots.load("soft-arm")
+    sim, loop = _armed_loop(arm, 1, RowControlStack)
+    stack = loop.stack
+    sim.place_object(B.x, B.y, B.r)
+    loop.submit(lambda s, t: s.start_row(
+        7, [B, D, E], bin_at(arm, 0.15, 0.25), t,
+        lambda obj: sim.place_object(obj.x, obj.y, obj.r)))
+    timer = LegTimer(arm)
+    t0, seen, planned = loop.t, [], False
+    while loop.t - t0 < 400.0:
+        c = loop.tick()
+        report = stack.row_report()
+        if report is not None and not report.running and loop.t - t0 > 1.0:
+            break
+        if loop.ticks % 100 or report is None:  # once a simulated second
+            continue
+        plan = executing_plan(stack.machine)
+        planned = planned or plan is not None
+        view = types.SimpleNamespace(snapshot=types.SimpleNamespace(control=c), row=report,
+                                     executing=plan)
+        run = run_of(view, arm, timer, ("Object 1", "Object 2", "Object 3"))
+        if planned and run is not None:
+            seen.append((loop.t - t0, run, c.phase))
+    total = loop.t - t0
+    assert stack.row_report().state == "done" and stack.row_report().released == 3
+    between = [(t, run) for t, run, phase in seen if run.index > 0
+               and phase in ("settling", "planning")]
+    assert between, "never saw a later object settle or be planned"
+    for t, run, phase in seen:
+        assert run.row_remaining_s is not None, (t, phase, run.index)
+        assert 1 / FACTOR <= (t + run.row_remaining_s) / total <= FACTOR, \
+            (t, phase, run.index, run.row_remaining_s, total)
+        assert run.time_text().startswith("≈ "), run.time_text()
+    assert [run.index for _, run, _ in seen][-1] == 2 and seen[-1][1].name == "Object 3"
+
+
+def test_the_rows_pace_is_its_finished_objects_mean_time():
+    done = [types.SimpleNamespace(started_s=10.0, ended_s=40.0),
+            types.SimpleNamespace(started_s=40.0, ended_s=80.0)]
+    row = types.SimpleNamespace(outcomes=tuple(done))
+    # Object 3 of 4 runs with 12 s left: it, and one more at the pace of 35 s.
+    assert row_seconds(row, 2, 4, 90.0, 12.0, 10.0) == (pytest.approx(47.0), None)
+    # Between objects (no plan yet), 5 s after the last release: 30 s of this one left.
+    total, here = row_seconds(row, 2, 4, 85.0, None, 0.0)
+    assert total == pytest.approx(30.0 + 35.0) and here == pytest.approx(5.0 / 35.0)
+    # The first object: its own whole estimate for each later one; nothing known before a plan.
+    first = types.SimpleNamespace(outcomes=())
+    assert row_seconds(first, 0, 3, 20.0, 50.0, 20.0) == (pytest.approx(50.0 + 2 * 70.0), None)
+    assert row_seconds(first, 0, 3, 2.0, None, 0.0) == (None, None)
