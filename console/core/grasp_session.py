@@ -381,7 +381,9 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                     last_live = self._clock()
                 planning.start()
                 try:
-                    outcome = self._plan(objects, selected, settings)
+                    # an empty table (a row cleared it, the last object removed) is nothing to
+                    # refuse: the summary goes back to "Place an object and press Plan grasp."
+                    outcome = self._plan(objects, selected, settings) if objects else None
                 finally:
                     planning.stop()
                 with self._cond:

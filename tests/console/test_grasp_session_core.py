@@ -163,3 +163,26 @@ def test_a_listener_added_after_the_start_is_told_the_table_at_once():
         assert len(logged) == n_logged  # the recording is not told the same table again
     finally:
         s.close()
+
+
+def test_a_table_emptied_is_no_refusal_but_a_nothing_selected_plan_is():
+    """A row that clears the table (or the last object removed) re-plans an empty table: the
+    summary goes back to idle, not a red "Refused: No object selected" nobody asked for."""
+    from console.scene.plan_view import outcome_html
+    s, told, logged = headless_session()
+    try:
+        wait_for(lambda: s.view().outcome, 30.0, "the first object planned")
+        s.set_objects([])
+        wait_for(lambda: s.view().outcome is None, 30.0, "the summary back to idle")
+        assert 'data-state="idle"' in outcome_html(s.view().outcome)
+        name = s.place(-0.12, 0.28)
+        wait_for(lambda: (o := s.view().outcome) and o.obj and o.obj.name == name, 30.0,
+                 "the placed object planned")
+        s.select(None)  # objects on the table, none chosen: Plan says what to do
+        out = wait_for(lambda: (o := s.view().outcome) and o.refusal and o, 30.0, "refused")
+        assert out.refusal.startswith("No object selected")
+        s.remove(name)
+        wait_for(lambda: s.view().outcome is None, 30.0, "idle again")
+    finally:
+        s.close()
+        s.join(5.0)
