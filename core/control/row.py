@@ -18,7 +18,10 @@ every re-plan and the carry) keeps the machine's clearance from objects k+1 .. N
 its radius, named "object j" by its place in the queue; :func:`row_obstacles`), so the arm never
 sweeps through an object still waiting on the table; a bin pose too close to one of them is
 refused at the start. The objects already taken (released, or failed and possibly moved) are
-not. The machine's own obstacles are put back when the row ends.
+not. An object whose plan is refused because of a waiting object (its approach or its carry
+blocked by "object j") waits, once, behind the rest of the queue: taking the others first
+clears its way (the order a person would choose). The machine's own obstacles are put back
+when the row ends.
 
 The row is pure bookkeeping, called from the loop thread (the only one that touches the stack):
 :meth:`ObjectRow.start` and :meth:`ObjectRow.after_tick` return the object whose turn begins, so
@@ -31,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
@@ -80,12 +84,24 @@ class ObjectOutcome:
 
 
 def row_obstacles(obstacles: Sequence[Any], objects: Sequence[RowObject],
-                  index: int) -> tuple[Obstacle, ...]:
+                  index: int, waiting: Sequence[int] | None = None) -> tuple[Obstacle, ...]:
     """What the plans for ``objects[index]`` keep the clearance from: ``obstacles`` and the
-    objects after it in the queue (not yet moved), named "object j" (1-based queue place)."""
-    later = [Obstacle(f"object {j + 1}", o.x, o.y, o.r)
-             for j, o in enumerate(objects) if j > index]
-    return with_other_objects(tuple(obstacles), later)
+    objects still waiting on the table (``waiting``, queue places; default: the objects after
+    ``index``), named "object j" (1-based queue place)."""
+    later = set(range(index + 1, len(objects)) if waiting is None else waiting) - {index}
+    blockers = [Obstacle(f"object {j + 1}", o.x, o.y, o.r)
+                for j, o in enumerate(objects) if j in later]
+    return with_other_objects(tuple(obstacles), blockers)
+
+
+_WAITING_OBJECT = re.compile(r"\bobject \d+\b")
+
+
+def blocked_by_waiting(reason: str | None) -> bool:
+    """Whether the machine stopped because its plan was refused for a waiting object (the
+    planner names it "object j": an approach or a carry that would pass through it)."""
+    return bool(reason and reason.startswith("planner refused")
+                and _WAITING_OBJECT.search(reason))
 
 
 class ObjectRow:
@@ -118,6 +134,8 @@ class ObjectRow:
         self.reason: str | None = None
         self._started_s = 0.0
         self._robot_bin: BinParams | None = None  # the machine's bin before the row
+        self._queue: list[int] = []  # queue places of the objects not yet begun, in turn
+        self._deferred: set[int] = set()  # objects that waited behind the others once
         self._obstacles: tuple[Any, ...] = ()  # the machine's obstacles before the row
 
     # -- progress ------------------------------------------------------------------------------
@@ -149,12 +167,14 @@ class ObjectRow:
         if self.bin_params is not None:
             stack.machine.bin = self.bin_params  # for this row only: put back when it ends
         self.state = "running"
+        self._queue = list(range(1, len(self.objects)))
         return self._begin(stack, 0, t)
 
     def _begin(self, stack: Any, index: int, t: float) -> RowObject:
         self.current = index
         self._started_s = t
-        self._set_obstacles(stack, row_obstacles(self._obstacles, self.objects, index))
+        self._set_obstacles(stack, row_obstacles(self._obstacles, self.objects, index,
+                                                 self._queue))
         stack.start(t)
         return self.objects[index]
 
@@ -171,6 +191,7 @@ class ObjectRow:
         self.outcomes.append(ObjectOutcome(
             self.current, self.objects[self.current], status, reason, self._started_s, t,
             m.approach_s, m.return_s, m.replans))
+        self.outcomes.sort(key=lambda o: o.index)  # queue order, whichever waited
 
     def after_tick(self, stack: Any, t: float) -> RowObject | None:
         """Look at the machine after a tick at ``t``; returns the next object if one starts."""
@@ -192,16 +213,21 @@ class ObjectRow:
             why = self.check_release(obj) if self.check_release else None
             self._record(stack, "failed" if why else "released", why, t)
         elif m.phase is Phase.STOPPED:
-            self._record(stack, "failed", m.reason or "stopped", t)
+            cur = self.current
+            if (cur is not None and self._queue and cur not in self._deferred
+                    and blocked_by_waiting(m.reason)):
+                self._deferred.add(cur)  # its way is blocked: take the others first
+                self._queue.append(cur)
+            else:
+                self._record(stack, "failed", m.reason or "stopped", t)
         else:
             return None
-        nxt = (self.current or 0) + 1
-        if nxt >= len(self.objects):
+        if not self._queue:
             self.state, self.current = "done", None
             stack.machine.bin = self._robot_bin
             self._set_obstacles(stack, self._obstacles)
             return None
-        return self._begin(stack, nxt, t)
+        return self._begin(stack, self._queue.pop(0), t)
 
     def stop(self, stack: Any, t: float, reason: str = "operator STOP") -> None:
         """The operator's STOP: hold the arm and end the row; the rest is skipped with ``reason``."""

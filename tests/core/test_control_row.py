@@ -211,3 +211,52 @@ def test_a_row_goes_to_a_bin_the_operator_placed(arm):
         assert not captured
         assert np.hypot(xy[0] - spot[0], xy[1] - spot[1]) < BinParams.from_robot(arm).drop_radius_m
         assert np.hypot(*(xy - world.drop)) > 0.1  # not at the default bin
+
+
+def _refusing_planner(arm, blocked, always=False):
+    """plan_grasp, except that it refuses ``blocked`` (as the obstacle planner words it) while
+    another object waits on the table (an obstacle named "object j"), or always."""
+    from core.planning.feasibility import GraspRefused
+
+    def plan(req):
+        waiting = [o.name for o in req.obstacles if o.name.startswith("object ")]
+        at_blocked = np.hypot(req.center[0] - blocked.x, req.center[1] - blocked.y) < 0.005
+        if at_blocked and (waiting or always):
+            raise GraspRefused("blocked", f"No approach keeps 0 mm clear of "
+                                          f"{waiting[0] if waiting else 'object 2'}.")
+        return plan_grasp(arm, req.kappa, req.center, req.radius)
+    return immediate(plan)
+
+
+def test_an_object_blocked_by_a_waiting_one_waits_behind_the_rest(arm):
+    # B's way is blocked while D still lies on the table: D is taken first, then B (the order
+    # a person would choose), and the outcomes stay in queue order.
+    sim = SoftArmSim(arm, seed=1)
+    stack = ControlStack(arm, 0.01, _refusing_planner(arm, B))
+    loop = SimLoop(sim, stack, 0.01)
+    loop.run(0.05)
+    loop.arm()
+    loop.run(0.5)
+    world = _World(sim, arm)
+    row = run_row(loop, ObjectRow([B, D], check_release=world.check), world.place, 300.0)
+    assert row.state == "done" and row.progress() == "2/2 released"
+    assert world.placed == [B, D, B]  # B's turn, D's, B's again
+    assert [(o.index, o.status, o.reason) for o in row.outcomes] == [
+        (0, "released", None), (1, "released", None)]
+    assert [a[0] for a in world.at_release] == [D, B]
+
+
+def test_an_object_still_refused_after_waiting_fails_once(arm):
+    sim = SoftArmSim(arm, seed=1)
+    stack = ControlStack(arm, 0.01, _refusing_planner(arm, B, always=True))
+    loop = SimLoop(sim, stack, 0.01)
+    loop.run(0.05)
+    loop.arm()
+    loop.run(0.5)
+    world = _World(sim, arm)
+    row = run_row(loop, ObjectRow([B, D], check_release=world.check), world.place, 300.0)
+    assert row.state == "done" and row.progress() == "1/2 released"
+    assert world.placed == [B, D, B]
+    (b, d) = row.outcomes
+    assert (b.index, b.status) == (0, "failed") and "object 2" in b.reason
+    assert (d.index, d.status) == (1, "released")
