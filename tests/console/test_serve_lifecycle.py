@@ -136,6 +136,23 @@ def test_shutdown_past_its_budget_names_the_hung_step_and_exits_0(monkeypatch):
         release.set()
 
 
+def test_shutdown_waits_for_the_arms_stop_beyond_the_budget_of_the_rest(monkeypatch):
+    """The first step, the arm's STOP, gets its own allowance (a loaded machine's STOP took
+    3.7 s, past the 2 s budget, and the console exited before the hardware was closed): a STOP
+    longer than ``budget`` still finishes and the later steps run."""
+    said: list[str] = []
+    ran: list[str] = []
+
+    def slow_stop() -> None:
+        time.sleep(0.2)  # 20 budgets: never within one, however the machine is loaded
+        ran.append("STOP")
+
+    monkeypatch.setattr(serve_lifecycle.os, "_exit", _raise_exited)
+    steps = [("STOP", slow_stop), ("hardware", lambda: ran.append("hardware"))]
+    assert Lifecycle(said.append).shutdown(steps, budget=0.01, first_budget=60.0) is True
+    assert ran == ["STOP", "hardware"] and said == []
+
+
 def _silent_websocket(port: int) -> socket.socket:
     """A browser that opens the websocket and then never reads nor answers anything."""
     s = socket.create_connection(("127.0.0.1", port))
