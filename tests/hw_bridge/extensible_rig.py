@@ -43,13 +43,16 @@ TIP_TOL = 0.003  # m: "within a few mm"
 SLACK_S = 3.0
 WATCHDOG_S = 1.0
 HELLO_S = 10.0  # HELLO answer, and the disarmed link's timeout: within the tests' 20 s waits
+# CONFIG_ACK patience per try (shipped 50 ms x 4 tries: a loaded run got 'no CONFIG_ACK after 4 tries')
+CONFIG_RETRY_S = 1.0
 
 
 def tolerant() -> BridgeConfig:
     # a just-started emulator on a busy box can take longer than the shipped 500 ms to answer
     # HELLO (a fresh clone's run: "no HELLO answer ... within 500 ms")
     return dataclasses.replace(BridgeConfig.from_robot(ROBOT), link_timeout_s=SLACK_S,
-                               watchdog_s=WATCHDOG_S, hello_timeout_s=HELLO_S)
+                               watchdog_s=WATCHDOG_S, hello_timeout_s=HELLO_S,
+                               config_retry_s=CONFIG_RETRY_S)
 
 
 def serial_to(port: str) -> SerialHardware:
