@@ -12,7 +12,6 @@ from __future__ import annotations
 import gzip
 import json
 import resource
-import time
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -65,10 +64,10 @@ def test_gigabyte_of_short_lines_is_refused_by_the_budget(tmp_path, model):
             + "\n").encode()
     path = tmp_path / "short.jsonl.gz"
     write_gzip(path, header(model), line, GB)
-    t0 = time.perf_counter()
+    # (how soon it refuses is a figure, benchmarks/bench_recording_budget.py: a wall-clock bound
+    # here failed on a loaded machine)
     with pytest.raises(ValueError, match=r"more than 1,000,000 records|larger than 256 MB"):
         load_recording(path, model)
-    assert time.perf_counter() - t0 < 60.0
     # a smaller budget refuses sooner, on the same file: the byte budget ...
     with pytest.raises(ValueError, match="larger than 1 MB uncompressed"):
         load_recording(path, model, ReadBudget(max_bytes=1 << 20))
@@ -152,9 +151,10 @@ def test_replay_loads_off_the_callback_thread(app):
                (json.dumps({"t": 1.0, "kind": "state", "q": [0.0] * 6}) + "\n").encode(),
                GB)
     session = ReplaySession(app, FakeClient(app.server), order=50.0)
-    t0 = time.perf_counter()
     worker = session.load_in_background(f"huge{SUFFIX}")
-    assert time.perf_counter() - t0 < 0.2  # the callback returned at once
+    # the callback returned while the load still runs (it inflates 256 MB before it refuses; a
+    # wall-clock bound here would be a timed assertion)
+    assert worker is not None and worker.is_alive()
     assert worker is not None and worker.name == "replay-load"
     assert session.load_in_background(f"huge{SUFFIX}") is None  # one load at a time
     assert session.client.notes[-1][0] == "Still loading"
