@@ -260,7 +260,7 @@ def main(argv: list[str] | None = None) -> int:
         os._exit(1)  # (not a normal exit: that would wait for a half-started control process)
     print(f"serve.py: {pin_console(app.services)}", file=sys.stderr)
     app.start()
-    life.serving()  # from now on SIGTERM / Ctrl-C shut down in order (STOP ≤ 10 s, the rest ≤ 2 s)
+    life.serving()  # from now on SIGTERM / Ctrl-C shut down in order (STOP and hardware ≤ 10 s, the rest ≤ 2 s)
     port = server.get_port()  # viser moves to the next free port if --port is taken
     if port != args.port:
         print(f"serve.py: PORT {args.port} IS BUSY: serving on {port} instead", file=sys.stderr,

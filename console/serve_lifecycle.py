@@ -99,14 +99,16 @@ class Lifecycle:
             pass
 
     def shutdown(self, steps: Iterable[tuple[str, Callable[[], Any]]], budget: float = 2.0,
-                 first_budget: float = 10.0) -> bool:
-        """Run ``steps`` (name, function) in order in a helper thread: the first (the arm's STOP)
-        gets up to ``first_budget`` s of its own, the rest ``budget`` s in all after it.
+                 first_budget: float = 10.0, patient: int = 2) -> bool:
+        """Run ``steps`` (name, function) in order in a helper thread: the first ``patient``
+        (the arm's STOP, closing the hardware processes) get up to ``first_budget`` s, the rest
+        ``budget`` s in all after them.
 
-        The STOP is waited for longer because it is what matters (on a loaded machine it took
-        3.7 s, and exiting before it finished left multiprocessing's semaphores to the resource
-        tracker's "leaked" warning); the later steps close browsers' connections, which a
-        browser that does not answer can hold forever.
+        The STOP and the hardware are waited for longer because they are what matters (on a
+        loaded machine each took more than 2 s, and exiting before they finished left
+        multiprocessing's semaphores to the resource tracker's "leaked" warning); the later
+        steps close browsers' connections, which a browser that does not answer can hold
+        forever.
 
         Returns True when all finished; otherwise reports the step that hung and exits the
         process (code 0: a requested shutdown) without waiting further.
@@ -121,7 +123,7 @@ class Lifecycle:
                     fn()
                 except Exception as exc:  # noqa: BLE001 - shutting down: keep closing the rest
                     self._say(f"shutdown: {name} failed: {exc}")
-                if i == 0:
+                if i == patient - 1:
                     first_done.set()
             first_done.set()
             current[0] = ""

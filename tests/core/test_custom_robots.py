@@ -170,8 +170,10 @@ def test_emulator_process_answers_with_the_files_channel_count(name, shipped):
     arm = load(name)
     emu = Emulator(DATA / f"{name}.toml")
     try:
+        # patient with a just-started emulator on a loaded machine (a run: "no CONFIG_ACK after
+        # 4 tries" at the shipped 50 ms per try)
         slow = dataclasses.replace(BridgeConfig.from_robot(arm), link_timeout_s=2.0,
-                                   watchdog_s=1.0)
+                                   watchdog_s=1.0, hello_timeout_s=10.0, config_retry_s=1.0)
         hw = SerialHardware(slow, emu.port)
         assert hw.configure() is ReturnType.OK, hw.fault
         hw.cleanup()
