@@ -33,7 +33,9 @@ def write_queue(path: Path, q: queue.Queue[dict[str, Any] | None], header: dict[
     The file is finished (summary and index written) when ``None`` arrives; a crash before
     that leaves the chunks written so far, which ``mcap recover`` restores.
     """
-    log = McapLog(path, {k: v for k, v in header.items() if k not in ("kind", "t")},
+    # McapLog stamps its own format id (core.labdata.mcap_file.FORMAT); the JSON-lines id
+    # (console.recording.timeline.FORMAT) is not this file's.
+    log = McapLog(path, {k: v for k, v in header.items() if k not in ("kind", "t", "format")},
                   start_ns, ArmGeometry(model.robot))
     try:
         while True:

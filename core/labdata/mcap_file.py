@@ -63,6 +63,8 @@ class McapLog:
         self._seq: dict[int, int] = {}
         meta = {"format": FORMAT, "start_ns": str(self.start_ns)}
         for key, value in header.items():
+            if key == "format":  # the file's format id is this writer's, never the caller's
+                continue
             meta[str(key)] = value if isinstance(value, str) else json.dumps(value)
         self._writer.add_metadata(META_NAME, meta)
         self.closed = False
