@@ -181,12 +181,15 @@ class Recorder:
     def on_state(self, state: ArmState, command: ArmState | None = None) -> None:
         """Record a drawn state (the render thread calls this every frame) and, if given, the
         newest commanded state (with hardware the drawn one is the measurement)."""
+        record: dict[str, Any] = {"kind": "state", "q": np.asarray(state.q).tolist(),
+                                  "seq": state.seq, "source": state.source}
+        if command is not None:
+            record["command"] = np.asarray(command.q).tolist()
         if self._queue is not None or self.taps:
-            record: dict[str, Any] = {"kind": "state", "q": np.asarray(state.q).tolist(),
-                                      "seq": state.seq, "source": state.source}
-            if command is not None:
-                record["command"] = np.asarray(command.q).tolist()
             self._put(record)
+        else:  # kept all the same: a recording started later begins with the arm as drawn now
+            with self._latch_lock:
+                self._latched["state"] = record
 
     def on_ticks(self, batch: Any) -> None:
         """Record a batch of the arm loop's ticks (``core.labdata.ticks.TickBatch``, from the
