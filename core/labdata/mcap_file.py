@@ -140,6 +140,7 @@ class LabMessage:
     schema_name: str
     log_time: int
     message: Any
+    size: int = 0  # bytes of the encoded message
 
 
 def read_header(f: BinaryIO) -> dict[str, str]:
@@ -151,14 +152,19 @@ def read_header(f: BinaryIO) -> dict[str, str]:
     raise ValueError("not a console recording (no softarm.recording metadata)")
 
 
-def stored_size(f: BinaryIO) -> tuple[int, int] | None:
-    """(uncompressed bytes of all chunks, message count) from the file's summary, read without
-    decompressing a message; None when the file has no summary (a recording cut short)."""
+def stored_size(f: BinaryIO, exclude: tuple[str, ...] = ()) -> tuple[int, int] | None:
+    """(uncompressed bytes of all chunks, count of messages not on an ``exclude`` topic) from the
+    file's summary, read without decompressing a message; None when the file has no summary (a
+    recording cut short)."""
     summary = make_reader(f).get_summary()
     if summary is None:
         return None
     total = sum(int(ci.uncompressed_size) for ci in summary.chunk_indexes)
-    count = int(summary.statistics.message_count) if summary.statistics is not None else 0
+    stats = summary.statistics
+    if stats is None:
+        return total, 0
+    skipped = {cid for cid, ch in summary.channels.items() if ch.topic in exclude}
+    count = sum(int(n) for cid, n in stats.channel_message_counts.items() if cid not in skipped)
     return total, count
 
 
@@ -169,4 +175,4 @@ def iter_messages(f: BinaryIO, topics: list[str] | None = None) -> Iterator[LabM
         if channel.message_encoding != "json":
             raise ValueError(f"channel {channel.topic} is {channel.message_encoding}, not json")
         yield LabMessage(channel.topic, schema.name if schema is not None else "",
-                         message.log_time, json.loads(message.data))
+                         message.log_time, json.loads(message.data), len(message.data))
