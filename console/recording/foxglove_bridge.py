@@ -12,8 +12,10 @@ viewer that joins late sees the table at once; nothing is repeated on a timer, s
 carries only what happened.
 
 Read-only: the server is started with no capabilities (no client publish, no services, no
-parameters, no asset fetching) and no listener, so nothing a Foxglove client sends reaches the
-console; the tap only enqueues (a full queue drops and counts), and one bridge thread encodes and
+parameters, no asset fetching) and a listener that only hears subscriptions (to re-send the
+latched state), so nothing a Foxglove client sends reaches the console; a client's bad frames
+are logged once per client and kind, with its real address
+(:mod:`console.recording.foxglove_log`); the tap only enqueues (a full queue drops and counts), and one bridge thread encodes and
 logs. foxglove-sdk's server runs in its own (Rust) threads, in a private ``foxglove.Context``, on
 a loopback port; the public port is a :class:`~console.recording.foxglove_relay.SubprotocolRelay`, so
 clients asking for ``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking
@@ -31,6 +33,7 @@ from typing import Any
 
 import foxglove
 
+from console.recording.foxglove_log import BadFrameLog
 from console.recording.foxglove_relay import SubprotocolRelay
 from core.labdata.channels import (CHANNELS, EVENT_TOPICS, ArmGeometry, ChannelSpec, json_safe,
                                     latch_key, messages_for, spec_for)
@@ -79,6 +82,9 @@ class FoxgloveBridge:
                                             server_listener=_Subscriptions(self._resend),
                                             context=self.context)
         self.relay = SubprotocolRelay(int(self.server.port), host, port)
+        # The SDK's "Invalid message" lines: once per client and kind, naming the real client.
+        self.bad_frames = BadFrameLog(self.relay.client_of)
+        self.bad_frames.attach()
         self._queue: queue.Queue[tuple[dict[str, Any], int] | str | None] = \
             queue.Queue(max_queue)
         for record in recorder.latched():  # the scene logged before the bridge existed
@@ -178,3 +184,4 @@ class FoxgloveBridge:
         self._thread.join(2.0)
         self.relay.stop()
         self.server.stop()
+        self.bad_frames.detach()
