@@ -15,9 +15,9 @@ Read-only: the server is started with no capabilities (no client publish, no ser
 parameters, no asset fetching) and a listener that only hears subscriptions (to re-send the
 latched state), so nothing a Foxglove client sends reaches the console; a client's bad frames
 are logged once per client and kind, with its real address
-(:mod:`console.recording.foxglove_log`); the tap only enqueues (a full queue drops and counts), and one bridge thread encodes and
-logs. foxglove-sdk's server runs in its own (Rust) threads, in a private ``foxglove.Context``, on
-a loopback port; the public port is a :class:`~console.recording.foxglove_relay.SubprotocolRelay`, so
+(:mod:`console.recording.foxglove_log`); the tap only enqueues (a full queue drops and counts),
+and one bridge thread encodes and logs. foxglove-sdk's server runs in its own (Rust) threads,
+in a private ``foxglove.Context``, on a loopback port; the public port is a :class:`~console.recording.foxglove_relay.SubprotocolRelay`, so
 clients asking for ``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking
 for the SDK's ``foxglove.sdk.v1`` (Foxglove, newer Lichtblick).
 """

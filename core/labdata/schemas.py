@@ -1,9 +1,9 @@
 """JSON schemas of the lab channels, so Foxglove/Lichtblick render them and ROS-side tools type them.
 
 Three are Foxglove's well-known schemas in their JSON form (every field of Foxglove's own
-definition, with its field names, ``oneOf`` enums and ``time``/``duration`` objects; the installed
-foxglove-sdk's protobuf definition of each is the reference ``tests/core/test_lichtblick_schemas.py``
-checks them against), which Foxglove and Lichtblick recognise by name: ``foxglove.SceneUpdate``
+definition, with its field names, ``oneOf`` enums and ``time``/``duration`` objects; the
+installed foxglove-sdk's protobuf definition of each is the reference that
+``tests/core/test_lichtblick_schemas.py`` checks them against), which Foxglove and Lichtblick recognise by name: ``foxglove.SceneUpdate``
 (3D panel), ``foxglove.PoseInFrame`` (3D panel, plots) and ``foxglove.Log`` (Log panel). The
 others are the console's own (``softarm.*``), plain JSON objects whose numeric fields plot
 directly (e.g. ``/control/loop_timing.work_ms``).
@@ -157,7 +157,8 @@ PLAN: Schema = _object(
     "softarm.Plan",
     "A grasp plan (approach circles around the object, waypoints with curvatures and palm poses)"
     " or a path plan (waypoints); lengths in m, angles in rad, curvatures in 1/m",
-    {"timestamp": TIME, "who": WHO, "client": CLIENT, "refusal": {"type": "string", "description": "why the planner refused (omitted: a plan)"},
+    {"timestamp": TIME, "who": WHO, "client": CLIENT,
+     "refusal": {"type": "string", "description": "why the planner refused (omitted: a plan)"},
      "center": _array(NUMBER), "radius": NUMBER,
      "circles": _array({"type": "object", "properties": {"x": NUMBER, "y": NUMBER,
                                                          "r": NUMBER}}),
