@@ -17,9 +17,10 @@ latched state), so nothing a Foxglove client sends reaches the console; a client
 are logged once per client and kind, with its real address
 (:mod:`console.recording.foxglove_log`); the tap only enqueues (a full queue drops and counts),
 and one bridge thread encodes and logs. foxglove-sdk's server runs in its own (Rust) threads,
-in a private ``foxglove.Context``, on a loopback port; the public port is a :class:`~console.recording.foxglove_relay.SubprotocolRelay`, so
-clients asking for ``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking
-for the SDK's ``foxglove.sdk.v1`` (Foxglove, newer Lichtblick).
+in a private ``foxglove.Context``, on a loopback port; the public port is a
+:class:`~console.recording.foxglove_relay.SubprotocolRelay`, so clients asking for
+``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking for the SDK's
+``foxglove.sdk.v1`` (Foxglove, newer Lichtblick).
 """
 
 from __future__ import annotations
