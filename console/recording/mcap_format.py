@@ -98,10 +98,13 @@ def load_mcap(path: Path, model: ArmModel, budget: ReadBudget | None = None) -> 
             start = int(header.get("start_ns", "0"))
             # The replay reads every channel but the 100 Hz ticks (it shows what the console
             # drew; the ticks are for the lab's tools), so only those count against the budget:
-            # their message count from the summary before anything is decompressed, their bytes
-            # as they are read. The compressed file size above bounds the whole file.
+            # from the summary and message indexes before anything is decompressed, and again
+            # as they are read (a file without a summary).
             f.seek(0)
             size = stored_size(f, exclude=TICK_TOPICS)  # None without a summary
+            if size is not None and size[0] > budget.max_bytes:
+                raise ValueError(f"{path.name}: larger than {budget.max_bytes >> 20} MB "
+                                 "uncompressed (the replay limit)")
             if size is not None and size[1] > budget.max_records:
                 raise ValueError(f"{path.name}: more than {budget.max_records:,} records (the "
                                  "replay limit)")

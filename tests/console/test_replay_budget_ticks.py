@@ -9,12 +9,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from mcap.reader import make_reader
 
 from console.core.model import model_for
 from console.recording.mcap_format import load_mcap
 from console.recording.recorder import ReadBudget, load_recording
 from core.labdata.channels import ArmGeometry
-from core.labdata.mcap_file import McapLog
+from core.labdata.mcap_file import McapLog, stored_size
 from core.robots import load
 
 SOFT = load("soft-arm")
@@ -45,6 +46,16 @@ def test_tick_channels_do_not_count_against_the_replay_budget(tmp_path: Path) ->
     assert path.stat().st_size < BUDGET.max_bytes  # compressed, it is small
     rec = load_mcap(path, model_for(SOFT), BUDGET)
     assert [q[0] for q in rec.qs] == [0.0, 1.0, 2.0, 3.0, 4.0]
+    # the summary's count of the replayed bytes matches the replayed messages as the mcap
+    # package reads them (31 bytes of record header each; schema and channel records in a
+    # chunk count with the message before them)
+    with open(path, "rb") as f:
+        counted, n = stored_size(f, exclude=("/control/ticks",))
+        f.seek(0)
+        sizes = [len(m.data) + 31 for _, ch, m in make_reader(f).iter_messages()
+                 if ch.topic != "/control/ticks"]
+    assert n == len(sizes) == 15  # 5 states, each on 3 channels
+    assert sum(sizes) <= counted <= sum(sizes) + 32 * 1024
 
 
 def test_the_same_bytes_on_a_replayed_channel_are_still_refused(tmp_path: Path) -> None:
