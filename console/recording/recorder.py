@@ -217,8 +217,8 @@ class Recorder:
         self.taps.append(fn)
 
     def latched(self) -> list[dict[str, Any]]:
-        """Copies of the newest record of every latched kind (``core.labdata.channels.latch_key``), in
-        the order they were first seen: what a new recording or live viewer starts with."""
+        """Copies of the newest record of every latched kind
+        (``core.labdata.channels.latch_key``), in the order they were first seen: what a new recording or live viewer starts with."""
         with self._latch_lock:
             return [{k: v for k, v in r.items() if k not in ("t", "ns")}
                     for r in self._latched.values()]

@@ -3,9 +3,9 @@
 Three are Foxglove's well-known schemas in their JSON form (every field of Foxglove's own
 definition, with its field names, ``oneOf`` enums and ``time``/``duration`` objects; the
 installed foxglove-sdk's protobuf definition of each is the reference that
-``tests/core/test_lichtblick_schemas.py`` checks them against), which Foxglove and Lichtblick recognise by name: ``foxglove.SceneUpdate``
-(3D panel), ``foxglove.PoseInFrame`` (3D panel, plots) and ``foxglove.Log`` (Log panel). The
-others are the console's own (``softarm.*``), plain JSON objects whose numeric fields plot
+``tests/core/test_lichtblick_schemas.py`` checks them against), which Foxglove and Lichtblick
+recognise by name: ``foxglove.SceneUpdate`` (3D panel), ``foxglove.PoseInFrame`` (3D panel,
+plots) and ``foxglove.Log`` (Log panel). The others are the console's own (``softarm.*``), plain JSON objects whose numeric fields plot
 directly (e.g. ``/control/loop_timing.work_ms``).
 
 Every schema opens in Lichtblick (its parser, ``parseJsonSchema.ts``, accepts one type per field,

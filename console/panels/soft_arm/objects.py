@@ -145,7 +145,8 @@ class ObjectsPanel(Panel):
             return
         o = found[0]
         self.app.recorder.action(
-            f"{verb} object '{name}' at ({o.x * 1e3:.0f}, {o.y * 1e3:.0f}) mm, r {o.r * 1e3:.1f} mm",
+            f"{verb} object '{name}' at ({o.x * 1e3:.0f}, {o.y * 1e3:.0f}) mm, "
+            f"r {o.r * 1e3:.1f} mm",
             client, object=name, x_m=o.x, y_m=o.y, r_m=o.r)
 
     @operator_only(action="place the bin")
