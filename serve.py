@@ -250,6 +250,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"serve.py: {busy}; choose another with --port, or give --next-free-port",
               file=sys.stderr)
         return 2
+    fox_busy = (port_in_use(args.host, args.foxglove_port)
+                 if args.foxglove_port is not None else None)
+    if fox_busy:  # said before anything serves, like the page's port
+        print(f"serve.py: --foxglove-port: {fox_busy}; choose another", file=sys.stderr)
+        return 2
     life = Lifecycle().install()  # a signal while starting: exit at once
     try:
         server, app, token = build(args, robot, status)
@@ -258,6 +263,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"serve.py: start-up failed: {exc}", file=sys.stderr, flush=True)
         sys.stdout.flush()
         os._exit(1)  # (not a normal exit: that would wait for a half-started control process)
+    # The Foxglove port opens right after the console is built, before it starts drawing and
+    # before its address is printed (not before the page's port: viser serves from its
+    # constructor, and the bridge taps the recorder the console builds with that server).
+    bridge = None
+    if args.foxglove_port is not None:  # Foxglove / Lichtblick: "Open connection" -> this URL
+        from console.recording.foxglove_bridge import FoxgloveBridge
+        try:
+            bridge = FoxgloveBridge(app.recorder, robot, args.host, args.foxglove_port)
+        except OSError as exc:  # taken between the check and the bind
+            print(f"serve.py: --foxglove-port {args.foxglove_port}: {exc}", file=sys.stderr)
+            life.shutdown(_shutdown_steps(app, server))
+            return 2
     print(f"serve.py: {pin_console(app.services)}", file=sys.stderr)
     app.start()
     life.serving()  # from now on SIGTERM / Ctrl-C shut down in order (STOP and hardware ≤ 10 s, the rest ≤ 2 s)
@@ -266,7 +283,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"serve.py: PORT {args.port} IS BUSY: serving on {port} instead", file=sys.stderr,
               flush=True)
         if not args.next_free_port:  # taken between the check and the bind
-            life.shutdown(_shutdown_steps(app, server))
+            steps = _shutdown_steps(app, server)
+            if bridge is not None:
+                steps.append(("foxglove bridge", bridge.stop))
+            life.shutdown(steps)
             return 2
     found = urls(args.host, port)
     print(f"Console for '{robot.name}' at {found[0]}  (Ctrl-C to stop)", flush=True)
@@ -281,10 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         print("Desk mode: the first browser to connect gets control (--lab to disable).",
               flush=True)
     print(f"Data folder: {app.data.root}", flush=True)
-    bridge = None
-    if args.foxglove_port is not None:  # Foxglove / Lichtblick: "Open connection" -> this URL
-        from console.recording.foxglove_bridge import FoxgloveBridge
-        bridge = FoxgloveBridge(app.recorder, robot, args.host, args.foxglove_port)
+    if bridge is not None:
         ws_url = urls(args.host, bridge.port)[0].replace("http://", "ws://").rstrip("/")
         print(f"Foxglove live data (read-only): {ws_url}", flush=True)
     try:

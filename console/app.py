@@ -185,10 +185,8 @@ class ConsoleApp:
                 cache_dirs=(self.data_root / "cache",))
             self.grasp_scene = GraspSceneView(server, robot, self.grasp_session)
             self.grasp_session.start()
-            # A recording starts with the table and plan as they are (else logged on change).
-            grasp = self.grasp_session
-            self.recorder.add_start_hook(lambda: feed_grasp(
-                self.recorder, grasp.view(), {"objects", "obstacles", "plan"}))
+            # A recording starts with the table and plan as they are: the recorder keeps the
+            # newest objects and plan records (Recorder.latched), logged by the feed on change.
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         # Each browser's camera framed for its own window (a tablet's, a phone's).
         kind, span, table = self.model.kind, self.arm_reach(), self.table_rectangle()

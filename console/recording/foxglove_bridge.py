@@ -4,16 +4,23 @@
 one :class:`FoxgloveBridge`. It taps the console's recorder (``Recorder.add_tap``), so it streams
 exactly what a recording would hold -- the same topics, schemas and messages
 (``core.labdata.channels``) -- whether or not a recording runs, with log times on the console's
-clock (ns since the epoch). While the arm rests, the newest configuration, objects, plan and
-phase are sent again once a second, so a layout opened later shows them.
+clock (ns since the epoch). State channels are latched: the bridge starts with the recorder's
+newest state records (``Recorder.latched``: configuration, objects, plan, phase, link, scene
+layers) and sends a channel's newest message again whenever a client subscribes to it (the SDK
+has no latching of its own, so its ``on_subscribe`` callback asks the bridge thread), so a
+viewer that joins late sees the table at once; nothing is repeated on a timer, so ``/events``
+carries only what happened.
 
 Read-only: the server is started with no capabilities (no client publish, no services, no
-parameters, no asset fetching) and no listener, so nothing a Foxglove client sends reaches the
-console; the tap only enqueues (a full queue drops and counts), and one bridge thread encodes and
-logs. foxglove-sdk's server runs in its own (Rust) threads, in a private ``foxglove.Context``, on
-a loopback port; the public port is a :class:`~console.recording.foxglove_relay.SubprotocolRelay`, so
-clients asking for ``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking
-for the SDK's ``foxglove.sdk.v1`` (Foxglove, newer Lichtblick).
+parameters, no asset fetching) and a listener that only hears subscriptions (to re-send the
+latched state), so nothing a Foxglove client sends reaches the console; a client's bad frames
+are logged once per client and kind, with its real address
+(:mod:`console.recording.foxglove_log`); the tap only enqueues (a full queue drops and counts),
+and one bridge thread encodes and logs. foxglove-sdk's server runs in its own (Rust) threads,
+in a private ``foxglove.Context``, on a loopback port; the public port is a
+:class:`~console.recording.foxglove_relay.SubprotocolRelay`, so clients asking for
+``foxglove.websocket.v1`` (older Lichtblick) connect as well as those asking for the SDK's
+``foxglove.sdk.v1`` (Foxglove, newer Lichtblick).
 """
 
 from __future__ import annotations
@@ -27,15 +34,27 @@ from typing import Any
 
 import foxglove
 
+from console.recording.foxglove_log import BadFrameLog
 from console.recording.foxglove_relay import SubprotocolRelay
-from core.labdata.channels import (CHANNELS, ArmGeometry, ChannelSpec, json_safe, messages_for,
-                                    spec_for)
+from core.labdata.channels import (CHANNELS, EVENT_TOPICS, ArmGeometry, ChannelSpec, json_safe,
+                                    latch_key, messages_for, spec_for)
 from core.robots import Robot
 
 log = logging.getLogger(__name__)
 SERVER_NAME = "softarm-console"
-LATCHED = ("state", "objects", "plan", "phase")  # repeated while quiet, for late joiners
-REPEAT_S = 1.0
+RESEND_AGAIN_S = 0.3  # a latched channel is sent again this long after a subscription
+RESEND_WAIT_S = 5.0  # how long a re-send waits for the subscription to take messages
+
+
+class _Subscriptions:
+    """foxglove-sdk server listener: a new subscription asks the bridge thread to re-send the
+    channel's latched message (runs on the SDK's threads: only enqueues)."""
+
+    def __init__(self, resend: Any) -> None:
+        self._resend = resend
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self._resend(str(channel.topic))
 
 
 class FoxgloveBridge:
@@ -61,9 +80,16 @@ class FoxgloveBridge:
             self._channel(spec)
         self.server = foxglove.start_server(name=SERVER_NAME, host="127.0.0.1", port=0,
                                             capabilities=[], services=None,
-                                            server_listener=None, context=self.context)
+                                            server_listener=_Subscriptions(self._resend),
+                                            context=self.context)
         self.relay = SubprotocolRelay(int(self.server.port), host, port)
-        self._queue: queue.Queue[tuple[dict[str, Any], int] | None] = queue.Queue(max_queue)
+        # The SDK's "Invalid message" lines: once per client and kind, naming the real client.
+        self.bad_frames = BadFrameLog(self.relay.client_of)
+        self.bad_frames.attach()
+        self._queue: queue.Queue[tuple[dict[str, Any], int] | str | None] = \
+            queue.Queue(max_queue)
+        for record in recorder.latched():  # the scene logged before the bridge existed
+            self._enqueue(record, time.time_ns())
         self._thread = threading.Thread(target=self._run, name="foxglove-bridge", daemon=True)
         self._thread.start()
         recorder.add_tap(self._enqueue)
@@ -91,31 +117,57 @@ class FoxgloveBridge:
         except queue.Full:
             self.dropped += 1
 
+    def _resend(self, topic: str) -> None:
+        if self._stopped:
+            return
+        try:
+            self._queue.put_nowait(topic)
+        except queue.Full:
+            self.dropped += 1
+
     def _run(self) -> None:
-        # The newest record of each latched kind, re-sent once a second while none comes, so a
-        # layout opened later shows the arm, objects, plan and phase without waiting for motion.
-        latest: dict[str, tuple[dict[str, Any], float]] = {}
+        # The newest record per latch key, re-sent (its messages on the subscribed topic only)
+        # when a client subscribes to a channel. The SDK calls on_subscribe before the new
+        # subscription may take messages, so a re-send waits for the channel to have a sink and
+        # goes once more RESEND_AGAIN_S later (a second client's subscription: a duplicate of
+        # the same state for the first is harmless).
+        latest: dict[str, tuple[dict[str, Any], int]] = {}
+        pending: list[tuple[str, float, int]] = []  # (topic, not before, sends left)
         while True:
             try:
-                item = self._queue.get(timeout=REPEAT_S / 2)
+                item = self._queue.get(timeout=0.02 if pending else None)
             except queue.Empty:
-                item = ()
+                item = ""
             if item is None:
                 return
-            now = time.monotonic()
-            if item:
+            if isinstance(item, str):
+                if item and item not in EVENT_TOPICS:  # what happened is never re-sent
+                    pending.append((item, time.monotonic(), 2))
+            else:
                 record, ns = item
                 self._send(record, ns)
-                if record.get("kind") in LATCHED:
-                    latest[str(record["kind"])] = (record, now)
-            for kind, (record, at) in list(latest.items()):
-                if now - at >= REPEAT_S:
-                    self._send(record, time.time_ns())
-                    latest[kind] = (record, now)
+                key = latch_key(record)
+                if key is not None:
+                    latest[key] = (record, ns)
+            now = time.monotonic()
+            kept: list[tuple[str, float, int]] = []
+            for topic, at, left in pending:
+                ch = self._channels.get(topic)
+                if at > now or ch is None or not ch.has_sinks():
+                    if now - at < RESEND_WAIT_S:
+                        kept.append((topic, at, left))
+                    continue
+                for record, ns in list(latest.values()):
+                    self._send(record, ns, only=topic)
+                if left > 1:
+                    kept.append((topic, now + RESEND_AGAIN_S, left - 1))
+            pending = kept
 
-    def _send(self, record: dict[str, Any], ns: int) -> None:
+    def _send(self, record: dict[str, Any], ns: int, only: str | None = None) -> None:
         try:
             for topic, msg in messages_for(record, ns, self.arm):
+                if only is not None and topic != only:
+                    continue
                 ch = self._channel(spec_for(topic))
                 try:
                     data = json.dumps(msg, separators=(",", ":"), allow_nan=False)
@@ -133,3 +185,4 @@ class FoxgloveBridge:
         self._thread.join(2.0)
         self.relay.stop()
         self.server.stop()
+        self.bad_frames.detach()

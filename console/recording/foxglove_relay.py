@@ -6,7 +6,9 @@ SDK's handshake); Lichtblick releases before its ``foxglove.sdk.v1`` support, an
 built on ``@foxglove/ws-protocol``, ask for ``foxglove.websocket.v1`` only and would be turned
 away. :class:`SubprotocolRelay` listens on the public port, accepts either name and relays every
 frame unchanged, both ways, to the SDK server on a loopback port. It decides nothing: what a
-client may do (here: nothing but subscribe) is still the SDK server's answer.
+client may do (here: nothing but subscribe) is still the SDK server's answer. It remembers which
+client is behind each of its loopback connections (:meth:`SubprotocolRelay.client_of`), so what
+the SDK logs about a connection can name the client's real address.
 """
 
 from __future__ import annotations
@@ -24,6 +26,15 @@ log = logging.getLogger(__name__)
 SDK_SUBPROTOCOL = "foxglove.sdk.v1"
 SUBPROTOCOLS = (Subprotocol(SDK_SUBPROTOCOL), Subprotocol("foxglove.websocket.v1"))
 MAX_FRAME = 64 << 20
+
+
+def _address(addr: Any) -> str:
+    """A socket address as "host:port" (IPv6 hosts in brackets, as the SDK writes them)."""
+    try:
+        host, port = addr[0], addr[1]
+    except (TypeError, IndexError):
+        return str(addr)
+    return f"[{host}]:{port}" if ":" in str(host) else f"{host}:{port}"
 
 
 def _pump(src: Any, dst: Any) -> None:
@@ -52,6 +63,8 @@ class SubprotocolRelay:
 
     def __init__(self, upstream_port: int, host: str, port: int) -> None:
         self.upstream = f"ws://127.0.0.1:{upstream_port}"
+        self._clients: dict[str, str] = {}  # our loopback "host:port" -> the client's address
+        self._lock = threading.Lock()
         self._server = serve(self._handle, host, port, subprotocols=list(SUBPROTOCOLS),
                              compression=None, max_size=MAX_FRAME)
         self.port = int(self._server.socket.getsockname()[1])
@@ -67,11 +80,23 @@ class SubprotocolRelay:
             log.warning("foxglove relay: SDK server unreachable (%s)", exc)
             client.close(1011, "live data server unavailable")
             return
+        ours, theirs = _address(upstream.local_address), _address(client.remote_address)
+        with self._lock:
+            self._clients[ours] = theirs
         down = threading.Thread(target=_pump, args=(upstream, client),
                                 name="foxglove-relay-down", daemon=True)
         down.start()
-        _pump(client, upstream)
-        down.join(5.0)
+        try:
+            _pump(client, upstream)
+            down.join(5.0)
+        finally:
+            with self._lock:
+                self._clients.pop(ours, None)
+
+    def client_of(self, address: str) -> str | None:
+        """The address ("host:port") of the client relayed through our loopback ``address``."""
+        with self._lock:
+            return self._clients.get(address)
 
     def stop(self) -> None:
         self._server.shutdown()

@@ -24,7 +24,7 @@ import numpy as np
 
 from console.core.table_bin import TableBin
 from console.core.table_scene import TableObject
-from core.labdata.telemetry import LoopRecords
+from core.labdata.telemetry import LoopRecords, plan_data
 from core.planning.obstacles import Obstacle
 from core.planning.plan_types import GraspPlan
 
@@ -110,16 +110,9 @@ class GraspView(Protocol):
 
 def plan_record(outcome: GraspOutcome) -> dict[str, Any]:
     """A grasp planner outcome as ``plan`` record data (circles, waypoints; or the refusal)."""
-    plan = outcome.plan
-    if plan is None:
+    if outcome.plan is None:
         return {"refusal": outcome.refusal, "circles": [], "waypoints": []}
-    cx, cy = (float(v) for v in np.asarray(plan.center)[:2])
-    return {"refusal": None, "center": [cx, cy], "radius": float(plan.radius),
-            "circles": [{"x": cx, "y": cy, "r": float(r)} for r in np.asarray(plan.radii)],
-            "waypoints": [{"kappa": np.asarray(k, dtype=float).tolist(),
-                           "palm": np.asarray(p, dtype=float).tolist()}
-                          for k, p in zip(plan.kappas, plan.palm_poses)],
-            "total_ms": float(plan.total_ms)}
+    return plan_data(outcome.plan)
 
 
 def path_plan_record(req: Any, waypoints: Any, path: Any) -> dict[str, Any]:

@@ -20,10 +20,21 @@ import numpy as np
 from console.core.model import ArmModel
 from console.recording.timeline import (MAX_DECOMPRESSED, Event, ReadBudget, Recording,
                                         describe_record)
-from core.labdata.channels import ArmGeometry, record_from_message
+from core.labdata.channels import TICK_CHANNELS, ArmGeometry, record_from_message
 from core.labdata.mcap_file import McapLog, iter_messages, read_header, stored_size
 
 SUFFIX = ".mcap"
+TICK_TOPICS = tuple(spec.topic for spec in TICK_CHANNELS)
+
+
+def _replayed_topics(f: Any) -> list[str] | None:
+    """The file's topics but the tick channels (None: all, when the file has no summary)."""
+    from mcap.reader import make_reader
+
+    summary = make_reader(f).get_summary()
+    if summary is None:
+        return None
+    return [ch.topic for ch in summary.channels.values() if ch.topic not in TICK_TOPICS]
 
 
 def write_queue(path: Path, q: queue.Queue[dict[str, Any] | None], header: dict[str, Any],
@@ -33,7 +44,9 @@ def write_queue(path: Path, q: queue.Queue[dict[str, Any] | None], header: dict[
     The file is finished (summary and index written) when ``None`` arrives; a crash before
     that leaves the chunks written so far, which ``mcap recover`` restores.
     """
-    log = McapLog(path, {k: v for k, v in header.items() if k not in ("kind", "t")},
+    # McapLog stamps its own format id (core.labdata.mcap_file.FORMAT); the JSON-lines id
+    # (console.recording.timeline.FORMAT) is not this file's.
+    log = McapLog(path, {k: v for k, v in header.items() if k not in ("kind", "t", "format")},
                   start_ns, ArmGeometry(model.robot))
     try:
         while True:
@@ -83,8 +96,12 @@ def load_mcap(path: Path, model: ArmModel, budget: ReadBudget | None = None) -> 
                                  f"({header.get('robot_kind')}), not on this console's "
                                  f"'{model.robot.name}'")
             start = int(header.get("start_ns", "0"))
+            # The replay reads every channel but the 100 Hz ticks (it shows what the console
+            # drew; the ticks are for the lab's tools), so only those count against the budget:
+            # from the summary and message indexes before anything is decompressed, and again
+            # as they are read (a file without a summary).
             f.seek(0)
-            size = stored_size(f)  # (uncompressed bytes, messages), None without a summary
+            size = stored_size(f, exclude=TICK_TOPICS)  # None without a summary
             if size is not None and size[0] > budget.max_bytes:
                 raise ValueError(f"{path.name}: larger than {budget.max_bytes >> 20} MB "
                                  "uncompressed (the replay limit)")
@@ -92,7 +109,16 @@ def load_mcap(path: Path, model: ArmModel, budget: ReadBudget | None = None) -> 
                 raise ValueError(f"{path.name}: more than {budget.max_records:,} records (the "
                                  "replay limit)")
             f.seek(0)
-            for n, m in enumerate(iter_messages(f), 1):
+            read = 0
+            topics = _replayed_topics(f)
+            f.seek(0)
+            for n, m in enumerate(iter_messages(f, topics), 1):
+                if m.topic in TICK_TOPICS:  # a file without a summary: read, not counted
+                    continue
+                read += m.size
+                if read > budget.max_bytes:
+                    raise ValueError(f"{path.name}: larger than {budget.max_bytes >> 20} MB "
+                                     "uncompressed (the replay limit)")
                 if n > budget.max_records:
                     raise ValueError(f"{path.name}: more than {budget.max_records:,} records "
                                      "(the replay limit)")

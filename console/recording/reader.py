@@ -81,7 +81,7 @@ def load_recording(path: Path, model: ArmModel, budget: ReadBudget | None = None
             the budget; the message says which.
     """
     if path.name.endswith(MCAP_SUFFIX):
-        return load_mcap(path, model)
+        return load_mcap(path, model, budget)
     budget = budget or ReadBudget()
     shape = tuple(model.shape)
     times = np.empty(1024)

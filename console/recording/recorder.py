@@ -45,6 +45,7 @@ from console.recording.reader import load_recording
 from console.recording.timeline import (FORMAT, MAX_DECOMPRESSED, MCAP_SUFFIX, SUFFIX, SUFFIXES,
                                         Event, ReadBudget, Recording)
 from console.core.state import ArmState
+from core.labdata.channels import latch_key
 
 __all__ = ["FORMAT", "MAX_DECOMPRESSED", "MCAP_SUFFIX", "SUFFIX", "SUFFIXES", "Event",
            "ReadBudget", "Recorder", "Recording", "load_recording"]
@@ -97,6 +98,8 @@ class Recorder:
         self.path: Path | None = None
         self._tick_offset_ns: int | None = None  # on_ticks: log ns of the loop's t = 0
         self._tick_last = 0.0  # on_ticks: the newest tick index recorded
+        self._latched: dict[str, dict[str, Any]] = {}  # newest state record per latch_key
+        self._latch_lock = threading.Lock()
 
     @property
     def recording(self) -> bool:
@@ -129,6 +132,11 @@ class Recorder:
             if self.suffix == SUFFIX:
                 q.put(header)
             self.path, self._queue, self.dropped, self.lines = path, q, 0, 0
+            for record in self.latched():  # the scene as it is now, at t = 0
+                record["t"] = 0.0
+                if self.suffix == MCAP_SUFFIX:
+                    record["ns"] = self._start_ns
+                q.put_nowait(record)
             self._tick_offset_ns, self._tick_last = None, 0.0
             self._thread = threading.Thread(target=self._write, args=(path, q, header),
                                             name="console-recorder", daemon=True)
@@ -173,12 +181,15 @@ class Recorder:
     def on_state(self, state: ArmState, command: ArmState | None = None) -> None:
         """Record a drawn state (the render thread calls this every frame) and, if given, the
         newest commanded state (with hardware the drawn one is the measurement)."""
+        record: dict[str, Any] = {"kind": "state", "q": np.asarray(state.q).tolist(),
+                                  "seq": state.seq, "source": state.source}
+        if command is not None:
+            record["command"] = np.asarray(command.q).tolist()
         if self._queue is not None or self.taps:
-            record: dict[str, Any] = {"kind": "state", "q": np.asarray(state.q).tolist(),
-                                      "seq": state.seq, "source": state.source}
-            if command is not None:
-                record["command"] = np.asarray(command.q).tolist()
             self._put(record)
+        else:  # kept all the same: a recording started later begins with the arm as drawn now
+            with self._latch_lock:
+                self._latched["state"] = record
 
     def on_ticks(self, batch: Any) -> None:
         """Record a batch of the arm loop's ticks (``core.labdata.ticks.TickBatch``, from the
@@ -205,7 +216,18 @@ class Recorder:
         clock, ns since the epoch); ``fn`` runs on the caller's thread and must only enqueue."""
         self.taps.append(fn)
 
+    def latched(self) -> list[dict[str, Any]]:
+        """Copies of the newest record of every latched kind
+        (``core.labdata.channels.latch_key``), in the order they were first seen: what a new recording or live viewer starts with."""
+        with self._latch_lock:
+            return [{k: v for k, v in r.items() if k not in ("t", "ns")}
+                    for r in self._latched.values()]
+
     def _put(self, record: dict[str, Any]) -> None:
+        key = latch_key(record)
+        if key is not None:
+            with self._latch_lock:
+                self._latched[key] = dict(record)
         for tap in self.taps:
             try:
                 tap(dict(record), time.time_ns())

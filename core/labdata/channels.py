@@ -17,6 +17,7 @@ obstacles, also draws them as cubes on ``/scene/boxes``).
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import re
 from typing import Any, Literal
@@ -75,6 +76,11 @@ TYPED_KINDS: dict[str, ChannelSpec] = {"objects": OBJECTS, "plan": PLAN, "phase"
                                        "timing": TIMING, "link": LINK, "fault": FAULTS}
 #: Record kinds that mark the replay timeline (phase changes, faults, STOP, operator actions).
 MARKER_KINDS = ("action", "phase", "fault")
+#: Record kinds that carry state (the newest one is what is true now), not events: a recording
+#: starts with the newest of each and a live viewer gets them when it subscribes (latched).
+LATCHED_KINDS = ("state", "objects", "plan", "phase", "link", "timing", "boxes", "overlay")
+#: Channels of things that happened: never latched (a late viewer must not see a STOP again).
+EVENT_TOPICS = (EVENTS.topic, ACTIONS.topic, FAULTS.topic)
 _META = ("timestamp", "who", "client")
 _KIND_RE = re.compile(r"[^A-Za-z0-9_]+")
 
@@ -91,28 +97,65 @@ def spec_for(topic: str) -> ChannelSpec:
     raise KeyError(f"no lab channel {topic!r}")
 
 
+def latch_key(rec: dict[str, Any]) -> str | None:
+    """The key under which record ``rec`` is the current state (its kind; an overlay's kind and
+    name, since each named overlay stands alone), or None for an event (an action, a fault...)."""
+    kind = str(rec.get("kind", ""))
+    if kind not in LATCHED_KINDS:
+        return None
+    if kind == "overlay":
+        data = rec.get("data")
+        return f"overlay/{data.get('name', 'overlay') if isinstance(data, dict) else 'overlay'}"
+    return kind
+
+
 def stamp(ns: int) -> dict[str, int]:
     """Foxglove ``time`` of ``ns`` nanoseconds."""
     return {"sec": int(ns // NS), "nsec": int(ns % NS)}
 
 
-def json_safe(value: Any) -> Any:
-    """``value`` with numpy arrays/scalars and tuples made JSON-able (recursively)."""
+_OMIT = object()  # json_safe: a value left out (None, NaN, a list holding one)
+
+
+def _clean(value: Any) -> Any:
     if isinstance(value, np.ndarray):
-        return value.tolist()
+        return _clean(value.tolist())
     if isinstance(value, np.generic):
-        return value.item()
+        return _clean(value.item())
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return json_safe(dataclasses.asdict(value))
+        return _clean(dataclasses.asdict(value))
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return _OMIT
     if isinstance(value, dict):
-        return {str(k): json_safe(v) for k, v in value.items()}
+        out = {}
+        for k, v in value.items():
+            c = _clean(v)
+            if c is not _OMIT:
+                out[str(k)] = c
+        return out
     if isinstance(value, (list, tuple, set)):
-        return [json_safe(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if value is None or isinstance(value, (bool, int, float, str)):
+        items = [_clean(v) for v in value]
+        return _OMIT if any(c is _OMIT for c in items) else items
+    if isinstance(value, (bool, int, float, str)):
         return value
     return repr(value)
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` made JSON-able for a typed channel (recursively): numpy arrays and scalars,
+    tuples and dataclasses become JSON values, and what has no value is left out rather than
+    written as ``null`` (Lichtblick's schemas have no nullable fields): a ``None`` or non-finite
+    number (NaN: a lost measurement; inf) drops its field, and a list holding one drops the whole
+    list's field (a list with a hole would misalign its elements). None if ``value`` itself has
+    no value."""
+    c = _clean(value)
+    return None if c is _OMIT else c
+
+
+def _client(rec: dict[str, Any]) -> dict[str, str]:
+    """The ``client`` field of a message (the viser client id as text), empty for the server."""
+    cid = rec.get("client")
+    return {} if cid is None else {"client": str(cid)}
 
 
 class ArmGeometry:
@@ -340,23 +383,23 @@ def messages_for(rec: dict[str, Any], ns: int,
     """
     kind = str(rec.get("kind", ""))
     who = str(rec.get("who", "server"))
-    client = json_safe(rec.get("client"))
+    client = _client(rec)
     if kind == "state":
         if arm is None:
             raise ValueError("a state record needs the arm geometry")
         return _state_messages(rec, ns, arm)
     if kind == "action":
         what = str(rec.get("what", ""))
-        details = {k: json_safe(v) for k, v in rec.items()
-                   if k not in ("kind", "t", "ns", "who", "client", "what")}
+        details = json_safe({k: v for k, v in rec.items()
+                             if k not in ("kind", "t", "ns", "who", "client", "what")})
         out: list[tuple[str, dict[str, Any]]] = [
-            (ACTIONS.topic, {"timestamp": stamp(ns), "what": what, "who": who,
-                             "client": client, "details": details}),
+            (ACTIONS.topic, {"timestamp": stamp(ns), "what": what, "who": who, **client,
+                             "details": json.dumps(details, separators=(",", ":"))}),
             (EVENTS.topic, log_message(ns, _action_level(what), what, who))]
         return out
     data = json_safe(rec.get("data"))
     if kind in TYPED_KINDS and isinstance(data, dict):
-        msg = {**data, "timestamp": stamp(ns), "who": who, "client": client}
+        msg = {**data, "timestamp": stamp(ns), "who": who, **client}
         out = [(TYPED_KINDS[kind].topic, msg)]
         if kind == "phase":
             reason = f" ({data['reason']})" if data.get("reason") else ""
@@ -367,8 +410,8 @@ def messages_for(rec: dict[str, Any], ns: int,
                                                   f"fault: {data.get('fault')}", who)))
         return out + _scene_for(kind, data, ns, arm)
     topic = "/console/" + (_KIND_RE.sub("_", kind).strip("_") or "record")
-    out = [(topic, {"timestamp": stamp(ns), "kind": kind, "who": who, "client": client,
-                    "data": data})]
+    out = [(topic, {"timestamp": stamp(ns), "kind": kind, "who": who, **client,
+                    "data": json.dumps(data, separators=(",", ":"))})]
     if kind in ("overlay", "boxes") and isinstance(data, dict):
         out += _scene_for(kind, data, ns, arm)
     return out
@@ -382,13 +425,28 @@ def record_from_message(topic: str, msg: dict[str, Any]) -> dict[str, Any] | Non
                 "source": msg.get("source", "")}
     if topic == ACTIONS.topic:
         return {"kind": "action", "what": msg.get("what", ""), "who": msg.get("who", ""),
-                "client": msg.get("client"), **(msg.get("details") or {})}
+                "client": msg.get("client"), **(_json_object(msg.get("details")) or {})}
     for kind, spec in TYPED_KINDS.items():
         if spec.topic == topic:
             return {"kind": kind, "who": msg.get("who", ""), "client": msg.get("client"),
                     "data": {k: v for k, v in msg.items() if k not in _META}}
     if topic.startswith("/console/"):
+        data = msg.get("data")
         return {"kind": str(msg.get("kind", topic.removeprefix("/console/"))),
                 "who": msg.get("who", ""), "client": msg.get("client"),
-                "data": msg.get("data")}
+                "data": _json_text(data) if isinstance(data, str) else data}
     return None
+
+
+def _json_text(text: str) -> Any:
+    """JSON text written by :func:`messages_for` (older files held the value itself)."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def _json_object(value: Any) -> dict[str, Any] | None:
+    """An action's details: JSON text (an object) now, the object itself in older files."""
+    value = _json_text(value) if isinstance(value, str) else value
+    return value if isinstance(value, dict) else None

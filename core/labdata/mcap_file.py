@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import struct
 from pathlib import Path
 from typing import Any, BinaryIO, Iterator
 
@@ -26,6 +27,7 @@ PROFILE = ""  # plain JSON channels (no ROS profile)
 LIBRARY = "softarm-console"
 META_NAME = "softarm.recording"
 FORMAT = "softarm-console-mcap/1"
+MESSAGE_INDEX_OPCODE = 0x07  # the MCAP spec's Message Index record
 
 
 class McapLog:
@@ -63,6 +65,8 @@ class McapLog:
         self._seq: dict[int, int] = {}
         meta = {"format": FORMAT, "start_ns": str(self.start_ns)}
         for key, value in header.items():
+            if key == "format":  # the file's format id is this writer's, never the caller's
+                continue
             meta[str(key)] = value if isinstance(value, str) else json.dumps(value)
         self._writer.add_metadata(META_NAME, meta)
         self.closed = False
@@ -138,6 +142,7 @@ class LabMessage:
     schema_name: str
     log_time: int
     message: Any
+    size: int = 0  # bytes of the encoded message
 
 
 def read_header(f: BinaryIO) -> dict[str, str]:
@@ -149,14 +154,45 @@ def read_header(f: BinaryIO) -> dict[str, str]:
     raise ValueError("not a console recording (no softarm.recording metadata)")
 
 
-def stored_size(f: BinaryIO) -> tuple[int, int] | None:
-    """(uncompressed bytes of all chunks, message count) from the file's summary, read without
-    decompressing a message; None when the file has no summary (a recording cut short)."""
+def stored_size(f: BinaryIO, exclude: tuple[str, ...] = ()) -> tuple[int, int] | None:
+    """(uncompressed bytes, message count) of the messages not on an ``exclude`` topic, from the
+    file's summary and message indexes, read without decompressing a message; None when the
+    file has no summary (a recording cut short).
+
+    Without ``exclude`` the bytes are the chunks' uncompressed sizes. With it, each chunk counts
+    the records of the other channels only: a record's size is the gap to the next record's
+    offset in the decompressed chunk, which the chunk's message indexes (uncompressed, after the
+    chunk) list for every channel; a chunk without indexes counts whole."""
     summary = make_reader(f).get_summary()
     if summary is None:
         return None
-    total = sum(int(ci.uncompressed_size) for ci in summary.chunk_indexes)
-    count = int(summary.statistics.message_count) if summary.statistics is not None else 0
+    stats = summary.statistics
+    skipped = {cid for cid, ch in summary.channels.items() if ch.topic in exclude}
+    count = (0 if stats is None else
+             sum(int(n) for cid, n in stats.channel_message_counts.items() if cid not in skipped))
+    if not skipped:
+        return sum(int(ci.uncompressed_size) for ci in summary.chunk_indexes), count
+    total = 0
+    for ci in summary.chunk_indexes:
+        if not ci.message_index_offsets:
+            total += int(ci.uncompressed_size)
+            continue
+        entries: list[tuple[int, int]] = []  # (offset in the chunk, channel)
+        f.seek(int(ci.chunk_start_offset) + int(ci.chunk_length))
+        raw = f.read(int(ci.message_index_length))
+        i = 0
+        while i + 9 <= len(raw):
+            opcode, length = raw[i], struct.unpack_from("<Q", raw, i + 1)[0]
+            body = raw[i + 9:i + 9 + length]
+            i += 9 + length
+            if opcode != MESSAGE_INDEX_OPCODE or len(body) < 6:
+                continue
+            channel, n = struct.unpack_from("<HI", body, 0)
+            for k in range(6, 6 + n - n % 16, 16):
+                entries.append((struct.unpack_from("<Q", body, k + 8)[0], channel))
+        entries.sort()
+        ends = [o for o, _ in entries[1:]] + [int(ci.uncompressed_size)]
+        total += sum(end - o for (o, ch), end in zip(entries, ends) if ch not in skipped)
     return total, count
 
 
@@ -167,4 +203,4 @@ def iter_messages(f: BinaryIO, topics: list[str] | None = None) -> Iterator[LabM
         if channel.message_encoding != "json":
             raise ValueError(f"channel {channel.topic} is {channel.message_encoding}, not json")
         yield LabMessage(channel.topic, schema.name if schema is not None else "",
-                         message.log_time, json.loads(message.data))
+                         message.log_time, json.loads(message.data), len(message.data))

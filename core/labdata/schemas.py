@@ -1,10 +1,19 @@
 """JSON schemas of the lab channels, so Foxglove/Lichtblick render them and ROS-side tools type them.
 
-Three are Foxglove's well-known schemas in their JSON form (the subset of fields the console
-writes, with Foxglove's field names and enum values), which Foxglove and Lichtblick recognise by
-name: ``foxglove.SceneUpdate`` (3D panel), ``foxglove.PoseInFrame`` (3D panel, plots) and
-``foxglove.Log`` (Log panel). The others are the console's own (``softarm.*``), plain JSON objects
-whose numeric fields plot directly (e.g. ``/control/loop_timing.work_ms``).
+Three are Foxglove's well-known schemas in their JSON form (every field of Foxglove's own
+definition, with its field names, ``oneOf`` enums and ``time``/``duration`` objects; the
+installed foxglove-sdk's protobuf definition of each is the reference that
+``tests/core/test_lichtblick_schemas.py`` checks them against), which Foxglove and Lichtblick
+recognise by name: ``foxglove.SceneUpdate`` (3D panel), ``foxglove.PoseInFrame`` (3D panel,
+plots) and ``foxglove.Log`` (Log panel). The others are the console's own (``softarm.*``), plain JSON objects whose numeric fields plot
+directly (e.g. ``/control/loop_timing.work_ms``).
+
+Every schema opens in Lichtblick (its parser, ``parseJsonSchema.ts``, accepts one type per field,
+objects with properties, arrays of one typed item): no type unions such as ``["number", "null"]``
+and no untyped objects. A field without a value is omitted from the message, never ``null``; a
+non-finite number (NaN, a lost measurement) is omitted with its field (see
+``core.labdata.channels.json_safe``); free-form data (an action's details, ``softarm.Record``'s
+data) is JSON text in a string field.
 """
 
 from __future__ import annotations
@@ -18,7 +27,8 @@ INTEGER: Schema = {"type": "integer"}
 TEXT: Schema = {"type": "string"}
 BOOL: Schema = {"type": "boolean"}
 WHO: Schema = {"type": "string", "description": "display name of who did it ('server' if none)"}
-CLIENT: Schema = {"type": ["integer", "string", "null"], "description": "viser client id"}
+CLIENT: Schema = {"type": "string",
+                  "description": "viser client id of who did it (omitted for the server)"}
 
 TIME: Schema = {"type": "object", "title": "time",
                 "properties": {"sec": {"type": "integer", "minimum": 0},
@@ -27,6 +37,12 @@ DURATION: Schema = {"type": "object", "title": "duration",
                     "properties": {"sec": INTEGER,
                                    "nsec": {"type": "integer", "minimum": 0,
                                             "maximum": 999999999}}}
+def _enum(title: str, description: str, values: list[tuple[str, int]]) -> Schema:
+    """A Foxglove enum field as its JSON schemas write it: ``oneOf`` titled numeric constants."""
+    return {"title": title, "description": description,
+            "oneOf": [{"title": name, "const": value} for name, value in values]}
+
+
 VECTOR3: Schema = {"type": "object", "title": "foxglove.Vector3",
                    "properties": {"x": NUMBER, "y": NUMBER, "z": NUMBER}}
 POINT3: Schema = {"type": "object", "title": "foxglove.Point3",
@@ -52,8 +68,9 @@ def _object(title: str, description: str, properties: dict[str, Schema],
 
 LINE_PRIMITIVE: Schema = {
     "type": "object", "title": "foxglove.LinePrimitive",
-    "properties": {"type": {"type": "integer", "enum": [0, 1, 2],
-                            "description": "0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
+    "properties": {"type": _enum("foxglove.LineType", "An enumeration indicating how input "
+                                 "points should be interpreted to create lines",
+                                 [("LINE_STRIP", 0), ("LINE_LOOP", 1), ("LINE_LIST", 2)]),
                    "pose": POSE, "thickness": NUMBER, "scale_invariant": BOOL,
                    "points": _array(POINT3), "color": COLOR, "colors": _array(COLOR),
                    "indices": _array(INTEGER)}}
@@ -67,22 +84,41 @@ TEXT_PRIMITIVE: Schema = {
     "type": "object", "title": "foxglove.TextPrimitive",
     "properties": {"pose": POSE, "billboard": BOOL, "font_size": NUMBER,
                    "scale_invariant": BOOL, "color": COLOR, "text": TEXT}}
+ARROW_PRIMITIVE: Schema = {
+    "type": "object", "title": "foxglove.ArrowPrimitive",
+    "properties": {"pose": POSE, "shaft_length": NUMBER, "shaft_diameter": NUMBER,
+                   "head_length": NUMBER, "head_diameter": NUMBER, "color": COLOR}}
+CUBE_PRIMITIVE: Schema = {"type": "object", "title": "foxglove.CubePrimitive",
+                          "properties": {"pose": POSE, "size": VECTOR3, "color": COLOR}}
+TRIANGLE_LIST_PRIMITIVE: Schema = {
+    "type": "object", "title": "foxglove.TriangleListPrimitive",
+    "properties": {"pose": POSE, "points": _array(POINT3), "color": COLOR,
+                   "colors": _array(COLOR), "indices": _array(INTEGER)}}
+MODEL_PRIMITIVE: Schema = {
+    "type": "object", "title": "foxglove.ModelPrimitive",
+    "properties": {"pose": POSE, "scale": VECTOR3, "color": COLOR, "override_color": BOOL,
+                   "url": TEXT, "media_type": TEXT,
+                   "data": {"type": "string", "contentEncoding": "base64"}}}
 SCENE_ENTITY: Schema = {
     "type": "object", "title": "foxglove.SceneEntity",
     "properties": {"timestamp": TIME, "frame_id": TEXT, "id": TEXT, "lifetime": DURATION,
                    "frame_locked": BOOL,
                    "metadata": _array({"type": "object", "title": "foxglove.KeyValuePair",
                                        "properties": {"key": TEXT, "value": TEXT}}),
-                   "arrows": _array({"type": "object"}), "cubes": _array({"type": "object"}),
+                   "arrows": _array(ARROW_PRIMITIVE), "cubes": _array(CUBE_PRIMITIVE),
                    "spheres": _array(SPHERE_PRIMITIVE), "cylinders": _array(CYLINDER_PRIMITIVE),
-                   "lines": _array(LINE_PRIMITIVE), "triangles": _array({"type": "object"}),
-                   "texts": _array(TEXT_PRIMITIVE), "models": _array({"type": "object"})}}
+                   "lines": _array(LINE_PRIMITIVE),
+                   "triangles": _array(TRIANGLE_LIST_PRIMITIVE),
+                   "texts": _array(TEXT_PRIMITIVE), "models": _array(MODEL_PRIMITIVE)}}
 SCENE_UPDATE: Schema = _object(
     "foxglove.SceneUpdate", "An update to the entities displayed in a 3D scene",
     {"deletions": _array({"type": "object", "title": "foxglove.SceneEntityDeletion",
                           "properties": {"timestamp": TIME,
-                                         "type": {"type": "integer", "enum": [0, 1],
-                                                  "description": "0 MATCHING_ID, 1 ALL"},
+                                         "type": _enum("foxglove.SceneEntityDeletionType",
+                                                       "An enumeration indicating which "
+                                                       "entities should match a "
+                                                       "SceneEntityDeletion command",
+                                                       [("MATCHING_ID", 0), ("ALL", 1)]),
                                          "id": TEXT}}),
      "entities": _array(SCENE_ENTITY)})
 POSE_IN_FRAME: Schema = _object(
@@ -91,8 +127,9 @@ POSE_IN_FRAME: Schema = _object(
 LOG: Schema = _object(
     "foxglove.Log", "A log message",
     {"timestamp": TIME,
-     "level": {"type": "integer", "enum": [0, 1, 2, 3, 4, 5],
-               "description": "0 UNKNOWN, 1 DEBUG, 2 INFO, 3 WARNING, 4 ERROR, 5 FATAL"},
+     "level": _enum("foxglove.LogLevel", "Log level",
+                    [("UNKNOWN", 0), ("DEBUG", 1), ("INFO", 2), ("WARNING", 3), ("ERROR", 4),
+                     ("FATAL", 5)]),
      "message": TEXT, "name": TEXT, "file": TEXT, "line": {"type": "integer", "minimum": 0}})
 
 SEGMENT: Schema = {
@@ -112,7 +149,7 @@ OBJECTS: Schema = _object(
     {"timestamp": TIME, "who": WHO, "client": CLIENT,
      "objects": _array({"type": "object", "properties": {"name": TEXT, "x": NUMBER,
                                                          "y": NUMBER, "r": NUMBER}}),
-     "selected": {"type": ["string", "null"]},
+     "selected": {"type": "string", "description": "the selected object (omitted: none)"},
      "obstacles": _array({"type": "object", "properties": {"name": TEXT, "x": NUMBER,
                                                            "y": NUMBER, "r": NUMBER}}),
      "clearance": NUMBER}, extra=True)
@@ -120,7 +157,8 @@ PLAN: Schema = _object(
     "softarm.Plan",
     "A grasp plan (approach circles around the object, waypoints with curvatures and palm poses)"
     " or a path plan (waypoints); lengths in m, angles in rad, curvatures in 1/m",
-    {"timestamp": TIME, "who": WHO, "client": CLIENT, "refusal": {"type": ["string", "null"]},
+    {"timestamp": TIME, "who": WHO, "client": CLIENT,
+     "refusal": {"type": "string", "description": "why the planner refused (omitted: a plan)"},
      "center": _array(NUMBER), "radius": NUMBER,
      "circles": _array({"type": "object", "properties": {"x": NUMBER, "y": NUMBER,
                                                          "r": NUMBER}}),
@@ -130,7 +168,9 @@ PLAN: Schema = _object(
     extra=True)
 PHASE: Schema = _object(
     "softarm.ControlPhase", "The control state machine's phase (Fig. 3) and flags",
-    {"timestamp": TIME, "phase": TEXT, "reason": {"type": ["string", "null"]}, "armed": BOOL,
+    {"timestamp": TIME, "phase": TEXT, "reason": {"type": "string",
+                                                  "description": "why (omitted: no reason)"},
+     "armed": BOOL,
      "tracking_ok": BOOL, "gripper_closed": BOOL, "waypoint": INTEGER, "n_waypoints": INTEGER,
      "replans": INTEGER, "who": WHO, "client": CLIENT}, extra=True)
 TIMING: Schema = _object(
@@ -142,19 +182,23 @@ TIMING: Schema = _object(
 LINK: Schema = _object(
     "softarm.LinkHealth", "Serial link health: lifecycle state, armed, round trip (ms), counters",
     {"timestamp": TIME, "device": TEXT, "state": TEXT, "port": TEXT, "armed": BOOL,
-     "rtt_ms_p50": {"type": ["number", "null"]}, "rtt_ms_p99": {"type": ["number", "null"]},
+     "rtt_ms_p50": {"type": "number", "description": "omitted before any round trip"},
+     "rtt_ms_p99": {"type": "number", "description": "omitted before any round trip"},
      "sent": INTEGER, "received": INTEGER, "lost": INTEGER, "crc_errors": INTEGER,
      "who": WHO, "client": CLIENT}, extra=True)
 ACTION: Schema = _object(
     "softarm.OperatorAction", "Something a person did or was refused, with who did it",
     {"timestamp": TIME, "what": TEXT, "who": WHO, "client": CLIENT,
-     "details": {"type": "object"}})
+     "details": {"type": "string", "contentMediaType": "application/json",
+                 "description": "the action's other details as a JSON object (text)"}})
 FAULT: Schema = _object(
     "softarm.Fault", "A hardware or control fault that stopped commanding the arm",
     {"timestamp": TIME, "fault": TEXT, "who": WHO, "client": CLIENT}, extra=True)
 RECORD: Schema = _object(
     "softarm.Record", "Any other console record: its kind and free-form data",
-    {"timestamp": TIME, "kind": TEXT, "who": WHO, "client": CLIENT, "data": {}})
+    {"timestamp": TIME, "kind": TEXT, "who": WHO, "client": CLIENT,
+     "data": {"type": "string", "contentMediaType": "application/json",
+              "description": "the record's data as JSON text"}})
 
 _TICK_COMMON: dict[str, Schema] = {
     "timestamp": TIME,

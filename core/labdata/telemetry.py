@@ -14,6 +14,22 @@ from typing import Any
 import numpy as np
 
 
+def plan_data(plan: Any, refusal: str | None = None) -> dict[str, Any]:
+    """A grasp plan (``core.planning.plan_types.GraspPlan``, duck-typed) as ``plan`` record data:
+    its approach circles and waypoints (curvatures, palm poses), lengths in m; or, for None, the
+    planner's ``refusal``. The console (``console.recording.lab_feed.plan_record``) and the
+    trials recorder write the same."""
+    if plan is None:
+        return {"refusal": refusal or "no plan", "circles": [], "waypoints": []}
+    cx, cy = (float(v) for v in np.asarray(plan.center)[:2])
+    return {"refusal": None, "center": [cx, cy], "radius": float(plan.radius),
+            "circles": [{"x": cx, "y": cy, "r": float(r)} for r in np.asarray(plan.radii)],
+            "waypoints": [{"kappa": np.asarray(k, dtype=float).tolist(),
+                           "palm": np.asarray(p, dtype=float).tolist()}
+                          for k, p in zip(plan.kappas, plan.palm_poses)],
+            "total_ms": float(plan.total_ms)}
+
+
 class LoopRecords:
     """Stateful mapping from loop snapshots to records (one instance per loop)."""
 

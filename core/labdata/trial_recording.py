@@ -22,7 +22,7 @@ import numpy as np
 from core.control.planner_spec import DEFAULT_PLANNER
 from core.labdata.channels import ArmGeometry
 from core.labdata.mcap_file import McapLog
-from core.labdata.telemetry import LoopRecords
+from core.labdata.telemetry import LoopRecords, plan_data
 from core.labdata.ticks import SoftArmTicks, TickRing
 from core.robots import load
 
@@ -41,10 +41,13 @@ class _Tick:
 
 class TrialSampler:
     """Loop observer: phase changes and faults at every tick; configuration, loop timing and
-    the object (when it moved > 1 mm) at ``hz`` (the loop runs at 100 Hz).
+    the object (when it moved > 1 mm) at ``hz`` (the loop runs at 100 Hz); every plan the state
+    machine gets (:meth:`on_plan`, called by ``core.control.trials.run_trial``).
 
     It is called with each tick's ``hw_bridge.loop.LoopSnapshot``, or with each tick's
-    ``core.control.stack.Telemetry`` (or None) by a loop that passes only that (no timing then).
+    ``core.control.stack.Telemetry`` (or None) by a loop that passes only that: its loop timing
+    is then the simulated period (10 ms) and, as ``work_ms``, the wall time the last simulated
+    tick took on this computer (simulation, control and this recording).
     """
 
     def __init__(self, hz: float = 10.0, period_s: float = 0.01, n_segments: int = 6) -> None:
@@ -55,15 +58,32 @@ class TrialSampler:
         self._ticks = 0
         self._ring = TickRing(SoftArmTicks(n_segments), TICK_BATCH + 1)
         self.records: list[dict[str, Any]] = []
+        self._t = 0.0  # loop time of the newest tick
+        self._wall: float | None = None  # perf_counter at the previous tick
+
+    def on_plan(self, plan: Any, refusal: str | None) -> None:
+        """A plan made for the state machine (None and why: refused), as a ``plan`` record."""
+        self.flush()
+        self.records.append({"kind": "plan", "t": self._t, "data": plan_data(plan, refusal)})
 
     def __call__(self, snap: Any) -> bool:
         self._ticks += 1
-        if snap is not None and not hasattr(snap, "control"):  # bare telemetry
+        now = time.perf_counter()
+        work_ms = None if self._wall is None else (now - self._wall) * 1e3
+        self._wall = now
+        bare = snap is not None and not hasattr(snap, "control")
+        if bare:  # bare telemetry
             snap = _Tick(self._ticks, float(snap.t), snap)
         self._tick_row(snap)
         if snap is None:
             return False
+        self._t = float(snap.t)
         sample = snap.tick % self.every == 0
+        if bare and sample and work_ms is not None:  # loop timing on the simulated clock
+            self.flush()
+            self.records.append({"kind": "timing", "t": self._t, "data": {
+                "tick": int(snap.tick), "loop_t": self._t, "period_ms": self.period_s * 1e3,
+                "work_ms": work_ms, "overruns": 0}})
         for rec in self._loop.records(snap):
             if sample or rec["kind"] in ("phase", "fault"):
                 rec["t"] = float(snap.t)

@@ -285,7 +285,7 @@ def test_boxes_are_recorded_and_read_back_with_the_mcap_reader(gated, tmp_path):
         for _, channel, message in make_reader(f).iter_messages():
             data = json.loads(message.data)
             if channel.topic == "/console/boxes":
-                records.append(data["data"])
+                records.append(json.loads(data["data"]))  # JSON text
             elif channel.topic == "/scene/boxes":
                 cubes.append(data["entities"][0]["cubes"])
     assert [[b["name"] for b in r["boxes"]] for r in records] == [["Shelf"], ["Shelf", "Wall"]]

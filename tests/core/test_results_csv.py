@@ -132,7 +132,8 @@ def test_progress_shows_on_a_terminal_only() -> None:
 
 
 def test_the_trial_sampler_takes_snapshots_or_bare_telemetry() -> None:
-    """A loop that hands ``until`` only the telemetry still gets phases, states and the object."""
+    """A loop that hands ``until`` only the telemetry still gets phases, states, the object and
+    loop timing (on the simulated clock: the 10 ms period, and the wall time per tick)."""
     from types import SimpleNamespace
 
     from core.labdata.trial_recording import TrialSampler
@@ -149,7 +150,10 @@ def test_the_trial_sampler_takes_snapshots_or_bare_telemetry() -> None:
         full(SimpleNamespace(tick=k, t=t.t, control=t, period_ms=10.0, work_ms=0.4,
                              overruns=0, fault=None))
     bare(None)
-    for sampler, timing in ((bare, 0), (full, 3)):
+    simulated = [r["data"] for r in bare.records if r["kind"] == "timing"]
+    assert all(d["period_ms"] == 10.0 and d["work_ms"] >= 0.0 for d in simulated)
+    assert [d["tick"] for d in simulated] == [2, 4, 6]
+    for sampler, timing in ((bare, 3), (full, 3)):
         kinds = [r["kind"] for r in sampler.records]
         assert kinds.count("phase") == 2 and kinds.count("state") == 3
         assert kinds.count("timing") == timing and kinds.count("objects") == 3

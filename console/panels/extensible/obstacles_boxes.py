@@ -112,7 +112,7 @@ class BoxObstaclesPanel(Panel):
         self.allow_viewers(self.save_button)
         self.load_button.on_upload(self._on_load)
         self.app.server.scene.on_click()(self._on_scene_click)
-        self.app.recorder.add_start_hook(self._log)
+        self._log()  # the recorder keeps the newest (Recorder.latched): recordings start with it
 
     # -- the shared scene ------------------------------------------------------------------
     def current(self) -> tuple[BoxScene, int]:

@@ -128,10 +128,26 @@ class ObjectsPanel(Panel):
 
     @operator_only(action="place or select an object")
     def _place_at(self, event, hit: tuple[float, float]) -> None:
+        before = {o.name for o in self.session.view().objects}
         try:
-            self.session.place(*hit, r=float(self.r.value) / 1e3)
+            name = self.session.place(*hit, r=float(self.r.value) / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
+            return
+        self._recorded("selected" if name in before else "placed", name, event.client)
+
+    def _recorded(self, verb: str, name: str, client: Any) -> None:
+        """An ``/operator/actions`` entry for what ``client`` did to object ``name``: where it
+        is now, in mm in the words and in m in the details."""
+        found = [o for o in self.session.view().objects if o.name == name]
+        if not found:
+            self.app.recorder.action(f"{verb} object '{name}'", client, object=name)
+            return
+        o = found[0]
+        self.app.recorder.action(
+            f"{verb} object '{name}' at ({o.x * 1e3:.0f}, {o.y * 1e3:.0f}) mm, "
+            f"r {o.r * 1e3:.1f} mm",
+            client, object=name, x_m=o.x, y_m=o.y, r_m=o.r)
 
     @operator_only(action="place the bin")
     def _place_bin_at(self, event, hit: tuple[float, float]) -> None:
@@ -159,6 +175,8 @@ class ObjectsPanel(Panel):
             return
         x, y = (float(v) for v in event.target.position[:2])
         self.session.drag(name, x, y, live=event.phase != "end")
+        if event.phase == "end":
+            self._recorded("moved", name, event.client)
 
     @operator_only(action="change how clicks on the table act")
     def _on_click_mode(self, event) -> None:
@@ -189,6 +207,8 @@ class ObjectsPanel(Panel):
             self.session.update(name, x=x / 1e3, y=y / 1e3, r=r / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
+            return
+        self._recorded("edited", name, event.client)
 
     @operator_only(action="add an object")
     def _on_add(self, event) -> None:
@@ -196,16 +216,20 @@ class ObjectsPanel(Panel):
         x, y = float(self.x.value) / 1e3, float(self.y.value) / 1e3
         if any(((o.x - x) ** 2 + (o.y - y) ** 2) ** 0.5 <= o.r for o in view.objects):
             x += 0.06  # typed spot taken (it shows the selected object): place beside it
+        before = {o.name for o in view.objects}
         try:
-            self.session.place(x, y, r=float(self.r.value) / 1e3)
+            name = self.session.place(x, y, r=float(self.r.value) / 1e3)
         except ValueError as exc:
             self._error(event, str(exc))
+            return
+        self._recorded("selected" if name in before else "added", name, event.client)
 
     @operator_only(action="remove an object")
     def _on_remove(self, event) -> None:
         name = self.session.view().selected
         if name is not None:
             self.session.remove(name)
+            self.app.recorder.action(f"removed object '{name}'", event.client, object=name)
 
     def on_refused(self, event: Any) -> None:
         """Undo what a refused viewer's edit shows everyone."""
@@ -240,6 +264,9 @@ class ObjectsPanel(Panel):
             return
         self.session.set_scene(scene.objects, scene.obstacles)
         self.session.set_bin(None)  # the file's bin once its pose is found (if it has one)
+        self.app.recorder.action(f"loaded the scene {upload.name} ({len(scene.objects)} objects, "
+                                 f"{len(scene.obstacles)} obstacles)", event.client,
+                                 file=upload.name)
         if bin_point is not None:
             self._find_bin(event.client, bin_point)
 

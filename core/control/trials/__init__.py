@@ -126,8 +126,20 @@ def run_trial(robot: SoftArm, obj: Sequence[float], seed: int, *, label: str = "
         sim.p = sim.p.replace(**sim_overrides)
     sim.place_object(x + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M),
                      y + rng.uniform(-PLACEMENT_TOLERANCE_M, PLACEMENT_TOLERANCE_M), r)
-    stack = ControlStack(robot, 0.01, immediate(
-        lambda req: plan_request(plan_fn, robot, req)))
+    on_plan = getattr(observe, "on_plan", None)  # a recorder also takes each plan made
+
+    def planned(req: Any) -> Any:
+        try:
+            plan = plan_request(plan_fn, robot, req)
+        except Exception as exc:
+            if on_plan is not None:
+                on_plan(None, str(exc))
+            raise
+        if on_plan is not None:
+            on_plan(plan, None)
+        return plan
+
+    stack = ControlStack(robot, 0.01, immediate(planned))
     loop = SimLoop(sim, stack, 0.01)
     wall = time.perf_counter()
     watch = (lambda c: bool(observe(c))) if observe else None
