@@ -4,7 +4,7 @@ A variant is the base robot file with some ``section.key`` values changed (issue
 variant's file is written into the study directory (so ``serve.py --robot`` opens it) and its
 metrics become one row of ``results.csv`` / ``results.parquet`` (units in column names). Each
 finished variant is also written as ``variants/<name>.json``, so a killed study resumes where it
-stopped. Variants run in a local process pool (``concurrent.futures``), as the trials do.
+stopped. ``report.html`` plots each metric (self-contained SVG). Variants run in a local process pool (``concurrent.futures``), as the trials do.
 """
 
 from __future__ import annotations
@@ -229,6 +229,8 @@ def run_study(robot: str, vary: Mapping[str, Sequence[float]], out: Path, spec: 
                 finish(row)
     ordered = [rows[name] for name, _, _ in todo]
     write_tables(ordered, out)
+    from core.study.report import write_html
+    write_html(ordered, METRICS, best(ordered), out / "report.html")
     return ordered
 
 

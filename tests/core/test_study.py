@@ -42,6 +42,8 @@ def test_tiny_study_tables_robot_files_metrics_and_resume(tmp_path: Path) -> Non
     assert [r["segments.length"] for r in table] == [0.05, 0.0627]
     assert all(r["error"] == "" for r in table)
     assert (out / "results.csv").read_text().count("\n") == 3
+    report = (out / "report.html").read_text()
+    assert "<svg" in report and "http" not in report.replace("http://www.w3.org/2000/svg", "")
     for r in table:
         robot = load(out / f"{r['variant']}.toml")
         assert isinstance(robot, SoftArm)
@@ -78,3 +80,10 @@ def test_a_failing_variant_is_a_row_with_its_reason(tmp_path: Path,
     rows = run_study("extensible", {"segments.rack_max": [0.3, 0.41]}, tmp_path / "s", TINY)
     assert [r["error"] for r in rows] == ["RuntimeError: planner exploded"] * 2
     assert (tmp_path / "s" / "results.parquet").exists()
+
+
+def test_process_pool_gives_the_same_numbers_as_in_process(tmp_path: Path) -> None:
+    vary = {"segments.rack_max": [0.3, 0.41]}
+    one = run_study("extensible", vary, tmp_path / "a", TINY, jobs=1)
+    two = run_study("extensible", vary, tmp_path / "b", TINY, jobs=2)
+    assert one == two
