@@ -43,7 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                      jobs=a.jobs, progress=bar)
     print(file=sys.stderr)
     for r in rows:
-        vals = "  ".join(f"{m}={r.get(m, float('nan')):.4g}" for m in METRICS)
+        vals = "  ".join(f"{m}={r[m]:.4g}" for m in METRICS if m in r)
         print(f"{r['variant']}: {vals}  {r['error']}")
     for m, name in best(rows).items():
         print(f"best {m}: {name}")
