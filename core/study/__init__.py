@@ -1,0 +1,262 @@
+"""Design studies: compute a soft arm's figures of merit for every variant of a robot file.
+
+A variant is the base robot file with some ``section.key`` values changed (issue 30). Each
+variant's file is written into the study directory (so ``serve.py --robot`` opens it) and its
+metrics become one row of ``results.csv`` / ``results.parquet`` (units in column names). Each
+finished variant is also written as ``variants/<name>.json``, so a killed study resumes where it
+stopped. ``report.html`` plots each metric (self-contained SVG). Variants run in a local process pool (``concurrent.futures``), as the trials do.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from core.robot_schema import RobotFileError
+from core.robots import ROBOTS_DIR, ExtensibleArm, SoftArm, load, parse
+
+_SECTION = re.compile(r"^\s*\[([^\]]+)\]\s*(#.*)?$")
+
+
+@dataclasses.dataclass(frozen=True)
+class StudySpec:
+    """What to compute per variant.
+
+    Attributes:
+        objects: Grasp-and-place objects per seed (spots A-E of the paper, cycled).
+        seeds: Seeds per object.
+        reach_step: Grid step (m) of the reachable-area map.
+        capture_spacing: Grid step (m) of the capture region.
+        time_limit_s: Simulated time limit per trial (s).
+    """
+
+    objects: int = 5
+    seeds: int = 1
+    reach_step: float = 0.02
+    capture_spacing: float = 0.01
+    time_limit_s: float = 60.0
+
+
+def source_path(robot: str) -> Path:
+    """The TOML file of a shipped robot name or a path."""
+    return Path(robot) if robot.endswith(".toml") else ROBOTS_DIR / f"{robot}.toml"
+
+
+def parse_vary(items: Sequence[str]) -> dict[str, list[float]]:
+    """``["segments.count=4,6"]`` -> ``{"segments.count": [4, 6]}`` (ints stay ints).
+
+    Raises:
+        ValueError: an item is not ``KEY=V1,V2,...`` with numbers; the message names it.
+    """
+    out: dict[str, list[float]] = {}
+    for item in items:
+        key, sep, values = item.partition("=")
+        if not sep or "." not in key or not values:
+            raise ValueError(f"--vary {item!r}: expected SECTION.KEY=V1,V2,...")
+        vals: list[float] = []
+        for v in values.split(","):
+            try:
+                num: float = int(v) if re.fullmatch(r"[+-]?\d+", v.strip()) else float(v)
+            except ValueError:
+                raise ValueError(f"--vary {key}: {v!r} is not a number") from None
+            if not math.isfinite(num):
+                raise ValueError(f"--vary {key}: {v!r} is not a finite number")
+            vals.append(num)
+        out[key.strip()] = vals
+    return out
+
+
+def variant_text(text: str, changes: Mapping[str, float], name: str, label: str) -> str:
+    """The robot file ``text`` with ``changes`` applied in place (comments kept), renamed.
+
+    Raises:
+        RobotFileError: a key is not in its section exactly once (the message names it).
+    """
+    lines = text.splitlines(keepends=True)
+    found = {key: 0 for key in changes}
+    section = ""
+    for i, line in enumerate(lines):
+        head = _SECTION.match(line)
+        if head:
+            section = head.group(1).strip()
+            continue
+        for key, value in changes.items():
+            sec, _, field = key.rpartition(".")
+            m = re.match(rf"^(\s*{re.escape(field)}\s*=\s*)([^#\n]*?)(\s*(#.*)?\n?)$", line)
+            if sec == section and m:
+                lines[i] = f"{m.group(1)}{value!r}{m.group(3)}"
+                found[key] += 1
+    for key, n in found.items():
+        if n != 1:
+            raise RobotFileError(f"{label}: unknown key {key!r} (no such field in the file)")
+    out = "".join(lines)
+    return re.sub(r'(?m)^name = "[^"]+"', f'name = "{name}"', out, count=1)
+
+
+def variants(robot: str, vary: Mapping[str, Sequence[float]]) -> list[tuple[str, dict[str, float], str]]:
+    """Every combination of the varied values: ``(name, changes, robot file text)``.
+
+    Each text is parsed with the robot schema here, so an unknown key or a value out of
+    bounds raises :class:`RobotFileError` naming the key before any work starts.
+    """
+    path = source_path(robot)
+    if not path.exists():
+        load(robot)  # raises the schema's own "unknown robot" message
+    text = path.read_text()
+    base = tomllib.loads(text).get("name", path.stem)
+    keys = list(vary)
+    out = []
+    for combo in itertools.product(*(vary[k] for k in keys)):
+        changes = dict(zip(keys, combo))
+        name = base + "".join(f"_{k.replace('.', '-')}={v}" for k, v in changes.items())
+        vtext = variant_text(text, changes, name, path.name)
+        parse(tomllib.loads(vtext), path, label=f"{path.name} with {_fmt(changes)}")
+        out.append((name, changes, vtext))
+    return out
+
+
+def _fmt(changes: Mapping[str, float]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in changes.items())
+
+
+def soft_metrics(robot: SoftArm, robot_file: str, spec: StudySpec) -> dict[str, float]:
+    """Reachable-grasp area, capture-region area and grasp-and-place success of one soft arm."""
+    from core.control.capture import characterise
+    from core.control.trials import paper_locations, run_trials, sided_objects
+    from core.planning.reachability import PLANNABLE, reachability_map
+
+    r = robot.capture.nominal_object_radius if hasattr(robot, "capture") else 0.0165
+    reach_len = float(sum(robot.lengths)) + robot.gripper.length
+    reach = reachability_map(robot, r, (-reach_len, reach_len), (0.0, reach_len),
+                             spec.reach_step, samples=5000, levels=1)
+    area = float((reach.status == PLANNABLE).sum()) * spec.reach_step ** 2
+    cmap = characterise(robot, r, spacing=spec.capture_spacing)
+    cap = float(cmap.successes) * spec.capture_spacing ** 2
+    spots = list(paper_locations().items())
+    objs = [(lab, (x, y, r)) for lab, (x, y) in
+            (spots[i % len(spots)] for i in range(spec.objects))]
+    if "right" in robot.gripper.sides:
+        objs = sided_objects(robot, objs, "both")
+    results = run_trials(robot_file, objs, spec.seeds, 0, time_limit_s=spec.time_limit_s)
+    ok = sum(t.success for t in results)
+    return {"reachable_area_m2": area, "capture_area_m2": cap,
+            "grasp_place_success": ok / len(results) if results else math.nan,
+            "grasp_place_trials": float(len(results))}
+
+
+def extensible_metrics(robot: ExtensibleArm, samples: int = 20000,
+                       voxel: float = 0.02) -> dict[str, float]:
+    """Reachable tip-workspace volume: each segment's bend drawn uniformly in the disc
+    ``|(dx, dy)| <= d theta_max`` and its extension uniformly in the racks' range (seed 0),
+    draws with a rack outside ``[rack_min, rack_max]`` dropped, occupied ``voxel`` cubes counted."""
+    from core.kinematics.delta import actuators_from_delta, forward_kinematics
+
+    rng = np.random.default_rng(0)
+    shape = (samples, robot.n_segments)
+    rad = robot.bend_max * np.sqrt(rng.uniform(0, 1, shape))
+    ang = rng.uniform(0, 2 * np.pi, shape)
+    dz = rng.uniform(robot.rack_min - robot.L0, robot.rack_max - robot.L0, shape)
+    deltas = np.stack([rad * np.cos(ang), rad * np.sin(ang), dz], axis=-1)
+    racks = actuators_from_delta(deltas, robot.phi, robot.L0)
+    ok = ((racks >= robot.rack_min) & (racks <= robot.rack_max)).all(axis=(-1, -2))
+    tips = forward_kinematics(deltas[ok], robot.L0, robot.d)[:, -1, :3, 3]
+    cells = {tuple(c) for c in np.floor(tips / voxel).astype(int)}
+    return {"workspace_volume_m3": len(cells) * voxel ** 3,
+            "configurations_within_rack_limits": float(ok.mean())}
+
+
+def run_variant(job: tuple[str, str, dict[str, float], StudySpec]) -> dict[str, Any]:
+    """One variant's row (picklable; a failure is a row with its reason)."""
+    name, robot_file, changes, spec = job
+    row: dict[str, Any] = {"variant": name, **changes, "error": ""}
+    try:
+        robot = load(robot_file)
+        if isinstance(robot, SoftArm):
+            row.update(soft_metrics(robot, robot_file, spec))
+        else:
+            row.update(extensible_metrics(robot))
+    except Exception as exc:  # noqa: BLE001 - a failing variant is a row, the study goes on
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    return row
+
+
+METRICS = ("reachable_area_m2", "capture_area_m2", "grasp_place_success", "workspace_volume_m3")
+
+
+def run_study(robot: str, vary: Mapping[str, Sequence[float]], out: Path, spec: StudySpec,
+              *, jobs: int = 1,
+              progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+    """Run (or resume) a study; writes robot files, per-variant JSON, CSV and Parquet."""
+    todo = variants(robot, vary)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "variants").mkdir(exist_ok=True)
+    rows: dict[str, dict[str, Any]] = {}
+    pending = []
+    for name, changes, text in todo:
+        f = out / f"{name}.toml"
+        f.write_text(text)
+        done = out / "variants" / f"{name}.json"
+        if done.exists():
+            rows[name] = json.loads(done.read_text())
+        else:
+            pending.append((name, str(f), changes, spec))
+    total = len(todo)
+    if progress:
+        progress(len(rows), total)
+
+    def finish(row: dict[str, Any]) -> None:
+        (out / "variants" / f"{row['variant']}.json").write_text(json.dumps(row))
+        rows[row["variant"]] = row
+        if progress:
+            progress(len(rows), total)
+
+    if jobs <= 1:
+        for job in pending:
+            finish(run_variant(job))
+    else:
+        import concurrent.futures as cf
+        import multiprocessing as mp
+        with cf.ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
+            for row in pool.map(run_variant, pending):
+                finish(row)
+    ordered = [rows[name] for name, _, _ in todo]
+    write_tables(ordered, out)
+    from core.study.report import write_html
+    write_html(ordered, METRICS, best(ordered), out / "report.html")
+    return ordered
+
+
+def write_tables(rows: Sequence[dict[str, Any]], out: Path) -> None:
+    """``results.csv`` and ``results.parquet``, one row per variant."""
+    import csv
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols: list[str] = []
+    for row in rows:
+        cols += [c for c in row if c not in cols]
+    with open(out / "results.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, cols)
+        w.writeheader()
+        w.writerows(rows)
+    table = pa.table({c: [row.get(c) for row in rows] for c in cols})
+    pq.write_table(table, out / "results.parquet")
+
+
+def best(rows: Sequence[dict[str, Any]]) -> dict[str, str]:
+    """The variant with the largest value of each metric (rows with an error skipped)."""
+    out = {}
+    for m in METRICS:
+        ok = [r for r in rows if not r.get("error") and np.isfinite(r.get(m, math.nan))]
+        if ok:
+            out[m] = max(ok, key=lambda r: r[m])["variant"]
+    return out
