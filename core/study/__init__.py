@@ -192,9 +192,13 @@ METRICS = ("reachable_area_m2", "capture_area_m2", "grasp_place_success", "works
 
 
 def run_study(robot: str, vary: Mapping[str, Sequence[float]], out: Path, spec: StudySpec,
-              *, jobs: int = 1,
+              *, map_fn: Callable[..., Any] = map,
               progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
-    """Run (or resume) a study; writes robot files, per-variant JSON, CSV and Parquet."""
+    """Run (or resume) a study; writes robot files, per-variant JSON, CSV and Parquet.
+
+    ``map_fn`` runs :func:`run_variant` over the pending variants, in order (default: in this
+    process; the command line passes a process pool's ``map``, as the trials do: core stays
+    free of processes and threads)."""
     todo = variants(robot, vary)
     out.mkdir(parents=True, exist_ok=True)
     (out / "variants").mkdir(exist_ok=True)
@@ -218,15 +222,8 @@ def run_study(robot: str, vary: Mapping[str, Sequence[float]], out: Path, spec: 
         if progress:
             progress(len(rows), total)
 
-    if jobs <= 1:
-        for job in pending:
-            finish(run_variant(job))
-    else:
-        import concurrent.futures as cf
-        import multiprocessing as mp
-        with cf.ProcessPoolExecutor(jobs, mp_context=mp.get_context("spawn")) as pool:
-            for row in pool.map(run_variant, pending):
-                finish(row)
+    for row in map_fn(run_variant, pending):
+        finish(row)
     ordered = [rows[name] for name, _, _ in todo]
     write_tables(ordered, out)
     from core.study.report import write_html

@@ -39,8 +39,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"\r[{'#' * n}{'.' * (30 - n)}] {done}/{total} variants", end="",
               file=sys.stderr, flush=True)
 
-    rows = run_study(a.robot, vary, a.out, StudySpec(objects=a.objects, seeds=a.seeds),
-                     jobs=a.jobs, progress=bar)
+    spec = StudySpec(objects=a.objects, seeds=a.seeds)
+    if a.jobs <= 1:
+        rows = run_study(a.robot, vary, a.out, spec, progress=bar)
+    else:
+        import concurrent.futures as cf
+        import multiprocessing as mp
+        with cf.ProcessPoolExecutor(a.jobs, mp_context=mp.get_context("spawn")) as pool:
+            rows = run_study(a.robot, vary, a.out, spec, map_fn=pool.map, progress=bar)
     print(file=sys.stderr)
     for r in rows:
         vals = "  ".join(f"{m}={r[m]:.4g}" for m in METRICS if m in r)

@@ -84,6 +84,9 @@ def test_a_failing_variant_is_a_row_with_its_reason(tmp_path: Path,
 
 def test_process_pool_gives_the_same_numbers_as_in_process(tmp_path: Path) -> None:
     vary = {"segments.rack_max": [0.3, 0.41]}
-    one = run_study("extensible", vary, tmp_path / "a", TINY, jobs=1)
-    two = run_study("extensible", vary, tmp_path / "b", TINY, jobs=2)
+    import concurrent.futures as cf
+    import multiprocessing as mp
+    one = run_study("extensible", vary, tmp_path / "a", TINY)
+    with cf.ProcessPoolExecutor(2, mp_context=mp.get_context("spawn")) as pool:
+        two = run_study("extensible", vary, tmp_path / "b", TINY, map_fn=pool.map)
     assert one == two
