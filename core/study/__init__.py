@@ -14,12 +14,12 @@ import itertools
 import json
 import math
 import re
-import tomllib
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from core.robot_schema import tomllib  # (Python 3.10: tomli)
 from core.robot_schema import RobotFileError
 from core.robots import ROBOTS_DIR, ExtensibleArm, SoftArm, load, parse
 

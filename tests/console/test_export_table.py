@@ -117,7 +117,15 @@ def test_the_live_scene_export_has_the_obstacles_and_the_bin(monkeypatch):
         layers = app.grasp_scene
         wait_for(lambda: layers.obstacle_layer.bodies and layers.bin_view.shown == BIN, 30.0,
                  "obstacle and bin drawn")
-        payload, buffers = decode_embedded(scene_html(srv))
+        def exported():  # the clearance rings are drawn a moment after the bodies
+            payload, buffers = decode_embedded(scene_html(srv))
+            try:
+                binary(payload, buffers, "/grasp/obstacles/rings", "points", 3)
+            except AssertionError:
+                return None
+            return payload, buffers
+
+        payload, buffers = wait_for(exported, 30.0, "the clearance rings in the export")
         names = {m.get("name") for _, m in payload["messages"]}
         body = next(n for n in names if str(n).startswith("/grasp/obstacles/body_"))
         assert positions(payload, body)[-1][1] == pytest.approx((POST.x, POST.y, 0.0))
