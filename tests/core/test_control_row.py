@@ -26,10 +26,11 @@ def arm():
     return robots.load("soft-arm")
 
 
-def _armed_loop(arm, seed=1, stack_type=ControlStack):
-    """The simulated arm and an armed ``stack_type`` (planning at once) on a SimLoop."""
+def _armed_loop(arm, seed=1, stack_type=ControlStack, planner=None):
+    """The simulated arm and an armed ``stack_type`` (planning at once: ``planner`` or
+    plan_grasp) on a SimLoop."""
     sim = SoftArmSim(arm, seed=seed)
-    stack = stack_type(arm, 0.01, immediate(
+    stack = stack_type(arm, 0.01, planner or immediate(
         lambda req: plan_grasp(arm, req.kappa, req.center, req.radius)))
     loop = SimLoop(sim, stack, 0.01)
     loop.run(0.05)
@@ -231,12 +232,7 @@ def _refusing_planner(arm, blocked, always=False):
 def test_an_object_blocked_by_a_waiting_one_waits_behind_the_rest(arm):
     # B's way is blocked while D still lies on the table: D is taken first, then B (the order
     # a person would choose), and the outcomes stay in queue order.
-    sim = SoftArmSim(arm, seed=1)
-    stack = ControlStack(arm, 0.01, _refusing_planner(arm, B))
-    loop = SimLoop(sim, stack, 0.01)
-    loop.run(0.05)
-    loop.arm()
-    loop.run(0.5)
+    sim, loop = _armed_loop(arm, planner=_refusing_planner(arm, B))
     world = _World(sim, arm)
     row = run_row(loop, ObjectRow([B, D], check_release=world.check), world.place, 300.0)
     assert row.state == "done" and row.progress() == "2/2 released"
@@ -247,12 +243,7 @@ def test_an_object_blocked_by_a_waiting_one_waits_behind_the_rest(arm):
 
 
 def test_an_object_still_refused_after_waiting_fails_once(arm):
-    sim = SoftArmSim(arm, seed=1)
-    stack = ControlStack(arm, 0.01, _refusing_planner(arm, B, always=True))
-    loop = SimLoop(sim, stack, 0.01)
-    loop.run(0.05)
-    loop.arm()
-    loop.run(0.5)
+    sim, loop = _armed_loop(arm, planner=_refusing_planner(arm, B, always=True))
     world = _World(sim, arm)
     row = run_row(loop, ObjectRow([B, D], check_release=world.check), world.place, 300.0)
     assert row.state == "done" and row.progress() == "1/2 released"
