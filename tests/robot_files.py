@@ -20,6 +20,8 @@ import re
 from pathlib import Path
 from typing import Mapping
 
+from core.robot_text import set_keys
+
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "data" / "robots"
 TEST_ROBOTS = REPO / "tests" / "data" / "robots"
@@ -33,9 +35,6 @@ QUICK_MOTION: Mapping[str, float] = {
     "state_machine.release_time_s": 0.5,   # shipped 1.0
 }
 
-_SECTION = re.compile(r"^\s*\[([^\]]+)\]\s*(#.*)?$")
-
-
 def robot_copy(source: str | Path, dest_dir: Path, changes: Mapping[str, object],
                name: str | None = None) -> Path:
     """Write ``source`` (a shipped robot's name or a TOML path) to ``dest_dir`` with ``changes``
@@ -48,24 +47,10 @@ def robot_copy(source: str | Path, dest_dir: Path, changes: Mapping[str, object]
         KeyError: a key of ``changes`` is not in its section exactly once.
     """
     path = Path(source) if str(source).endswith(".toml") else SHIPPED / f"{source}.toml"
-    lines = path.read_text().splitlines(keepends=True)
-    found = {key: 0 for key in changes}
-    section = ""
-    for i, line in enumerate(lines):
-        head = _SECTION.match(line)
-        if head:
-            section = head.group(1).strip()
-            continue
-        for key, value in changes.items():
-            sec, _, field = key.rpartition(".")
-            match = re.match(rf"^(\s*{re.escape(field)}\s*=\s*)([^#\n]*?)(\s*(#.*)?\n?)$", line)
-            if sec == section and match:
-                lines[i] = f"{match.group(1)}{_toml(value)}{match.group(3)}"
-                found[key] += 1
+    text, found = set_keys(path.read_text(), changes)
     wrong = {key: n for key, n in found.items() if n != 1}
     if wrong:
         raise KeyError(f"{path.name}: not found exactly once: {wrong}")
-    text = "".join(lines)
     old = re.search(r'(?m)^name = "([^"]+)"', text)
     assert old is not None, f"{path.name} has no name"
     new_name = name or f"{old.group(1)}-test"
@@ -75,12 +60,3 @@ def robot_copy(source: str | Path, dest_dir: Path, changes: Mapping[str, object]
     out.write_text(text)
     return out
 
-
-def _toml(value: object) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return f'"{value}"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    return repr(value)

@@ -21,9 +21,8 @@ import numpy as np
 
 from core.robot_schema import tomllib  # (Python 3.10: tomli)
 from core.robot_schema import RobotFileError
+from core.robot_text import set_keys
 from core.robots import ROBOTS_DIR, ExtensibleArm, SoftArm, load, parse
-
-_SECTION = re.compile(r"^\s*\[([^\]]+)\]\s*(#.*)?$")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,24 +79,10 @@ def variant_text(text: str, changes: Mapping[str, float], name: str, label: str)
     Raises:
         RobotFileError: a key is not in its section exactly once (the message names it).
     """
-    lines = text.splitlines(keepends=True)
-    found = {key: 0 for key in changes}
-    section = ""
-    for i, line in enumerate(lines):
-        head = _SECTION.match(line)
-        if head:
-            section = head.group(1).strip()
-            continue
-        for key, value in changes.items():
-            sec, _, field = key.rpartition(".")
-            m = re.match(rf"^(\s*{re.escape(field)}\s*=\s*)([^#\n]*?)(\s*(#.*)?\n?)$", line)
-            if sec == section and m:
-                lines[i] = f"{m.group(1)}{value!r}{m.group(3)}"
-                found[key] += 1
+    out, found = set_keys(text, changes)
     for key, n in found.items():
         if n != 1:
             raise RobotFileError(f"{label}: unknown key {key!r} (no such field in the file)")
-    out = "".join(lines)
     return re.sub(r'(?m)^name = "[^"]+"', f'name = "{name}"', out, count=1)
 
 
