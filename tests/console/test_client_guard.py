@@ -20,6 +20,7 @@ import pytest
 from viser import _messages
 
 from console.panels.soft_arm.control import ControlPanel
+from console.panels.common.hardware import HardwarePanel
 from console.panels.common.session import SessionPanel
 from fakes import FakeClient
 from tests.ws_client import RawClient
@@ -93,9 +94,25 @@ def _snapshot(handle: Any) -> tuple:
             getattr(p, "label", None), len(impl.update_cb), impl.is_button)
 
 
-def _settled(handles: dict[str, Any], timeout: float = 60.0) -> dict[str, tuple]:
-    """The widgets' state once the console has finished starting (the hardware panel fills in
-    its port, the planner enables the waypoint slider ...): unchanged for two seconds."""
+def _started(app: Any) -> None:
+    """Wait for the console's one-time start-up changes: the loop process's first view (the
+    soft arm's Disarm follows it), its link configured and the port it uses filled in."""
+    loop = app.services.soft_control or app.services.extensible_runner
+    if loop is not None:
+        wait_for(lambda: loop.view is not None and loop.view_age() < 0.5,
+                 what="the loop process's first fresh view")
+    hardware = app.panel(HardwarePanel)
+    ctl = hardware.controls()
+    if ctl is not None:
+        wait_for(lambda: ctl.health() is not None and ctl.health().state != "unconfigured"
+                 and str(hardware.port_text.value).strip() != "",
+                 what="the hardware link configured and its port shown")
+
+
+def _settled(app: Any, handles: dict[str, Any], timeout: float = 60.0) -> dict[str, tuple]:
+    """The widgets' state once the console has finished starting (:func:`_started`; then the
+    planner enables the waypoint slider ...): unchanged for two seconds."""
+    _started(app)
     deadline = time.monotonic() + timeout
     snap = {u: _snapshot(h) for u, h in handles.items()}
     while time.monotonic() < deadline:
@@ -105,6 +122,19 @@ def _settled(handles: dict[str, Any], timeout: float = 60.0) -> dict[str, tuple]
             return snap
         snap = again
     raise AssertionError("the console's widgets never settled")
+
+
+def _unchanged(before: dict[str, tuple], handles: dict[str, Any],
+               timeout: float = 30.0) -> dict[str, tuple]:
+    """What still differs from ``before`` after up to ``timeout``: the console itself disables
+    buttons while its loop's view is stale (a loaded box) and enables them again; what an attack
+    stored would stay."""
+    deadline = time.monotonic() + timeout
+    while True:
+        changed = _changed(before, {u: _snapshot(h) for u, h in handles.items()})
+        if not changed or time.monotonic() > deadline:
+            return changed
+        time.sleep(0.5)
 
 
 def _hostile(updates: dict[str, Any]) -> bool:
@@ -217,7 +247,7 @@ def test_non_value_keys_and_bad_values_are_refused_for_every_widget(console: tup
     op_own = _own_inputs(server, op)
     everything = {**shared, **own, **op_own}
     assert len(shared) >= 20 and len(own) >= 5
-    before = _settled(everything)
+    before = _settled(app, everything)
     q0, seq0 = np.array(app.store.command.q), app.store.command.seq
     stops0 = app.stops
     watcher.clear()
@@ -251,8 +281,7 @@ def test_non_value_keys_and_bad_values_are_refused_for_every_widget(console: tup
     # Settled again: on a loaded machine the loop's view can go stale meanwhile, and the Control
     # panel then rightly disables Arm / Disarm / Execute until it is fresh (a loaded run caught
     # Disarm so); what an attack left would stay.
-    after = _settled(everything)
-    changed = _changed(before, after)
+    changed = _unchanged(before, everything)
     assert changed == {}, "\n".join(f"{b} -> {a}" for b, a in changed.values())
     assert op.alive() and viewer.alive() and watcher.alive()
     assert app.access.holder is not None and app.access.holder.client_id == op.client_id
@@ -291,9 +320,9 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
                and not getattr(h._impl.props, "disabled", False)
                and getattr(h._impl.props, "visible", True)}
     assert len(targets) >= 15
-    _settled(shared)
+    _settled(app, shared)
     targets = {u: h for u, h in targets.items() if not getattr(h._impl.props, "disabled", 0)}
-    before = _settled(shared)
+    before = _settled(app, shared)
     q0, seq0 = np.array(app.store.command.q), app.store.command.seq
     refused0 = app.guard.counts["refused"]
     watcher.clear()
@@ -312,7 +341,7 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
     # (the viewer's copy of its old values and the notes arrive after the refusals are counted)
     wait_for(lambda: restored() >= inputs, what="every refused input given back to the viewer")
     notes = wait_for(lambda: viewer.received("NotificationShowMessage"), what="a refusal note")
-    assert _changed(before, {u: _snapshot(h) for u, h in shared.items()}) == {}
+    assert _unchanged(before, shared) == {}
     assert np.array_equal(app.store.command.q, q0) and app.store.command.seq == seq0
     # (value updates: a panel may disable or enable a button meanwhile, e.g. while the loop
     # is slow to answer, and viewers are sent operator-only buttons disabled, issue 31.4)

@@ -104,7 +104,8 @@ class ControlPanel(Panel):
         self.state_md = gui.add_markdown("**State:** –")
         self.fault_md = gui.add_markdown("", visible=False)
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
-        self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP)
+        self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP,
+                                         disabled=True)  # until a view says armed
         self.execute = ExecuteControls(self)  # what Execute acts on, Execute, Click to grasp
         self.row = RowControls(self)  # "Clear table into bin" and the row's status
         self.progress = ProgressControls(gui)  # the running task's progress and time left
