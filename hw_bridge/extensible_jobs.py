@@ -210,3 +210,5 @@ class Job:
     counts: Counts           # (K, 3n) demands relative to home
     t_end: float | None = None
     written: int = 0
+    ticks: int = 0           # ticks streamed: the path's clock (one period each)
+    sample: int = 0          # the sample demanded on the last tick

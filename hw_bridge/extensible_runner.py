@@ -7,8 +7,9 @@ deadlines, overruns skipped): every tick reads the encoders, converts them to ra
 (L = U m), Delta (eq. 2) and the measured tip (forward kinematics), and writes one DEMAND.
 
 * A job (:meth:`ExtensibleRunner.execute` a :class:`~core.planning.paths.MotionPath`, or
-  :meth:`ExtensibleRunner.move_to` rack lengths) streams its motor counts by time (sample
-  ``floor((t - t0) * rate_hz)``), preceded by a joint move from wherever the motors are to the
+  :meth:`ExtensibleRunner.move_to` rack lengths) streams its motor counts one period of the
+  path per tick (sample ``floor(ticks * period * rate_hz)``: a late tick delays the path and
+  never skips a sample the device would have to chase across a corner), preceded by a joint move from wherever the motors are to the
   path's first sample; after the last sample the final demand is held until the encoders are
   within ``settle_counts`` (or ``settle_timeout`` passes).
 * Idle, the runner holds its last demand, or follows the console's newest commanded posture

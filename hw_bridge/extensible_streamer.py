@@ -2,7 +2,8 @@
 
 :class:`Streamer` is the ``stack`` of :class:`hw_bridge.loop.LoopRunner` for the extensible arm
 (loop thread only). Each tick it turns the encoders into racks, Delta and the measured tip,
-then either streams the running job's sample for the current time, or (idle) holds the last
+then either streams the running job's next sample (one period of the path per tick: a late
+tick delays the path, it never skips ahead), or (idle) holds the last
 demand or follows the console's newest command within the rack, motor and tip speed limits and
 the rack and bending limits. Without an armed device it only measures (state ``disarmed``) or
 reports that nothing is connected. It publishes an immutable
@@ -186,7 +187,7 @@ class Streamer:
         else:
             k = len(j.path.times)
             self.snapshot = RunnerSnapshot(
-                state, tick, j.job_id, j.label, min(int((t - j.t0) * j.path.rate_hz), k - 1), k,
+                state, tick, j.job_id, j.label, min(j.sample, k - 1), k,
                 delta, tip, self.fault, self.message, j.trace, j.written, self.last_result)
         return demand, self.snapshot
 
@@ -215,8 +216,12 @@ class Streamer:
 
     def _stream(self, job: Job, enc: Counts, tip: Array, t: float) -> tuple[Counts, str]:
         k_last = len(job.path.times) - 1
-        k = min(int((t - job.t0) * job.path.rate_hz + 1e-9), k_last)
-        while job.written <= k:  # skipped samples (overruns) get this tick's measurement
+        # The path's clock advances one period per tick, whatever the wall clock did: after a
+        # late tick (a stalled host) the device gets the next sample, not the one due by now,
+        # which it could only chase straight across a corner faster than planned.
+        k = min(int(job.ticks * self.period * job.path.rate_hz + 1e-9), k_last)
+        job.ticks, job.sample = job.ticks + 1, k
+        while job.written <= k:  # (a path sampled faster than the loop: skipped samples)
             job.trace.measured[job.written] = tip
             job.written += 1
         demand = job.counts[k]

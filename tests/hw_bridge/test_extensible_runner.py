@@ -129,9 +129,10 @@ def _check_run(runner: ExtensibleRunner, hw, kind: str) -> None:
     # return leg's sample 103 as well as on the way out). How
     # far behind, and so how far it cuts a corner of the path (the path runs at the motors' speed
     # limits: a device that fell behind chases the newest demand straight across the corner; 3.3
-    # mm off the path at a loaded run's corner), depends on how the device and the loop were
-    # scheduled: a figure (benchmarks/bench_serial_link.py), not asserted. The tip passes every
-    # waypoint and ends on the last.
+    # mm off the path at a loaded run's corner), depends on how the device was scheduled: a
+    # figure (benchmarks/bench_serial_link.py), not asserted. A late loop tick no longer skips
+    # samples (a loaded run once missed a corner by 39 mm): the tip passes every waypoint and
+    # ends on the last.
     for k in range(n):
         gap = np.linalg.norm(commanded - measured[k], axis=1)
         by_then, later = gap[:k + 2].min(), gap[k + 2:].min(initial=np.inf)

@@ -100,3 +100,27 @@ def test_idle_streamer_follows_the_console_within_every_speed_limit(periods: int
     assert (np.linalg.norm(np.diff(tips, axis=0), axis=1) <= ROBOT.tip_speed * dt + 1e-4).all()
     # It moved at a limited speed over many periods, not in one step.
     assert len(demands) - 1 >= 10
+
+
+def test_a_late_tick_delays_the_path_and_skips_no_sample() -> None:
+    """After ticks the loop could not keep (``periods`` > 1, the time 3 periods on), the job
+    streams its next sample, not the one due by the wall clock: every sample in order, one
+    per tick, so the motors never chase a demand across a corner faster than planned."""
+    streamer = Streamer(ROBOT, 0.01, None, settle_counts=3, settle_timeout=3.0)
+    start = dk.robot_rack_lengths(ROBOT, np.zeros((N, 3)))
+    goal = dk.robot_rack_lengths(ROBOT, np.array([[0.02, 0.0, 0.03], [0.0, 0.01, 0.0]]))
+    path = joint_move(ROBOT, start, goal)
+    expected = path.motor_counts - streamer.home
+    encoders = dk.motor_counts_from_lengths(ROBOT, start) - streamer.home
+    streamer.connected(encoders, follow=False)
+    streamer.start_job(1, "move", path, 0.0)
+    demands, samples = [], []
+    t = 0.0
+    for k in range(len(path.times)):
+        demand, snap = streamer.update(encoders, t, 3 if k % 5 == 4 else 1)
+        demands.append(demand)
+        samples.append(snap.sample)
+        encoders = demand
+        t += 0.03 if k % 5 == 4 else 0.01  # every fifth tick comes two periods late
+    np.testing.assert_array_equal(np.array(demands), expected)
+    assert samples == list(range(len(path.times)))
