@@ -158,7 +158,8 @@ class ConsoleApp:
                 listeners.append(self.recorder.on_ticks)
         self.core = ConsoleCore(self.store, self.services, self.access, self.recorder,
                                 clock=clock)
-        self.lease = LeaseMonitor(server, self.access, busy=lambda: self.core.hold.active)
+        self.lease = LeaseMonitor(server, self.access, busy=lambda: self.core.hold.active,
+                                  needed=self._motion_needs_lease)
         # Each viewer's page: one line atop saying who operates and how to get control.
         self.viewer_line = ViewerLine(server, self.access, stopped=lambda: self.stopped)
         self.access.add_listener(self._on_control_change)  # after the core's: it stops first
@@ -248,6 +249,14 @@ class ConsoleApp:
     def hold(self) -> HoldToRun:
         """The core's hold-to-run (every jog motion)."""
         return self.core.hold
+
+    def _motion_needs_lease(self) -> bool:
+        """Whether the operator's tab must answer lease probes now: a jog held, the arm moving
+        (the loop's view), or the demo motion running; a still console keeps the lease without
+        them (see ``console.lease.LeaseMonitor``)."""
+        demo = self.services.demo
+        return (self.core.hold.active or self.core.arm.moving()
+                or (demo is not None and demo.running))
 
     def stop_motion(self, reason: str, client: Any = None) -> None:
         """STOP: the core's one safety route (:meth:`ConsoleCore.stop_motion`)."""

@@ -102,7 +102,9 @@ class LeaseMonitor:
     is re-sent at that moment; answers come in order, so nothing is lost); the answers are also
     the heartbeats that keep a set-point jog moving (it holds when the last one is over 300 ms
     old, see ``console.core.hold_to_run``), so while ``busy()`` (a jog is running) the tab is probed
-    every ``probe_period`` s (0.1), otherwise every ``idle_period`` s (1.0): each probe makes
+    every ``probe_period`` s (0.1), otherwise every ``idle_period`` s (1.0), and only while
+    ``needed()`` (the operator's motion needs their tab: the arm moving or a jog held; a tab
+    that never answered yet, or is being warned, is probed regardless): each probe makes
     viser's client draw the 3D scene for a quarter of a second (a message that is not GUI-only
     opens its render window, and the answer is sent from the next frame), so probing a still
     console ten times a second kept its page drawing without pause, which a browser without a
@@ -116,7 +118,8 @@ class LeaseMonitor:
 
     def __init__(self, server: viser.ViserServer, access: AccessControl,
                  probe_period: float = 0.1, idle_period: float = 1.0,
-                 busy: Callable[[], bool] = lambda: True) -> None:
+                 busy: Callable[[], bool] = lambda: True,
+                 needed: Callable[[], bool] = lambda: True) -> None:
         if not 0 < probe_period <= idle_period:
             raise ValueError("need 0 < probe_period <= idle_period (s)")
         self.server = server
@@ -124,7 +127,9 @@ class LeaseMonitor:
         self.probe_period = probe_period
         self.idle_period = idle_period
         self.busy = busy
+        self.needed = needed
         self.probes = 0
+        self.quiet_steps = 0  # steps that kept a still console's lease without a round trip
         self.warning = SilenceWarning()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -173,6 +178,14 @@ class LeaseMonitor:
             return
         if client is None:
             self.access.revoke(f"{holder.name}'s tab is gone", holder.client_id)
+            return
+        if status.answered and not self.needed() and not self.warning.active:
+            # Nothing moves: a frozen tab could stop nothing, and a closed one is caught by
+            # on_client_disconnect. Keep the lease without a probe (each probe makes viser's
+            # client redraw the 3D view); the probe resumes the moment motion needs it, and
+            # its silence then counts from here, so a frozen tab still ends that motion.
+            self.quiet_steps += 1
+            self.access.heartbeat(holder.client_id)
             return
         budget = status.limit - status.silent_for
         if budget <= 0:

@@ -7,12 +7,13 @@ may move the arm. Panels never check roles themselves: they call :meth:`AccessCo
 :class:`NotOperator` carrying the sentence to show the refused user.
 
 The lock is a lease. ``console.lease.LeaseMonitor`` (the viser side) keeps it alive by a small GUI
-round trip to the operator's tab every second, every 0.1 s while a jog runs (a localStorage
-read: the browser's JavaScript must answer, so a frozen or throttled tab fails it as well as a
-closed one or a dropped network) and revokes it when the tab disconnects or has not answered for
-``lease_s`` s; from ``warn_s`` s of silence the operator sees a warning (:meth:`status`). Every
-change of holder is reported to the listeners (the app stops the arm when an operator goes
-away, see ``console.core.console_core.ConsoleCore.stop_motion``).
+round trip to the operator's tab every second while the arm moves, every 0.1 s while a jog
+runs, none on a still console (a localStorage read: the browser's JavaScript must answer, so a
+frozen or throttled tab fails it as well as a closed one or a dropped network) and revokes it
+when the tab disconnects or has not answered for ``lease_s`` s; from ``warn_s`` s of silence the
+operator sees a warning (:meth:`status`). Every change of holder is reported to the listeners
+(the app stops the arm when an operator goes away, see
+``console.core.console_core.ConsoleCore.stop_motion``).
 
 The limits come from measurements of headless Chromium with software rendering
 (``benchmarks/lease_gaps.py``, see ``console.core.lease_limits``): the gaps between a tab's answers

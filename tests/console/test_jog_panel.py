@@ -107,7 +107,8 @@ def lab(tmp_path: Any, request: Any) -> Iterator[tuple[viser.ViserServer, Consol
         wait_for(lambda: op.client_id in session.clients, what="per-browser widgets built")
         app.access.take(op.client_id, token, "Olivia")
         probes = app.lease.probes
-        wait_for(lambda: app.lease.probes > probes + 3, what="the operator's tab answers probes")
+        wait_for(lambda: app.lease.probes > probes and app.access.status().answered,
+                 what="the operator's tab answers the lease")
         yield server, app, op
         op.close()
     finally:

@@ -234,3 +234,42 @@ def test_the_consoles_lease_probes_fast_only_while_a_jog_runs(server) -> None:
     assert app.lease.busy()  # the set-point move steps only on fresh answers
     app.hold.cancel()
     assert not app.lease.busy()
+
+
+def test_a_still_console_keeps_the_lease_without_probing_its_tab() -> None:
+    """Issue 29: each probe makes viser's client redraw the 3D view (a still software-rendered
+    page drew 4.7-8.6 frames/s). While nothing moves the tab is not probed and keeps control
+    even frozen (it could stop nothing); once motion needs it, the probes resume and a frozen
+    tab loses control within the lease, which stops the arm (the listeners)."""
+    moving = [False]
+    clock = FakeClock()
+    access = AccessControl(None, lease_s=3.0, warn_s=1.5, clock=clock)
+    tab = SlowTab(1, clock)
+    monitor = LeaseMonitor(FakeServer(tab), access,  # type: ignore[arg-type]
+                           needed=lambda: moving[0])
+    access.take(1, name="Ann")
+    stops: list[str] = []  # every change of holder from here (the app stops the arm)
+    access.add_listener(lambda new, prev, why: stops.append(why))
+    settle(monitor, clock, 1.0)  # a loading tab is probed regardless, until it answers once
+    first = len(tab.warned_while_probed)
+    assert first >= 1 and access.status().answered
+    tab.freeze(None)  # frozen, still: nothing to stop
+    settle(monitor, clock, 10.0, period=1.0)
+    assert len(tab.warned_while_probed) == first  # not one probe in 10 simulated s
+    assert access.holder is not None and not stops and not tab.notes
+    moving[0] = True  # the arm moves: the frozen tab must answer, and cannot
+    start = clock.t
+    settle(monitor, clock, 4.0)
+    assert len(tab.warned_while_probed) > first and tab.notes  # probed, warned
+    assert access.holder is None and stops == ["Ann's tab went silent for 3 s"]
+    assert clock.t - start <= 4.0 + 0.2
+
+
+def test_the_consoles_lease_is_needed_only_while_motion_runs(server) -> None:
+    app = console_app(load("soft-arm"), server, panels=())
+    app.access.take(1, name="Ann")
+    assert not app.lease.needed()  # a still console
+    assert app.hold.move_to(1, app.store.command.q * 0.5 + 0.5)
+    assert app.lease.needed()  # a jog held
+    app.hold.cancel()
+    assert not app.lease.needed()
