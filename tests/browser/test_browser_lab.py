@@ -135,9 +135,12 @@ def test_held_jog_release_stop_latch_and_closing_or_freezing_the_operators_tab(l
     assert app.access.holder is None and not app.services.demo.running
     wait_for(lambda: "nobody" in bob.locator('[data-testid="holder"]').inner_text())
 
-    # A tab frozen longer than the lease loses control (and would stop the arm).
+    # A tab frozen longer than the lease while the arm moves loses control and stops the arm
+    # (a still console keeps a frozen tab's lease: it can start nothing, console.lease).
     carol = lab.page()
     lab.take_control(carol, "Carol")
+    session_button(carol, "Run demo motion").click()
+    wait_for(lambda: app.services.demo.running, timeout=10.0)
     probes = app.lease.probes
     wait_for(lambda: app.lease.probes >= probes + 2, timeout=10.0)  # lease round trips answer
     assert app.access.holder is not None
@@ -147,4 +150,4 @@ def test_held_jog_release_stop_latch_and_closing_or_freezing_the_operators_tab(l
                    lease_s + 1.5)
     wait_for(lambda: len(lab.stops) > n_stops, timeout=10.0)
     assert "silent" in lab.stops[-1][1], lab.stops
-    assert app.access.holder is None
+    assert app.access.holder is None and not app.services.demo.running
