@@ -74,6 +74,7 @@ from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
 from console.scene.grasp_layers import GraspSceneView
 from console.scene.camera import presets_for_window
+from console.scene.plan_frame import FRAMED_PARTS, plan_points
 from console.scene.window_fit import WindowFit
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
@@ -189,12 +190,16 @@ class ConsoleApp:
             # A recording starts with the table and plan as they are: the recorder keeps the
             # newest objects and plan records (Recorder.latched), logged by the feed on change.
         self.camera_presets = setup_camera(server, robot, self.model.kind)
-        # Each browser's camera framed for its own window (a tablet's, a phone's).
         kind, span, table = self.model.kind, self.arm_reach(), self.table_rectangle()
+        # Each browser's camera framed for its own window (a tablet's, a phone's) and for what
+        # is planned (a far object's approach circles: console.scene.plan_frame).
         self.window_fit = WindowFit(
             server, self.camera_presets[0],
-            lambda w, h: presets_for_window(kind, span, table, w, h)[0],
+            lambda w, h: presets_for_window(kind, span, table, w, h, self.planned_points()),
             stopped=lambda: self.stopped)
+        if self.grasp_session is not None:
+            self.grasp_session.add_listener(
+                lambda view, changed: self.window_fit.refit() if changed & FRAMED_PARTS else None)
         for panel_cls in DEFAULT_PANELS if panels is None else panels:
             self.add_panel(panel_cls)
 
@@ -449,3 +454,10 @@ class ConsoleApp:
         """Table rectangle (x0, x1, y0, y1) around the arm's workspace
         (:func:`console.scene.stage.table_extent`)."""
         return table_extent(self.robot, self.model.kind)
+
+    def planned_points(self) -> np.ndarray | None:
+        """World points (m) the camera presets show besides the arm's reach: the soft arm's
+        objects, bin and plans (:func:`console.scene.plan_frame.plan_points`); None for an arm
+        without a grasp session."""
+        session = self.grasp_session
+        return None if session is None else plan_points(session.view())

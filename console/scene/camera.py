@@ -8,7 +8,10 @@ computed from the robot's reach (``span``, m) and the table rectangle, for a can
 aspect ratio; the control panel never covers the canvas (docked beside it, ``static/theme.toml``;
 on a phone the canvas is the part above viser's bottom sheet, ``console.web.phone_sheet``).
 :func:`presets_for_window` takes a browser's canvas size in pixels, and
-``console.scene.window_fit`` re-frames each browser's camera for its own window.
+``console.scene.window_fit`` re-frames each browser's camera for its own window. Both take
+``extra`` points (m) the soft arm's views must show besides its reach: the objects, the bin and
+the plans' approach circles and waypoints (``console.scene.plan_frame``); a plan that reaches
+past the arm's reach (a far object's outer circles) widens the view to show it all.
 
 Pure numpy: no viser here; :func:`apply` sets a browser's camera from a pose.
 """
@@ -27,6 +30,7 @@ Kind = Literal["planar", "delta"]
 FOV = math.radians(50.0)          # vertical field of view of every preset
 DEFAULT_ASPECT = 1.28             # the 3D view of a 1600 x 1000 window beside the docked panel
 MARGIN = 1.08                     # framed region plus this much room around it
+NARROWEST = 0.45                  # the extensible arm's framed volume: narrowest width, of a ball
 
 
 @dataclasses.dataclass(frozen=True)
@@ -109,6 +113,35 @@ def _fit(points: npt.ArrayLike, direction: npt.ArrayLike, aspect: float,
     return look + back * hi, look
 
 
+def in_view(pose: CameraPose, points: npt.ArrayLike, aspect: float) -> bool:
+    """Whether every point is in front of ``pose`` and inside its canvas of ``aspect`` (width /
+    height) shrunk by :data:`MARGIN` about its centre (where :func:`frame_points` puts them)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(pts) == 0:
+        return True
+    eye = np.asarray(pose.position, float)
+    forward = pose.forward
+    right = np.cross(forward, np.asarray(pose.up, float))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = pts - eye
+    depth = rel @ forward
+    if np.any(depth <= 1e-6):
+        return False
+    tan_v = math.tan(pose.fov / 2)
+    x = (rel @ right) / (depth * tan_v * aspect)
+    y = (rel @ up) / (depth * tan_v)
+    edge = 1.0 / MARGIN + 1e-6
+    return bool(np.all(np.abs(x) <= edge) and np.all(np.abs(y) <= edge))
+
+
+def _points(extra: npt.ArrayLike | None) -> npt.NDArray[np.float64]:
+    """``extra`` as an (n, 3) array (none: (0, 3))."""
+    if extra is None:
+        return np.zeros((0, 3))
+    return np.asarray(extra, dtype=float).reshape(-1, 3)
+
+
 def frame_points(name: str, points: npt.ArrayLike, direction: npt.ArrayLike,
                  aspect: float = DEFAULT_ASPECT, fov: float = FOV) -> CameraPose:
     """The nearest pose looking along ``-direction`` that shows every point of ``points`` in
@@ -138,7 +171,8 @@ def frame_top_down(name: str, x: tuple[float, float], y: tuple[float, float],
 
 
 def presets(kind: Kind | str, span: float, table: tuple[float, float, float, float],
-            aspect: float = DEFAULT_ASPECT) -> tuple[CameraPose, ...]:
+            aspect: float = DEFAULT_ASPECT,
+            extra: npt.ArrayLike | None = None) -> tuple[CameraPose, ...]:
     """The named poses for a robot kind; the first is the initial camera ("Reset view").
 
     Args:
@@ -146,30 +180,44 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
         span: Largest distance of any arm point from its base (m).
         table: Table rectangle ``(x0, x1, y0, y1)`` (m).
         aspect: The canvas's width / height.
+        extra: World points (m) the soft arm's poses show besides its reach (what the operator
+            plans: objects, bin, approach circles, waypoints); a pose that would leave one out
+            is widened, in the same direction, to show them all. The extensible arm's poses
+            frame its working volume only (:func:`working_volume`).
     """
     if span <= 0 or not math.isfinite(span):
         raise ValueError(f"span must be a positive length, got {span}")
+    if not aspect > 0 or not math.isfinite(aspect):
+        raise ValueError(f"aspect must be a positive ratio, got {aspect}")
     x0, x1, y0, y1 = table
     if kind == "planar":
+        more = _points(extra)
         # The initial view is the console's long-standing one (the browser tests project clicks
         # with it): the reachable half-disc from the front right, look-at right of its centre.
         perspective = CameraPose("Perspective", (0.55 * span, -1.25 * span, 1.75 * span),
                                  (0.3 * span, 0.32 * span, 0.0))
+        direction = np.subtract(perspective.position, perspective.look_at)
+        reach = np.array([(sx * span, sy * span, 0.0) for sx in (-1, 1) for sy in (-0.25, 1)])
         if abs(aspect - DEFAULT_ASPECT) > 0.05:
             # Another window shape: the same direction, fitted to the reach (the initial
             # camera cannot know the window; console.scene.window_fit re-frames each
             # browser's camera with its own).
-            reach = [(sx * span, sy * span, 0.0) for sx in (-1, 1) for sy in (-0.25, 1)]
-            perspective = frame_points("Perspective", reach, np.subtract(
-                perspective.position, perspective.look_at), aspect)
-        # Top-down: the arm's reach, x in [-span, span], y from just behind the base to span.
-        top = frame_top_down("Top-down", (-span, span), (-0.25 * span, span), aspect)
+            perspective = frame_points("Perspective", reach, direction, aspect)
+        if not in_view(perspective, more, aspect):
+            # A plan reaching past this view (a far object's outer approach circles): the
+            # same direction, fitted to the reach and everything planned.
+            perspective = frame_points("Perspective", np.vstack([reach, more]), direction,
+                                       aspect)
+        # Top-down: the arm's reach, x in [-span, span], y from just behind the base to span,
+        # widened to what is planned.
+        box = np.vstack([reach[:, :2], more[:, :2]])
+        top = frame_top_down("Top-down", (float(box[:, 0].min()), float(box[:, 0].max())),
+                             (float(box[:, 1].min()), float(box[:, 1].max())), aspect)
         return (perspective, top)
     # The extensible arm stands at the origin and reaches up to ``span``; it starts straight at
     # mid-range racks (about half of that tall) and bends from there. Frame that working volume
     # (full extension just fits), so the arm fills a good part of the view, not the whole table.
-    centre = (0.0, 0.0, 0.45 * span)
-    volume = np.vstack([_sphere(centre, 0.52 * span), [(0.0, 0.0, span)]])  # with the full top
+    volume = working_volume(span, aspect)
     return (frame_points("Perspective", volume, (0.75, -1.0, 0.55), aspect),
             frame_points("Front", volume, (0.0, -1.0, 0.12), aspect),
             frame_points("Side", volume, (1.0, 0.0, 0.12), aspect),
@@ -177,15 +225,32 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
                            (max(y0, -0.55 * span), min(y1, 0.55 * span)), aspect))
 
 
+def working_volume(span: float, aspect: float = DEFAULT_ASPECT) -> npt.NDArray[np.float64]:
+    """Points bounding what the extensible arm's views frame, for a canvas of ``aspect``.
+
+    An ellipsoid about the arm's axis, from just below the table to ``span`` high (the fully
+    extended top on it). In a wide canvas it is a ball of radius 0.52 ``span`` (the tip bent
+    sideways at half extension); a tall canvas (a tablet's, a phone's) is limited by its width,
+    and that ball framed by the width left the arm a third of the canvas high, so there the
+    ellipsoid narrows with the canvas (down to :data:`NARROWEST` of the ball's width) and the
+    arm's height fills the canvas instead.
+    """
+    squeeze = min(1.0, max(NARROWEST, aspect / DEFAULT_ASPECT))
+    ball = _sphere((0.0, 0.0, 0.45 * span), 0.52 * span)
+    ball[:, :2] *= squeeze
+    return np.vstack([ball, [(0.0, 0.0, span)]])
+
+
 def presets_for_window(kind: Kind | str, span: float, table: tuple[float, float, float, float],
-                       width_px: float, height_px: float) -> tuple[CameraPose, ...]:
+                       width_px: float, height_px: float,
+                       extra: npt.ArrayLike | None = None) -> tuple[CameraPose, ...]:
     """:func:`presets` for a browser canvas of ``width_px`` x ``height_px`` (0 x 0: not known
-    yet, the wide window's presets). The control panel never covers the canvas (docked beside
-    it; on phones the canvas is above the sheet: ``console.web.phone_sheet``), so the canvas's
-    aspect is all a pose needs."""
+    yet, the wide window's presets), showing ``extra`` too (see :func:`presets`). The control
+    panel never covers the canvas (docked beside it; on phones the canvas is above the sheet:
+    ``console.web.phone_sheet``), so the canvas's aspect is all a pose needs."""
     if width_px > 0 and height_px > 0 and math.isfinite(width_px / height_px):
-        return presets(kind, span, table, width_px / height_px)
-    return presets(kind, span, table)
+        return presets(kind, span, table, width_px / height_px, extra)
+    return presets(kind, span, table, extra=extra)
 
 
 def preset(kind: Kind | str, name: str, span: float, table: tuple[float, float, float, float],

@@ -1,4 +1,5 @@
-"""Each browser's camera framed for its own window, so the arm is in view on a tablet or a phone.
+"""Each browser's camera framed for its own window and for what is planned, so the arm and the
+plan are in view on a desk, a tablet or a phone.
 
 The initial camera (``console.scene.stage.setup_camera``) is one pose for every browser, made
 for a wide window (1600 x 1000 with the panel docked beside the 3D view). In a tall window the
@@ -7,30 +8,39 @@ phone viser's bottom sheet covers the lower half of the view (``console.web.phon
 :class:`WindowFit` watches each browser's camera reports (viser sends the canvas size with
 them): when the canvas's size differs from what the browser's camera was last framed for, and
 the camera is still where the console put it (the person has not turned or zoomed it), it moves
-that browser's camera to the first preset framed for that canvas
-(``console.scene.camera.presets_for_window``). A camera the person moved stays theirs; "Reset
-view" (the View panel) frames it for the window again.
+that browser's camera to its preset framed for that canvas
+(``console.scene.camera.presets_for_window``: the first one, or the one the person last chose
+in the View panel). The presets also show what the operator plans (the soft arm's objects, bin,
+approach circles and waypoints: ``console.scene.plan_frame``): when that changes the console
+calls :meth:`WindowFit.refit`, which re-frames every camera still where the console put it
+(a far object's plan widens the view; nothing moves while everything is already in view). A
+camera the person moved stays theirs; a View preset or "Reset view" (:meth:`WindowFit.put`)
+makes it the console's again.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import threading
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from console.scene.camera import CameraPose, apply
+from console.scene.camera import CameraPose, apply, pick
 
 POSE_TOLERANCE_M = 2e-3  # a camera within this of where it was put has not been moved
+
+Presets = Callable[[int, int], Sequence[CameraPose]]
 
 
 @dataclasses.dataclass
 class _Framed:
-    """What one browser's camera was last framed for, and where it was put."""
+    """What one browser's camera was last framed for (canvas size, preset), and where it was
+    put."""
 
     size: tuple[int, int]
     pose: CameraPose
+    name: str | None = None  # the preset chosen (None: the first)
 
 
 def _at(camera: Any, pose: CameraPose) -> bool:
@@ -39,21 +49,38 @@ def _at(camera: Any, pose: CameraPose) -> bool:
                 and np.allclose(camera.look_at, pose.look_at, atol=POSE_TOLERANCE_M))
 
 
+def _still_at(client: Any, pose: CameraPose) -> bool:
+    """Whether a browser's camera (as it last reported or was set) is at ``pose``."""
+    try:
+        return _at(client.camera, pose)
+    except AssertionError:  # viser: no camera message yet
+        return False
+
+
+def _size(camera: Any) -> tuple[int, int]:
+    """The canvas size (px) a browser's camera reported ((0, 0): none yet)."""
+    try:
+        return int(camera.image_width), int(camera.image_height)
+    except (AssertionError, AttributeError, TypeError, ValueError):  # no camera message yet
+        return 0, 0
+
+
 class WindowFit:
-    """Re-frames every browser's camera for its canvas (see the module docstring).
+    """Re-frames every browser's camera for its canvas and the plan (see the module docstring).
 
     Args:
         server: The viser server (its connects, disconnects and clients' cameras).
         initial: The initial camera's pose (every browser starts there).
-        first_for: The first preset for a canvas of (width, height) pixels.
+        presets_for: The presets for a canvas of (width, height) pixels ((0, 0): not known),
+            framing what is planned now; the first is the default.
         stopped: Whether the console is shutting down (no camera updates then).
     """
 
-    def __init__(self, server: Any, initial: CameraPose,
-                 first_for: Callable[[int, int], CameraPose], *,
+    def __init__(self, server: Any, initial: CameraPose, presets_for: Presets, *,
                  stopped: Callable[[], bool] = lambda: False) -> None:
+        self._server = server
         self._initial = initial
-        self._first_for = first_for
+        self._presets_for = presets_for
         self._stopped = stopped
         self._lock = threading.Lock()
         self._framed: dict[int, _Framed] = {}
@@ -81,6 +108,26 @@ class WindowFit:
             framed = self._framed.get(client_id)
             return None if framed is None else framed.pose
 
+    def _preset(self, size: tuple[int, int], name: str | None) -> CameraPose:
+        poses = self._presets_for(*size)
+        return poses[0] if name is None else pick(poses, name)
+
+    def pose_for(self, client: Any, name: str | None = None) -> CameraPose:
+        """The preset ``name`` (None: the first) framed for ``client``'s window and the plan."""
+        return self._preset(_size(client.camera), name)
+
+    def put(self, client: Any, name: str | None = None) -> CameraPose:
+        """Move ``client``'s camera (theirs only) to the preset ``name`` (None: the first, "Reset
+        view"), framed for its window and the plan; the console re-frames it from now on (a
+        new plan, a new window size) until the person moves it."""
+        size = _size(client.camera)
+        with self._lock:
+            pose = self._preset(size, name)
+            self._framed[client.client_id] = _Framed(size, pose, name)
+        with client.atomic():
+            apply(client.camera, pose)
+        return pose
+
     def on_camera(self, client: Any, camera: Any) -> CameraPose | None:
         """A browser reported its camera: frame it for its canvas if that changed and the
         camera is where the console put it; the pose it was moved to (None: left alone)."""
@@ -92,15 +139,38 @@ class WindowFit:
         with self._lock:
             framed = self._framed.get(client.client_id)
             last = self._initial if framed is None else framed.pose
+            name = None if framed is None else framed.name
             if framed is not None and framed.size == size:
                 return None
             if not _at(camera, last):     # the person moved it: theirs; remember the size
-                self._framed[client.client_id] = _Framed(size, last)
+                self._framed[client.client_id] = _Framed(size, last, name)
                 return None
-            pose = self._first_for(*size)
-            self._framed[client.client_id] = _Framed(size, pose)
+            pose = self._preset(size, name)
+            self._framed[client.client_id] = _Framed(size, pose, name)
         if _at(camera, pose):
             return None
         with client.atomic():
             apply(client.camera, pose)
         return pose
+
+    def refit(self) -> list[int]:
+        """What is planned changed: re-frame every browser's camera that is still where the
+        console put it (for its window and preset); the ids of the browsers moved."""
+        if self._stopped():
+            return []
+        moved: list[tuple[Any, CameraPose]] = []
+        clients = list(self._server.get_clients().values())
+        with self._lock:
+            for client in clients:
+                framed = self._framed.get(client.client_id)
+                if framed is None or not _still_at(client, framed.pose):
+                    continue          # not framed yet, or the person's camera
+                pose = self._preset(framed.size, framed.name)
+                if _still_at(client, pose):
+                    continue
+                self._framed[client.client_id] = _Framed(framed.size, pose, framed.name)
+                moved.append((client, pose))
+        for client, pose in moved:
+            with client.atomic():
+                apply(client.camera, pose)
+        return [client.client_id for client, _ in moved]

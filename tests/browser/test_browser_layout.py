@@ -3,10 +3,12 @@ phone sizes, on every tab, for both default consoles; every tab is shot at deskt
 size (``artifacts/layout/``) for people to look at.
 
 Issue #31: at each size the arm (the soft arm with its object and the planned approach circles)
-is in the 3D view and not behind the control panel. The arm's points are projected with the
-camera the browser reports to the console (its pose, field of view and canvas size, read on the
-server side of the console built in this process), their bounding box on the page compared with
-the canvas's and the panel's rectangles as the page measures them.
+is in the 3D view and not behind the control panel; so is a far object's plan (an object at
+(-300, 80) mm: its outer approach circles reach past the arm's reach, and the console frames
+what is planned, ``console.scene.plan_frame``). The arm's points are projected with the camera
+the browser reports to the console (its pose, field of view and canvas size, read on the server
+side of the console built in this process), their bounding box on the page compared with the
+canvas's and the panel's rectangles as the page measures them.
 """
 
 from __future__ import annotations
@@ -86,7 +88,7 @@ _RECTS = """() => {
 
 def scene_points(app: Any) -> np.ndarray:
     """World points (m) of what must stay in view: the arm's drawn surfaces at its shown pose;
-    for the soft arm also each object's rim and the plan's approach circles."""
+    for the soft arm also each object's rim and the plan's approach circles and waypoints."""
     g = app.view.geometry(np.asarray(app.store.display.q))
     parts = [g[k] for k in ("body", "gripper", "backbone", "platforms") if k in g]
     parts += list(g.get("racks", []))
@@ -94,9 +96,11 @@ def scene_points(app: Any) -> np.ndarray:
         a = np.linspace(0.0, 2 * math.pi, 24)
         for o in app.grasp_session.view().objects:
             parts.append(np.stack([o.x + o.r * np.cos(a), o.y + o.r * np.sin(a), 0 * a], -1))
-        circles = app.grasp_scene.plan_scene.circles
-        assert circles.visible, "no approach circles drawn"
-        parts.append(circles.points)
+        plan = app.grasp_scene.plan_scene
+        assert plan.circles.visible, "no approach circles drawn"
+        parts += [plan.circles.points, plan.palms.points]               # circles, waypoints
+        if plan.circles_failed.visible:
+            parts.append(plan.circles_failed.points)
     return np.concatenate([np.asarray(p, float).reshape(-1, 3) for p in parts])
 
 
@@ -165,22 +169,8 @@ def test_stop_and_phase_need_no_scrolling_and_the_arm_is_clear_of_the_panel_at_a
         except PlaywrightError:
             pass  # (a GPU-rendered browser shows none)
         for size, (width, height) in SIZES.items():  # one page, resized: as a user turns a tablet
-            page.set_viewport_size({"width": width, "height": height})
-            page.wait_for_function("w => innerWidth === w", arg=width)
-            drawn(page)
-            close_notices(page)
-            open_tab(page, "Operate")
-            why: list[str | None] = [None]
-
-            def clear(size: str = size) -> bool:
-                why[0] = arm_in_view(page, app, size)
-                return why[0] is None
-            try:
-                wait_for(clear, 20, "the arm in view", interval=0.1)
-            except AssertionError:
-                shot = shots / f"{robot}-{size}-arm.png"
-                page.screenshot(path=str(shot))
-                raise AssertionError(f"{why[0]} (see {shot})") from None
+            resize(page, width, height)
+            in_view_or_shot(page, app, size, shots / f"{robot}-{size}-arm.png")
             for tab in TABS[robot] if size in SHOT_SIZES else ("Operate",):
                 open_tab(page, tab)
                 drawn(page)
@@ -192,5 +182,45 @@ def test_stop_and_phase_need_no_scrolling_and_the_arm_is_clear_of_the_panel_at_a
                                              f"(see {shot})")
                 assert page.evaluate("() => scrollY") == 0
                 page.screenshot(path=str(shot))
+        session = app.grasp_session
+        if session is not None:
+            # A far object (issue 31): its plan's outer circles reach past the arm's reach.
+            name = session.place(-0.30, 0.08)
+            session.request_plan()
+
+            def planned() -> bool:
+                v = session.view()
+                return (v.outcome is not None and v.outcome.obj is not None
+                        and v.outcome.obj.name == name and v.outcome.plan is not None
+                        and v.planning_s is None)
+            wait_for(planned, 60, "the far object's plan")
+            for size, (width, height) in reversed(SIZES.items()):
+                resize(page, width, height)
+                in_view_or_shot(page, app, size, shots / f"{robot}-{size}-far-plan.png")
+                page.screenshot(path=str(shots / f"{robot}-{size}-far-plan.png"))
     finally:
         context.close()
+
+
+def resize(page: Any, width: int, height: int) -> None:
+    """Resize the page (as a user turns a tablet), close the notices and open Operate."""
+    page.set_viewport_size({"width": width, "height": height})
+    page.wait_for_function("w => innerWidth === w", arg=width)
+    drawn(page)
+    close_notices(page)
+    open_tab(page, "Operate")
+
+
+def in_view_or_shot(page: Any, app: Any, size: str, shot: Path) -> None:
+    """Wait (20 s at most) until the arm and what is planned are in the 3D view and clear of
+    the panel; else screenshot the page to ``shot`` and fail with why."""
+    why: list[str | None] = [None]
+
+    def clear() -> bool:
+        why[0] = arm_in_view(page, app, size)
+        return why[0] is None
+    try:
+        wait_for(clear, 20, "the arm in view", interval=0.1)
+    except AssertionError:
+        page.screenshot(path=str(shot))
+        raise AssertionError(f"{why[0]} (see {shot})") from None

@@ -253,8 +253,10 @@ def test_click_to_place_and_plan_then_top_down_and_two_clicks_measure_a_distance
     assert objects.inner_text() == before                           # the clicks placed nothing
     page.screenshot(path=str(artifacts_dir / "view-measured.png"))
 
+    first = view.pose_for(client, "Reset view")                     # framed for this window
     page.get_by_role("button", name="Reset view").click()
-    first = app.window_fit.framed_pose(client.client_id)            # framed for this window
+    wait_for(lambda: app.window_fit.framed_pose(client.client_id) == first, 30,
+             "the console keeps the camera framed again")
     wait_for(lambda: np.allclose(client.camera.position, first.position, atol=0.01), 30,
              "the camera back where the console opened")
     page.get_by_role("button", name="Clear measurement").click()

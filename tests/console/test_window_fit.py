@@ -1,7 +1,8 @@
 """Each browser's camera framed for its window (console.scene.window_fit,
 camera.presets_for_window): in a tablet's tall 3D view and a phone's (the part above the sheet,
-console.web.phone_sheet) the arm's reach is all in view; a camera the person moved is left
-alone."""
+console.web.phone_sheet) the arm's reach is all in view, and so is what the operator plans (a far
+object's approach circles and waypoints, console.scene.plan_frame); the extensible arm fills a
+tall canvas; a camera the person moved is left alone."""
 
 from __future__ import annotations
 
@@ -110,6 +111,7 @@ class _Server:
     def __init__(self) -> None:
         self.connect: list[Any] = []
         self.disconnect: list[Any] = []
+        self.clients: dict[int, _Client] = {}
 
     def on_client_connect(self, fn: Any) -> None:
         self.connect.append(fn)
@@ -118,9 +120,10 @@ class _Server:
         self.disconnect.append(fn)
 
     def get_clients(self) -> dict[int, Any]:
-        return {}
+        return dict(self.clients)
 
     def join(self, client: _Client) -> None:
+        self.clients[client.client_id] = client
         for fn in self.connect:
             fn(client)
 
@@ -133,7 +136,8 @@ def fit() -> tuple[_Server, WindowFit, camera.CameraPose, Any]:
     def first(w: int, h: int) -> camera.CameraPose:
         return camera.presets_for_window("planar", span, table, w, h)[0]
     server = _Server()
-    return server, WindowFit(server, initial, first), initial, first
+    return (server, WindowFit(server, initial, lambda w, h: (first(w, h),)), initial,
+            first)
 
 
 def test_a_tablet_browser_is_framed_for_its_canvas_once(fit):
@@ -165,3 +169,129 @@ def test_a_desktop_browser_keeps_the_initial_camera_and_a_moved_camera_stays(fit
     server.join(unknown)
     unknown.camera.report()
     assert unknown.moves == 0 and window_fit.framed_size(2) is None
+
+
+# -- what the operator plans: a far object's approach circles and waypoints ------------------
+
+SIZES = {"desktop": (1276, 1000), "tablet": (496, 1180), "phone": (390, 422)}
+
+
+def _circle(cx: float, cy: float, r: float, z: float, n: int = 72) -> list[tuple[float, ...]]:
+    a = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    return [(cx + r * math.cos(t), cy + r * math.sin(t), z) for t in a]
+
+
+@pytest.fixture(scope="module")
+def plans() -> dict[str, Any]:
+    """The grasp session's snapshots (console.core.grasp_state.SessionView) of a table with
+    Object 1 at (-200, 200) mm and Object 2 at (-300, 80) mm (the issue's far object), each
+    selected with its plan (the other object kept clear of), and the points a person must see
+    for each: both objects and the plan's approach circles and waypoints, drawn here from the
+    plan itself (not from console.scene.plan_frame)."""
+    from console.core.grasp_state import Outcome, SessionView
+    from console.core.table_scene import TableObject
+    from core.planning.obstacles import with_other_objects
+    from core.planning.sides import SidedPlanner
+
+    r = SOFT.capture.nominal_object_radius
+    objects = (TableObject("Object 1", -0.20, 0.20, r), TableObject("Object 2", -0.30, 0.08, r))
+    planner = SidedPlanner(SOFT)
+    out: dict[str, Any] = {}
+    for obj in objects:
+        others = [o for o in objects if o is not obj]
+        plan = planner.plan(np.zeros(SOFT.n_segments), (obj.x, obj.y), obj.r,
+                            obstacles=with_other_objects((), others), clearance=0.01)
+        view = SessionView(objects, obj.name, Outcome(obj, plan, None, 1), 0, False, 2.0, True,
+                           "off")
+        must = [p for o in objects for p in _circle(o.x, o.y, o.r, 0.0)]
+        for radius in np.asarray(plan.radii, float):
+            must += _circle(float(plan.center[0]), float(plan.center[1]), float(radius), 0.03)
+        must += [(float(x), float(y), 0.03) for x, y, _ in np.asarray(plan.palm_poses)]
+        out[obj.name] = (view, np.array(must))
+    return out
+
+
+def _outside(pose: camera.CameraPose, points: Any, aspect: float) -> int:
+    """How many of ``points`` are off the canvas seen through ``pose``."""
+    xy = np.array([ndc(pose, p, aspect) for p in points])
+    return int(np.sum(np.any(np.abs(xy) > 1.0, axis=1)))
+
+
+@pytest.mark.parametrize("size", list(SIZES.values()), ids=list(SIZES))
+def test_every_preset_shows_a_far_objects_approach_circles_and_waypoints(plans, size):
+    """Issue 31: an object at (-300, 80) mm has approach circles reaching past the arm's reach:
+    the views framed only the reach cut them off; framed with what is planned, every preset
+    shows the circles, the waypoints, both objects and still the arm's reach."""
+    from console.scene.plan_frame import plan_points
+
+    width, height = size
+    aspect = width / height
+    span, table = arm_span(SOFT, "planar"), table_extent(SOFT, "planar")
+    view, must = plans["Object 2"]
+    old = camera.presets_for_window("planar", span, table, width, height)[0]
+    assert _outside(old, must, aspect) > 0            # what the reach's framing left out
+    for pose in camera.presets_for_window("planar", span, table, width, height,
+                                          plan_points(view)):
+        assert _outside(pose, must, aspect) == 0, pose.name
+        assert _outside(pose, arm_points(SOFT), aspect) == 0, pose.name
+
+
+def test_a_plan_already_in_view_leaves_the_view_as_it_was(plans):
+    """Object 1's plan is inside the reach's view: no preset moves for it (a plan does not
+    shake the camera), and the desktop still opens with the long-standing camera."""
+    from console.scene.plan_frame import plan_points
+
+    span, table = arm_span(SOFT, "planar"), table_extent(SOFT, "planar")
+    view, must = plans["Object 1"]
+    for width, height in SIZES.values():
+        plain = camera.presets_for_window("planar", span, table, width, height)
+        framed = camera.presets_for_window("planar", span, table, width, height,
+                                           plan_points(view))
+        assert _outside(plain[0], must, width / height) == 0
+        assert framed[0] == plain[0]
+    assert camera.presets_for_window("planar", span, table, 1276, 1000,
+                                     plan_points(view))[0] == camera.presets("planar", span,
+                                                                             table)[0]
+
+
+def test_a_new_plan_reframes_the_browsers_the_console_framed_and_not_a_moved_camera(plans):
+    from console.scene.plan_frame import plan_points
+
+    span, table = arm_span(SOFT, "planar"), table_extent(SOFT, "planar")
+    initial = camera.presets("planar", span, table)[0]
+    planned: list[Any] = [None]
+    server = _Server()
+    fit = WindowFit(server, initial, lambda w, h: camera.presets_for_window(
+        "planar", span, table, w, h, planned[0]))
+    desk = _Client(1, initial, SIZES["desktop"])
+    tablet = _Client(2, initial, SIZES["tablet"])
+    moved = _Client(3, initial, SIZES["desktop"])
+    for c in (desk, tablet, moved):
+        server.join(c)
+        c.camera.report()
+    assert (desk.moves, tablet.moves, moved.moves) == (0, 1, 0)
+    moved.camera.position = moved.camera.position + 0.05            # the person orbits
+    theirs = moved.camera.position.copy()
+    assert fit.refit() == []                                          # nothing new planned
+    far, must = plans["Object 2"]
+    planned[0] = plan_points(far)                                     # the far object's plan
+    assert sorted(fit.refit()) == [1, 2]
+    for c, (w, h) in ((desk, SIZES["desktop"]), (tablet, SIZES["tablet"])):
+        pose = fit.framed_pose(c.client_id)
+        np.testing.assert_allclose(c.camera.position, pose.position)
+        assert _outside(pose, must, w / h) == 0
+    np.testing.assert_allclose(moved.camera.position, theirs)        # theirs stays theirs
+    assert fit.refit() == []                                          # the same plan again
+    planned[0] = plan_points(plans["Object 1"][0])                    # back to a near plan
+    assert sorted(fit.refit()) == [1, 2]
+    np.testing.assert_allclose(desk.camera.position, initial.position)
+    # A preset the person chose (View: Top-down) is the one kept framed.
+    fit.put(desk, "Top-down")
+    assert np.asarray(desk.camera.look_at)[2] < np.asarray(desk.camera.position)[2]
+    planned[0] = plan_points(far)
+    assert sorted(fit.refit()) == [1, 2]
+    top = fit.framed_pose(1)
+    assert top.name == "Top-down" and top.forward[2] < -0.999
+    assert _outside(top, must, SIZES["desktop"][0] / SIZES["desktop"][1]) == 0
+    fit.put(desk)                                                     # Reset view
+    assert fit.framed_pose(1).name == "Perspective"

@@ -3,7 +3,9 @@
 * **Camera**: the robot's presets (``console.scene.camera``: soft arm *Perspective* / *Top-down*;
   extensible arm *Perspective* / *Front* / *Side* / *Top-down*) and *Reset view* (the camera the
   console opens with). A preset moves only the camera of the browser that pressed it, fitted to
-  that browser's window; viewers may use them (they move nothing but their own view).
+  that browser's window and to what is planned (a far object's approach circles), and keeps it
+  framed so until the person turns or zooms it (``console.scene.window_fit``); viewers may use
+  them (they move nothing but their own view).
 * **Measure distance**: the presser's next two clicks on the table measure instead of doing
   anything else (no object is placed, no grasp starts: ``console.web.scene_clicks``); the line and
   its length ("123.4 mm") are drawn in the scene everyone sees. Viewers may measure. A click
@@ -180,21 +182,14 @@ class ViewPanel(Panel):
 
     # -- camera ------------------------------------------------------------------------------
     def pose_for(self, client: Any, name: str) -> camera.CameraPose:
-        """The preset ``name`` (or Reset's, the first) fitted to ``client``'s window: its
-        canvas's aspect and the part the control panel leaves free."""
-        try:
-            width, height = int(client.camera.image_width), int(client.camera.image_height)
-        except (AssertionError, AttributeError, TypeError, ValueError):  # no camera message yet
-            width = height = 0
-        poses = camera.presets_for_window(self.kind, self.span, self.table, width, height)
-        return poses[0] if name == RESET else camera.pick(poses, name)
+        """The preset ``name`` (or Reset's, the first) fitted to ``client``'s window (its
+        canvas's aspect) and to what is planned (``console.scene.window_fit``)."""
+        return self.app.window_fit.pose_for(client, None if name == RESET else name)
 
     def move_camera(self, client: Any, name: str) -> camera.CameraPose:
-        """Move ``client``'s camera (theirs only) to the preset ``name``."""
-        pose = self.pose_for(client, name)
-        with client.atomic():
-            camera.apply(client.camera, pose)
-        return pose
+        """Move ``client``'s camera (theirs only) to the preset ``name``; the console keeps it
+        framed for that preset (a new plan, another window size) until the person moves it."""
+        return self.app.window_fit.put(client, None if name == RESET else name)
 
     def _on_camera(self, event: viser.GuiEvent, name: str) -> None:
         if event.client is not None:
