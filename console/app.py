@@ -78,6 +78,7 @@ from console.scene.window_fit import WindowFit
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
 from console.panels.common.tabs import ConsoleTabs
+from core.labdata.channels import robot_description
 from core.robots import Robot, SoftArm
 from console.web.client_guard import ClientGuard
 
@@ -152,6 +153,7 @@ class ConsoleApp:
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
+        self.recorder.log("robot", robot_description(robot))  # latched: recordings start with it
         for loop_process in (self.services.soft_control, self.services.extensible_runner):
             listeners = getattr(loop_process, "tick_listeners", None)
             if listeners is not None:  # every loop tick into recordings (100 Hz)
