@@ -61,8 +61,8 @@ def test_every_variant_is_scored_on_the_same_grid_and_longer_racks_reach_more(tm
     assert all(r["error"] == "" for r in rows)
     assert [r["tip_ik_box_m"] for r in rows] == [pytest.approx(0.82)] * 2
     assert [r["tip_ik_targets"] for r in rows] == [27.0, 27.0]
-    # The grid point straight above the base at 0.5 x reach: beyond 2 x 0.3 m? No (0.41 m);
-    # the one at 0.683 m is beyond the short arm's 0.6 m and within the long arm's 0.82 m.
+    # Grid points straight above the base: (0, 0, 0.41) is within both arms' reach (straight
+    # segments of 0.205 m); (0, 0, 0.683) is beyond the short arm's 2 x 0.3 m, within 2 x 0.41 m.
     assert 0 < rows[0]["tip_ik_success"] < rows[1]["tip_ik_success"] < 1
 
 
