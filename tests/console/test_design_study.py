@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -104,11 +105,11 @@ def test_the_panel_lists_the_study_and_shows_every_variant_row(app: Any, data: P
     panel = opened(app, FakeClient(1))
     expected = csv_rows(data / "studies" / "segments")
     assert len(expected) == 3
-    lines = [line for line in panel.table.content.splitlines()
-             if line.startswith("| ") and "`" in line]
+    lines = [line for line in panel.table.content.splitlines() if re.match(r"\| \d+ \|", line)]
     assert len(lines) == 3
-    for line, row in zip(lines, expected):
-        assert f"`{row['variant']}`" in line
+    for i, (line, row) in enumerate(zip(lines, expected), 1):
+        assert line.startswith(f"| {i} |")
+        assert f"{i}: `{row['variant']}`" in panel.table.content  # the number names it
         # each metric in the unit its column names: m² shown as mm², whole
         mm2 = f"{float(row['reachable_area_m2']) * 1e6:,.0f}".replace(",", THIN)
         assert mm2 in line
@@ -137,7 +138,7 @@ def test_a_failed_variant_is_a_row_with_its_reason_and_no_best(server: Any, data
     soft_study(data / "studies" / "one-failed", fail=8)
     app = console_app(SOFT, server, data_dir=data, panels=(DesignStudyPanel,))
     panel = opened(app, FakeClient(1), "studies/one-failed")
-    row8 = next(line for line in panel.table.content.splitlines() if "count=8" in line)
+    row8 = next(line for line in panel.table.content.splitlines() if line.startswith("| 3 |"))
     assert "planner gave up" in row8 and "**" not in row8
     best = [line for line in panel.table.content.splitlines() if "**Best" in line]
     assert best and not any("count=8" in line for line in best)

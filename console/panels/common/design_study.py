@@ -36,6 +36,7 @@ from console.panels.common.study_table import column_unit, default_metric, plot_
 
 NONE_FOUND = "(no study in the data folder)"
 NO_STUDY = "(open a study)"
+AXIS_SIZE = 90  # px for the y axis's numbers (mm³ run to nine digits) and its unit
 LINE_COLORS = ("#1c7ed6", "#e8590c", "#2f9e44", "#ae3ec9", "#f08c00", "#0c8599", "#e03131",
                "#5c677d")
 
@@ -189,7 +190,7 @@ class DesignStudyPanel(Panel):
         with self.app.server.atomic():  # series and data change together in the browser
             self.plot.series = tuple(series)
             self.plot.axes = (uplot.Axis(label=over),
-                              uplot.Axis(label=column_unit(metric).header))
+                              uplot.Axis(size=AXIS_SIZE, label=column_unit(metric).unit))
             self.plot.title = title
             self.plot.data = data
             self.plot.visible = True

@@ -97,16 +97,17 @@ def _code(name: str) -> str:
 
 
 def table_markdown(results: StudyResults, max_rows: int = MAX_TABLE_ROWS) -> str:
-    """The study as a markdown table: #, the variant, the varied keys, every metric (screen
-    units; the best value of each bold), the reason of a failed variant; then the best
-    variant per metric, by name."""
+    """The study as a markdown table: # (the variant's number in the study), the varied keys,
+    every metric (screen units; the best value of each bold), the reason of a failed variant;
+    then the variants by number and name (their names are long: a narrow panel's table holds
+    the numbers) and the best variant per metric, by name."""
     errors = any(r.get("error") for r in results.rows)
     cols = [*results.keys, *results.metrics]
-    head = ["#", "variant", *(column_unit(c).header for c in cols)] + (["error"] if errors else [])
+    head = ["#", *(column_unit(c).header for c in cols)] + (["error"] if errors else [])
     lines = ["| " + " | ".join(_md(h) for h in head) + " |",
              "|" + "---|" * len(head)]
     for i, row in enumerate(results.rows[:max_rows], 1):
-        cells = [str(i), _code(row["variant"])]
+        cells = [str(i)]  # the number names the variant: the Variant list and Best lines
         for c in cols:
             text = _md(fmt_value(c, row.get(c)))
             cells.append(f"**{text}**" if results.best.get(c) == row["variant"] else text)
@@ -116,7 +117,10 @@ def table_markdown(results: StudyResults, max_rows: int = MAX_TABLE_ROWS) -> str
     more = len(results.rows) - max_rows
     tail = [f"<small>… {more} more rows in {results.label}/{results.source}</small>"] if (
         more > 0) else []
-    return "\n".join(lines + tail) + "\n\n" + best_markdown(results)
+    names = "<br>".join(f"{i}: {_code(name)}" for i, name in
+                        enumerate(results.variants[:max_rows], 1))
+    return ("\n".join(lines + tail) + "\n\n" + best_markdown(results)
+            + f"\n\n<small>{names}</small>")
 
 
 def best_markdown(results: StudyResults) -> str:
