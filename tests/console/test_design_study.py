@@ -233,6 +233,20 @@ def test_a_bad_folder_is_refused_with_a_message_and_nothing_changes(
     assert set(panel.pick.options) == {"studies/not-a-study", "studies/segments"}
 
 
+def test_a_typed_folder_opens_and_the_list_shows_it(server: Any, data: Path) -> None:
+    soft_study(data / "studies" / "a", counts=(4,))
+    soft_study(data / "studies" / "b", counts=(4, 6))
+    app = console_app(SOFT, server, data_dir=data, panels=(DesignStudyPanel,))
+    panel = app.panel(DesignStudyPanel)
+    assert panel.pick.options == ("studies/a", "studies/b") and panel.pick.value == "studies/a"
+    client = FakeClient(1)
+    user(panel.path, client, str(data / "studies" / "b"))   # absolute, inside the data folder
+    user(panel.open_btn, client)
+    assert client.notes == []
+    assert app.design_study.results.label == "studies/b" and panel.pick.value == "studies/b"
+    assert panel.variant.options == app.design_study.results.variants
+
+
 def test_an_empty_data_folder_says_so_and_opening_nothing_is_refused(server: Any,
                                                                     data: Path) -> None:
     app = console_app(EXT, server, data_dir=data, panels=(DesignStudyPanel,))

@@ -146,6 +146,8 @@ class DesignStudyPanel(Panel):
         results = self.studies.results
         if results is not None:
             _set(self.status, "content", self._status(results, 0))
+            if results.label in self.pick.options:  # the list shows the study that is open
+                _set(self.pick, "value", results.label)
             _set(self.table, "content", table_markdown(results))
             self._choices(self.metric, results.metrics, default_metric(results))
             self._choices(self.over, results.keys, None)
