@@ -61,6 +61,7 @@ from console.core.console_core import ConsoleCore, StopRecord
 from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import DataDir
+from console.core.design_study import DesignStudies
 from console.core.grasp_session import GraspSession
 from console.panels.common.header import ConsoleHeader, ViewerLine
 from console.core.hold_to_run import HoldToRun
@@ -73,6 +74,7 @@ from console.recording.lab_feed import feed_grasp
 from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
 from console.scene.grasp_layers import GraspSceneView
+from console.scene.study_ghost import StudyGhostView
 from console.scene.camera import presets_for_window
 from console.scene.window_fit import WindowFit
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
@@ -190,6 +192,9 @@ class ConsoleApp:
             self.grasp_session.start()
             # A recording starts with the table and plan as they are: the recorder keeps the
             # newest objects and plan records (Recorder.latched), logged by the feed on change.
+        # Design studies (Experiments tab): the open study and a variant drawn beside the arm.
+        self.design_study = DesignStudies(self.data_root)
+        self.study_ghost = StudyGhostView(server, self.design_study, robot)
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         # Each browser's camera framed for its own window (a tablet's, a phone's).
         kind, span, table = self.model.kind, self.arm_reach(), self.table_rectangle()
