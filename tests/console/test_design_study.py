@@ -46,7 +46,7 @@ def soft_study(out: Path, counts: tuple[int, ...] = (4, 6, 8), fail: int | None 
     """A soft-arm study over segments.count written by core.study (metrics stubbed)."""
     def rows(fn: Any, jobs: list) -> list[dict[str, Any]]:
         out_rows = []
-        for name, _, changes, _ in jobs:
+        for name, _, changes, *_ in jobs:  # (name, robot file, changes, spec[, text])
             n = changes["segments.count"]
             row = {"variant": name, **changes, "error": ""}
             if n == fail:
