@@ -182,6 +182,7 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
     from console.core.demo_motion import DemoMotion
     from console.panels.soft_arm.capture import CapturePanel
     from console.panels.soft_arm.control import ControlPanel
+    from console.panels.common.design_study import DesignStudyPanel
     from console.panels.extensible.panel_set import EXTENSIBLE_PANELS
     from console.panels.common.hardware import HardwarePanel
     from console.panels.soft_arm.panel_set import grasp_panels
@@ -211,7 +212,8 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
         app.status.content += ("<br><small><b>Device log:</b> " + html.escape(device_log[-1])
                                + "</small>")
     for panel_cls in (*DEFAULT_PANELS, *grasp_panels(), ControlPanel, CapturePanel, TrialsPanel,
-                      *EXTENSIBLE_PANELS, HardwarePanel, SessionPanel, ViewPanel):
+                      *EXTENSIBLE_PANELS, DesignStudyPanel, HardwarePanel, SessionPanel,
+                      ViewPanel):
         app.add_panel(panel_cls)
     return server, app, token
 

@@ -61,6 +61,7 @@ from console.core.console_core import ConsoleCore, StopRecord
 from console.scene.arm_view import ArmView
 from console.scene.arm_view_factory import make_arm_view
 from console.core.datadir import DataDir
+from console.core.design_study import DesignStudies
 from console.core.grasp_session import GraspSession
 from console.panels.common.header import ConsoleHeader, ViewerLine
 from console.core.hold_to_run import HoldToRun
@@ -73,12 +74,14 @@ from console.recording.lab_feed import feed_grasp
 from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
 from console.scene.grasp_layers import GraspSceneView
+from console.scene.study_ghost import StudyGhostView
 from console.scene.camera import presets_for_window
 from console.scene.plan_frame import FRAMED_PARTS, plan_points
 from console.scene.window_fit import WindowFit
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
 from console.panels.common.tabs import ConsoleTabs
+from core.labdata.channels import robot_description
 from core.robots import Robot, SoftArm
 from console.web.client_guard import ClientGuard
 
@@ -153,6 +156,7 @@ class ConsoleApp:
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
+        self.recorder.log("robot", robot_description(robot))  # latched: recordings start with it
         for loop_process in (self.services.soft_control, self.services.extensible_runner):
             listeners = getattr(loop_process, "tick_listeners", None)
             if listeners is not None:  # every loop tick into recordings (100 Hz)
@@ -189,6 +193,9 @@ class ConsoleApp:
             self.grasp_session.start()
             # A recording starts with the table and plan as they are: the recorder keeps the
             # newest objects and plan records (Recorder.latched), logged by the feed on change.
+        # Design studies (Experiments tab): the open study and a variant drawn beside the arm.
+        self.design_study = DesignStudies(self.data_root)
+        self.study_ghost = StudyGhostView(server, self.design_study, robot)
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         kind, span, table = self.model.kind, self.arm_reach(), self.table_rectangle()
         # Each browser's camera framed for its own window (a tablet's, a phone's) and for what

@@ -28,6 +28,10 @@ class DeviceEvents:
     watchdog_tripped: bool = False
     armed: bool = False
     disarmed: bool = False
+    # Longest run of DEMANDs replaced before a tick acted on them: a microcontroller reading
+    # one DEMAND per period never has one; the emulator has them after its own stall (or a
+    # late pty), and then moves toward the newest only (a path's corner skipped).
+    superseded: int = 0
 
 
 class DeviceCore:
@@ -59,6 +63,7 @@ class DeviceCore:
         self._next_state = now + period_s
         self._out: list[bytes] = []
         self.events = DeviceEvents()
+        self._unticked = 0  # DEMANDs that set targets since the last tick
 
     # -- inputs ---------------------------------------------------------------------------
     def receive(self, data: bytes, now: float) -> None:
@@ -97,6 +102,7 @@ class DeviceCore:
             self._last_demand, self._stalled = now, 0.0
             if self.armed and not self.tripped:
                 self.motors.set_targets(msg.mask, msg.counts)
+                self._unticked += 1
             self._send_state(now)
             self._next_state = now + self.period_s
         elif isinstance(msg, p.Config):
@@ -131,6 +137,9 @@ class DeviceCore:
             self.motors.hold()
             self.motors.enabled = False
             self.events.watchdog_tripped = True
+        if self._unticked > 1:
+            self.events.superseded = max(self.events.superseded, self._unticked - 1)
+        self._unticked = 0
         self.motors.step(now - self._last_tick)
         self._last_tick = now
         if now >= self._next_state:

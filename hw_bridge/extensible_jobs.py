@@ -205,7 +205,6 @@ class Job:
     job_id: int
     label: str
     path: MotionPath
-    t0: float
     trace: JobTrace
     counts: Counts           # (K, 3n) demands relative to home
     t_end: float | None = None

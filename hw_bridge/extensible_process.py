@@ -86,8 +86,9 @@ class PipeLink:
         self.measured_delta, self.measured_n = delta, self.measured_n + 1
 
     def settled(self, delta: Any) -> int:
-        self.replies.put(("settled", np.asarray(delta, float)))
-        return -1 if self.latest is None else self.latest[0]  # not sent back (SOURCE)
+        seen = -1 if self.latest is None else self.latest[0]  # (SOURCE's own: not sent back)
+        self.replies.put(("settled", np.asarray(delta, float), seen))
+        return seen
 
 
 def _hardware(robot: ExtensibleArm, opts: ExtensibleOptions) -> Any:
@@ -215,6 +216,8 @@ class ExtensibleProcess(LoopProcess):
         self._results: dict[int, JobResult] = {}
         self._done = threading.Condition()
         self._start_lock = threading.Lock()
+        self._sent_seq = -1  # the newest set-point sent to the child (see on_message)
+        self._sent_lock = threading.Lock()
 
     # -- lifecycle -------------------------------------------------------------------------
     @property
@@ -245,6 +248,8 @@ class ExtensibleProcess(LoopProcess):
             if self._proc is not None:  # the options as they are now (use_port)
                 self._args = (str(self.robot.source), self.options, self._commands,
                               self._replies)
+            with self._sent_lock:
+                self._sent_seq = -1  # the new child has seen no set-point
             super().restart(timeout)
             self.connecting = self.connect()
 
@@ -304,7 +309,12 @@ class ExtensibleProcess(LoopProcess):
         elif kind == "measured":
             self.store.report(payload, SOURCE)
         elif kind == "settled":
-            self.store.request(payload, SOURCE)
+            # Where the runner holds, as the console's command: unless a newer set-point than
+            # the newest it had seen was on its way (a jog started again after an expiry): the
+            # runner follows that one, and the console's command must stay with it.
+            with self._sent_lock:
+                if self._sent_seq <= int(msg[2]):
+                    self.store.request(payload, SOURCE)
 
     def setpoint(self, seq: int, delta: npt.ArrayLike) -> None:
         """Send the console's commanded posture ``delta`` (n, 3) with its store sequence number
@@ -313,4 +323,6 @@ class ExtensibleProcess(LoopProcess):
         store)."""
         rows = tuple(tuple(float(v) for v in row) for row in np.asarray(delta, float))
         if self.alive:
-            self._commands.put((0, Setpoint(int(seq), rows)))
+            with self._sent_lock:
+                self._sent_seq = int(seq)
+                self._commands.put((0, Setpoint(int(seq), rows)))

@@ -155,7 +155,7 @@ class ExtensibleRunner:
     def _apply(self, cmd: ExtensibleCommand, t: float) -> object:
         """Loop thread: run one command (dispatch on its type)."""
         if isinstance(cmd, RunPath):
-            return self.streamer.start_job(cmd.job_id, cmd.label, cmd.path, t)
+            return self.streamer.start_job(cmd.job_id, cmd.label, cmd.path)
         if isinstance(cmd, Hold):
             return self.streamer.halt(t)
         if isinstance(cmd, ConnectFactory):

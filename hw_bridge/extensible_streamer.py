@@ -81,7 +81,7 @@ class Streamer:
         sp = self.link.setpoint() if self.link else None
         return None if sp is None else sp[0]
 
-    def start_job(self, job_id: int, label: str, path: MotionPath, t: float) -> None:
+    def start_job(self, job_id: int, label: str, path: MotionPath) -> None:
         if not self.armed or self.measured_L is None:
             why = f"not started: {self.fault or ARM_FIRST}"
             self._finish(JobResult(job_id, label, False, why, None, None, None))
@@ -94,7 +94,7 @@ class Streamer:
             path = concat_paths(lead, path)
         trace = JobTrace(path.times, path.targets, path.tips,
                          np.full((len(path.times), 3), np.nan))
-        self.job = self.recent = Job(job_id, label, path, t, trace,
+        self.job = self.recent = Job(job_id, label, path, trace,
                                      path.motor_counts - self.home)
         self.track_L = None
         self.message = f"{label}: running"

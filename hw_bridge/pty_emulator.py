@@ -36,6 +36,11 @@ from hw_bridge.plants import MotorBank
 EventSink = Callable[..., None]
 """``emit(event, **fields)``: one event (``"armed"``, ``"watchdog_tripped"``, ...) and its data."""
 
+SUPERSEDED_EVENT = 3
+"""A tick that finds this many DEMANDs or more replaced unacted (the emulator stalled, or the pty
+delivered late: 30 ms of a 100 Hz host's demands) logs ``demands_superseded``; one or two come
+from ordinary jitter between the host's and the device's periods."""
+
 
 @dataclasses.dataclass(frozen=True)
 class EmulatorOptions:
@@ -296,6 +301,8 @@ class Emulator:
             self.emit("armed", positions=pos)
         if ev.disarmed:
             self.emit("disarmed", positions=pos)
+        if ev.superseded >= SUPERSEDED_EVENT:
+            self.emit("demands_superseded", count=ev.superseded, late_ms=round(late * 1e3, 1))
         if self.plant is not None and self.udp is not None:
             self.plant.step(self.core.motors.position, self.bridge.period_s)
             self.mocap_seq += 1

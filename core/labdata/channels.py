@@ -9,7 +9,8 @@ tools and are not read back.
 
 Record kinds with a typed channel: ``state`` (``q``, ``seq``, ``source``, optional ``command``),
 ``action`` (``what``, ``who``, ``client``, extra details), and for ``log(kind, data)``:
-``objects``, ``plan``, ``phase``, ``timing``, ``link``, ``fault`` and ``overlay``; any other kind
+``objects``, ``plan``, ``phase``, ``timing``, ``link``, ``fault``, ``robot`` (the robot file:
+:func:`robot_description`) and ``overlay``; any other kind
 goes to ``/console/<kind>`` as a ``softarm.Record`` (``boxes``, the extensible arm's box
 obstacles, also draws them as cubes on ``/scene/boxes``).
 """
@@ -20,6 +21,7 @@ import dataclasses
 import json
 import math
 import re
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
@@ -62,6 +64,7 @@ LINK = ChannelSpec("/link/health", S.LINK)
 ACTIONS = ChannelSpec("/operator/actions", S.ACTION)
 FAULTS = ChannelSpec("/faults", S.FAULT)
 EVENTS = ChannelSpec("/events", S.LOG)
+ROBOT_DESCRIPTION = ChannelSpec("/robot/description", S.ROBOT_DESCRIPTION)
 #: Every 100 Hz loop tick (``core.labdata.ticks``): written by recordings, not streamed live.
 SOFT_ARM_TICKS = ChannelSpec("/control/ticks", S.SOFT_ARM_TICK)
 EXTENSIBLE_TICKS = ChannelSpec("/control/extensible_ticks", S.EXTENSIBLE_TICK)
@@ -70,15 +73,17 @@ TICK_CHANNELS: tuple[ChannelSpec, ...] = (SOFT_ARM_TICKS, EXTENSIBLE_TICKS)
 #: Every fixed channel (``/console/<kind>`` channels are made on demand with :func:`spec_for`).
 CHANNELS: tuple[ChannelSpec, ...] = (CONFIGURATION, TIP, ARM_SCENE, OBJECTS, OBJECT_SCENE, PLAN,
                                      PLAN_SCENE, OVERLAY_SCENE, BOX_SCENE, PHASE, TIMING, LINK,
-                                     ACTIONS, FAULTS, EVENTS)
+                                     ACTIONS, FAULTS, EVENTS, ROBOT_DESCRIPTION)
 #: ``log(kind, data)`` kinds with their own typed channel (data fields are the message's fields).
 TYPED_KINDS: dict[str, ChannelSpec] = {"objects": OBJECTS, "plan": PLAN, "phase": PHASE,
-                                       "timing": TIMING, "link": LINK, "fault": FAULTS}
+                                       "timing": TIMING, "link": LINK, "fault": FAULTS,
+                                       "robot": ROBOT_DESCRIPTION}
 #: Record kinds that mark the replay timeline (phase changes, faults, STOP, operator actions).
 MARKER_KINDS = ("action", "phase", "fault")
 #: Record kinds that carry state (the newest one is what is true now), not events: a recording
 #: starts with the newest of each and a live viewer gets them when it subscribes (latched).
-LATCHED_KINDS = ("state", "objects", "plan", "phase", "link", "timing", "boxes", "overlay")
+LATCHED_KINDS = ("robot", "state", "objects", "plan", "phase", "link", "timing", "boxes",
+                 "overlay")
 #: Channels of things that happened: never latched (a late viewer must not see a STOP again).
 EVENT_TOPICS = (EVENTS.topic, ACTIONS.topic, FAULTS.topic)
 _META = ("timestamp", "who", "client")
@@ -95,6 +100,13 @@ def spec_for(topic: str) -> ChannelSpec:
     if topic.startswith("/console/"):
         return ChannelSpec(topic, S.RECORD)
     raise KeyError(f"no lab channel {topic!r}")
+
+
+def robot_description(robot: Robot) -> dict[str, str]:
+    """The ``robot`` record's data: the robot file the console runs (name, kind, path and its
+    text, which ``core.robots.parse`` reads back), logged once at start and latched."""
+    return {"name": robot.name, "kind": robot.kind, "file": str(robot.source),
+            "toml": Path(robot.source).read_text(encoding="utf-8")}
 
 
 def latch_key(rec: dict[str, Any]) -> str | None:

@@ -194,6 +194,13 @@ ACTION: Schema = _object(
 FAULT: Schema = _object(
     "softarm.Fault", "A hardware or control fault that stopped commanding the arm",
     {"timestamp": TIME, "fault": TEXT, "who": WHO, "client": CLIENT}, extra=True)
+ROBOT_DESCRIPTION: Schema = _object(
+    "softarm.RobotDescription", "The robot file the console runs (its TOML text as loaded), so "
+    "a recording or a late viewer knows the arm's geometry and limits",
+    {"timestamp": TIME, "name": TEXT, "kind": TEXT, "file": TEXT,
+     "toml": {"type": "string", "contentMediaType": "application/toml",
+              "description": "the robot file's text (core.robots.parse reads it back)"},
+     "who": WHO, "client": CLIENT})
 RECORD: Schema = _object(
     "softarm.Record", "Any other console record: its kind and free-form data",
     {"timestamp": TIME, "kind": TEXT, "who": WHO, "client": CLIENT,

@@ -20,7 +20,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from core.control.planner_spec import DEFAULT_PLANNER
-from core.labdata.channels import ArmGeometry
+from core.labdata.channels import ArmGeometry, robot_description
 from core.labdata.mcap_file import McapLog
 from core.labdata.telemetry import LoopRecords, plan_data
 from core.labdata.ticks import SoftArmTicks, TickRing
@@ -160,6 +160,8 @@ def record_trials(path: str | Path, robot_src: str,
               "clock": "simulated"}
     offset = 0.0
     with McapLog(path, header, start_ns, ArmGeometry(robot)) as log:
+        log.record({"kind": "robot", "who": "trials", "t": 0.0,
+                    "data": robot_description(robot)})
         for i, (result, records) in enumerate(done):
             x, y, r = result.object
             who = "trials"

@@ -32,7 +32,10 @@ BULK_PACE = 1.0 / 400  # and its pace, below it
 VIEWER_ALLOWED = {"STOP  (Esc)", "Save scene", "Save boxes", "Export scene (HTML)",
                   # the View panel: each browser's own camera; a measurement moves nothing
                   "Perspective", "Top-down", "Front", "Side", "Reset view", "Measure distance",
-                  "Clear measurement"}
+                  "Clear measurement",
+                  # the Design study panel: reading a study and drawing a variant move nothing
+                  "Study", "Refresh list", "Or folder", "Open folder", "Metric", "Over key",
+                  "Variant", "Show variant", "Hide variant"}
 
 
 @pytest.fixture(scope="module", params=["soft-arm", "extensible"])

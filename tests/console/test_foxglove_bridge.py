@@ -213,11 +213,14 @@ def test_a_client_joining_mid_run_gets_the_tables_objects_at_once(live) -> None:
         _, channels = hello(ws)
         ws.send(json.dumps({"op": "subscribe", "subscriptions": [
             {"id": 1, "channelId": channels["/objects"]["id"]},
-            {"id": 2, "channelId": channels["/scene/objects"]["id"]}]}))
-        got: dict[int, list[Any]] = {1: [], 2: []}
+            {"id": 2, "channelId": channels["/scene/objects"]["id"]},
+            {"id": 3, "channelId": channels["/robot/description"]["id"]}]}))
+        got: dict[int, list[Any]] = {1: [], 2: [], 3: []}
         for sub, _, body in messages(ws, time.monotonic() + 1.0):
             got[sub].append(body)
     assert got[1], "no /objects message within 1 s of subscribing"
+    assert got[3], "no /robot/description within 1 s of subscribing"
+    _assert_describes(got[3][0], SOFT)
     assert [(o["x"], o["y"], o["r"]) for o in got[1][0]["objects"]] == \
         [(o["x"], o["y"], o["r"]) for o in table]
     cylinders = [c for e in got[2][0]["entities"] if e["id"] == "objects" for c in e["cylinders"]]
@@ -267,3 +270,15 @@ def test_a_recording_started_mid_session_begins_with_the_table(live) -> None:
         [(o["x"], o["y"], o["r"]) for o in table]
     assert "/scene/objects" in first and "/plan" in first and "/scene/plan" in first
     assert first["/control/phase"]["phase"] == "idle"
+    _assert_describes(first["/robot/description"], SOFT)
+
+
+def _assert_describes(message: dict[str, Any], robot: Any) -> None:
+    """``message`` carries ``robot``'s file: its text, read back by the robot parser."""
+    from core.robot_schema import tomllib
+    from core.robots import parse
+
+    assert message["name"] == robot.name and message["kind"] == robot.kind
+    assert message["toml"] == robot.source.read_text(encoding="utf-8")
+    again = parse(tomllib.loads(message["toml"]), message["file"])
+    assert again.n_segments == robot.n_segments and again.name == robot.name

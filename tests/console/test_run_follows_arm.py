@@ -120,7 +120,8 @@ def test_the_screen_follows_the_object_the_arm_works_on(rig):
     show(control, dataclasses.replace(arm_view(second, "released", 0, 81.0, done),
                                       executing=None))
     wait_for(lambda: run_scene.shown is None)
-    assert not control.progress.bar.visible and not waypoints.run_info.visible
+    assert not control.progress.bar.visible
+    wait_for(lambda: not waypoints.run_info.visible)  # (the panel's own refresh follows)
     assert not run_scene.circles.visible
     wait_for(lambda: not scene.dimmed, PLAN_S)  # the worker's part, once it is not planning
 

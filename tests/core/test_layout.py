@@ -1,7 +1,7 @@
 """The repository's rooms (DEVELOPERS.md): core/ is pure, command lines live apart, no import circles.
 
 * ``core/`` imports nothing from ``hw_bridge``/``console`` and no GUI, serial, socket, thread or
-  subprocess module; a process pool (``multiprocessing``, ``concurrent.futures``) only in a
+  subprocess module; a process pool (``multiprocessing``, ``concurrent.futures``) or ``ray`` only in a
   command line (``__main__.py``), never in a library module.
 * Library modules under ``core/`` and ``hw_bridge/`` have no ``argparse``, ``print``,
   ``sys.exit`` or ``if __name__ == "__main__"``: those belong to the command-line modules.
@@ -39,8 +39,8 @@ PACKAGES = ("core", "console", "hw_bridge")
 # Never imported by anything under core/ (pure numpy/scipy: no GUI, no hardware, no I/O threads).
 CORE_FORBIDDEN = {"hw_bridge", "console", "viser", "serial", "threading", "_thread", "socket",
                   "subprocess", "asyncio"}
-# Process pools: the caller's business (a command line, the console), not core's library.
-CORE_CLI_ONLY = {"multiprocessing", "concurrent"}
+# Process pools and Ray: the caller's business (a command line, the console), not core's library.
+CORE_CLI_ONLY = {"multiprocessing", "concurrent", "ray"}
 # Command-line modules: argparse, printing and exit codes are their job.
 CLI_MODULES = {"hw_bridge.emulator", "hw_bridge.probe", "hw_bridge.tty_keeper"}
 

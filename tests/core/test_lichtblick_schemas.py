@@ -20,7 +20,8 @@ from mcap.reader import make_reader
 
 from core.labdata import schemas as S
 from core.labdata.channels import (CHANNELS, TICK_CHANNELS, ArmGeometry, ChannelSpec,
-                                    messages_for, record_from_message, spec_for)
+                                    messages_for, record_from_message, robot_description,
+                                    spec_for)
 from core.labdata.mcap_file import McapLog
 from core.robots import load
 from tests.foxglove_proto import Field, messages as proto_messages
@@ -139,6 +140,7 @@ def _records() -> list[dict[str, Any]]:
         {"kind": "boxes", "data": {"boxes": [{"name": "b", "centre": [0.1, 0.1, 0.1],
                                               "size": [0.1, 0.1, 0.1]}],
                                    "clearance": 0.01, "note": None}},
+        {"kind": "robot", "data": robot_description(load("soft-arm"))},
         {"kind": "telemetry", "client": "abc", "data": {"a": [1, 2], "b": None}},
     ]
 

@@ -14,7 +14,8 @@ from core.robots import SoftArm, load
 from core.study import StudySpec, run_study
 
 REPO = Path(__file__).resolve().parents[2]
-TINY = StudySpec(objects=0, seeds=1, reach_step=0.04, capture_spacing=0.02)
+TINY = StudySpec(objects=0, seeds=1, reach_step=0.04, capture_spacing=0.02, ik_grid=0,
+                 slip_points=0)
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess[str]:

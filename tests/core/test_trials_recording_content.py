@@ -1,7 +1,8 @@
 """``trials --record`` carries what its docstring promises beside the ticks: the loop timing
 (on the simulated clock: its 10 ms period, and the wall time each sampled tick took as
 ``work_ms``) and every plan the state machine got (``/plan``, drawn on ``/scene/plan``), read
-back with the ``mcap`` package alone. Before, a trials recording had neither."""
+back with the ``mcap`` package alone (before, a trials recording had neither), and the robot file
+it ran."""
 
 from __future__ import annotations
 
@@ -36,3 +37,11 @@ def test_trials_recording_has_loop_timing_and_the_plan(tmp_path: Path) -> None:
     assert plans[0]["center"] == pytest.approx([x, y], abs=0.01)  # around the object
     assert all(len(w["kappa"]) == 6 for w in plans[0]["waypoints"])
     assert by_topic["/scene/plan"]
+    # The robot file the trials ran, as text the robot parser reads back (issue 29.2).
+    (robot,) = by_topic["/robot/description"]
+    from core.robot_schema import tomllib
+    from core.robots import load, parse
+
+    shipped = load("soft-arm")
+    assert robot["toml"] == shipped.source.read_text(encoding="utf-8")
+    assert parse(tomllib.loads(robot["toml"]), robot["file"]).n_segments == shipped.n_segments

@@ -127,6 +127,9 @@ class Lockstep:
             results.append(r)
             if r is ReturnType.OK and self.hw.state is LifecycleState.ACTIVE:
                 self.hw.write(target)
+                # The DEMAND's echo STATE is sent at once: let the host take it now, or a
+                # receive thread held up by a loaded box stamps it a period or more later.
+                self.settle()
         return results
 
     def shutdown(self) -> None:

@@ -97,3 +97,46 @@ def test_bad_jobs_raise_before_anything_is_sent(proc) -> None:
     with pytest.raises(ValueError, match="lengths"):
         p.move_to(np.full((ROBOT.n_segments, 3), np.nan))
     assert not p.started
+
+
+def test_a_settled_reply_never_takes_back_a_set_point_sent_after_what_the_runner_saw() -> None:
+    """Where the runner holds comes back as the console's command (a halt, a job's end), tagged
+    with the newest set-point it had seen. A set-point sent after that one (a jog started again
+    after a hold-to-run expiry, while the reply was on its way) is what the runner follows next:
+    the console's command stays with it. Before, the reply replaced it and the console's
+    command jumped back to the old pose while the arm followed the jog (a loaded fresh run:
+    Δx₁ read -1e-16 after a + jog)."""
+    from hw_bridge.extensible_process import SOURCE
+
+    store = StateStore(model_for(ROBOT))
+    runner = ExtensibleProcess(ROBOT, store, cpus=None)  # not started: its parent side only
+    runner._proc = FakeChild()  # noqa: SLF001 -- "alive": set-points are sent (queued)
+    held = np.zeros((ROBOT.n_segments, 3))
+    held[:, 2] = 0.02  # extended: bends are allowed
+    seen = store.request(held, "jog")
+    runner.setpoint(seen.seq, seen.q)  # the runner had this one when it halted
+    jogged = held.copy()
+    jogged[0, 0] = 0.004
+    newer = store.request(jogged, "jog")  # the operator's next command, after the halt
+    np.testing.assert_array_equal(newer.q, jogged)  # (within the limits)
+    runner.setpoint(newer.seq, newer.q)
+    runner.on_message(("settled", held, seen.seq))
+    assert store.command.seq == newer.seq
+    np.testing.assert_array_equal(store.command.q, jogged)
+    runner.on_message(("settled", jogged, newer.seq))  # it saw the newest: its hold is the command
+    assert store.command.source == SOURCE and store.command.seq > newer.seq
+    np.testing.assert_allclose(store.command.q, jogged)
+    # A STOP's own command is never sent to the runner: its hold replaces it.
+    stop = store.request(jogged, "stop")
+    runner.on_message(("settled", held, newer.seq))
+    assert store.command.seq > stop.seq and store.command.source == SOURCE
+    np.testing.assert_allclose(store.command.q, held)
+
+
+class FakeChild:
+    """A child process that is alive (what ``LoopProcess.alive`` asks)."""
+
+    pid = 1
+
+    def is_alive(self) -> bool:
+        return True

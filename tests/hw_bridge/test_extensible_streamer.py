@@ -30,7 +30,7 @@ def test_a_jobs_result_is_told_after_the_snapshot_that_shows_it_ended() -> None:
                                                 streamer.snapshot.last_result))
     encoders = dk.motor_counts_from_lengths(ROBOT, start) - streamer.home
     streamer.connected(encoders, follow=False)
-    streamer.start_job(1, "move", path, 0.0)
+    streamer.start_job(1, "move", path)
     states = []
     for k in range(len(path.times) + 5):  # the motors follow each demand exactly
         demand, snap = streamer.update(encoders, k * 0.01)
@@ -113,7 +113,7 @@ def test_a_late_tick_delays_the_path_and_skips_no_sample() -> None:
     expected = path.motor_counts - streamer.home
     encoders = dk.motor_counts_from_lengths(ROBOT, start) - streamer.home
     streamer.connected(encoders, follow=False)
-    streamer.start_job(1, "move", path, 0.0)
+    streamer.start_job(1, "move", path)
     demands, samples = [], []
     t = 0.0
     for k in range(len(path.times)):

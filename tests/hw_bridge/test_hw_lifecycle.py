@@ -340,3 +340,26 @@ def test_link_lost_counts_only_the_time_the_host_listened() -> None:
     now[0] = 0.10
     assert hw.read() is ReturnType.ERROR
     assert "no valid STATE for 100 ms (this host stalled 50 ms of it)" in (hw.fault or "")
+
+
+def test_device_reports_demands_replaced_before_a_tick_acted_on_them() -> None:
+    """One DEMAND per period leaves none unacted; a burst read at once (the emulator stalled,
+    the host's demands queued in the pty) moves the motors toward the newest only, and the
+    device says how many it skipped (the emulator logs it: ``demands_superseded``)."""
+    cfg = BridgeConfig.from_robot(ROBOT)
+    device = DeviceCore(MotorBank(6, SPEED), cfg.watchdog_s, cfg.period_s, now=0.0)
+    device.receive(p.encode(p.Arm()), 0.0)
+    t, seq = 0.0, 0
+    for _ in range(5):  # paced: a demand, then a tick
+        seq += 1
+        device.receive(p.encode(p.Demand.full(seq, [seq] * 6)), t)
+        t += cfg.period_s
+        device.tick(t)
+    assert device.take_events().superseded == 0
+    for _ in range(7):  # a burst of seven before the next tick
+        seq += 1
+        device.receive(p.encode(p.Demand.full(seq, [seq] * 6)), t)
+    t += cfg.period_s
+    device.tick(t)
+    assert device.take_events().superseded == 6
+    assert device.motors.target.tolist() == [seq] * 6  # the newest wins

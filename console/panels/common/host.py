@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from console.core.access import AccessControl, NotOperator
     from console.core.console_core import ConsoleCore
     from console.core.datadir import DataDir
+    from console.core.design_study import DesignStudies
     from console.core.grasp_session import GraspSession
     from console.core.model import ArmModel
     from console.core.services import ConsoleServices
@@ -45,6 +46,7 @@ class PanelHost(Protocol):
     view: ArmView
     guard: ClientGuard
     grasp_session: GraspSession | None
+    design_study: DesignStudies
     camera_presets: Any
     data_root: Path
 
