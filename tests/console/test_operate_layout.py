@@ -92,6 +92,18 @@ def test_soft_arm_operate_starts_with_plan_then_arm_and_execute_and_folds_the_re
     assert shown.index(control.arm_btn) < shown.index(control.execute.execute_btn)
 
 
+def test_the_running_tasks_progress_is_right_under_the_state_above_arm_and_execute(
+        soft: Any) -> None:
+    """Seen in the demo's screenshots at 1600 x 1000: the progress bar and "Running: … waypoint
+    i of n · ≈ 42 s left" sat below Execute, the row's line and Clear table, off screen while
+    the arm ran. They come right after the state line (and its fault line), before Arm."""
+    control = soft.panel(ControlPanel)
+    shown = _children(soft, control.folder)
+    bar, line = shown.index(control.progress.bar), shown.index(control.progress.line)
+    assert shown.index(control.state_md) < shown.index(control.fault_md) < bar < line
+    assert line < shown.index(control.arm_btn) < shown.index(control.execute.execute_btn)
+
+
 def test_soft_arm_diagnostics_and_editing_are_folded(soft: Any) -> None:
     from console.panels.soft_arm.objects import ObjectsPanel
 

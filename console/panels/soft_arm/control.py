@@ -103,12 +103,14 @@ class ControlPanel(Panel):
         r0 = self.app.robot.capture.nominal_object_radius
         self.state_md = gui.add_markdown("**State:** –")
         self.fault_md = gui.add_markdown("", visible=False)
+        # The running task's progress bar and time left, right under the state: on screen at
+        # 1600 x 1000 while the arm runs (below Execute and the row's line it was not).
+        self.progress = ProgressControls(gui)
         self.arm_btn = gui.add_button("Arm", color="red", icon=viser.Icon.POWER)
         self.disarm_btn = gui.add_button("Disarm", icon=viser.Icon.HAND_STOP,
                                          disabled=True)  # until a view says armed
         self.execute = ExecuteControls(self)  # what Execute acts on, Execute, Click to grasp
         self.row = RowControls(self)  # "Clear table into bin" and the row's status
-        self.progress = ProgressControls(gui)  # the running task's progress and time left
         self._timer = LegTimer(self.app.robot)  # times the plan's legs (this panel's threads)
         # Diagnostics (link health, κ numbers, loop statistics, the live plots) are folded: the
         # header already shows the link and phase, and a demo needs Plan, Arm and Execute.
