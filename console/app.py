@@ -75,12 +75,13 @@ from console.recording.recorder import Recorder
 from console.core.services import ConsoleServices
 from console.scene.grasp_layers import GraspSceneView
 from console.scene.study_ghost import StudyGhostView
-from console.scene.camera import presets_for_window
+from console.scene.camera import presets_for_window, volume_top
 from console.scene.plan_frame import FRAMED_PARTS, plan_points
 from console.scene.window_fit import WindowFit
 from console.scene.stage import add_lights, add_table, arm_span, setup_camera, setup_theme, table_extent
 from console.core.state import ArmState, StateStore
 from console.panels.common.tabs import ConsoleTabs
+from core.kinematics import delta as dk
 from core.labdata.channels import robot_description
 from core.robots import Robot, SoftArm
 from console.web.client_guard import ClientGuard
@@ -88,6 +89,8 @@ from console.web.client_guard import ClientGuard
 log = logging.getLogger(__name__)
 
 P = TypeVar("P", bound=Panel)
+# The extensible arm's tip this close (m) to the top its views were framed for: re-framed.
+FOLLOW_MARGIN_M = 0.02
 
 
 class ConsoleApp:
@@ -199,10 +202,12 @@ class ConsoleApp:
         self.camera_presets = setup_camera(server, robot, self.model.kind)
         kind, span, table = self.model.kind, self.arm_reach(), self.table_rectangle()
         # Each browser's camera framed for its own window (a tablet's, a phone's) and for what
-        # is planned (a far object's approach circles: console.scene.plan_frame).
+        # is planned (a far object's approach circles: console.scene.plan_frame); the
+        # extensible arm's for the arm as tall as it is (re-framed when it grows: follow_arm).
+        self._framed_top = span  # the lowest top (m) an extensible arm's view was framed for
         self.window_fit = WindowFit(
             server, self.camera_presets[0],
-            lambda w, h: presets_for_window(kind, span, table, w, h, self.planned_points()),
+            lambda w, h: presets_for_window(kind, span, table, w, h, self.framed_points()),
             stopped=lambda: self.stopped)
         if self.grasp_session is not None:
             self.grasp_session.add_listener(
@@ -413,6 +418,7 @@ class ConsoleApp:
                     panel.on_state(state)
                 except Exception:  # a broken panel must not stop the arm from drawing
                     log.exception("panel %s failed in on_state", type(panel).__name__)
+        self.follow_arm(np.asarray(state.q))
         self.frames_drawn += 1
         self.last_drawn_seq = state.seq
         self.recorder.on_state(state, self.store.command)
@@ -461,6 +467,31 @@ class ConsoleApp:
         """Table rectangle (x0, x1, y0, y1) around the arm's workspace
         (:func:`console.scene.stage.table_extent`)."""
         return table_extent(self.robot, self.model.kind)
+
+    def framed_points(self) -> np.ndarray | None:
+        """World points (m) the camera presets frame besides the arm's reach: the soft arm's
+        plans (:meth:`planned_points`); the extensible arm's own points as drawn now, which
+        size its framed working volume (``console.scene.camera.working_volume``)."""
+        if self.model.kind == "planar":
+            return self.planned_points()
+        g = self.view.geometry(np.asarray(self.store.display.q))
+        points = np.concatenate([np.asarray(g[k], float).reshape(-1, 3)
+                                 for k in ("platforms", "backbone") if k in g])
+        self._framed_top = min(self._framed_top, volume_top(self.arm_reach(), points))
+        return points
+
+    def follow_arm(self, q: np.ndarray) -> list[int]:
+        """The extensible arm's tip rose within :data:`FOLLOW_MARGIN_M` of the top its views
+        were framed for (:meth:`framed_points`): re-frame every browser's camera still where the
+        console put it (``WindowFit.refit``), for the arm as tall as it is now; the ids of the
+        browsers moved. Nothing for the soft arm (it lies on the table) or below that top."""
+        if self.model.kind != "delta":
+            return []
+        top = float(dk.tip_position(self.robot, q)[2])
+        if self._framed_top >= self.arm_reach() or top + FOLLOW_MARGIN_M <= self._framed_top:
+            return []  # framed for the fully extended arm already, or the arm in view
+        self._framed_top = volume_top(self.arm_reach(), [(0.0, 0.0, top)])
+        return self.window_fit.refit()
 
     def planned_points(self) -> np.ndarray | None:
         """World points (m) the camera presets show besides the arm's reach: the soft arm's

@@ -11,7 +11,10 @@ on a phone the canvas is the part above viser's bottom sheet, ``console.web.phon
 ``console.scene.window_fit`` re-frames each browser's camera for its own window. Both take
 ``extra`` points (m) the soft arm's views must show besides its reach: the objects, the bin and
 the plans' approach circles and waypoints (``console.scene.plan_frame``); a plan that reaches
-past the arm's reach (a far object's outer circles) widens the view to show it all.
+past the arm's reach (a far object's outer circles) widens the view to show it all. For the
+extensible arm the ``extra`` points are the arm's own: its views frame the working volume of
+an arm as tall as it is plus :data:`HEADROOM` (:func:`working_volume`), and the console
+re-frames them when the arm grows out of that (``ConsoleApp.follow_arm``).
 
 Pure numpy: no viser here; :func:`apply` sets a browser's camera from a pose.
 """
@@ -31,6 +34,7 @@ FOV = math.radians(50.0)          # vertical field of view of every preset
 DEFAULT_ASPECT = 1.28             # the 3D view of a 1600 x 1000 window beside the docked panel
 MARGIN = 1.08                     # framed region plus this much room around it
 NARROWEST = 0.45                  # the extensible arm's framed volume: narrowest width, of a ball
+HEADROOM = 0.15                   # the extensible arm's framed volume: room above the arm, of span
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,8 +186,9 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
         aspect: The canvas's width / height.
         extra: World points (m) the soft arm's poses show besides its reach (what the operator
             plans: objects, bin, approach circles, waypoints); a pose that would leave one out
-            is widened, in the same direction, to show them all. The extensible arm's poses
-            frame its working volume only (:func:`working_volume`).
+            is widened, in the same direction, to show them all. For the extensible arm:
+            the arm's own points (as drawn now), which size its working volume
+            (:func:`working_volume`); none: the volume of the fully extended arm.
     """
     if span <= 0 or not math.isfinite(span):
         raise ValueError(f"span must be a positive length, got {span}")
@@ -215,9 +220,10 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
                              (float(box[:, 1].min()), float(box[:, 1].max())), aspect)
         return (perspective, top)
     # The extensible arm stands at the origin and reaches up to ``span``; it starts straight at
-    # mid-range racks (about half of that tall) and bends from there. Frame that working volume
-    # (full extension just fits), so the arm fills a good part of the view, not the whole table.
-    volume = working_volume(span, aspect)
+    # mid-range racks (about half of that tall) and bends from there. Frame the working volume
+    # of an arm as tall as this one plus some headroom (the console re-frames the view when the
+    # arm grows out of it: ConsoleApp.follow_arm), so the arm fills a good part of the view.
+    volume = working_volume(span, aspect, _points(extra))
     return (frame_points("Perspective", volume, (0.75, -1.0, 0.55), aspect),
             frame_points("Front", volume, (0.0, -1.0, 0.12), aspect),
             frame_points("Side", volume, (1.0, 0.0, 0.12), aspect),
@@ -225,7 +231,18 @@ def presets(kind: Kind | str, span: float, table: tuple[float, float, float, flo
                            (max(y0, -0.55 * span), min(y1, 0.55 * span)), aspect))
 
 
-def working_volume(span: float, aspect: float = DEFAULT_ASPECT) -> npt.NDArray[np.float64]:
+def volume_top(span: float, arm: npt.ArrayLike | None = None) -> float:
+    """The height (m) up to which the extensible arm's views frame its working volume: the
+    arm's highest point plus :data:`HEADROOM` of ``span``, at most ``span`` (the fully extended
+    top); ``span`` without ``arm`` points."""
+    pts = _points(arm)
+    if len(pts) == 0:
+        return span
+    return float(min(span, max(0.0, float(pts[:, 2].max())) + HEADROOM * span))
+
+
+def working_volume(span: float, aspect: float = DEFAULT_ASPECT,
+                   arm: npt.ArrayLike | None = None) -> npt.NDArray[np.float64]:
     """Points bounding what the extensible arm's views frame, for a canvas of ``aspect``.
 
     An ellipsoid about the arm's axis, from just below the table to ``span`` high (the fully
@@ -233,12 +250,16 @@ def working_volume(span: float, aspect: float = DEFAULT_ASPECT) -> npt.NDArray[n
     sideways at half extension); a tall canvas (a tablet's, a phone's) is limited by its width,
     and that ball framed by the width left the arm a third of the canvas high, so there the
     ellipsoid narrows with the canvas (down to :data:`NARROWEST` of the ball's width) and the
-    arm's height fills the canvas instead.
+    arm's height fills the canvas instead. Given the ``arm``'s points (m, as drawn now), the
+    volume is that of an arm :func:`volume_top` tall (scaled about the base: the arm at
+    mid-range racks, about half of ``span`` tall, framed with room for the full extension was
+    two fifths of a tall canvas high), and the arm's points are in it.
     """
     squeeze = min(1.0, max(NARROWEST, aspect / DEFAULT_ASPECT))
     ball = _sphere((0.0, 0.0, 0.45 * span), 0.52 * span)
     ball[:, :2] *= squeeze
-    return np.vstack([ball, [(0.0, 0.0, span)]])
+    volume = np.vstack([ball, [(0.0, 0.0, span)]]) * (volume_top(span, arm) / span)
+    return np.vstack([volume, _points(arm)])
 
 
 def presets_for_window(kind: Kind | str, span: float, table: tuple[float, float, float, float],

@@ -15,7 +15,10 @@ approach circles and waypoints: ``console.scene.plan_frame``): when that changes
 calls :meth:`WindowFit.refit`, which re-frames every camera still where the console put it
 (a far object's plan widens the view; nothing moves while everything is already in view). A
 camera the person moved stays theirs; a View preset or "Reset view" (:meth:`WindowFit.put`)
-makes it the console's again.
+makes it the console's again. A report still carrying a pose the console put before the
+newest (a quick resize: the browser's next canvas size arrives before the newest pose reached
+it) is the console's camera too. The extensible arm's views are re-framed by :meth:`WindowFit.refit`
+when the arm grows out of the height they were framed for (``ConsoleApp.follow_arm``).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ import numpy as np
 from console.scene.camera import CameraPose, apply, pick
 
 POSE_TOLERANCE_M = 2e-3  # a camera within this of where it was put has not been moved
+IN_FLIGHT = 3  # earlier poses put that a browser's reports may still carry (a quick resize)
 
 Presets = Callable[[int, int], Sequence[CameraPose]]
 
@@ -41,6 +45,22 @@ class _Framed:
     size: tuple[int, int]
     pose: CameraPose
     name: str | None = None  # the preset chosen (None: the first)
+    # The poses put before ``pose``, newest first: a browser resized quickly (a tablet turned,
+    # viser switching to its phone layout) reports its next canvas size before the last pose
+    # put has reached it, so such a report is at one of these, and the camera is still the
+    # console's (taken for the person's, a phone was left at a pose framed for a transient
+    # 70 px wide canvas).
+    before: tuple[CameraPose, ...] = ()
+
+    def then(self, size: tuple[int, int], pose: CameraPose, name: str | None) -> _Framed:
+        """The record after putting ``pose`` for ``size``: this pose joins :attr:`before`."""
+        if pose == self.pose:
+            return _Framed(size, pose, name, self.before)
+        return _Framed(size, pose, name, ((self.pose,) + self.before)[:IN_FLIGHT])
+
+    def put_by_console(self, camera: Any) -> bool:
+        """Whether a reported camera is at :attr:`pose` or at a pose put before it."""
+        return any(_at(camera, p) for p in (self.pose, *self.before))
 
 
 def _at(camera: Any, pose: CameraPose) -> bool:
@@ -53,6 +73,14 @@ def _still_at(client: Any, pose: CameraPose) -> bool:
     """Whether a browser's camera (as it last reported or was set) is at ``pose``."""
     try:
         return _at(client.camera, pose)
+    except AssertionError:  # viser: no camera message yet
+        return False
+
+
+def _still_put(client: Any, framed: _Framed) -> bool:
+    """Whether a browser's camera is (still) at a pose the console put (:class:`_Framed`)."""
+    try:
+        return framed.put_by_console(client.camera)
     except AssertionError:  # viser: no camera message yet
         return False
 
@@ -123,7 +151,9 @@ class WindowFit:
         size = _size(client.camera)
         with self._lock:
             pose = self._preset(size, name)
-            self._framed[client.client_id] = _Framed(size, pose, name)
+            framed = self._framed.get(client.client_id)
+            self._framed[client.client_id] = (_Framed(size, pose, name) if framed is None
+                                              else framed.then(size, pose, name))
         with client.atomic():
             apply(client.camera, pose)
         return pose
@@ -138,15 +168,15 @@ class WindowFit:
             return None
         with self._lock:
             framed = self._framed.get(client.client_id)
-            last = self._initial if framed is None else framed.pose
-            name = None if framed is None else framed.name
-            if framed is not None and framed.size == size:
+            if framed is None:
+                framed = _Framed((0, 0), self._initial)
+            elif framed.size == size:
                 return None
-            if not _at(camera, last):     # the person moved it: theirs; remember the size
-                self._framed[client.client_id] = _Framed(size, last, name)
+            if not framed.put_by_console(camera):  # the person moved it: theirs; the size
+                self._framed[client.client_id] = _Framed(size, framed.pose, framed.name)
                 return None
-            pose = self._preset(size, name)
-            self._framed[client.client_id] = _Framed(size, pose, name)
+            pose = self._preset(size, framed.name)
+            self._framed[client.client_id] = framed.then(size, pose, framed.name)
         if _at(camera, pose):
             return None
         with client.atomic():
@@ -163,12 +193,12 @@ class WindowFit:
         with self._lock:
             for client in clients:
                 framed = self._framed.get(client.client_id)
-                if framed is None or not _still_at(client, framed.pose):
+                if framed is None or not _still_put(client, framed):
                     continue          # not framed yet, or the person's camera
                 pose = self._preset(framed.size, framed.name)
                 if _still_at(client, pose):
                     continue
-                self._framed[client.client_id] = _Framed(framed.size, pose, framed.name)
+                self._framed[client.client_id] = framed.then(framed.size, pose, framed.name)
                 moved.append((client, pose))
         for client, pose in moved:
             with client.atomic():

@@ -155,6 +155,28 @@ def test_a_tablet_browser_is_framed_for_its_canvas_once(fit):
     np.testing.assert_allclose(tablet.camera.position, first(390, 422).position)
 
 
+def test_a_report_sent_before_the_last_framing_arrived_is_still_the_consoles_camera(fit):
+    """Seen resizing a tablet page to a phone's: viser's layout passes through a 70 px wide
+    canvas, the console framed the camera for it, and the browser's next report (the phone's
+    390 x 422 canvas) still carried the pose before, which was taken for a camera the person
+    had moved: the phone stayed framed for 70 px (the arm a quarter of its height)."""
+    server, _, initial, first = fit
+    tablet = _Client(1, initial, (496, 1180))
+    server.join(tablet)
+    tablet.camera.report()                                       # framed for the tablet
+    at_tablet = np.array(tablet.camera.position)
+    tablet.camera.report((70, 844))                              # the transient canvas
+    np.testing.assert_allclose(tablet.camera.position, first(70, 844).position)
+    tablet.camera.position, tablet.camera.look_at = at_tablet, np.array(
+        first(496, 1180).look_at)                                # (that pose not there yet)
+    tablet.camera.report((390, 422))                             # the phone's canvas
+    assert tablet.moves == 3
+    np.testing.assert_allclose(tablet.camera.position, first(390, 422).position)
+    tablet.camera.position = np.asarray(tablet.camera.position) + 0.05  # the person orbits
+    tablet.camera.report((392, 420))
+    assert tablet.moves == 3                                     # and it stays theirs
+
+
 def test_a_desktop_browser_keeps_the_initial_camera_and_a_moved_camera_stays(fit):
     server, window_fit, initial, _ = fit
     desk = _Client(1, initial, (1280, 1000))
@@ -295,3 +317,69 @@ def test_a_new_plan_reframes_the_browsers_the_console_framed_and_not_a_moved_cam
     assert _outside(top, must, SIZES["desktop"][0] / SIZES["desktop"][1]) == 0
     fit.put(desk)                                                     # Reset view
     assert fit.framed_pose(1).name == "Perspective"
+
+
+# -- the extensible arm framed as tall as it is ---------------------------------------------
+
+def _extensible_q(extension: float) -> np.ndarray:
+    """The extensible arm straight, every segment at ``extension`` of its rack travel (0.5:
+    mid-range racks, where the console starts)."""
+    q = np.zeros((EXT.n_segments, 3))
+    q[:, 2] = EXT.rack_min + extension * (EXT.rack_max - EXT.rack_min) - EXT.L0
+    return q
+
+
+def _spine(q: np.ndarray) -> np.ndarray:
+    """The straight arm's axis from its base to its tip (m): an independent reader of its
+    height (segment lengths L0 + δL stacked)."""
+    top = float(np.sum(EXT.L0 + q[:, 2]))
+    return np.array([(0.0, 0.0, z) for z in np.linspace(0.0, top, 11)])
+
+
+@pytest.mark.parametrize("size", [(496, 1180), (390, 422), (1276, 1000)],
+                         ids=["tablet", "phone", "desktop"])
+def test_the_extensible_arm_at_rest_fills_most_of_the_canvas_height_with_room_above(size):
+    """Issue 31: framed with room for the full extension, the arm at mid-range racks (its
+    start) was 0.42 of a tablet's canvas high and 0.44 of a phone's. Framed as tall as it is
+    plus HEADROOM of its span, it is more than half as high as the canvas, and its top raised
+    by that headroom is still in view."""
+    width, height = size
+    aspect = width / height
+    span, table = arm_span(EXT, "delta"), table_extent(EXT, "delta")
+    spine = _spine(_extensible_q(0.5))
+    pose = camera.presets_for_window("delta", span, table, width, height, spine)[0]
+    ys = [ndc(pose, p, aspect)[1] for p in spine]
+    assert (max(ys) - min(ys)) / 2 > 0.55
+    above = spine[-1] + (0.0, 0.0, camera.HEADROOM * span)
+    assert camera.in_view(pose, np.vstack([spine, above]), aspect)
+    # Without the arm's points: the volume of the fully extended arm (as before)
+    full = camera.presets_for_window("delta", span, table, width, height)[0]
+    ys = [ndc(full, p, aspect)[1] for p in spine]
+    assert (max(ys) - min(ys)) / 2 < 0.5
+    assert camera.in_view(full, _spine(_extensible_q(1.0)), aspect)
+
+
+def test_the_extensible_arms_views_are_reframed_when_it_grows_out_of_them(server):
+    """ConsoleApp.follow_arm: the tip rising to within 2 cm of the top the views were framed
+    for re-frames them once (WindowFit.refit), for the arm as tall as it is then; moving below
+    that top, or the soft arm, re-frames nothing."""
+    from tests.fakes import FakeRunner, console_app
+
+    app = console_app(EXT, server, extensible_runner=FakeRunner(), panels=())
+    refits: list[int] = []
+    app.window_fit.refit = lambda: refits.append(1) or []           # (counted, not run)
+    span = arm_span(EXT, "delta")
+    rest, full = _extensible_q(0.5), _extensible_q(1.0)
+    np.testing.assert_allclose(app.store.display.q, rest, atol=1e-9)  # (where it starts)
+    app.framed_points()                                            # a browser framed at rest
+    top = float(np.sum(EXT.L0 + rest[:, 2]))
+    assert app._framed_top == pytest.approx(top + camera.HEADROOM * span, abs=0.02)
+    assert app.follow_arm(rest) == [] and refits == []
+    a_bit = _extensible_q(0.55)                                       # 1.8 cm taller: in view
+    assert float(np.sum(EXT.L0 + a_bit[:, 2])) < app._framed_top - 0.02
+    app.follow_arm(a_bit)
+    assert refits == []
+    app.follow_arm(full)                                              # out of it: re-framed
+    assert refits == [1] and app._framed_top == pytest.approx(span)
+    app.follow_arm(full)                                              # once
+    assert refits == [1]
