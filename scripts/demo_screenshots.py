@@ -82,9 +82,18 @@ class Demo:
         self.shots.append((path, what))
         print(f"{path}: {what}" + (f" (scrolled {scrolled} px)" if scrolled else ""), flush=True)
 
-    def button(self, name: str, page: Any = None) -> None:
-        """Click the button labelled ``name`` in the operator's page."""
-        (page or self.page).get_by_role("button", name=name, exact=True).first.click()
+    def button(self, name: str) -> None:
+        """Click the button labelled ``name`` in the operator's page, saying so when it was not
+        on screen without scrolling; then scroll the panel back to its top."""
+        found = self.page.get_by_role("button", name=name, exact=True).first
+        box = found.bounding_box()
+        size = self.page.viewport_size
+        if box is None or size is None or box["y"] < 0 or box["x"] < 0 \
+                or box["y"] + box["height"] > size["height"] \
+                or box["x"] + box["width"] > size["width"]:
+            print(f"SCROLLED: '{name}' was not on screen without scrolling ({box})", flush=True)
+        found.click()
+        self.to_top()
 
     def operator(self) -> Any:
         """The operator's viser client."""
@@ -113,8 +122,13 @@ class Demo:
         self.page.mouse.click(px, py)
 
     def choose(self, label: str, option: str) -> None:
-        """Pick ``option`` in the operator's dropdown labelled ``label``."""
-        self.page.get_by_label(label, exact=True).first.click()
+        """Pick ``option`` in the operator's dropdown labelled ``label`` (saying so when it was
+        not on screen without scrolling)."""
+        found = self.page.get_by_label(label, exact=True).first
+        box, size = found.bounding_box(), self.page.viewport_size
+        if box is None or size is None or box["y"] + box["height"] > size["height"]:
+            print(f"SCROLLED: '{label}' was not on screen without scrolling ({box})", flush=True)
+        found.click()
         self.page.get_by_role("option", name=option, exact=True).first.click()
         self.to_top()
 
@@ -225,10 +239,10 @@ def soft_arm_demo(d: Demo) -> None:
     time.sleep(8)
     d.shot("11-row-1", "the row: object 1 of 3, its plan drawn, remaining time")
     d.shot("11v-viewer", "the viewer during the row", viewer=True)
-    d.wait("the second object", lambda: len(s.view().objects) <= 2, 300)
+    d.wait("the second object", lambda: row().current == 1 or not row().running, 300)
     time.sleep(8)
     d.shot("12-row-2", "the row: object 2 of 3")
-    d.wait("the third object", lambda: len(s.view().objects) <= 1, 300)
+    d.wait("the third object", lambda: row().current == 2 or not row().running, 300)
     time.sleep(8)
     d.shot("13-row-3", "the row: object 3 of 3")
     d.wait("the row's end", lambda: row() is not None and not row().running, 400)
@@ -282,7 +296,7 @@ def extensible_demo(d: Demo) -> None:
     time.sleep(3)
     d.shot("02-armed", "Hardware: armed")
     open_tab(d.page, "Operate")
-    typed = (60.0, -40.0, 420.0)
+    typed = (60.0, -40.0, 600.0)  # above the arm's start (464 mm): the view widens
     for axis, value in zip("xyz", typed):
         field = d.page.get_by_label(f"Target {axis} (mm)", exact=True)
         field.fill(f"{value:g}")
@@ -296,7 +310,7 @@ def extensible_demo(d: Demo) -> None:
     goal = tuple(v / 1000 for v in typed)
     d.wait("the tip at the target", lambda: tip_near(goal), 60)
     time.sleep(1)
-    d.shot("05-at-target", "the tip at the target")
+    d.shot("05-at-target", "the tip at the target, 600 mm high: the view widened for it")
     d.button("Preview")
     time.sleep(2)
     d.shot("06-path-preview", "a path previewed")

@@ -70,7 +70,8 @@ class RunView:
             return self.phase
         if self.waypoint is not None:
             return f"waypoint {self.waypoint + 1} of {self.plan.n}"
-        return f"{self.phase} (after {self.plan.n} waypoints)" if self.phase in (
+        n = self.plan.n
+        return f"{self.phase} (after {n} waypoint{'s' if n != 1 else ''})" if self.phase in (
             "grasp", "move_to_bin", "release") else self.phase
 
     def time_text(self) -> str:

@@ -262,7 +262,8 @@ def outcome_html(outcome: Outcome | None) -> str:
         plan = outcome.plan
         n, ms = str(plan.n), f"{plan.total_ms:.1f}"
         if plan.success:
-            body, state = f"<b>{plan.n} waypoints, {plan.total_ms:.1f} ms</b>", "ok"
+            body, state = (f"<b>{plan.n} waypoint{'s' if plan.n != 1 else ''}, "
+                           f"{plan.total_ms:.1f} ms</b>"), "ok"
             if plan.obstacles and plan.obstacle_path_clearance is not None:
                 gap = float(np.min(plan.obstacle_path_clearance))
                 body += (f"; the arm keeps ≥ {fmt_mm(gap, 0)} mm from "

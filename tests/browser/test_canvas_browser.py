@@ -142,7 +142,7 @@ def _click_to_place_plan_step_to_the_last_waypoint_and_refusal(page, cam: Any,
     wait_state(page, ("ok",))
     expected = plan_grasp(ROBOT, np.zeros(6), (x, y), radius)
     text = summary(page).inner_text()
-    m = re.match(r"(\d+) waypoints, ([\d.]+) ms", text.strip())  # (then what it kept clear of)
+    m = re.match(r"(\d+) waypoints?, ([\d.]+) ms", text.strip())  # (then what it kept clear of)
     assert m, text
     assert int(m.group(1)) == expected.n == expected.num_moves
     page.screenshot(path=str(artifacts_dir / "grasp-planned.png"))

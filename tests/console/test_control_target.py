@@ -109,3 +109,22 @@ def test_tracking_error_keeps_a_still_arms_noise_small() -> None:
 def test_a_one_waypoint_plan_is_one_waypoint() -> None:
     """Seen in a walk through the console: "plan of 1 waypoints" after a right-side grasp."""
     assert waypoint_text(telemetry("released", 0, 1)) == " · plan of 1 waypoint (controller's plan)"
+
+
+def test_the_arms_run_and_the_planner_summary_say_one_waypoint_for_a_one_waypoint_plan() -> None:
+    """Seen in the demo's screenshots (scripts/demo_screenshots.py): "Arm: Object 2 · grasp
+    (after 1 waypoints)" on the arm and "1 waypoints, 0.7 ms" in the Grasp planner."""
+    from types import SimpleNamespace
+
+    from console.core.run_state import RunView
+    from console.scene.plan_view import outcome_html
+
+    run = RunView("grasp", SimpleNamespace(n=1), None, "Object 2", None, 1, 5.0, 5.0, 0.5)
+    assert run.waypoint_text() == "grasp (after 1 waypoint)"
+    five = RunView("grasp", SimpleNamespace(n=5), None, "Object 2", None, 1, 5.0, 5.0, 0.5)
+    assert five.waypoint_text() == "grasp (after 5 waypoints)"
+    for n, words in ((1, "1 waypoint, 0.7 ms"), (5, "5 waypoints, 0.7 ms")):
+        plan = SimpleNamespace(n=n, total_ms=0.7, success=True, obstacles=(),
+                               obstacle_path_clearance=None, carry=None)
+        html = outcome_html(SimpleNamespace(refusal=None, plan=plan, carry_note=None, others=()))
+        assert f"<b>{words}</b>" in html
