@@ -51,11 +51,12 @@ class RunView:
     fraction: float
 
     def key(self) -> tuple[Any, ...]:
-        """What the drawn plan depends on: the plan, the waypoint, the object (not the times)."""
+        """What the drawn plan and its label depend on: the plan, the waypoint, the object and
+        the phase (the label says "grasp (after 5 waypoints)", then "move_to_bin (…)"), not the
+        times."""
         p = self.plan
         plan_key = None if p is None else (p.kappas.tobytes(), p.center, p.replans)
-        return (plan_key, self.waypoint, self.name, self.index, self.count,
-                self.phase in ("approach",))
+        return (plan_key, self.waypoint, self.name, self.index, self.count, self.phase)
 
     def object_text(self) -> str:
         """ "Object 2 (object 2 of 3)", "Object 1", or "object 2 of 3"; empty if nothing known."""

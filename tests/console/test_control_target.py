@@ -128,3 +128,23 @@ def test_the_arms_run_and_the_planner_summary_say_one_waypoint_for_a_one_waypoin
                                obstacle_path_clearance=None, carry=None)
         html = outcome_html(SimpleNamespace(refusal=None, plan=plan, carry_note=None, others=()))
         assert f"<b>{words}</b>" in html
+
+
+def test_the_arms_label_follows_the_phase_after_the_approach() -> None:
+    """Seen in the demo's screenshots: the label at the object said "grasp (after 1 waypoint)"
+    while the header said move_to_bin: a run's key (what redraws the plan and its label)
+    left out the phases after the approach."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from console.core.run_state import RunView
+    from console.scene.run_view import run_label
+
+    plan = SimpleNamespace(n=1, kappas=np.zeros((1, 6)), center=(-0.08, 0.33), replans=0)
+    grasp = RunView("grasp", plan, None, "Object 2", None, 1, 5.0, 5.0, 0.5)
+    carry = RunView("move_to_bin", plan, None, "Object 2", None, 1, 4.0, 4.0, 0.6)
+    assert run_label(carry) == "Arm: Object 2 · move_to_bin (after 1 waypoint)"
+    assert grasp.key() != carry.key()
+    later = RunView("move_to_bin", plan, None, "Object 2", None, 1, 2.0, 2.0, 0.8)
+    assert later.key() == carry.key()                       # the times alone: no redraw
