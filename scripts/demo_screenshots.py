@@ -209,7 +209,7 @@ def soft_arm_demo(d: Demo) -> None:
     time.sleep(6)
     d.shot("05-executing", "executing: progress bar, waypoint i/n, remaining time")
     d.shot("05v-viewer", "the viewer while the arm runs", viewer=True)
-    d.wait("the grasp", lambda: phase() in ("grasp", "move_to_bin"), 180)
+    d.wait("the grasp", lambda: phase() in ("grasp", "move_to_bin", "release", "released"), 180)
     d.shot("06-grasped", "grasped, carrying to the robot file's bin (drawn)")
     d.wait("the release", lambda: len(s.view().objects) == 1, 180)
     d.wait("idle again", lambda: phase() in ("idle", "released"), 60)

@@ -32,7 +32,8 @@ class RunView:
         plan: The plan it executes (None while it settles or plans).
         waypoint: The waypoint it goes to (0-based) while approaching, else None.
         name: The object's name when this console knows it (else None).
-        index: The object's place in a row (0-based), None for a single grasp.
+        index: The object's place in the order the row takes them (0-based: the objects
+            finished before it), None for a single grasp.
         count: How many objects the row takes (1 for a single grasp).
         remaining_s: Estimated seconds to the release of this object (None: not known yet).
         row_remaining_s: The same for the whole row: this object's and the objects not yet
@@ -114,8 +115,13 @@ def run_of(view: Any, robot: SoftArm, timer: LegTimer, names: tuple[str, ...] | 
     own = 0.0 if left is None else (left / (elapsed + left) if elapsed + left > 0 else 0.0)
     done_here = 1.0 - own if left is not None else 0.0
     if in_row:
-        k, n = int(row.current or 0), int(row.n)
-        name = names[k] if names is not None and k < len(names) else None
+        queued, n = int(row.current or 0), int(row.n)
+        name = names[queued] if names is not None and queued < len(names) else None
+        # Its place in the order taken: the objects finished before it. (A row takes an
+        # object whose way a waiting one blocks after the others: the third in the queue
+        # can be the first taken, and "object 3 of 3", no time left for the two waiting and
+        # a bar two thirds full were shown with nothing released.)
+        k = min(len(getattr(row, "outcomes", ())), n - 1)
         total, here = row_seconds(row, k, n, float(c.t), left, elapsed)
         return RunView(c.phase, plan, waypoint, name, k, n, left, total,
                        (k + (done_here if here is None else here)) / n)

@@ -69,3 +69,33 @@ def test_the_rows_pace_is_its_finished_objects_mean_time():
     first = types.SimpleNamespace(outcomes=())
     assert row_seconds(first, 0, 3, 20.0, 50.0, 20.0) == (pytest.approx(50.0 + 2 * 70.0), None)
     assert row_seconds(first, 0, 3, 2.0, None, 0.0) == (None, None)
+
+
+def test_an_object_taken_before_the_ones_queued_ahead_of_it_counts_in_the_order_taken():
+    """Seen in the demo's screenshots: the row took the third object first (the other two
+    waited behind it, their ways blocked) and the screen said "object 3 of 3 · ≈ 22 s left"
+    with a bar two thirds full and nothing released. The object's place, the time left and the
+    bar count the objects finished before it (row.outcomes), its name its place in the queue."""
+    arm = robots.load("soft-arm")
+    c = types.SimpleNamespace(armed=True, phase="planning", kappa_meas=None,
+                              kappa_ref=[0.0] * 6, t=35.0, waypoint=0)
+    names = ("Object 1", "Object 2", "Object 3")
+    first = types.SimpleNamespace(running=True, current=2, n=3, outcomes=())
+    run = run_of(types.SimpleNamespace(snapshot=types.SimpleNamespace(control=c), row=first,
+                                       executing=None), arm, LegTimer(arm), names)
+    assert run.name == "Object 3" and run.index == 0
+    assert run.object_text() == "Object 3 (object 1 of 3)" and run.fraction == 0.0
+    done = types.SimpleNamespace(started_s=0.0, ended_s=30.0)
+    second = types.SimpleNamespace(running=True, current=0, n=3, outcomes=(done,))
+    run = run_of(types.SimpleNamespace(snapshot=types.SimpleNamespace(control=c), row=second,
+                                       executing=None), arm, LegTimer(arm), names)
+    assert run.name == "Object 1" and run.object_text() == "Object 1 (object 2 of 3)"
+    # 30 s a object: this one 25 s more (5 s since the last ended), then one more object
+    assert run.row_remaining_s == pytest.approx(25.0 + 30.0)
+    assert 1 / 3 <= run.fraction < 2 / 3
+    from console.panels.soft_arm.control_row import row_html
+    report = types.SimpleNamespace(running=True, current=2, n=3, outcomes=(), released=0,
+                                   state="running", row_id=1, reason=None)
+    line = row_html(types.SimpleNamespace(row=report, snapshot=types.SimpleNamespace(control=c)),
+                    None)
+    assert "object 1 of 3 (object 3): planning · 0 released so far" in line

@@ -82,7 +82,8 @@ def row_html(view: ControlView | None, sent: SentRow | None) -> str:
         phase = "" if c is None else f": {html.escape(c.phase)}"
         name = html.escape(_name(sent, report, report.current))
         where = f" into the {html.escape(sent.bin_text)}" if sent is not None else ""
-        body = (f"<b>Clearing the table{where}:</b> object {report.current + 1} of {report.n} "
+        taken = min(len(report.outcomes), report.n - 1) + 1  # (the order taken: run_state)
+        body = (f"<b>Clearing the table{where}:</b> object {taken} of {report.n} "
                 f"({name}){phase} · {report.released} released so far")
     else:
         how = "done" if report.state == "done" else f"stopped ({html.escape(report.reason or '')})"
