@@ -1,8 +1,8 @@
 """The bin in the 3D scene, so every browser sees where "Clear table into bin" takes the objects:
 an open box (:data:`console.core.table_bin.BIN_COLOR`) with a "Bin" label; with no bin
 placed, where the robot file's ``[bin]`` drops the objects instead (Execute and the row go there
-then): the same box dimmed (:data:`ROBOT_FILE_OPACITY`) at each finger's drop point, labelled
-"robot file's bin".
+then): the same box dimmed (:data:`ROBOT_FILE_OPACITY`) at each finger's drop point, one label
+"robot file's bin" over them.
 
 The grasp session keeps the bin (:class:`console.core.table_bin.TableBin`); the grasp layers
 (:class:`console.scene.grasp_layers.GraspSceneView`) draw it here when it changed.
@@ -30,18 +30,21 @@ class BinView:
         self._half = 0.0
         self.label = scene.add_label("/row/bin/label", "Bin", position=(0.0, 0.0, 0.0),
                                      visible=False, anchor="bottom-center")
-        self.defaults: list[Any] = []  # the robot file's bin: boxes and labels
+        self.defaults: list[Any] = []  # the robot file's bin: its boxes, then its label
         if robot is not None:
             drops = robot_file_drops(robot)
             v, f = open_box_mesh(float(robot.bin.drop_radius_m))
             for side, x, y in drops:
-                name = ROBOT_FILE_LABEL + (f" ({side} finger)" if len(drops) > 1 else "")
                 self.defaults.append(scene.add_mesh_simple(
                     f"/row/robot_file_bin/{side}/box", v, f, color=BIN_COLOR, side="double",
                     opacity=ROBOT_FILE_OPACITY, cast_shadow=False, position=(x, y, 0.0)))
-                self.defaults.append(scene.add_label(
-                    f"/row/robot_file_bin/{side}/label", name,
-                    position=(x, y, BIN_HEIGHT + 0.01), anchor="bottom-center"))
+            # One label over the boxes (one per finger, 73 mm apart on the shipped arm: a
+            # label per box, "(left finger)" and "(right finger)", overlapped on screen).
+            mx = sum(x for _, x, _ in drops) / len(drops)
+            my = sum(y for _, _, y in drops) / len(drops)
+            self.defaults.append(scene.add_label(
+                "/row/robot_file_bin/label", ROBOT_FILE_LABEL,
+                position=(mx, my, BIN_HEIGHT + 0.01), anchor="bottom-center"))
 
     def draw(self, table_bin: TableBin | None) -> None:
         """Show ``table_bin`` (None hides the bin); does nothing when it did not change."""
