@@ -14,11 +14,14 @@ page). Sizes: desktop 1600 x 1000, tablet 820 x 1180.
   clicked at (-300, 80) and (-100, 350) mm beside Object 1, the bin clicked at (200, 220) mm
   and "Clear table into bin" (shots of each object of the row); the whole demo is recorded and
   last replayed in the Session tab (the recorded objects, bin and plan drawn);
-* extensible arm: Arm device, type a tip target, Go, preview and run a path.
+* extensible arm: Arm device, type a tip target above the arm (the view widens for it), Go,
+  preview and run a four-corner path.
 
-It prints one line per shot (its path, what it shows) and takes 4-8 minutes (the arm moves at
-its shipped speed). A tool, not a test: nothing is asserted; a step that does not happen in
-time is said ("TIMEOUT ...") and the demo goes on.
+It prints one line per shot (its path, what it shows) and any button that needed scrolling
+("SCROLLED ..."); it takes 2 (extensible) to 12 (soft arm) minutes here, the arm moving at its
+shipped speed. A tool, not a test: nothing is asserted; a step that does not happen in time is
+said ("TIMEOUT ...") and the demo goes on. On a busy machine the headless operator's tab can
+miss its lease answers and the console stops the arm, as it should ("tab went silent").
 """
 
 from __future__ import annotations
