@@ -10,7 +10,8 @@ within 1 cm of the bin) -> released. Failures re-plan or stop, always with a sta
   settles, re-plan;
 * tracking lost (markers occluded) -> freeze the cylinders; stop after ``tracking_timeout_s``;
 * object not in the gripper after grasping or lost on the way -> open, re-plan;
-* planner refused (object infeasible) or failed, bin not reached in time -> stop.
+* planner refused (object infeasible) or failed, bin (or a carry target) not reached
+  ``move_timeout_s`` after the reference arrived -> stop.
 
 STOP (:meth:`GraspAndPlace.stop`) freezes the cylinder volumes, which holds the arm's shape.
 
@@ -293,13 +294,16 @@ class GraspAndPlace:
                                    f"(max |dkappa| {err:.2f} 1/m)", settle=False)
         return Decision(Phase.APPROACH)
 
-    def _timed_out(self, obs: Observation, t: float) -> bool:
+    def _timed_out(self, obs: Observation, t: float, limit_s: float | None = None) -> bool:
+        """True once the reference has rested at its target for ``limit_s`` (default
+        ``waypoint_timeout_s``) without the arm arriving."""
         if not obs.reference_finished:
             self._ref_done_since = None
             return False
         if self._ref_done_since is None:
             self._ref_done_since = t
-        return t - self._ref_done_since >= self.p.waypoint_timeout_s
+        return t - self._ref_done_since >= (self.p.waypoint_timeout_s if limit_s is None
+                                            else limit_s)
 
     def _on_grasp(self, obs: Observation, t: float) -> Decision:
         if t - self._since < self.p.grasp_time_s:
@@ -316,6 +320,7 @@ class GraspAndPlace:
         self._grip_rel = rel
         self.times["grasp_end"] = t
         self._enter(Phase.MOVE_TO_BIN, t, "grasped")
+        self._ref_done_since = None  # the approach's reference is not the carry's
         carry = getattr(self.plan, "carry", None)
         self.carry = CarryFollower(self.bin.kappa_for(self.closing_side) if carry is None
                                    else carry)
@@ -327,9 +332,12 @@ class GraspAndPlace:
             if float(np.hypot(*(rel - self._grip_rel))) > self.p.capture_check_m:
                 self.gripper_closed = False
                 return self._replan(t, "object lost while moving to the bin", settle=True)
-        nxt = self.carry.advance(obs.kappa, obs.reference_finished, self.p.advance_dkappa)
-        if nxt is not None:  # each target of the carry gets move_timeout_s
+        # a middle target of the carry is reached, not passed: its corner keeps the clearance
+        tol = self.p.advance_dkappa
+        nxt = self.carry.advance(obs.kappa, obs.reference_finished, tol)
+        if nxt is not None:  # each target of the carry gets move_timeout_s once its reference arrived
             self._since = t
+            self._ref_done_since = None
             self.events.append((t, f"carry: target {self.carry.index + 1}/"
                                    f"{len(self.carry.targets)}"))
             return Decision(Phase.MOVE_TO_BIN, kappa_target=nxt, gripper_closed=True)
@@ -340,12 +348,16 @@ class GraspAndPlace:
             self.times["release"] = t
             self._enter(Phase.RELEASE, t, f"palm {dist * 1000:.0f} mm from the bin")
             return Decision(Phase.RELEASE, gripper_closed=False)
-        if t - self._since > self.p.move_timeout_s:
-            what = "bin" if self.carry.last else \
-                f"carry target {self.carry.index + 1}/{len(self.carry.targets)}"
-            return self._stop(t, f"{what} not reached within {self.p.move_timeout_s:g} s "
-                                 f"(palm {dist * 1000:.0f} mm away)" if self.carry.last
-                              else f"{what} not reached within {self.p.move_timeout_s:g} s")
+        # the reference moves at the trajectory's rate limits (a long carry takes longer than
+        # move_timeout_s by itself): the time to arrive counts from when it arrived
+        if self._timed_out(obs, t, self.p.move_timeout_s):
+            if self.carry.last:
+                return self._stop(t, f"bin not reached {self.p.move_timeout_s:g} s after the "
+                                     f"reference arrived (palm {dist * 1000:.0f} mm away)")
+            err = float(np.max(np.abs(obs.kappa - self.carry.target)))
+            return self._stop(t, f"carry target {self.carry.index + 1}/{len(self.carry.targets)}"
+                                 f" not reached {self.p.move_timeout_s:g} s after the reference "
+                                 f"arrived (max |dkappa| {err:.2f} 1/m, needs {tol:g})")
         return Decision(Phase.MOVE_TO_BIN, gripper_closed=True)
 
     def _on_release(self, obs: Observation, t: float) -> Decision:

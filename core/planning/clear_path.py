@@ -40,6 +40,8 @@ Array = npt.NDArray[np.float64]
 
 HELD_SLACK = 0.003      # m: a held object that starts inside the clearance may lose this much
 START_SLACK = 0.0005    # m: an arm that starts inside clearance + pad keeps its gap less this
+LIMIT_SLACK = 2.0       # 1/m: a measured start this far past a curvature limit (sensor noise,
+                        # overshoot at the limit: ~1 1/m seen in the simulator) is the limit
 STEP_M = 0.06           # m: longest RRT extension (bound on any arm point's displacement)
 MAX_ITERATIONS = 600    # RRT-connect rounds (the deterministic cap; budget_s cuts earlier)
 LOCAL_SHARE = 0.5       # of the samples drawn near a node of the growing tree ...
@@ -229,6 +231,17 @@ def _refuse_end(problem: ClearPathProblem, k: Array, name: str) -> None:
         raise ClearPathRefused(*why)
 
 
+def within_limits(model: ArmModel, start: Array) -> Array:
+    """A measured start (1/m, N) with the curvatures up to :data:`LIMIT_SLACK` past a limit set
+    to that limit; ValueError naming the segment when one is further out."""
+    past = np.maximum(model.lo - start, start - model.hi)
+    i = int(np.argmax(past))
+    if past[i] > LIMIT_SLACK:
+        raise ValueError(f"the start is outside the curvature limits (segment {i + 1}: "
+                         f"{start[i]:.2f} 1/m, limits {model.lo[i]:.2f} to {model.hi[i]:.2f})")
+    return np.clip(start, model.lo, model.hi)
+
+
 def clear_path(problem: ClearPathProblem, start: npt.ArrayLike, goal: npt.ArrayLike, *,
                budget_s: float = 1.0, seed: int = 0, samples: int = 8,
                goal_name: str = "the goal pose", hints: Sequence[Array] = ()) -> ClearPath:
@@ -251,8 +264,9 @@ def clear_path(problem: ClearPathProblem, start: npt.ArrayLike, goal: npt.ArrayL
     for name, k in (("start", a), ("goal", b)):
         if k.shape != (m.n,) or not np.isfinite(k).all():
             raise ValueError(f"the {name} must be {m.n} finite curvatures")
-        if np.any(k < m.lo - 1e-9) or np.any(k > m.hi + 1e-9):
-            raise ValueError(f"the {name} is outside the curvature limits")
+    a = within_limits(m, a)
+    if np.any(b < m.lo - 1e-9) or np.any(b > m.hi + 1e-9):
+        raise ValueError("the goal is outside the curvature limits")
     _refuse_end(problem, a, "the arm's shape at the start")
     _refuse_end(problem, b, goal_name)
     lb = problem.certify(a, b, samples)

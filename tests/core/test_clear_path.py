@@ -214,3 +214,21 @@ def test_the_long_way_round_plans_a_spot_the_local_search_refused():
     # Algorithm 1's final waypoint on the final circle, within the curvature limits.
     assert plan.radii[-1] == pytest.approx(R + ARM.gripper.g_off, abs=1e-9)
     assert np.all(np.abs(plan.kappas) <= ARM.kappa_max + 1e-9)
+
+
+def test_a_measured_start_just_past_a_curvature_limit_is_planned_from_that_limit(grasp):
+    """The measured arm sits a little past a limit after a carry that ended there (noise,
+    overshoot): the next object's plan starts from the limit; far past it is refused, naming
+    the segment (a row's second object failed with "the start is outside the curvature
+    limits")."""
+    from core.planning.clear_path import LIMIT_SLACK, within_limits
+
+    start = np.clip(grasp.kappas[-1], MODEL.lo, MODEL.hi).copy()
+    start[3] = MODEL.lo[3] - 0.5 * LIMIT_SLACK
+    got = within_limits(MODEL, start)
+    assert got[3] == MODEL.lo[3] and np.array_equal(np.delete(got, 3), np.delete(start, 3))
+    path = clear_path(_problem(start, obstacles=(), held=False), start, np.zeros(6))
+    assert np.array_equal(path.kappas[0], got) and np.array_equal(path.kappas[-1], np.zeros(6))
+    start[3] = MODEL.lo[3] - 1.5 * LIMIT_SLACK
+    with pytest.raises(ValueError, match=r"segment 4: .* limits"):
+        clear_path(_problem(start, obstacles=(), held=False), start, np.zeros(6))

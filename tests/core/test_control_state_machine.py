@@ -234,3 +234,55 @@ def test_object_not_in_gripper_after_grasp_reopens_and_replans(arm):
     drv.run(m.p.grasp_time_s + 0.02, follow=False)
     assert m.phase is Phase.SETTLING and not m.gripper_closed
     assert any("not in the gripper" in e for _, e in m.events)
+
+
+def _carrying(arm, carry, **changes):
+    """A machine in MOVE_TO_BIN with ``carry`` as its targets (the arm still at the grasp)."""
+    plan = make_plan(arm)
+    plan.carry = np.asarray(carry, float)   # what plan_carry adds to a plan
+    m = machine(arm, immediate(lambda req: plan), **changes)
+    drv = Driver(m, np.zeros(6), object_in_gripper(arm, plan.kappas[-1]))
+    m.execute(plan, drv.obj, 0.0)
+    for _ in range(200):   # the arm follows each approach target at once
+        drv.tick()
+        drv.kappa = drv.target.copy()
+        if m.phase is Phase.GRASP:
+            break
+    drv.run(m.p.grasp_time_s + 0.02, follow=False)
+    assert m.phase is Phase.MOVE_TO_BIN
+    return m, drv
+
+
+def test_a_carry_longer_than_move_timeout_is_not_cut_short_while_its_reference_moves(arm):
+    """The reference moves at the trajectory's rate limits (0.8 1/(m s): a 33 1/m change of a
+    carry takes ~41 s): move_timeout_s counts from when it arrived, not from the target's start
+    (a row of three into a bin on the other side stopped with "carry target 1/2 not reached
+    within 40 s" while the arm was still following)."""
+    mid = np.array([12.0, -16.0, -16.0, -16.0, -16.0, -16.0])
+    m, drv = _carrying(arm, [mid, np.zeros(6)], move_timeout_s=2.0)
+    drv.run(5.0, follow=False, finished=False)   # the reference is still on its way
+    assert m.phase is Phase.MOVE_TO_BIN and m.carry.index == 0
+    drv.run(1.99, follow=False, finished=True)   # it arrived; the arm has not
+    assert m.phase is Phase.MOVE_TO_BIN
+    drv.run(0.03, follow=False, finished=True)
+    assert m.phase is Phase.STOPPED
+    assert "carry target 1/2 not reached 2 s after the reference arrived" in m.reason
+    err = np.max(np.abs(drv.kappa - mid))
+    assert f"max |dkappa| {err:.2f} 1/m" in m.reason
+
+
+def test_a_middle_carry_target_is_reached_within_advance_dkappa_not_passed(arm):
+    """Unlike an intermediate approach waypoint (passed within pass_dkappa), a via of the
+    carry is a corner around an obstacle: the arm must be within advance_dkappa of it on every
+    segment (passing it within pass_dkappa cut a simulated carry's clearance to 8 mm of 10)."""
+    mid = np.array([5.0, -5.0, -5.0, -5.0, -5.0, -5.0])
+    m, drv = _carrying(arm, [mid, np.zeros(6)])
+    assert m.p.pass_over and m.p.pass_dkappa > m.p.advance_dkappa
+    drv.kappa = mid + np.array([0, 0, 0, 0, 0, (m.p.advance_dkappa + m.p.pass_dkappa) / 2])
+    drv.obj = object_in_gripper(arm, drv.kappa)   # held: it moves with the gripper
+    drv.tick(finished=True)
+    assert m.phase is Phase.MOVE_TO_BIN and m.carry.index == 0
+    drv.kappa = mid + np.array([0, 0, 0, 0, 0, 0.9 * m.p.advance_dkappa])
+    drv.obj = object_in_gripper(arm, drv.kappa)
+    d = drv.tick(finished=True)
+    assert m.carry.index == 1 and np.allclose(d.kappa_target, np.zeros(6))

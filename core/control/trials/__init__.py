@@ -39,6 +39,7 @@ from core.planning.sides import mirror_xy, object_side
 from core.robots import Side, SoftArm, load
 
 PLACEMENT_TOLERANCE_M = 0.001  # the paper: user placement within +-1 mm
+ROW_OBJECT_TIME_LIMIT_S = 300.0  # a row's object: carried around the others it can take ~150 s
 
 
 def paper_locations() -> dict[str, tuple[float, float]]:
@@ -386,7 +387,8 @@ class RowTrialResult:
 
 
 def run_row_trial(robot: SoftArm, objects: Sequence[Sequence[float]], seed: int, *,
-                  planner: str = DEFAULT_PLANNER, object_time_limit_s: float = 150.0,
+                  planner: str = DEFAULT_PLANNER,
+                  object_time_limit_s: float = ROW_OBJECT_TIME_LIMIT_S,
                   sim_overrides: dict[str, Any] | None = None,
                   bin_xy: Sequence[float] | None = None,
                   clearance: float = DEFAULT_CLEARANCE,

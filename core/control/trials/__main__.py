@@ -17,7 +17,8 @@ object ``{"trials": [...], "loop": {...}}`` (``loop.sides``: ``{"left": {"succes
 (:func:`core.control.trials.run_row_trial`): the N ``--object`` given, or without ``--object``
 N drawn from ``--seed`` among reachable spots (paper's object radius) on ``--side``: left (the
 default), right (the right finger's quadrant), or both (alternating, left first); a side the
-robot file's gripper has no finger for is refused. ``--time-limit`` is then per object;
+robot file's gripper has no finger for is refused. ``--time-limit`` is then per object
+(default 300 s: an object far from the bin, carried around the others, can take ~150 s);
 ``--bin X Y`` puts the bin at that point of the table (m) instead of the robot file's bin
 configuration. The objects not yet taken are obstacles for each object's plans and carry,
 kept ``--clearance`` (m, default 0.01) from. Prints one row per object (its side, released /
@@ -42,9 +43,9 @@ from typing import Any, Callable, Sequence
 from core.control.params import SimParams
 from core.control.planner_spec import DEFAULT_PLANNER
 from core.control.row import bin_at
-from core.control.trials import (SIDE_CHOICES, RowTrialResult, TrialResult, draw_row_objects,
-                                 paper_locations, per_side, row_json, run_row_trial, run_trials,
-                                 sided_objects, summary)
+from core.control.trials import (ROW_OBJECT_TIME_LIMIT_S, SIDE_CHOICES, RowTrialResult,
+                                 TrialResult, draw_row_objects, paper_locations, per_side,
+                                 row_json, run_row_trial, run_trials, sided_objects, summary)
 from core.planning.obstacles import DEFAULT_CLEARANCE, check_clearance
 from core.robots import SoftArm, load
 from core.units import fmt_mm
@@ -162,8 +163,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--robot", default="soft-arm")
     ap.add_argument("--planner", default=DEFAULT_PLANNER, help="module:function (default %(default)s)")
-    ap.add_argument("--time-limit", type=float, default=150.0,
-                    help="simulated s per trial (per object with --objects-in-a-row)")
+    ap.add_argument("--time-limit", type=float, default=None,
+                    help="simulated s per trial (default 150), per object with "
+                         "--objects-in-a-row (default 300)")
     ap.add_argument("--sim", action="append", default=[], metavar="KEY=VALUE",
                     help="override a [sim] parameter, e.g. stall_rate_hz=0.5 or mocap.noise_m=5e-4")
     ap.add_argument("--record", type=Path, default=None, metavar="PATH.mcap",
@@ -196,6 +198,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         ap.error("--repeats must be >= 1")
     if a.objects_in_a_row is not None and a.objects_in_a_row < 1:
         ap.error("--objects-in-a-row must be >= 1")
+    if a.time_limit is None:
+        a.time_limit = ROW_OBJECT_TIME_LIMIT_S if a.objects_in_a_row is not None else 150.0
     if not (math.isfinite(a.time_limit) and a.time_limit > 0):
         ap.error(f"--time-limit {a.time_limit}: need a number of seconds > 0")
     try:
