@@ -20,7 +20,8 @@ def test_execute_names_the_robot_files_bin_until_a_bin_is_placed(rig) -> None:
     ahead = (sum(SOFT.lengths) + SOFT.gripper.w_off_along) * 1e3
     expected = (f"no bin placed: into the robot file's bin (drawn dimmed on the table), dropped at "
                 f"({-side:.0f}, {ahead:.0f}) mm (left finger) or ({side:.0f}, {ahead:.0f}) mm "
-                f"(right finger); place a bin in the Objects panel to choose")
+                f"(right finger); to choose, set Table click places: Bin (top of Operate) and "
+                f"click the table")
     assert expected.startswith("no bin placed: into the robot file's bin (drawn dimmed on the table), dropped "
                                "at (-40, 411) mm")
     control.execute._show_target()

@@ -58,7 +58,8 @@ def _operate(app: Any) -> list[Any]:
 
 def _folders(app: Any) -> list[tuple[str, bool]]:
     """Operate's top-level folders: (label, open when the page loads)."""
-    return [(h.label, h.expand_by_default) for h in _operate(app)]
+    return [(h.label, h.expand_by_default) for h in _operate(app)
+            if hasattr(h, "expand_by_default")]
 
 
 def _parent(handle: Any) -> str:
@@ -81,7 +82,12 @@ def test_soft_arm_operate_starts_with_plan_then_arm_and_execute_and_folds_the_re
                               ("Objects", True), ("Waypoints", False), ("Jog", False),
                               ("Readout", False)]
     planner, control = soft.panel(PlannerPanel), soft.panel(ControlPanel)
-    # Plan grasp is the first thing in Operate, then the object it plans for
+    # what a table click places comes first (to place the bin before "Clear table into bin"
+    # it had to be found in the Objects folder, below the fold at 1600 x 1000)
+    from console.panels.soft_arm.objects import ObjectsPanel
+    assert _operate(soft)[0] is soft.panel(ObjectsPanel).click_place
+    assert _operate(soft)[1] is planner.folder
+    # Plan grasp is the first thing in the Grasp planner, then the object it plans for
     first = _children(soft, planner.folder)
     assert first[0] is planner.plan_button and first[1] is planner.plan_for
     # Arm, Disarm, Execute, Click to grasp and Clear table are in the Control folder itself
@@ -121,8 +127,8 @@ def test_soft_arm_diagnostics_and_editing_are_folded(soft: Any) -> None:
     for handle in (planner.delta_d, planner.weights, planner.clearance, planner.live,
                    planner.reach):
         assert _parent(handle) == _cid(settings)
-    # Objects: what a click places and which object is selected stay in view
-    assert _parent(objects.click_place) == _cid(objects.folder)
+    # Objects: which object is selected stays in view (what a click places is above Plan)
+    assert _parent(objects.click_place) == _cid(soft.tabs.tab("Operate"))
     assert _parent(objects.selected) == _cid(objects.folder)
     for fold in (objects.editing, objects.obstacles.folder):
         assert _parent(fold) == _cid(objects.folder) and not fold.expand_by_default

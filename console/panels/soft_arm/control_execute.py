@@ -44,7 +44,8 @@ def bin_sentence(robot: Any, table_bin: Any, radius: float) -> str:
     points = [f"({x * 1e3:.0f}, {y * 1e3:.0f}) mm" + (f" ({side} finger)" if len(drops) > 1 else "")
               for side, x, y in drops]
     return ("no bin placed: into the robot file's bin (drawn dimmed on the table), dropped at "
-            + " or ".join(points) + "; place a bin in the Objects panel to choose")
+            + " or ".join(points) + "; to choose, set Table click places: Bin (top of Operate) "
+            "and click the table")
 
 
 def target_object(target: ExecuteTarget) -> Any:

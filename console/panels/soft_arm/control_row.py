@@ -31,8 +31,8 @@ from console.core.table_scene import validate_object
 from console.panels.common.events import client_of
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST, ControlView
 
-NO_BIN = ("Place a bin first: in the Objects panel choose 'Table click places: Bin' and click "
-          "on the table where it stands.")
+NO_BIN = ("Place a bin first: at the top of Operate choose 'Table click places: Bin' and "
+          "click on the table where it stands.")
 NO_OBJECTS = "No objects on the table to clear into the bin: place some in the Objects panel."
 KEEP_ROWS = 8  # rows taken whose names the panel keeps (a report names the newest)
 STATUS_WORDS = {"released": "released", "failed": "failed", "skipped": "skipped"}

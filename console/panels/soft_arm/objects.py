@@ -48,6 +48,7 @@ from console.core.table_scene import parse_scene, scene_to_json
 # What a click on free table places (dropdown options; a click on an object or obstacle
 # selects it).
 CLICK_MODES = ("Object", "Obstacle", "Bin", "Nothing")
+CLICK_PLACE_ORDER = 1.0  # in the Operate tab: before the Grasp planner folder (2.0)
 
 
 def mm(metres: float) -> float:
@@ -66,11 +67,17 @@ class ObjectsPanel(Panel):
         self.session = self.app.soft_arm_grasp()
         view = self.session.view()
         first = view.objects[0] if view.objects else None
-        self.click_place = self.gui.add_dropdown(
-            "Table click places", CLICK_MODES, initial_value=CLICK_MODES[0],
-            hint="What a click on free table places: an object, an obstacle, or the bin that "
-                 "'Clear table into bin' (Control panel) takes every object to; a click on "
-                 "an object or obstacle selects it. Nothing: clicks leave the table alone.")
+        # What a click places is the table's mode, used before Plan and to put the bin before
+        # "Clear table into bin": first in Operate, above the Grasp planner (in this folder, far
+        # below, placing a bin needed scrolling at 1600 x 1000)
+        with self.app.tabs.tab(self.tab):
+            self.click_place = self.gui.add_dropdown(
+                "Table click places", CLICK_MODES, initial_value=CLICK_MODES[0],
+                order=CLICK_PLACE_ORDER,
+                hint="What a click on free table places: an object, an obstacle, or the bin "
+                     "that 'Clear table into bin' (Control panel) takes every object to; a "
+                     "click on an object or obstacle selects it. Nothing: clicks leave the "
+                     "table alone.")
         self.bins = BinLocator(self.app.robot)
         self.selected = self.gui.add_dropdown(
             "Selected", [o.name for o in view.objects] or ["(none)"],
@@ -177,6 +184,11 @@ class ObjectsPanel(Panel):
         self.session.drag(name, x, y, live=event.phase != "end")
         if event.phase == "end":
             self._recorded("moved", name, event.client)
+
+    def close(self) -> None:
+        """Remove the panel's widgets, the table's click mode (outside the folder) too."""
+        self.click_place.remove()
+        super().close()
 
     @operator_only(action="change how clicks on the table act")
     def _on_click_mode(self, event) -> None:

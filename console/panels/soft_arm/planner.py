@@ -35,7 +35,7 @@ def plan_for_html(view: SessionView) -> str:
     diameter (mm), or what to do when none is selected (``data-testid="plan-for"``)."""
     chosen = next((o for o in view.objects if o.name == view.selected), None)
     if chosen is None:
-        text = ("No object selected: click the table to place one (Objects: "
+        text = ("No object selected: click the table to place one (top of Operate: "
                 "<i>Table click places</i>).")
         name = ""
     else:
