@@ -177,6 +177,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             if why is not None:  # hidden inside the obstacle; the planner would refuse it
                 raise ValueError(why)
             self._objects.append(obj)
+            self._count += 1  # a removed (or cleared) object's name is not given again
             self._selected = obj.name
             self._changed("objects", plan=False)
             return obj.name

@@ -186,3 +186,21 @@ def test_a_table_emptied_is_no_refusal_but_a_nothing_selected_plan_is():
     finally:
         s.close()
         s.join(5.0)
+
+
+def test_a_removed_objects_name_is_not_given_to_the_next_one():
+    """Names identify objects in plans, rows and recordings: after Object 2 is removed (or taken
+    to the bin), the next object is Object 3, not a second Object 2; names already on the table
+    (a loaded scene's) are skipped."""
+    session, _, _ = headless_session()
+    try:
+        assert [o.name for o in session.view().objects] == ["Object 1"]
+        second = session.place(-0.1, 0.3)
+        assert second == "Object 2"
+        session.remove(second)
+        assert session.place(-0.1, 0.3) == "Object 3"
+        session.remove("Object 1")
+        assert session.place(-0.25, 0.15) == "Object 4"
+        assert [o.name for o in session.view().objects] == ["Object 3", "Object 4"]
+    finally:
+        session.close()
