@@ -205,6 +205,7 @@ class ConsoleApp:
         # is planned (a far object's approach circles: console.scene.plan_frame); the
         # extensible arm's for the arm as tall as it is (re-framed when it grows: follow_arm).
         self._framed_top = span  # the lowest top (m) an extensible arm's view was framed for
+        self._kept_in_view: np.ndarray | None = None  # a typed tip target (keep_in_view)
         self.window_fit = WindowFit(
             server, self.camera_presets[0],
             lambda w, h: presets_for_window(kind, span, table, w, h, self.framed_points()),
@@ -477,8 +478,29 @@ class ConsoleApp:
         g = self.view.geometry(np.asarray(self.store.display.q))
         points = np.concatenate([np.asarray(g[k], float).reshape(-1, 3)
                                  for k in ("platforms", "backbone") if k in g])
+        kept = self._kept_in_view
+        if kept is not None:
+            points = np.vstack([points, kept[None]])
         self._framed_top = min(self._framed_top, volume_top(self.arm_reach(), points))
         return points
+
+    def keep_in_view(self, point: npt.ArrayLike | None) -> list[int]:
+        """Keep ``point`` (m, world; the extensible arm's typed or dragged tip target) in every
+        browser's view until another replaces it (None: none): when it lies above the top the
+        views were framed for (or within :data:`FOLLOW_MARGIN_M` of it), re-frame the cameras
+        still where the console put them, like :meth:`follow_arm`; the ids of the browsers
+        moved. A typed target above the arm used to be drawn half off the top until Go."""
+        if point is None:
+            self._kept_in_view = None
+            return []
+        p = np.asarray(point, dtype=float).reshape(3)
+        if not np.all(np.isfinite(p)) or self.model.kind != "delta":
+            return []
+        self._kept_in_view = p
+        if self._framed_top >= self.arm_reach() or p[2] + FOLLOW_MARGIN_M <= self._framed_top:
+            return []
+        self._framed_top = volume_top(self.arm_reach(), [p])
+        return self.window_fit.refit()
 
     def follow_arm(self, q: np.ndarray) -> list[int]:
         """The extensible arm's tip rose within :data:`FOLLOW_MARGIN_M` of the top its views

@@ -383,3 +383,32 @@ def test_the_extensible_arms_views_are_reframed_when_it_grows_out_of_them(server
     assert refits == [1] and app._framed_top == pytest.approx(span)
     app.follow_arm(full)                                              # once
     assert refits == [1]
+
+
+def test_a_typed_target_above_the_framed_top_reframes_the_views_to_show_it(server):
+    """ConsoleApp.keep_in_view (the Tip target panel's typed target, drawn as a dimmed ball
+    until Go): above the top the views were framed for, it re-frames them and every preset
+    then shows it; one already in view, or the soft arm, re-frames nothing."""
+    from tests.fakes import FakeRunner, console_app
+
+    app = console_app(EXT, server, extensible_runner=FakeRunner(), panels=())
+    refits: list[int] = []
+    app.window_fit.refit = lambda: refits.append(1) or []           # (counted, not run)
+    span, table = arm_span(EXT, "delta"), table_extent(EXT, "delta")
+    rest = _extensible_q(0.5)
+    app.framed_points()                                            # a browser framed at rest
+    top = app._framed_top
+    below = np.array([0.02, -0.01, top - 0.1])
+    assert app.keep_in_view(below) == [] and refits == []
+    above = np.array([0.06, -0.04, top + 0.05])                    # the demo's typed target
+    pose = camera.presets_for_window("delta", span, table, 1276, 1000,
+                                     _spine(rest))[0]
+    assert not camera.in_view(pose, above[None], 1276 / 1000)      # was drawn off the top
+    app.keep_in_view(above)
+    assert refits == [1] and app._framed_top > above[2]
+    for width, height in ((1276, 1000), (496, 1180), (390, 422)):
+        pose = camera.presets_for_window("delta", span, table, width, height,
+                                         app.framed_points())[0]
+        assert camera.in_view(pose, np.vstack([_spine(rest), above]), width / height)
+    app.keep_in_view(None)                                          # Go / discarded: no point
+    assert not np.any(np.all(np.isclose(app.framed_points(), above), axis=1))

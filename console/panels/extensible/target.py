@@ -183,6 +183,8 @@ class TargetPanel(Panel):
             same = bool(np.allclose(target, self._target, rtol=0, atol=SAME_TARGET_M))
             self._pending = None if same else target
             self._show()
+        if not same:  # the pending ball is drawn there: every view widens to show it
+            self.app.keep_in_view(target)
 
     @operator_only(action="move the tip target")
     def _on_go(self, event: viser.GuiEvent) -> None:
@@ -198,6 +200,7 @@ class TargetPanel(Panel):
             self.gizmo.position = tuple(target)
             self._say_solving(target)
             self.worker.submit(target, True, event.client.client_id)
+        self.app.keep_in_view(target)
 
     def _read_fields(self) -> Array | None:
         """Every field as typed now (m); None after saying why when one is not a finite
