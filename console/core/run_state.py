@@ -121,11 +121,18 @@ def run_of(view: Any, robot: SoftArm, timer: LegTimer, names: tuple[str, ...] | 
         # object whose way a waiting one blocks after the others: the third in the queue
         # can be the first taken, and "object 3 of 3", no time left for the two waiting and
         # a bar two thirds full were shown with nothing released.)
-        k = min(len(getattr(row, "outcomes", ())), n - 1)
+        k = row_position(row)
         total, here = row_seconds(row, k, n, float(c.t), left, elapsed)
         return RunView(c.phase, plan, waypoint, name, k, n, left, total,
                        (k + (done_here if here is None else here)) / n)
     return RunView(c.phase, plan, waypoint, single, None, 1, left, left, done_here)
+
+
+def row_position(row: Any) -> int:
+    """The running object's place (0-based) in the order a row takes them: the objects finished
+    before it (a row takes an object whose way a waiting one blocks after the others, so its
+    place in the queue, ``row.current``, is not it)."""
+    return min(len(getattr(row, "outcomes", ())), int(row.n) - 1)
 
 
 def row_seconds(row: Any, k: int, n: int, t: float, left: float | None,

@@ -99,3 +99,12 @@ def test_an_object_taken_before_the_ones_queued_ahead_of_it_counts_in_the_order_
     line = row_html(types.SimpleNamespace(row=report, snapshot=types.SimpleNamespace(control=c)),
                     None)
     assert "object 1 of 3 (object 3): planning · 0 released so far" in line
+    # the header's phase counts the same way (it said "object 3 of 3" beside "object 2 of 3")
+    from console.panels.soft_arm.control_row import row_header_phase
+    approach = types.SimpleNamespace(**{**vars(c), "phase": "approach", "n_waypoints": 6})
+    view = types.SimpleNamespace(row=report, snapshot=types.SimpleNamespace(control=approach))
+    assert row_header_phase(view, None) == (
+        "object 1 of 3: approach · waypoint 1 of 6 · ARMED", "busy")
+    later = types.SimpleNamespace(**{**vars(report), "outcomes": (done,)})
+    view = types.SimpleNamespace(row=later, snapshot=types.SimpleNamespace(control=approach))
+    assert row_header_phase(view, None)[0].startswith("object 2 of 3: approach")

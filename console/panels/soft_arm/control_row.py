@@ -28,6 +28,7 @@ from console.panels.common.header import Tone
 from console.panels.common.base import operator_only
 from console.panels.soft_arm.control_text import IDLE_PHASES
 from console.core.table_scene import validate_object
+from console.core.run_state import row_position
 from console.panels.common.events import client_of
 from hw_bridge.soft_arm_process import ROW_ARM_FIRST, ControlView
 
@@ -57,7 +58,8 @@ def row_header_phase(view: ControlView, sent: SentRow | None) -> tuple[str, Tone
     if c.n_waypoints and c.phase == "approach":
         wp = f" · waypoint {c.waypoint + 1} of {c.n_waypoints}"
     armed = "ARMED" if c.armed else "disarmed"
-    return (f"object {report.current + 1} of {report.n}: {c.phase}{wp} · {armed}", "busy")
+    return (f"object {row_position(report) + 1} of {report.n}: {c.phase}{wp} · {armed}",
+            "busy")
 
 
 def _name(sent: SentRow | None, report: Any, index: int) -> str:
@@ -82,7 +84,7 @@ def row_html(view: ControlView | None, sent: SentRow | None) -> str:
         phase = "" if c is None else f": {html.escape(c.phase)}"
         name = html.escape(_name(sent, report, report.current))
         where = f" into the {html.escape(sent.bin_text)}" if sent is not None else ""
-        taken = min(len(report.outcomes), report.n - 1) + 1  # (the order taken: run_state)
+        taken = row_position(report) + 1  # in the order taken, like the header's
         body = (f"<b>Clearing the table{where}:</b> object {taken} of {report.n} "
                 f"({name}){phase} · {report.released} released so far")
     else:
