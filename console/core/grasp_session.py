@@ -143,15 +143,23 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                                self.clearance, show_reach=self.show_reach,
                                run=self._run_view)
 
-    def add_listener(self, fn: GraspListener) -> None:
+    def add_listener(self, fn: GraspListener) -> Callable[[], None]:
         """Call ``fn(view, changed)`` on the worker thread after every change (the snapshot
         and the parts that changed, :mod:`console.core.grasp_state`), in the order added. A
         listener added after the session started is first told everything (``PARTS``) once, so
-        it never waits for the next change to show the table."""
+        it never waits for the next change to show the table. Returns what removes it (a
+        closed panel's: its widgets are gone)."""
         with self._cond:
             self._listeners.append(fn)
             self._welcome.append(fn)
             self._cond.notify_all()
+
+        def remove() -> None:
+            with self._cond:
+                for registry in (self._listeners, self._welcome):
+                    if fn in registry:
+                        registry.remove(fn)
+        return remove
 
     def _changed(self, *parts: str, plan: bool | None = None) -> None:
         """Mark parts dirty and optionally request a plan (True = live); caller holds the lock."""
@@ -246,13 +254,19 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             except Exception:
                 log.exception("run listener %r failed", fn)
 
-    def add_run_listener(self, fn: Callable[[RunView | None], None]) -> None:
+    def add_run_listener(self, fn: Callable[[RunView | None], None]) -> Callable[[], None]:
         """Call ``fn(run)`` on :meth:`set_run`'s thread (the Control panel's display thread,
         one thread) whenever what the arm runs changed, so the plan being run is drawn at once
         even while the worker plans the operator's next one (the ``run`` part follows when it
-        is free)."""
+        is free). Returns what removes it."""
         with self._cond:
             self._run_listeners.append(fn)
+
+        def remove() -> None:
+            with self._cond:
+                if fn in self._run_listeners:
+                    self._run_listeners.remove(fn)
+        return remove
 
     def request_plan(self) -> None:
         with self._cond:

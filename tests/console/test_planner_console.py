@@ -313,3 +313,26 @@ def test_the_operator_changes_objects_plan_and_waypoints(gated):
         "cup.json", scene_to_json([TableObject("Cup", -0.1, 0.3, 0.02)]).encode()))
     wait_for(lambda: [o.name for o in s.view().objects] == ["Cup"])
     assert not any(title == "Not allowed" for title, _ in operator.notes)
+
+
+def test_closed_panels_stop_listening_to_the_session_that_outlives_them(gated, caplog):
+    """A panel closed while the grasp session goes on (the session belongs to the console)
+    is no longer told of changes: its removed widgets were written to ("Cannot assign to
+    'content' on a removed GuiHtmlHandle", logged on every change in fresh40)."""
+    import logging
+
+    s = gated.grasp_session
+    wait_for(lambda: s.view().outcome)
+    for panel in gated.panels:
+        panel.close()
+    told = []
+    s.add_listener(lambda view, changed: told.append([o.name for o in view.objects]))
+    caplog.clear()
+    with caplog.at_level(logging.ERROR, logger="console.core.grasp_session"):
+        name = s.place(-0.12, 0.28)
+        wait_for(lambda: any(name in names for names in told))
+        wait_for(lambda: (o := s.view().outcome) and o.obj is not None and o.obj.name == name,
+                 timeout=30.0)
+        s.remove(name)
+        wait_for(lambda: told and name not in told[-1])
+    assert not [r for r in caplog.records if r.levelno >= logging.ERROR], caplog.text

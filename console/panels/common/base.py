@@ -73,6 +73,7 @@ class Panel:
     def __init__(self, app: PanelHost) -> None:
         self.app = app
         self.gui = app.server.gui
+        self._on_close: list[Callable[[], None]] = []  # e.g. removers of session listeners
         with app.tabs.tab(self.tab):
             self.folder = self.gui.add_folder(self.title, order=self.order,
                                               expand_by_default=self.expand_by_default)
@@ -100,8 +101,16 @@ class Panel:
         """No new displayed state for a while (render thread): show anything held back."""
 
     def close(self) -> None:
-        """Remove the panel's widgets."""
+        """Stop listening (:meth:`when_closed`) and remove the panel's widgets."""
+        for undo in reversed(self._on_close):
+            undo()
+        self._on_close.clear()
         self.folder.remove()
+
+    def when_closed(self, undo: Callable[[], None]) -> None:
+        """Run ``undo`` when the panel closes: a listener's remover (a session that outlives the
+        panel must not call into its removed widgets)."""
+        self._on_close.append(undo)
 
     def on_refused(self, event: Any) -> None:
         """A viewer's event was refused by :func:`operator_only`; undo what it showed (optional)."""

@@ -89,8 +89,8 @@ class ExecuteControls:
         panel.app.server.scene.on_click()(self._on_scene_click)
         self.target: ExecuteTarget | None = None  # what the last Execute acts on
         self.sent: SentGrasp | None = None  # taken off the table once the arm released it
-        self.app.soft_arm_grasp().add_listener(
-            lambda _view, changed: changed != {"planning"} and self._show_target())
+        panel.when_closed(self.app.soft_arm_grasp().add_listener(
+            lambda _view, changed: changed != {"planning"} and self._show_target()))
 
     def _target_html(self) -> str:
         """Which object Execute would act on now (the Objects panel's selection), how long it

@@ -113,7 +113,7 @@ class ObjectsPanel(Panel):
         self.load_button.on_upload(self._on_load)
         self.app.server.scene.on_click()(self._on_scene_click)
         self.app.soft_arm_grasp_scene().gizmo_handler = self._on_gizmo  # drags, operator-only
-        self.session.add_listener(lambda view, _changed: self.refresh(view))
+        self.when_closed(self.session.add_listener(lambda view, _changed: self.refresh(view)))
 
     # -- callbacks (thin) ------------------------------------------------------------------
     def _error(self, event, message: str) -> None:

@@ -73,7 +73,7 @@ class PlannerPanel(Panel):
             lambda e: e.client and s.configure(show_reach=self.reach.value),
             "change the shading"))
         self._shown = None
-        s.add_listener(lambda view, _changed: self.refresh(view))
+        self.when_closed(s.add_listener(lambda view, _changed: self.refresh(view)))
         self.refresh(s.view())  # a plan finished before the listener was added is shown too
 
     def _build_settings(self) -> None:

@@ -130,8 +130,8 @@ class WaypointsPanel(Panel):
             lambda e: e.client and s.set_trail(self.trail.value), "change the trail"))
         self.move_button.on_click(self._on_move)
         self._shown: tuple | None = None
-        s.add_listener(lambda view, _changed: self.refresh(view))
-        s.add_run_listener(lambda _run: self._show_run(s.view()))  # at once, not after a plan
+        self.when_closed(s.add_listener(lambda view, _changed: self.refresh(view)))
+        self.when_closed(s.add_run_listener(lambda _run: self._show_run(s.view())))  # at once
         self.refresh(s.view())
 
     @operator_only(action="step through the waypoints")
