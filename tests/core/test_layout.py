@@ -28,6 +28,7 @@ from __future__ import annotations
 import ast
 import io
 import os
+import pickle
 import subprocess
 import sys
 import tokenize
@@ -74,6 +75,34 @@ KNOWN_TYPE_IGNORES: dict[str, int] = {
     'console/web/share_tunnel.py': 1,
     'console/web/shared_sends.py': 2,
 }
+
+
+_PARSE_ALL = """
+import ast, pickle, sys
+from pathlib import Path
+trees = {p: ast.parse(Path(p).read_text()) for p in sys.argv[1:]}
+sys.stdout.buffer.write(pickle.dumps(trees))
+"""
+_TREES: dict[str, ast.Module] = {}
+
+
+def parse_file(path: Path) -> ast.Module:
+    """``path``'s syntax tree; the files of PACKAGES are parsed once, in a child interpreter.
+
+    CPython 3.11 before 3.11.8 (gh-106905) keeps the AST converter's recursion depth per
+    interpreter: a compile in another thread (a console a test left running importing a module
+    for the first time, as in a fresh clone without .pyc files) during this thread's
+    ``ast.parse`` raised "SystemError: AST constructor recursion depth mismatch" (fresh40). The
+    child has no other threads."""
+    key = str(Path(path).resolve())
+    if not _TREES:
+        files = sorted(str(p.resolve()) for p in modules(*PACKAGES).values())
+        out = subprocess.run([sys.executable, "-c", _PARSE_ALL, *files],
+                             capture_output=True, check=True, timeout=300)
+        _TREES.update(pickle.loads(out.stdout))
+    if key not in _TREES:  # a test's own small file (tmp_path), perhaps rewritten: read now
+        return ast.parse(Path(path).read_text())
+    return _TREES[key]
 
 
 def module_name(path: Path, root: Path = REPO) -> str:
@@ -137,7 +166,7 @@ def test_the_module_list_is_real():
 def test_core_imports_nothing_from_hw_bridge_console_or_io():
     bad = []
     for name, path in modules("core").items():
-        for line, imported in imported_names(name, ast.parse(path.read_text()), path):
+        for line, imported in imported_names(name, parse_file(path), path):
             root = imported.split(".")[0]
             if root in CORE_FORBIDDEN or (root in CORE_CLI_ONLY and not is_cli(name)):
                 bad.append(f"{path.relative_to(REPO)}:{line} imports {imported}")
@@ -153,7 +182,7 @@ def test_the_console_core_imports_no_viser_and_no_view():
     for name, path in modules("console").items():
         if not name.startswith("console.core") or name in CONSOLE_CORE_PENDING:
             continue
-        for line, imported in imported_names(name, ast.parse(path.read_text()), path):
+        for line, imported in imported_names(name, parse_file(path), path):
             parts = imported.split(".")
             if parts[0] == "viser" or (parts[0] == "console" and len(parts) > 1
                                        and parts[1] != "core"):
@@ -177,7 +206,7 @@ def test_library_modules_have_no_command_line_code():
     for name, path in modules("core", "hw_bridge").items():
         if is_cli(name):
             continue
-        tree = ast.parse(path.read_text())
+        tree = parse_file(path)
         where = path.relative_to(REPO)
         for line, imported in imported_names(name, tree, path):
             if imported.split(".")[0] == "argparse":
@@ -247,7 +276,7 @@ def test_cycle_finder_finds_a_cycle():
 def test_module_level_imports_form_no_cycle():
     mods = modules(*PACKAGES)
     known = set(mods)
-    graph = {name: module_level_imports(name, ast.parse(path.read_text()), path, known)
+    graph = {name: module_level_imports(name, parse_file(path), path, known)
              for name, path in mods.items()}
     assert graph["core.control.trials"] >= {"core.control.sim_loop", "core.robots"}
     assert not _cycles(graph), _cycles(graph)
@@ -287,7 +316,7 @@ def import_edges(name: str, tree: ast.AST, path: Path, known: set[str]) -> set[s
 def import_graph(mods: dict[str, Path]) -> dict[str, set[str]]:
     """Every module's :func:`import_edges`."""
     known = set(mods)
-    return {name: import_edges(name, ast.parse(path.read_text()), path, known)
+    return {name: import_edges(name, parse_file(path), path, known)
             for name, path in mods.items()}
 
 
@@ -365,7 +394,7 @@ def test_the_cycle_finder_catches_type_checking_and_lazy_circles(tmp_path):
         (tmp_path / pkg / "c.py").write_text(f"from {pkg}.a import A\n")  # into it, not in it
     mods = modules("typed", "lazy", root=tmp_path)
     assert sorted(_cycles(import_graph(mods))) == [["lazy.a", "lazy.b"], ["typed.a", "typed.b"]]
-    module_level = {name: module_level_imports(name, ast.parse(path.read_text()), path, set(mods))
+    module_level = {name: module_level_imports(name, parse_file(path), path, set(mods))
                     for name, path in mods.items()}
     assert _cycles(module_level) == []
 
@@ -473,7 +502,7 @@ def test_private_viser_only_in_console_web_beyond_the_known_ones():
     KNOWN_PRIVATE_VISER imports, each of which still exists."""
     found = {(name, inner) for name, path in modules("console").items()
              if not (name == "console.web" or name.startswith("console.web."))
-             for inner in private_viser(ast.parse(path.read_text()))}
+             for inner in private_viser(parse_file(path))}
     problem = _only_shrinks(found, KNOWN_PRIVATE_VISER, "KNOWN_PRIVATE_VISER")
     assert not problem, problem
 
