@@ -258,6 +258,9 @@ class ReplaySession:
                     f'<small data-testid="replay-info" data-t="{pos:.3f}">{rec.name} · '
                     f"{pos:.1f} / {rec.duration:.1f} s · "
                     f"{'playing' if self.playing else 'paused'} {self.speed:g}x</small>"
+                    f'<br><small data-testid="replay-legend">In 3D, for you only: the '
+                    f"translucent grey arm with the objects, bin and plan as recorded at "
+                    f"{pos:.1f} s, drawn over the live arm and table</small>"
                     + marker + log_html(self.markers, pos))
 
     def export(self) -> None:
