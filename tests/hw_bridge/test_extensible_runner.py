@@ -114,9 +114,8 @@ def test_bad_jobs_raise_and_queue_nothing(mock: MockHardware) -> None:
 
 def _check_run(runner: ExtensibleRunner, hw, kind: str,
                superseded: Callable[[], int] = lambda: 0) -> None:
-    """Run ``kind``'s short path; ``superseded()``: the longest burst of demands the device
-    replaced before acting on them during the run (the pty emulator's own stalls; 0 for the
-    in-process mock)."""
+    """Run ``kind``'s short path; ``superseded()``: the demands the device replaced before
+    acting on them during the run (the pty emulator's own stalls; 0 for the in-process mock)."""
     mp, waypoints = short_path(kind)  # planned before the runner started (see short_path)
     result = runner.wait(runner.execute(mp), timeout=60)
     assert result is not None and result.ok, result
@@ -169,13 +168,16 @@ def test_runner_executes_a_path_on_the_emulator_over_a_pty(emulator: Emulator, r
     short_path("diagonal")
     hw = serial_to(emulator.port)
     runner = runner_on(hw)
-    _check_run(runner, hw, "diagonal", lambda: _longest_skip(emulator))
+    _check_run(runner, hw, "diagonal", lambda: _skipped_demands(emulator))
 
 
-def _longest_skip(emulator: Emulator) -> int:
-    """The most demands the emulator replaced unacted in one tick (its own stalls)."""
+def _skipped_demands(emulator: Emulator) -> int:
+    """The demands the emulator replaced unacted (its own stalls), all stalls together: the
+    device then chases the newest demand at the motors' speed limits, which the path runs at
+    too, so the lags of two stalls add up (fresh41, a loaded machine: a corner cut by 54.8 mm,
+    over the 54.0 mm that its longest stall, 49 demands, allowed by itself)."""
     events = [json.loads(line) for line in list(emulator.events) if line.startswith("{")]
-    return max((e["count"] for e in events if e.get("event") == "demands_superseded"), default=0)
+    return sum(e["count"] for e in events if e.get("event") == "demands_superseded")
 
 
 def running_at(runner: ExtensibleRunner, job: int, sample: int) -> bool:
