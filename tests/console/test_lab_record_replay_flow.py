@@ -92,8 +92,10 @@ def test_operator_records_a_run_and_a_viewer_replays_jumps_and_exports_it(lab: A
         rec = wait_for(lambda: session.rec, what="the recording loaded")
         assert name in session.info.content
         # which arm in the 3D view is the recording's: said under the name, at the position
-        assert (f"translucent grey arm with the objects, bin and plan as recorded at "
-                f"{session.pos:.1f} s") in session.info.content
+        # (once drawn: the line says "loading …" until then)
+        wait_for(lambda: (f"translucent grey arm with the objects, bin and plan as recorded at "
+                          f"{session.pos:.1f} s") in session.info.content,
+                 what="the replay's legend line")
         assert rec.duration > 0.5 and any("STOP" in e.text for e in rec.events)
         assert any(e.who == "Alice" and "demo" in e.text for e in rec.events)
         user(session.play_btn, bob)
