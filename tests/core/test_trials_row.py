@@ -57,16 +57,18 @@ def test_row_trial_releases_the_reachable_and_says_why_the_other_failed(arm):
 
 
 def test_a_row_carried_across_the_table_round_the_others_releases_every_object(arm):
-    """Three objects on the left into a bin on the right: the first one's carry goes round the
-    two others and takes ~80 s of reference motion (longer than move_timeout_s, 40 s; it used
-    to stop "carry target 1/2 not reached within 40 s"), and the second one starts from the
-    curvature limits that carry ended at (it used to be refused: "the start is outside the
-    curvature limits"). Seed 1 is one of the seeds whose plans take the long way round."""
+    """Three objects on the left into a bin on the right: every one is released. With seed 1
+    the first carry usually goes round the two others (~80 s of reference motion, longer than
+    move_timeout_s, 40 s; it used to stop "carry target 1/2 not reached within 40 s") and the
+    second one starts from the curvature limits that carry ended at (it used to be refused:
+    "the start is outside the curvature limits"). Which way the planner goes depends on how much
+    CPU its time budget bought, so the long carry itself is not asserted here: the carry timeout
+    has its own test on a scripted arm
+    (test_control_state_machine.py, a carry longer than move_timeout)."""
     res = trials.run_row_trial(arm, [(-0.2, 0.2, R), (-0.3, 0.08, R), (-0.1, 0.35, R)], 1,
                                bin_xy=(0.2, 0.22))
     assert [o.status for o in res.objects] == ["released"] * 3, [o.reason for o in res.objects]
     first = res.objects[0]
-    assert first.return_s > 40.0   # the long carry itself: longer than move_timeout_s
     assert first.ended_s - first.started_s < trials.ROW_OBJECT_TIME_LIMIT_S
 
 
