@@ -60,6 +60,12 @@ def test_a_grasp_and_place_on_the_soft_arms_loop_process_is_recorded_tick_by_tic
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
     app = console_app(SOFT, srv, panels=(), soft_control="process", data_dir=tmp_path)
     ctl = app.services.soft_control
+    newest_tick = [-1]
+
+    def note_newest(batch) -> None:  # runs after the recorder's listener, in the same thread
+        newest_tick[0] = int(batch.rows[-1, 0])
+
+    ctl.tick_listeners.append(note_newest)
     try:
         wait_for(lambda: ctl.view is not None and ctl.view.snapshot.control is not None)
         path = app.recorder.start("ticks")
@@ -68,7 +74,11 @@ def test_a_grasp_and_place_on_the_soft_arms_loop_process_is_recorded_tick_by_tic
         x, y = paper_locations()["B"]
         ctl.grasp_at(x, y, 0.0165).result(30)
         wait_for(lambda: ctl.view.snapshot.control.phase in ("released", "stopped"), 180.0)
-        assert ctl.view.snapshot.control.phase == "released", ctl.view.snapshot.control.reason
+        released = ctl.view.snapshot
+        assert released.control.phase == "released", released.control.reason
+        # The view comes before the tick batch that holds its tick (the child publishes the
+        # view, then drains the tick ring): stop once the recorder was handed that batch.
+        wait_for(lambda: newest_tick[0] >= released.tick)
         app.recorder.stop()
     finally:
         app.stop()
