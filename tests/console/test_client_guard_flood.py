@@ -87,8 +87,8 @@ def _ready(app: ConsoleApp, *clients: RawClient) -> None:
 def _operator(server: viser.ViserServer, app: ConsoleApp, token: str) -> RawClient:
     op = RawClient(server)
     _ready(app, op)
-    app.access.take(op.client_id, token, "Olivia")
-    probes = app.lease.probes
+    probes = app.lease.probes  # before take(): its first probe may be answered at once,
+    app.access.take(op.client_id, token, "Olivia")  # and a still console probes no more
     wait_for(lambda: app.lease.probes > probes and app.access.status().answered,
              what="the operator's tab answers the lease")
     return op

@@ -104,8 +104,8 @@ def lab(tmp_path: Any, request: Any) -> Iterator[tuple[viser.ViserServer, Consol
         op = RawClient(server)
         session = app.panel(SessionPanel)
         wait_for(lambda: op.client_id in session.clients, what="per-browser widgets built")
-        app.access.take(op.client_id, token, "Olivia")
-        probes = app.lease.probes
+        probes = app.lease.probes  # before take(): its first probe may be answered at once,
+        app.access.take(op.client_id, token, "Olivia")  # and a still console probes no more
         wait_for(lambda: app.lease.probes > probes and app.access.status().answered,
                  what="the operator's tab answers the lease")
         yield server, app, op
