@@ -30,6 +30,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -119,6 +120,11 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         self._thread: threading.Thread | None = None
         self._run_view: RunView | None = None  # what the arm runs (the loop's view)
         self._run_listeners: list[Callable[[RunView | None], None]] = []
+        # Held while a listener (run listener) is called: its remover waits for the call in
+        # progress, so a closed panel is never written to after it removed itself. Re-entrant:
+        # a listener may remove itself (or another) from inside its call.
+        self._calling = threading.RLock()
+        self._calling_run = threading.RLock()
 
     def start(self) -> GraspSession:
         """Start the worker (it plans the first object at once) and ask for the reachability
@@ -159,7 +165,30 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 for registry in (self._listeners, self._welcome):
                     if fn in registry:
                         registry.remove(fn)
+            self._wait_for_call(self._calling, fn)
         return remove
+
+    @staticmethod
+    def _wait_for_call(calling: Any, fn: Any, timeout_s: float = 5.0) -> None:
+        """Wait (at most ``timeout_s``) for a listener call in progress on another thread to
+        end: after a remover returns, ``fn`` is not running and will not be called again."""
+        if calling.acquire(timeout=timeout_s):
+            calling.release()
+        else:
+            log.warning("listener %r removed while its call has run for over %.0f s", fn,
+                        timeout_s)
+
+    def _call(self, calling: Any, registry: list[Any], fn: Any, *args: Any) -> None:
+        """Call ``fn(*args)`` holding ``calling``, unless it was removed from ``registry``
+        since the caller copied the list; an error is logged, the others are still told."""
+        with calling:
+            with self._cond:
+                if fn not in registry:
+                    return
+            try:
+                fn(*args)
+            except Exception:  # a view's error must not kill the worker
+                log.exception("grasp session listener %r failed", fn)
 
     def _changed(self, *parts: str, plan: bool | None = None) -> None:
         """Mark parts dirty and optionally request a plan (True = live); caller holds the lock."""
@@ -249,10 +278,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
                 self._changed("run")
             listeners = list(self._run_listeners) if changed else []
         for fn in listeners:  # at once, on the caller's thread: never behind a running plan
-            try:
-                fn(run)
-            except Exception:
-                log.exception("run listener %r failed", fn)
+            self._call(self._calling_run, self._run_listeners, fn, run)
 
     def add_run_listener(self, fn: Callable[[RunView | None], None]) -> Callable[[], None]:
         """Call ``fn(run)`` on :meth:`set_run`'s thread (the Control panel's display thread,
@@ -266,6 +292,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             with self._cond:
                 if fn in self._run_listeners:
                     self._run_listeners.remove(fn)
+            self._wait_for_call(self._calling_run, fn)
         return remove
 
     def request_plan(self) -> None:
@@ -441,7 +468,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         with self._cond:
             listeners = list(self._listeners)
         for fn in listeners:
-            fn(view, PLANNING)
+            self._call(self._calling, self._listeners, fn, view, PLANNING)
 
     def _greet(self, listeners: list[GraspListener]) -> None:
         """Tell listeners added since the last run the whole state (the feed is not told: it
@@ -450,10 +477,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
             return
         view = self.view()
         for fn in listeners:
-            try:
-                fn(view, PARTS)
-            except Exception:
-                log.exception("grasp session listener %r failed", fn)
+            self._call(self._calling, self._listeners, fn, view, PARTS)
 
     def _publish(self, dirty: set[str]) -> None:
         """Tell every listener (views first: they subscribed first) and then ``feed`` what
@@ -462,10 +486,7 @@ class GraspSession(ObstacleEdits, WaypointInspection):
         with self._cond:
             listeners = list(self._listeners)
         for fn in listeners:
-            try:
-                fn(view, changed)
-            except Exception:  # a view's error must not kill the worker
-                log.exception("grasp session listener %r failed", fn)
+            self._call(self._calling, self._listeners, fn, view, changed)
         if self._feed is not None:
             try:
                 self._feed(view, changed)   # objects and plans into recordings and the bridge

@@ -165,6 +165,57 @@ def test_a_listener_added_after_the_start_is_told_the_table_at_once():
         s.close()
 
 
+def test_removing_a_listener_waits_for_its_call_in_progress_and_it_is_not_called_again():
+    """A closed panel removes its listener from viser's thread while the worker may be inside
+    a call to it: the remover returns only after that call ended, and nothing calls it after
+    (closed panels wrote into removed widgets). The same for run listeners; a listener may
+    remove itself from inside its call."""
+    import threading
+
+    s, told, _ = headless_session()
+    try:
+        wait_for(lambda: s.view().outcome, 30.0, "the first object planned")
+        inside, release = threading.Event(), threading.Event()
+        calls: list = []
+
+        def slow(view, changed) -> None:
+            calls.append(changed)
+            inside.set()
+            release.wait(10.0)
+            calls.append("ended")
+
+        remove = s.add_listener(slow)
+        assert inside.wait(10.0), "the new listener is greeted"
+        removed = threading.Event()
+        remover = threading.Thread(target=lambda: (remove(), removed.set()))
+        remover.start()
+        assert not removed.wait(0.3), "the remover returned while the call ran"
+        release.set()
+        assert removed.wait(10.0)
+        assert calls[-1] == "ended"
+        n = len(calls)
+        s.place(-0.1, 0.3)   # a change every listener is told: not the removed one
+        wait_for(lambda: any("objects" in c for _, c in told[-3:]), 10.0, "the others told")
+        assert len(calls) == n
+
+        run_calls: list = []
+        holder: list = []
+
+        def removes_itself(run) -> None:
+            run_calls.append(run)
+            holder[0]()
+
+        from console.core.run_state import RunView
+        running = RunView("settle", None, None, None, None, 1, None, None, 0.0)
+        holder.append(s.add_run_listener(removes_itself))
+        s.set_run(running)   # the arm began to run: told (and it removes itself)
+        assert run_calls == [running]
+        s.set_run(None)      # ended: a change, but it removed itself inside its call
+        assert run_calls == [running]
+    finally:
+        s.close()
+
+
 def test_a_table_emptied_is_no_refusal_but_a_nothing_selected_plan_is():
     """A row that clears the table (or the last object removed) re-plans an empty table: the
     summary goes back to idle, not a red "Refused: No object selected" nobody asked for."""
