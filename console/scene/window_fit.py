@@ -160,23 +160,26 @@ class WindowFit:
 
     def on_camera(self, client: Any, camera: Any) -> CameraPose | None:
         """A browser reported its camera: frame it for its canvas if that changed and the
-        camera is where the console put it; the pose it was moved to (None: left alone)."""
+        camera is where the console put it; put the newest pose again when a report for the
+        same canvas is at a pose the console put before it (the newest did not stick: seen
+        after a quick resize, the camera left at a pose framed for a canvas 27 px wider and
+        the far plan's circle cut off); the pose it was moved to (None: left alone)."""
         if self._stopped():
             return None
         size = (int(camera.image_width), int(camera.image_height))
         if size[0] <= 0 or size[1] <= 0:
             return None
         with self._lock:
-            framed = self._framed.get(client.client_id)
-            if framed is None:
-                framed = _Framed((0, 0), self._initial)
-            elif framed.size == size:
-                return None
+            framed = self._framed.get(client.client_id) or _Framed((0, 0), self._initial)
             if not framed.put_by_console(camera):  # the person moved it: theirs; the size
-                self._framed[client.client_id] = _Framed(size, framed.pose, framed.name)
+                if framed.size != size:
+                    self._framed[client.client_id] = _Framed(size, framed.pose, framed.name)
                 return None
-            pose = self._preset(size, framed.name)
-            self._framed[client.client_id] = framed.then(size, pose, framed.name)
+            if framed.size == size:
+                pose = framed.pose             # at it (nothing to do), or at one put before
+            else:
+                pose = self._preset(size, framed.name)
+                self._framed[client.client_id] = framed.then(size, pose, framed.name)
         if _at(camera, pose):
             return None
         with client.atomic():

@@ -117,6 +117,21 @@ def on_page(camera: Any, points: np.ndarray, canvas: list[float]) -> tuple[float
     return float(px.min()), float(py.min()), float(px.max()), float(py.max())
 
 
+def _framing(app: Any, client: Any) -> str:
+    """What the console's window fit knows of this browser's camera (for a failure's words):
+    the canvas it framed for, the one reported, and whether the camera is where it put it."""
+    fit = app.window_fit
+    pose = fit.framed_pose(client.client_id)
+    cam = client.camera
+    at = pose is not None and bool(
+        np.allclose(cam.position, pose.position, atol=2e-3)
+        and np.allclose(cam.look_at, pose.look_at, atol=2e-3))
+    return (f"framed for {fit.framed_size(client.client_id)}, reported "
+            f"{cam.image_width}x{cam.image_height}, camera at the framed pose: {at}, "
+            f"framed look_at {None if pose is None else np.round(pose.look_at, 3).tolist()}, "
+            f"camera look_at {np.round(cam.look_at, 3).tolist()}")
+
+
 def arm_in_view(page: Any, app: Any, size: str) -> str | None:
     """None when the arm's box is inside the canvas and clear of the panel, else why not."""
     rects = page.evaluate(_RECTS)
@@ -134,7 +149,8 @@ def arm_in_view(page: Any, app: Any, size: str) -> str | None:
     where = f"{size}: the arm at {[round(v) for v in box]}"
     if not (box[0] >= canvas[0] and box[1] >= canvas[1] and box[2] <= canvas[2]
             and box[3] <= canvas[3]):
-        return f"{where} is not all in the 3D view {[round(v) for v in canvas]}"
+        return (f"{where} is not all in the 3D view {[round(v) for v in canvas]}; "
+                f"{_framing(app, clients[0])}")
     if box[0] < panel[2] and panel[0] < box[2] and box[1] < panel[3] and panel[1] < box[3]:
         return f"{where} is behind the panel {[round(v) for v in panel]}"
     return None

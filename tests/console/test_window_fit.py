@@ -177,6 +177,32 @@ def test_a_report_sent_before_the_last_framing_arrived_is_still_the_consoles_cam
     assert tablet.moves == 3                                     # and it stays theirs
 
 
+def test_a_camera_left_at_an_earlier_framing_after_a_quick_resize_is_framed_again(fit):
+    """Seen turning a phone page back into a tablet's (fresh clones' layout test): the canvas
+    passed through 275 px, then 248 px wide; the console framed the camera for each, but the
+    browser's camera stayed at the 275 px pose while the console counted it framed for 248 px,
+    and a far object's circle was cut off at the left. A report for the framed canvas at a pose
+    put before the newest gets the newest again; one the person moved stays theirs."""
+    server, _, initial, first = fit
+    tablet = _Client(1, initial, (275, 590))
+    server.join(tablet)
+    tablet.camera.report()                                       # framed for 275 px
+    at_275 = first(275, 590)
+    tablet.camera.report((248, 590))                             # framed for 248 px
+    assert tablet.moves == 2
+    tablet.camera.position, tablet.camera.look_at = (np.array(at_275.position),
+                                                     np.array(at_275.look_at))
+    tablet.camera.report()                                       # ... but left at 275 px's
+    assert tablet.moves == 3
+    np.testing.assert_allclose(tablet.camera.position, first(248, 590).position)
+    np.testing.assert_allclose(tablet.camera.look_at, first(248, 590).look_at)
+    tablet.camera.report()                                       # where it was put: nothing
+    assert tablet.moves == 3
+    tablet.camera.position = np.asarray(tablet.camera.position) + 0.05  # the person orbits
+    tablet.camera.report()
+    assert tablet.moves == 3                                     # and it stays theirs
+
+
 def test_a_desktop_browser_keeps_the_initial_camera_and_a_moved_camera_stays(fit):
     server, window_fit, initial, _ = fit
     desk = _Client(1, initial, (1280, 1000))
