@@ -104,6 +104,12 @@ def test_a_move_on_the_extensible_arms_loop_process_is_recorded_tick_by_tick(
     proc = ExtensibleProcess(EXT, store, "mock", cpus=None, sched_priority=None)
     rec = Recorder(DataDir(tmp_path), model_for(EXT))
     proc.tick_listeners.append(rec.on_ticks)
+    batches = [0]
+
+    def count(batch) -> None:  # after the recorder's listener, in the same thread
+        batches[0] += 1
+
+    proc.tick_listeners.append(count)
     try:
         proc.start()
         assert proc.connecting is not None and proc.connecting.result(30) is None
@@ -115,6 +121,10 @@ def test_a_move_on_the_extensible_arms_loop_process_is_recorded_tick_by_tick(
         result = proc.wait(proc.move_to(dk.robot_rack_lengths(EXT, q)), timeout=60)
         assert result is not None and result.ok, result
         wait_for(lambda: proc.snapshot.state == "holding")
+        # The child publishes a view, then drains the tick ring: the next batch handed over
+        # holds the ticks up to the holding view's (the last tick recorded is the settled arm).
+        seen = batches[0]
+        wait_for(lambda: batches[0] > seen)
         rec.stop()
     finally:
         proc.close()
