@@ -497,10 +497,7 @@ class ConsoleApp:
         if not np.all(np.isfinite(p)) or self.model.kind != "delta":
             return []
         self._kept_in_view = p
-        if self._framed_top >= self.arm_reach() or p[2] + FOLLOW_MARGIN_M <= self._framed_top:
-            return []
-        self._framed_top = volume_top(self.arm_reach(), [p])
-        return self.window_fit.refit()
+        return self._reframe_above(p)
 
     def follow_arm(self, q: np.ndarray) -> list[int]:
         """The extensible arm's tip rose within :data:`FOLLOW_MARGIN_M` of the top its views
@@ -509,10 +506,17 @@ class ConsoleApp:
         browsers moved. Nothing for the soft arm (it lies on the table) or below that top."""
         if self.model.kind != "delta":
             return []
-        top = float(dk.tip_position(self.robot, q)[2])
-        if self._framed_top >= self.arm_reach() or top + FOLLOW_MARGIN_M <= self._framed_top:
-            return []  # framed for the fully extended arm already, or the arm in view
-        self._framed_top = volume_top(self.arm_reach(), [(0.0, 0.0, top)])
+        return self._reframe_above(dk.tip_position(self.robot, q))
+
+    def _reframe_above(self, point: npt.ArrayLike) -> list[int]:
+        """Re-frame the cameras still where the console put them when ``point`` (m, world)
+        rises within :data:`FOLLOW_MARGIN_M` of the top the views were framed for; the ids of
+        the browsers moved (none when framed for the fully extended arm already, or when the
+        point is well in view)."""
+        p = np.asarray(point, dtype=float).reshape(3)
+        if self._framed_top >= self.arm_reach() or p[2] + FOLLOW_MARGIN_M <= self._framed_top:
+            return []
+        self._framed_top = volume_top(self.arm_reach(), [p])
         return self.window_fit.refit()
 
     def planned_points(self) -> np.ndarray | None:

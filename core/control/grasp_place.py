@@ -336,7 +336,6 @@ class GraspAndPlace:
         tol = self.p.advance_dkappa
         nxt = self.carry.advance(obs.kappa, obs.reference_finished, tol)
         if nxt is not None:  # each target of the carry gets move_timeout_s once its reference arrived
-            self._since = t
             self._ref_done_since = None
             self.events.append((t, f"carry: target {self.carry.index + 1}/"
                                    f"{len(self.carry.targets)}"))
