@@ -262,6 +262,10 @@ def pytest_configure(config: pytest.Config) -> None:
         "a 1 s answer, the lease) or that samples a readout at the page's frame rate, or a "
         "test that loads every core on purpose (CPU hogs): SUITE_PART=alone runs it with "
         "nothing else beside it")
+    config.addinivalue_line(
+        "markers", "slow(seconds): runs long on the wall clock (a simulated arm in real time, "
+        "about `seconds` on two busy cores): the parallel part starts it first, the longest "
+        "first, so the run does not end waiting for it alone")
 
 
 def xdist_group_of(item: pytest.Item) -> str | None:
@@ -316,6 +320,29 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     if drop:
         config.hook.pytest_deselected(items=drop)
         items[:] = keep
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0") or 0)
+    if part == "parallel" and workers > 1:
+        items[:] = slow_first(items, workers)
+
+
+def slow_first(items: list[Any], workers: int) -> list[Any]:
+    """``items`` reordered so that pytest-xdist's load scheduling starts the tests marked
+    ``slow`` first, the longest first (the marker's seconds), one per worker: its first
+    batches are consecutive chunks of ``max(len(items) // workers // 4, 2)`` items, one per
+    worker, and the rest goes out in order as workers run low. So the first ``workers`` slow tests open those chunks and the
+    others lead what is sent next; the other tests keep their order. (Every worker collects
+    and reorders the same list: xdist requires identical collections.)"""
+    slow = sorted((i for i in items if i.get_closest_marker("slow") is not None),
+                  key=lambda i: -float((i.get_closest_marker("slow").args or (0,))[0]))
+    if not slow:
+        return items
+    rest = [i for i in items if i.get_closest_marker("slow") is None]
+    chunk = max(len(items) // workers // 4, 2)
+    ordered: list[Any] = []
+    for k in range(workers):
+        ordered += slow[k:k + 1] + rest[:chunk - (k < len(slow))]
+        rest = rest[chunk - (k < len(slow)):]
+    return ordered + slow[workers:] + rest
 
 
 # Per-test wall and CPU seconds when PYTEST_CPU_TIMES=FILE (tests/cpu_times.py).

@@ -131,6 +131,7 @@ def type_object(objects: Any, operator: FakeClient, x: float, y: float) -> None:
     user(objects.y, operator, round(y * 1e3))
 
 
+@pytest.mark.slow(24)  # s on 2 busy cores (2026-12-05)
 def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
         served: Callable[[str], Any]) -> None:
     app = served("mock")

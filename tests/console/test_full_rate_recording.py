@@ -55,6 +55,7 @@ def assert_every_tick(ticks: list[dict]) -> None:
         assert m["period_ms"] >= 0 and m["work_ms"] > 0 and m["late_ms"] > -1.0
 
 
+@pytest.mark.slow(32)  # s on 2 busy cores (2026-12-05)
 def test_a_grasp_and_place_on_the_soft_arms_loop_process_is_recorded_tick_by_tick(
         tmp_path: Path) -> None:
     srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)

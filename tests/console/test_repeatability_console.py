@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+import pytest
 from robot_files import robot_copy
 from test_extensible_console_flows import arm_link, attr, served, tab  # noqa: F401 (fixtures)
 
@@ -48,6 +49,7 @@ def mm(html: str, testid: str) -> float:
     return float(found.group(1))
 
 
+@pytest.mark.slow(22)  # s on 2 busy cores (2026-12-05)
 def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
         tab: Callable[..., Any], tmp_path: Path) -> None:
     assert solve_tip_ik(ROBOT, np.array(POINT_MM) / 1e3).reachable

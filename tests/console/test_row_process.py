@@ -66,6 +66,7 @@ def quick_soft_app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[
         server.stop()
 
 
+@pytest.mark.slow(46)  # s on 2 busy cores (2026-12-05)
 def test_three_objects_are_cleared_into_a_clicked_bin(quick_soft_app: Any) -> None:
     app = quick_soft_app
     objects, control = app.panel(ObjectsPanel), app.panel(ControlPanel)

@@ -126,6 +126,7 @@ def test_clean_start_shows_no_fault_and_execute_does_not_arm(console: Any) -> No
     assert "disarmed" in control.link_md.content, control.link_md.content
 
 
+@pytest.mark.slow(21)  # s on 2 busy cores (2026-12-05)
 def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
         console: Any) -> None:
     app = console

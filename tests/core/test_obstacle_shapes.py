@@ -94,6 +94,7 @@ def _shapes(center, o, seed):
                         time.thread_time() + 600.0)
 
 
+@pytest.mark.slow(25)  # s on 2 busy cores (2026-12-05)
 def test_a_spot_main_refused_is_planned_clear_along_every_line():
     center, o = SPOT
     with pytest.raises(ObstacleRefused, match="Obstacle 1 is in the way: no approach found"):

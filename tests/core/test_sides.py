@@ -93,6 +93,7 @@ def test_right_object_is_grasped_carried_and_released_in_the_simulator():
     np.testing.assert_allclose(trials.bin_drop_point(ARM, R0, side="right"), drop, atol=1e-9)
 
 
+@pytest.mark.slow(22)  # s on 2 busy cores (2026-12-05)
 def test_fig7_experiment_on_both_sides_in_the_papers_range():
     """Spots A-E and their mirror images, once each: the paper's 23/25 (92 %) allows one miss
     in five per side; the right side, a reflection of the left, must do as well."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from conftest import REPO, in_suite_part, suite_part_of, xdist_group_of
+from conftest import REPO, in_suite_part, slow_first, suite_part_of, xdist_group_of
 
 PARTS = ("parallel", "browser", "timing", "alone")
 pytest_plugins = ["pytester"]  # its `pytester` fixture: real items from a module's source
@@ -95,3 +95,33 @@ def test_the_serial_part_splits_into_timing_and_alone() -> None:
                      "browser": ["browser"],
                      "alone browser": ["alone"], "parallel": ["parallel"]}
     assert all(in_suite_part(items[n], "serial") for n in ("timing", "alone", "alone browser"))  # type: ignore[arg-type]
+
+
+def _first_batches(items: list, workers: int) -> list[list]:
+    """What pytest-xdist's load scheduling sends each worker first (xdist/scheduler/load.py,
+    ``schedule``): consecutive chunks of ``max(len // workers // 4, 2)`` items."""
+    chunk = max(len(items) // workers // 4, 2)
+    return [items[k * chunk:(k + 1) * chunk] for k in range(workers)]
+
+
+@pytest.mark.parametrize("n_slow", [1, 4, 7])
+@pytest.mark.parametrize("workers", [2, 4])
+def test_slow_tests_open_each_workers_first_batch_and_lead_the_rest(workers, n_slow) -> None:
+    """The ``slow`` tests (a simulated arm in real time, ~30-60 s) used to sit where the
+    collection put them, and the parallel part ended with one of them running alone for ~50 s.
+    Reordered, each worker's first batch starts with one; the others lead what is sent next; no
+    test is lost or doubled and the rest keep their order."""
+    items = [_Item(f"tests/t.py::t{i}", *(("slow",) if i % 97 == 5 and i < 97 * n_slow else ()))
+             for i in range(1345)]
+    slow = [i for i in items if i.markers]
+    assert len(slow) == n_slow
+    ordered = slow_first(items, workers)  # type: ignore[arg-type]
+    assert sorted(i.nodeid for i in ordered) == sorted(i.nodeid for i in items)
+    batches = _first_batches(ordered, workers)
+    firsts = [b[0] for b in batches]
+    assert firsts[:min(n_slow, workers)] == slow[:workers]
+    assert sum(bool(i.markers) for b in batches for i in b) == min(n_slow, workers)
+    sent = sum(len(b) for b in batches)
+    assert ordered[sent:sent + max(n_slow - workers, 0)] == slow[workers:]
+    rest = [i for i in ordered if not i.markers]
+    assert rest == [i for i in items if not i.markers]

@@ -56,6 +56,7 @@ def test_row_trial_releases_the_reachable_and_says_why_the_other_failed(arm):
     json.dumps(out)  # plain JSON
 
 
+@pytest.mark.slow(30)  # s on 2 busy cores (2026-12-05)
 def test_a_row_carried_across_the_table_round_the_others_releases_every_object(arm):
     """Three objects on the left into a bin on the right: every one is released. With seed 1
     the first carry usually goes round the two others (~80 s of reference motion, longer than

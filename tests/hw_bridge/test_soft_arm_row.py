@@ -66,6 +66,7 @@ def quick_robot(tmp_path: Path) -> Any:
     return load(robot_copy("soft-arm", tmp_path, changes, name="soft-arm-quick-slack-link"))
 
 
+@pytest.mark.slow(67)  # s on 2 busy cores (2026-12-05)
 def test_two_objects_to_a_placed_bin_then_stop_a_row(tmp_path):
     robot = quick_robot(tmp_path)
     bin_params = bin_at(robot, *BIN_XY)
