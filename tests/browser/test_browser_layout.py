@@ -23,6 +23,7 @@ import viser.transforms as vtf
 from browser_tabs import close_notices, open_tab
 from playwright.sync_api import Error as PlaywrightError
 
+from console.scene.window_fit import POSE_TOLERANCE_M
 from tests.ws_client import wait_for
 
 pytestmark = pytest.mark.browser
@@ -123,9 +124,9 @@ def _framing(app: Any, client: Any) -> str:
     fit = app.window_fit
     pose = fit.framed_pose(client.client_id)
     cam = client.camera
-    at = pose is not None and bool(
-        np.allclose(cam.position, pose.position, atol=2e-3)
-        and np.allclose(cam.look_at, pose.look_at, atol=2e-3))
+    tol = POSE_TOLERANCE_M
+    at = pose is not None and bool(np.allclose(cam.position, pose.position, atol=tol)
+                                   and np.allclose(cam.look_at, pose.look_at, atol=tol))
     return (f"framed for {fit.framed_size(client.client_id)}, reported "
             f"{cam.image_width}x{cam.image_height}, camera at the framed pose: {at}, "
             f"framed look_at {None if pose is None else np.round(pose.look_at, 3).tolist()}, "
