@@ -5,9 +5,9 @@ a still console's websocket bytes (issue 29 item 1).
 
 Feeds the shipped ``SoftArmView`` (a local viser server, no viewer) the simulator's measured
 curvature noise of an armed, still soft arm at 20 frames/s on a simulated clock and prints how
-many frames it sent per simulated minute, with the shipped averaging and with the averaging's
-time constant left at ``settle_s`` for steadiness below ``moving_steadiness`` (noise), then how
-many of 20 frames of a clean move after it were drawn. The target is 0 frames per minute still.
+many frames it sent per simulated minute after a 5 s settle, then how many of 20 frames of a
+clean move after a pause were drawn; beside it the same with the band before (0.5 mm, 0.5 deg,
+2 s, a move from one steady update on). The target is 0 frames per minute still.
 """
 
 from __future__ import annotations
@@ -25,32 +25,29 @@ Q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])  # 1/m, the still pose of the tes
 SIGMA = np.array([0.035, 0.11, 0.19, 0.25, 0.31, 0.35])  # 1/m, measured on the sim, armed
 
 
-def run(seconds: float, seed: int, noise_keeps_tau: bool) -> tuple[int, int]:
-    """(frames sent while still over ``seconds``, frames drawn of a 20-frame move after it)."""
+def run(seconds: float, seed: int, band: Any = None) -> tuple[int, int]:
+    """(frames sent while still over ``seconds`` after a 5 s settle, frames drawn of a 20-frame
+    move after it) with ``band`` (None: the shipped dead band)."""
     import viser
 
     import console.scene.arm_view as arm_view
-    import console.scene.dead_band as dead_band
     from console.core.model import model_for
     from console.scene.arm_view_factory import make_arm_view
     from core.robots import load
 
     clock = [100.0]
-    shipped = dead_band.DeadBand.average
     arm_view.time.monotonic = lambda: clock[0]  # type: ignore[attr-defined]
-    if noise_keeps_tau:
-        def average(self: Any, mean: Any, frames: Any, dt: float, steadiness: float = 0.0) -> Any:
-            keep = steadiness if steadiness >= self.moving_steadiness else 0.0
-            return shipped(self, mean, frames, dt, keep)
-        dead_band.DeadBand.average = average  # type: ignore[method-assign]
     server = viser.ViserServer(port=0, verbose=False)
     try:
         view = make_arm_view(server.scene, model_for(load("soft-arm")))
+        if band is not None:
+            view.dead_band = band
         clock[0] += 5.0
         view.update(Q)
-        start = view.frames_sent
         rng = np.random.default_rng(seed)
-        for _ in range(int(seconds * 20)):
+        for k in range(int((seconds + 5.0) * 20)):
+            if k == 100:  # the first 5 s after the pause: its first steps read as steady
+                start = view.frames_sent
             clock[0] += 0.05
             view.update(Q + SIGMA * rng.standard_normal(Q.shape))
         still = view.frames_sent - start
@@ -62,19 +59,24 @@ def run(seconds: float, seed: int, noise_keeps_tau: bool) -> tuple[int, int]:
         return still, view.frames_sent - start
     finally:
         server.stop()
-        dead_band.DeadBand.average = shipped  # type: ignore[method-assign]
 
 
 def main() -> int:
+    import dataclasses
+
+    from console.scene.dead_band import DeadBand
+
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=60.0)
     p.add_argument("--seeds", type=int, nargs="+", default=[2, 3])
     a = p.parse_args()
-    for keep in (False, True):
+    # The band before issue 29's second pass: 0.5 mm / 0.5 deg over 2 s, one steady update a move.
+    before = dataclasses.replace(DeadBand(), position=5e-4, angle=float(np.deg2rad(0.5)),
+                                 settle_s=2.0, moving_frames=1)
+    for label, band in (("shipped", None), ("0.5 mm/0.5 deg/2 s, 1 steady update", before)):
         for seed in a.seeds:
-            still, moved = run(a.seconds, seed, keep)
-            label = "noise keeps tau" if keep else "shipped        "
-            print(f"{label} seed {seed}: {still * 60.0 / a.seconds:5.1f} frames/min still "
+            still, moved = run(a.seconds, seed, band)
+            print(f"{label:36s} seed {seed}: {still * 60.0 / a.seconds:5.1f} frames/min still "
                   f"(target 0), move drawn {moved}/20")
     return 0
 

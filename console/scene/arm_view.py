@@ -11,7 +11,7 @@ only assigns to them, so no node is ever re-created while the arm moves. Two way
 * ``method="vertices"``: the tubes' whole vertex arrays every frame (the original drawing, kept
   for the viewer benchmark and as the reference the skinned tubes are tested against).
 
-A dead band (:class:`DeadBand`: 0.5 mm, 0.5 deg, on the drawn frames averaged over up to 2 s
+A dead band (:class:`DeadBand`: 1 mm, 1 deg, on the drawn frames averaged over up to 4 s
 while they jitter; 0.1 mm, 0.1 deg while they move steadily) skips a frame when nothing drawn
 moved more than it since the last one sent, so a still arm with measurement noise costs (almost)
 nothing and a slow move is still drawn every frame; a held-back frame is sent when the display
@@ -148,6 +148,7 @@ class ArmView(ABC, Generic[ModelT]):
         self._mean: Array | None = None
         self._mean_at = 0.0
         self._steadiness = Steadiness()
+        self._steady_run = 0  # updates in a row at the band's moving steadiness or more
         self._held: Array | None = None  # the newest configuration not sent
         self._last_q: Array | None = None  # the configuration of the previous update
         self._sent_q: Array | None = None  # the configuration last drawn
@@ -188,7 +189,10 @@ class ArmView(ABC, Generic[ModelT]):
         self._mean_at = now
         settled = self._last_q is not None and np.array_equal(q, self._last_q)
         self._last_q = q
-        moving = steady if self._steadiness.steps >= band.moving_steps else 0.0
+        self._steady_run = self._steady_run + 1 if steady >= band.moving_steadiness else 0
+        known = (self._steadiness.steps >= band.moving_steps
+                 and self._steady_run >= band.moving_frames)
+        moving = steady if known else 0.0
         if self._sent is not None and not band.moved(self._sent, self._mean, moving):
             if settled and not np.array_equal(q, self._sent_q):
                 # The arm stopped exactly here (a source that keeps reporting the same state

@@ -20,39 +20,48 @@ Array = npt.NDArray[np.float64]
 class DeadBand:
     """A frame is sent only when what is drawn moved more than this since the last sent frame.
 
-    The comparison uses the drawn frames smoothed over up to ``settle_s`` (an exponential
-    average in time): motion-capture noise of a still arm averages out instead of crossing the
-    band (the soft arm's curvatures from the simulator's 0.2 mm marker noise move its tip by
-    ~0.8 mm and its heading by ~1.7 deg rms: a band below that noise alone would send every
-    frame). The time constant shrinks to 0 as the frames move steadily (:class:`Steadiness`),
-    so a jog or a planned move is drawn at once. What is sent is always the newest frame, never
-    the average; a frame held back is sent once the display goes idle (:meth:`ArmView.flush`).
-    Defaults: 0.5 mm (about a pixel of a 0.5 m arm in an 800 px view) and 0.5 deg.
+    The comparison uses the drawn frames smoothed over ``settle_s`` (an exponential average in
+    time): motion-capture noise of a still arm averages out instead of crossing the band (the
+    soft arm's curvatures from the simulator's 0.2 mm marker noise move its gripper's end by a
+    few mm rms: a band below that noise alone would send every frame). The time constant shrinks
+    (from ``moving_settle_s``) to 0 as the frames move steadily (:class:`Steadiness`), so a jog
+    or a planned move is drawn at once. What is sent is always the newest frame, never the
+    average; a frame held back is sent once the display goes idle (:meth:`ArmView.flush`). Defaults: 1 mm (about two pixels
+    of a 0.5 m arm in an 800 px view) and 1 deg, averaged over 4 s: a still soft arm on the
+    simulator is drawn ~2-5 times a minute (``benchmarks/dead_band_noise.py``; 75 a minute with
+    0.5 mm over 2 s and any momentary steadiness counted as a move).
 
-    While the frames move steadily (steadiness at least ``moving_steadiness``: a jog, a planned
-    move) the band is ``moving_position`` / ``moving_angle`` instead: the 0.5 mm band let a
-    grasp-and-place approach (the soft arm's points move at a few mm/s) through only every 3rd
-    to 4th frame, ~10 frames/s (``benchmarks/arm_frames_replay.py``); a still arm's noise is
-    not steady, so it stays held by the wide band.
+    While the frames move steadily (steadiness at least ``moving_steadiness`` for
+    ``moving_frames`` updates in a row: a jog, a planned move) the band is ``moving_position``
+    / ``moving_angle`` instead: the still band let a grasp-and-place approach (the soft arm's
+    points move at a few mm/s) through only every 3rd to 4th frame, ~10 frames/s
+    (``benchmarks/arm_frames_replay.py``). A still arm's noise is not steady: its steadiness
+    reads ~0.15 and passes 0.5 in about one update of 100, never several in a row.
 
     Args:
         position: Largest unsent translation (m).
         angle: Largest unsent rotation (rad).
         settle_s: Time constant of the average (s); 0 compares the newest frames themselves.
+        moving_settle_s: Time constant (s) at steadiness 0 of the one that shrinks with a
+            steady move (:meth:`average`).
         moving_position: Largest unsent translation while the frames move steadily (m).
         moving_angle: Largest unsent rotation while the frames move steadily (rad).
         moving_steadiness: Steadiness (:class:`Steadiness`) from which the frames move.
+        moving_frames: Updates in a row at ``moving_steadiness`` or more before the moving band
+            applies.
         moving_steps: Fewest steps the steadiness must be measured over since it started
             afresh (after a pause its first steps read as steady, noise included).
     """
 
-    position: float = 5e-4
-    angle: float = float(np.deg2rad(0.5))
-    settle_s: float = 2.0
+    position: float = 1e-3
+    angle: float = float(np.deg2rad(1.0))
+    settle_s: float = 4.0
+    moving_settle_s: float = 2.0
     moving_position: float = 1e-4
     moving_angle: float = float(np.deg2rad(0.1))
     moving_steadiness: float = 0.5
-    moving_steps: int = 20
+    moving_steps: int = 8
+    moving_frames: int = 5
 
     def moved(self, sent: Array, now: Array, steadiness: float = 0.0) -> bool:
         """Whether any of the (P, 4, 4) frames ``now`` left the band around ``sent`` (the
@@ -76,10 +85,15 @@ class DeadBand:
                 ) -> Array:
         """The running average of the frames after ``dt`` seconds more of ``frames``.
 
-        ``steadiness`` in [0, 1] (1: the frames move steadily one way, 0: they jitter) shortens
-        the time constant to ``settle_s (1 - steadiness)``, so a real move is not delayed.
+        ``steadiness`` in [0, 1] (1: the frames move steadily one way, 0: they jitter) from
+        ``moving_steadiness`` on sets the time constant to ``moving_settle_s (1 - steadiness)`` (at most ``settle_s``),
+        so a real move is not delayed; below it the frames are noise (a still arm's measurement
+        noise reads ~0.15) and are averaged over the whole ``settle_s``.
         """
-        tau = self.settle_s * (1.0 - min(max(steadiness, 0.0), 1.0))
+        s = min(max(steadiness, 0.0), 1.0)
+        tau = self.settle_s
+        if s >= self.moving_steadiness:
+            tau = min(tau, self.moving_settle_s * (1.0 - s))
         if mean is None or mean.shape != frames.shape or tau <= 1e-6:
             return frames.copy()
         alpha = 1.0 - np.exp(-max(dt, 0.0) / tau)
@@ -91,7 +105,9 @@ class Steadiness:
 
     About 1 for a move (every step points the same way), about sqrt(dt / 2 tau) for noise.
     ``steps``: how many steps it is measured over (a first step alone reads 1: it cannot yet
-    tell a move from noise).
+    tell a move from noise). After a pause of over ``5 tau`` it starts afresh from the frames
+    that end it: a step across a pause from a noisy frame made a clean move after it read as
+    noise for a dozen updates.
     """
 
     def __init__(self, tau: float = 0.25) -> None:
@@ -107,9 +123,12 @@ class Steadiness:
         if last is None or last.shape != pos.shape:
             self._drift, self._jitter, self.steps = None, 0.0, 0
             return 1.0
+        if dt > 5 * self.tau:  # after a pause: start afresh from here (the step across a
+            self._drift, self._jitter, self.steps = None, 0.0, 0  # pause is no move's step)
+            return 1.0
         step = pos - last
         alpha = 1.0 - np.exp(-max(dt, 1e-6) / self.tau)
-        if self._drift is None or dt > 5 * self.tau:  # after a pause: start afresh
+        if self._drift is None:
             self._drift, self._jitter = step.copy(), float(np.linalg.norm(step))
             self.steps = 1
         else:

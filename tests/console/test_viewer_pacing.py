@@ -249,8 +249,8 @@ def test_kappa_table_follows_the_drawn_arm_not_the_noise() -> None:
         meas0 = np.array([0.5, -1.25, 2.0, 0.0, 3.333, -6.7])
         shown: list[str] = []
 
-        def pump(meas: np.ndarray, **kw: Any) -> None:
-            panel.ctl.view = fake_view(kappa_meas=tuple(meas), **kw)
+        def pump(meas: np.ndarray, **kw: Any) -> None:  # (armed: the 3D view draws it)
+            panel.ctl.view = fake_view(kappa_meas=tuple(meas), armed=True, **kw)
             panel._plot_at = 0.0
             panel._table_at = 0.0  # as if the table's rate allowed a redraw each time
             panel._pump_once()
