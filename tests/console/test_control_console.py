@@ -164,8 +164,12 @@ def test_panel_shows_link_and_kappa_and_tells_every_browser_of_a_fault_once(fake
     assert not panel.fault_md.visible and "data-phase=\"idle\"" in panel.state_md.content
     kappa = panel.kappa_md.content
     assert 'data-testid="kappa-meas-1">-1.25<' in kappa and 'kappa-meas-4">+3.33<' in kappa
-    assert 'kappa-meas-5">-16.70<' in kappa and 'kappa-ref-0">-1.00<' in kappa
+    assert 'kappa-meas-5">-16.70<' in kappa and 'kappa-ref-0">–<' in kappa  # disarmed: none
     assert all(c.notes == [] for c in clients.values())
+    ctl.view = fake_view(armed=True)
+    panel._table_at = 0.0
+    pump(panel)
+    assert 'kappa-ref-0">-1.00<' in panel.kappa_md.content
 
     fault = "link lost: no valid STATE for 45 ms"
     ctl.view = fake_view(fault=fault, link_state="unconfigured")
@@ -229,3 +233,46 @@ def test_results_table_counts_successes():
            TrialResult([-0.1, 0.2, 0.0165], False, "tracking lost for 0.50 s", 5.0, 0.0, "A")]
     md = results_markdown(res)
     assert "**1/2 successes**" in md and "tracking lost" in md and md.count("\n| ") == 2  # two result rows
+
+
+def test_a_disarmed_still_arms_noise_redraws_neither_the_table_nor_the_plot(fake_panel,
+                                                                          monkeypatch) -> None:
+    """Disarmed, the loop's reference follows its measurement (arming starts from where the arm
+    is): its noise in the target row and in the tracking error sent the κ table and the error
+    plot to every viewer twice a second (8.4 KB/s, issue 29). Over 60 s of pumped noise at
+    20 Hz (simulated clock) neither is redrawn more than at the still plot's minimum rate; a
+    measurement that really moves is shown."""
+    from console.panels.soft_arm import control as control_mod
+    from console.panels.soft_arm.control_plots import STILL_PLOT_S
+
+    panel, ctl, _ = fake_panel
+    clock = [1000.0]
+    monkeypatch.setattr(control_mod.time, "monotonic", lambda: clock[0])
+    rng = np.random.default_rng(7)
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    sigma = np.array([0.035, 0.11, 0.19, 0.25, 0.31, 0.35])
+
+    def noisy_view(at: np.ndarray):
+        view = fake_view(kappa_meas=tuple(at + sigma * rng.standard_normal(6)))
+        c = view.snapshot.control
+        c.kappa_ref[:] = c.kappa_meas  # as the stack does disarmed
+        return view
+
+    table, plot = [], []
+    for k in range(1200):
+        clock[0] += 0.05
+        ctl.view = noisy_view(q)
+        before = (panel.kappa_md.content, panel.plots.error_plot.data)
+        pump(panel)
+        if k >= 20:  # (the first draws)
+            table += [1] if panel.kappa_md.content != before[0] else []
+            plot += [1] if panel.plots.error_plot.data is not before[1] else []
+    assert len(plot) <= 60.0 / STILL_PLOT_S + 1 and len(table) <= len(plot)
+    assert 'kappa-ref-0">–<' in panel.kappa_md.content
+    # The arm moved by 3 1/m (by hand, disarmed): the table shows it within a second.
+    for _ in range(20):
+        clock[0] += 0.05
+        ctl.view = noisy_view(q + 3.0)
+        pump(panel)
+    shown = float(panel.kappa_md.content.split('kappa-meas-0">')[1].split("<")[0])
+    assert abs(shown - (q[0] + 3.0)) < 0.5

@@ -75,9 +75,10 @@ __all__ = ["ControlPanel", "control_for", "fault_markdown", "header_link", "head
 
 
 def kappa_html_key(c: Any) -> tuple[Any, ...]:
-    """What of a telemetry sample the κ table shows at once: the targets (as printed) and
-    whether a measurement exists."""
-    return (tuple(f"{v:+.2f}" for v in c.kappa_ref), c.kappa_meas is None)
+    """What of a telemetry sample the κ table shows at once: the targets (as printed; none
+    while disarmed) and whether a measurement exists."""
+    targets = tuple(f"{v:+.2f}" for v in c.kappa_ref) if c.armed else None
+    return (targets, c.kappa_meas is None)
 
 
 def control_for(app: Any) -> ControlProcess:
@@ -217,8 +218,12 @@ class ControlPanel(Panel):
         if c is None:
             return
         snap = view.snapshot
-        meas = c.kappa_meas if c.kappa_meas is not None else np.full(len(c.kappa_ref), np.nan)
-        self.plots.append(c.t, c.kappa_ref, meas, c.phase, snap.period_ms, snap.work_ms)
+        nothing = np.full(len(c.kappa_ref), np.nan)
+        meas = c.kappa_meas if c.kappa_meas is not None else nothing
+        # Disarmed, the loop's reference is its measurement (so that arming starts from where
+        # the arm is): no target, no tracking error, and its noise no news for viewers.
+        ref = c.kappa_ref if c.armed else nothing
+        self.plots.append(c.t, ref, meas, c.phase, snap.period_ms, snap.work_ms)
         store = self.app.store
         if c.armed and c.kappa_meas is not None:
             if view is not self._reported:
@@ -368,14 +373,17 @@ class ControlPanel(Panel):
         c = None if view is None else view.snapshot.control
         # The κ table follows the drawn arm (at most TABLE_HZ): its measured row changes when
         # the 3D view sent a new frame (a still arm's measurement noise stays inside the view's
-        # dead band and costs viewers nothing), its target row whenever a target changes.
-        key = None if c is None else (kappa_html_key(c), self.app.view.frames_sent)
+        # dead band and costs viewers nothing) or, disarmed (the 3D arm is not the measured
+        # one then), when the error plot was redrawn for a measurement that moved; its target
+        # row whenever a target changes.
+        self.plots.draw(now)
+        follows = self.app.view.frames_sent if c is not None and c.armed else self.plots.redraws
+        key = None if c is None else (kappa_html_key(c), follows)
         if now - self._table_at >= 1.0 / TABLE_HZ and key != self._table_key:
             self._table_at, self._table_key = now, key
             table = kappa_html(view) if view else ""
             if table != self.kappa_md.content:
                 self.kappa_md.content = table
-        self.plots.draw(now)
 
     def close(self) -> None:
         self._pump_stop.set()

@@ -92,6 +92,7 @@ class ControlPlots:
             title="Control loop (100 Hz)", aspect=2.0)
         self._plotted: tuple[np.ndarray, np.ndarray] | None = None
         self._plotted_at = 0.0
+        self.redraws = 0  # error plot redraws so far (the κ table follows them while disarmed)
         self._loop_pacer = PlotPacer(LOOP_PLOT_HZ, still_s=STILL_PLOT_S)
         self._loop_top = LOOP_MIN_TOP
 
@@ -105,7 +106,8 @@ class ControlPlots:
 
     def append(self, t: float, ref: np.ndarray, meas: np.ndarray, phase: str, period_ms: float,
                work_ms: float) -> None:
-        """One sample (the pump, at its rate)."""
+        """One sample (the pump, at its rate); ``ref`` NaN where there is no target (disarmed:
+        no tracking error is drawn)."""
         self.hist.append((t, np.array(ref, float), np.array(meas, float),
                           1.0 if phase in TASK_PHASES else 0.0, period_ms, work_ms))
 
@@ -131,6 +133,7 @@ class ControlPlots:
                 self.error_plot.scales = self._scales()
             band = np.array([h[3] for h in hist])
             self.error_plot.data = thin([t, *err.T, band], ERROR_PLOT_POINTS)
+            self.redraws += 1
         period = np.array([h[4] for h in hist])
         work = np.array([h[5] for h in hist])
         top = axis_top(np.concatenate([period, work]), LOOP_MIN_TOP)
@@ -149,7 +152,7 @@ class ControlPlots:
         last = self._plotted
         moved = (last is None or last[0].shape != ref.shape
                  or now - self._plotted_at >= STILL_PLOT_S
-                 or not np.allclose(ref, last[0], rtol=0.0, atol=PLOT_BAND)
+                 or not np.allclose(ref, last[0], rtol=0.0, atol=PLOT_BAND, equal_nan=True)
                  or not np.allclose(meas, last[1], rtol=0.0, atol=MEAS_BAND, equal_nan=True))
         if moved:
             self._plotted, self._plotted_at = (ref.copy(), meas.copy()), now

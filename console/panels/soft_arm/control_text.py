@@ -176,12 +176,14 @@ def link_line(view: ControlView) -> str:
 
 
 def kappa_html(view: ControlView) -> str:
-    """Measured and target curvature per segment (1/m), two decimals; cells have test ids."""
+    """Measured and target curvature per segment (1/m), two decimals; cells have test ids.
+    Disarmed there is no target ("–")."""
     c = view.snapshot.control
     if c is None:
         return ""
     n = len(c.kappa_ref)
     meas = c.kappa_meas if c.kappa_meas is not None else [None] * n
+    refs = c.kappa_ref if c.armed else [None] * n
 
     def row(label: str, key: str, values: Any) -> str:
         cells = "".join(f'<td style="{_CELL}" data-testid="kappa-{key}-{i}">'
@@ -192,4 +194,4 @@ def kappa_html(view: ControlView) -> str:
     return (f'<div data-testid="control-kappa" style="font-size:0.72em">'
             f'<table style="border-collapse:collapse;width:100%">'
             f'<tr><th style="{_CELL};text-align:left">κ (1/m)</th>{head}</tr>'
-            f"{row('measured', 'meas', meas)}{row('target', 'ref', c.kappa_ref)}</table></div>")
+            f"{row('measured', 'meas', meas)}{row('target', 'ref', refs)}</table></div>")
