@@ -9,7 +9,8 @@ operator, lets the page settle, then over ``--seconds`` counts what the still pa
 CPU seconds of every Chromium process (renderer and the software-GL GPU process, from /proc),
 the renderer's task and script time (CDP ``Performance.getMetrics``), the 3D frames drawn
 (animation frames with a WebGL draw call, counted by a wrapper on the context) and the server's
-messages the page received, by type. Everything runs one after the other: give both robots and
+messages the page received, by type; first the same for a bare viser server with one button
+and a grid (viser's own floor, in the same run). Everything runs one after the other: give both robots and
 two checkouts (``--repo /path/to/main .``) in one call to compare them under the same load.
 """
 
@@ -121,6 +122,33 @@ def measure(pw: Any, robot: str, settle: float, seconds: float, shot: Path | Non
             extra: list[str], repo: Path = REPO) -> dict[str, Any]:
     """One robot's still page: returns the figures printed by :func:`main`."""
     proc, url = _serve(robot, extra, repo)
+    try:
+        return measure_page(pw, url, settle, seconds, shot)
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
+def measure_bare(pw: Any, settle: float, seconds: float) -> dict[str, Any]:
+    """The same for a bare viser server with a "STOP (Esc)" button and a grid (viser's own
+    floor: what any still viser page costs this browser)."""
+    import viser
+
+    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        srv.gui.add_button("STOP (Esc)")
+        srv.scene.add_grid("/grid")
+        return measure_page(pw, f"http://127.0.0.1:{srv.get_port()}/", settle, seconds, None)
+    finally:
+        srv.stop()
+
+
+def measure_page(pw: Any, url: str, settle: float, seconds: float, shot: Path | None
+                 ) -> dict[str, Any]:
+    """A still page at ``url`` (served until it returns) as its first browser."""
     browser = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=ARGS)
     try:
         context = browser.new_context(viewport={"width": 1600, "height": 1000})
@@ -161,11 +189,14 @@ def measure(pw: Any, robot: str, settle: float, seconds: float, shot: Path | Non
         }
     finally:
         browser.close()
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+
+
+def _print(checkout: str, robot: str, r: dict[str, Any]) -> None:
+    print(f"{checkout:10s} {robot:12s} {r['chromium_cpu']:16.2f}  {r['task']:8.2f}"
+          f"  {r['script']:10.2f}  {r['frames_per_s']:8.1f}  "
+          f"{r['draws_per_frame']:11.0f}", flush=True)
+    messages = sorted(r["messages"].items(), key=lambda kv: -kv[1])
+    print("    messages/s: " + (", ".join(f"{k} {v:.1f}" for k, v in messages) or "none"))
 
 
 def main() -> None:
@@ -183,18 +214,16 @@ def main() -> None:
     print(f"load {os.getloadavg()[0]:.1f}")
     print("checkout   robot        Chromium CPU s/s  task s/s  script s/s  frames/s  draws/frame")
     with sync_playwright() as pw:
+        _print("bare viser", "(button+grid)", measure_bare(pw, args.settle, args.seconds))
         for repo in args.repo:
             for robot in args.robot:
                 shot = None
                 if args.shots is not None:
                     args.shots.mkdir(parents=True, exist_ok=True)
                     shot = args.shots / f"{repo.name}-{Path(robot).stem}.png"
-                r = measure(pw, robot, args.settle, args.seconds, shot, args.extra, repo)
-                print(f"{repo.name:10s} {robot:12s} {r['chromium_cpu']:16.2f}  {r['task']:8.2f}"
-                      f"  {r['script']:10.2f}  {r['frames_per_s']:8.1f}  "
-                      f"{r['draws_per_frame']:11.0f}", flush=True)
-                messages = sorted(r["messages"].items(), key=lambda kv: -kv[1])
-                print("    messages/s: " + ", ".join(f"{k} {v:.1f}" for k, v in messages))
+                _print(repo.name, robot,
+                       measure(pw, robot, args.settle, args.seconds, shot, args.extra, repo))
+
 
 if __name__ == "__main__":
     main()
