@@ -44,6 +44,7 @@ from console.app import ConsoleApp
 from console.panel_sets import DEFAULT_PANELS
 from console.core.model import model_for
 from console.serve_lifecycle import Lifecycle, port_in_use
+from console.web.connection_gate import ConnectionLimits
 from console.core.services import ConsoleServices
 from console.core.state import StateStore
 from core.robots import RobotFileError, available, load
@@ -92,7 +93,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="extensible arm on the emulator: its racks slip on their pinions by F "
                         "(0..0.5) of each move's travel, and it streams a noisy tip measurement "
                         "(Repeatability: open vs closed loop on the tip); off by default")
+    p.add_argument("--max-connections", type=int, default=ConnectionLimits.total, metavar="N",
+                   help="websocket connections served at once in all (default "
+                        f"{ConnectionLimits.total}); this machine's and the operator's address "
+                        "are never refused")
+    p.add_argument("--max-connections-per-address", type=int,
+                   default=ConnectionLimits.per_address, metavar="N",
+                   help="websocket connections served at once from one address (default "
+                        f"{ConnectionLimits.per_address})")
     args = p.parse_args(argv)
+    if args.max_connections < 1 or args.max_connections_per_address < 1:
+        p.error("--max-connections and --max-connections-per-address must be at least 1")
     if args.slip is not None and not 0.0 <= args.slip <= 0.5:
         p.error("--slip must be in [0, 0.5]")
     return args
@@ -206,8 +217,11 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
                                      slip=getattr(args, "slip", None))
     if args.demo:
         services = services.replace(demo=DemoMotion(store))
+    limits = ConnectionLimits(per_address=getattr(args, "max_connections_per_address",
+                                                  ConnectionLimits.per_address),
+                              total=getattr(args, "max_connections", ConnectionLimits.total))
     app = ConsoleApp(robot, server, status=status, access=access, data_dir=Path(args.data_dir),
-                     panels=(), store=store, services=services)
+                     panels=(), store=store, services=services, connection_limits=limits)
     if device_log:
         app.status.content += ("<br><small><b>Device log:</b> " + html.escape(device_log[-1])
                                + "</small>")

@@ -85,6 +85,7 @@ from core.kinematics import delta as dk
 from core.labdata.channels import robot_description
 from core.robots import Robot, SoftArm
 from console.web.client_guard import ClientGuard
+from console.web.connection_gate import ConnectionGate, ConnectionLimits, is_loopback
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +114,9 @@ class ConsoleApp:
             default has none, and panels that need one say so).
         store: The console's state store, when a service built before the app needs it (it
             then carries ``initial`` and ``mirror_commands`` itself).
+        connection_limits: Websocket connections served per address and in all (default
+            :class:`~console.web.connection_gate.ConnectionLimits`: 20 and 200); loopback and
+            the operator's address are never refused.
         clock: Monotonic time source of the core, its hold-to-run, the panels' rate limits and
             the coalescing of refusals and notifications (tests pass a simulated one).
     """
@@ -124,6 +128,7 @@ class ConsoleApp:
                  initial: npt.ArrayLike | None = None, access: AccessControl | None = None,
                  data_dir: str | Path | None = None, services: ConsoleServices | None = None,
                  store: StateStore | None = None,
+                 connection_limits: ConnectionLimits | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
         if not web.installed():  # fail closed: no console on an unguarded, unfixed viser
             raise RuntimeError("call console.web.install() first: viser's patches (the client "
@@ -158,6 +163,8 @@ class ConsoleApp:
         self.access = access if access is not None else AccessControl()
         self.guard = ClientGuard(server, is_operator=self.access.is_operator, refuse=self.refuse,
                                  refusal=self.access.refusal)
+        self.connections = ConnectionGate(server, connection_limits,
+                                          privileged=self._privileged_address)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
         self.recorder.log("robot", robot_description(robot))  # latched: recordings start with it
         for loop_process in (self.services.soft_control, self.services.extensible_runner):
@@ -396,6 +403,15 @@ class ConsoleApp:
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None
+
+    def _privileged_address(self, address: str | None) -> bool:
+        """Whether connections from ``address`` are never refused: this machine's, and the one
+        the operator's browser connects from (others' sockets cannot lock them out)."""
+        if is_loopback(address):
+            return True
+        holder = self.access.holder
+        return (holder is not None and address is not None
+                and address == self.guard.address_of(holder.client_id))
 
     @property
     def stopped(self) -> bool:

@@ -8,6 +8,7 @@ control). Shared by the client-guard tests and usable from a REPL.
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 from typing import Any, Callable
@@ -44,19 +45,30 @@ def decode_frame(frame: bytes) -> list[dict[str, Any]]:
     return list(decode_payload(frame)["messages"])
 
 
+def open_socket(port: int, source: str | None = None) -> Any:
+    """A websocket to the viser server on 127.0.0.1:``port`` with the browser's subprotocol,
+    from the local address ``source`` (None: the system's choice); nothing sent yet."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=20,
+                                    source_address=None if source is None else (source, 0))
+    return connect(f"ws://127.0.0.1:{port}", sock=sock, max_size=None, open_timeout=20,
+                   subprotocols=[f"viser-v{viser.__version__}"])  # type: ignore[list-item]
+
+
 class RawClient:
     """One websocket connection to a viser server, receiving on a thread.
 
     Args:
         server: The viser server (to learn this connection's client id).
         answer_probes: Answer localStorage reads like a browser tab (the operator's lease).
+        source: The local address to connect from (another 127.x.y.z looks like another
+            machine to the server); default the system's choice.
     """
 
-    def __init__(self, server: viser.ViserServer, answer_probes: bool = True) -> None:
+    def __init__(self, server: viser.ViserServer, answer_probes: bool = True,
+                 source: str | None = None) -> None:
         before = set(server.get_clients())
         self.url = f"ws://127.0.0.1:{server.get_port()}"
-        self.ws = connect(self.url, max_size=None, open_timeout=20,
-                          subprotocols=[f"viser-v{viser.__version__}"])  # type: ignore[list-item]
+        self.ws = open_socket(server.get_port(), source)
         self.answer_probes = answer_probes
         self.messages: list[dict[str, Any]] = []
         self.closed: ConnectionClosed | None = None
