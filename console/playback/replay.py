@@ -310,7 +310,8 @@ def log_html(markers: list[Marker], t: float, k: int = LOG_LINES) -> str:
 
 
 class ReplayPlayer:
-    """Advances every playing :class:`ReplaySession` at ``rate_hz`` from one thread."""
+    """Advances every playing :class:`ReplaySession` at ``rate_hz`` from one thread, which runs
+    while any browser has a session (it ends when the last one left)."""
 
     def __init__(self, rate_hz: float = 20.0) -> None:
         self.period = 1.0 / rate_hz
@@ -344,6 +345,10 @@ class ReplayPlayer:
     def _run(self) -> None:
         last = time.perf_counter()
         while not self._stop.wait(self.period):
+            with self._lock:
+                if not self.sessions:  # every browser left: the next add starts one again
+                    self._thread = None
+                    return
             now = time.perf_counter()
             dt, last = now - last, now
             for session in self.all():

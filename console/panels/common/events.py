@@ -38,3 +38,11 @@ def client_of(event: object) -> viser.ClientHandle | None:
 def target_of(event: object) -> object | None:
     """The handle ``event`` is about (None: no event, or one about no handle)."""
     return event.target if isinstance(event, OnTarget) else None
+
+
+def connected(server: viser.ViserServer, client: viser.ClientHandle) -> bool:
+    """Whether ``client`` is still one of ``server``'s browsers. viser drops a client from its
+    list first thing when it disconnects, then runs the disconnect callbacks; a connect callback
+    (run in viser's thread pool) that built per-browser widgets for a browser that left
+    meanwhile checks this afterwards, or what it built outlives the browser."""
+    return client.client_id in server.get_clients()

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import viser
 
-from console.panels.common.events import client_of
+from console.panels.common.events import client_of, connected
 from console.core.arm_status import Tone
 
 if TYPE_CHECKING:
@@ -123,6 +123,7 @@ class ViewerLine:
 
     def __init__(self, server: viser.ViserServer, access: Any, *,
                  stopped: Callable[[], bool] = lambda: False) -> None:
+        self._server = server
         self._access = access
         self._stopped = stopped
         self._lock = threading.Lock()
@@ -134,11 +135,14 @@ class ViewerLine:
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
         with self._lock:
-            if client.client_id in self._lines or self._stopped():
+            if (client.client_id in self._lines or self._stopped()
+                    or not connected(self._server, client)):
                 return
             content, visible = self._render(client.client_id)
             self._lines[client.client_id] = client.gui.add_html(content, order=0.05,
                                                                 visible=visible)
+        if not connected(self._server, client):  # it left meanwhile (see events.connected)
+            self._on_disconnect(client)
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:

@@ -24,6 +24,7 @@ from console.core.access import NotOperator
 from console.core.operator import Operator
 from console.playback.export import scene_html
 from console.panels.common.base import Panel, operator_only
+from console.panels.common.events import connected
 from console.playback.replay import ReplayPlayer, ReplaySession
 
 log = logging.getLogger(__name__)
@@ -82,10 +83,18 @@ class SessionPanel(Panel):
         # A browser connecting while build() runs must wait: build() is inside the folder's
         # `with` block, which _build_client enters too (viser allows one at a time).
         self._ready.wait(60.0)
+        server = self.app.server
         with self._build_lock:
-            if client.client_id in self.clients:
-                return  # already built (connected while the panel was being built)
-            self._build_client(client, access)
+            if client.client_id in self.clients or not connected(server, client):
+                return  # already built (connected while the panel was being built), or gone
+            try:
+                self._build_client(client, access)
+            except KeyError:  # viser removed the browser's containers: it left mid-build
+                if connected(server, client):
+                    raise
+            if not connected(server, client):  # it left meanwhile: its disconnect callback
+                self._on_disconnect(client)  # may have found nothing yet to drop
+                return
         self.refresh()
 
     def _build_client(self, client: viser.ClientHandle, access: Any) -> None:
