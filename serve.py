@@ -35,6 +35,7 @@ import secrets
 import socket
 import sys
 import traceback
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -235,6 +236,13 @@ def build(args: argparse.Namespace, robot: Any, status: str) -> tuple[Any, Conso
 def main(argv: list[str] | None = None) -> int:
     """Build the console and serve it until SIGINT/SIGTERM."""
     args = parse_args(argv)
+    # viser warns about every message queued for a browser that already left ("Queued a ... on
+    # a closed connection"): widgets being built for a browser that leaves meanwhile print a
+    # line each, so browsers coming and going (a lab's tabs, a flood) fill the terminal. The
+    # console drops such a browser's state on its disconnect (console.panels.common.events
+    # .connected; tests/console/test_connection_flood.py): the lines tell nobody anything.
+    warnings.filterwarnings("ignore", message=r"Queued a \w+ on a closed connection",
+                            category=UserWarning)
     refused = install_viser_patches(args)  # before any server: the client guard, shared sends
     if refused is not None:
         return refused

@@ -165,6 +165,7 @@ class ConsoleApp:
                                  refusal=self.access.refusal)
         self.connections = ConnectionGate(server, connection_limits,
                                           privileged=self._privileged_address)
+        self.connections.closed.append(self.guard.forget)
         self.recorder = Recorder(lambda: self.data, self.model, self.access.name_of)
         self.recorder.log("robot", robot_description(robot))  # latched: recordings start with it
         for loop_process in (self.services.soft_control, self.services.extensible_runner):

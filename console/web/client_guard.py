@@ -148,7 +148,10 @@ class ClientGuard(MessageTypeChecks):
             return None
 
     def _forget(self, client: Any) -> None:
-        cid = client.client_id
+        self.forget(client.client_id)
+
+    def forget(self, cid: int) -> None:
+        """Drop what the guard keeps of connection ``cid`` (it closed)."""
         self._clients.pop(cid, None)
         for key in [k for k in list(self._logged) if k[0] == cid]:  # (another thread)
             self._logged.pop(key, None)
