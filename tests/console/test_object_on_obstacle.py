@@ -12,6 +12,7 @@ from test_row_console import rig  # noqa: F401
 from console.core.table_scene import TableObject, disk_overlap
 from core.planning.obstacles import Obstacle
 from fakes import click_at, user
+from tests.ws_client import wait_for
 
 OBSTACLE_XY = (0.05, 0.30)
 
@@ -39,6 +40,9 @@ def test_a_click_or_add_on_an_obstacle_places_no_object(rig) -> None:
     assert title == "Objects" and body.startswith("Not placed: Object 2 (r 16.5 mm) at (60, 300) "
                                                   "mm would overlap Obstacle 1 (by 26 mm)")
     user(objects_panel.x, operator, 50.0)  # Object 1 typed to (50, 200) mm: moved;
+    # (the session's echo of the move is shown from its own thread: once it is, the fields
+    # hold what the operator types next; a late echo wrote y back to 200 before Add below)
+    wait_for(lambda: "at (50, 200) mm" in objects_panel.info.content, what="the move shown")
     user(objects_panel.y, operator, 330.0)  # then to (50, 330) mm, on the obstacle: not moved
     assert operator.notes[-1][1].startswith("Not moved: Object 1 (r 16.5 mm) at (50, 330) mm "
                                             "would overlap Obstacle 1")
