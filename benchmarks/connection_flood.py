@@ -32,6 +32,9 @@ from typing import Any
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+from proc_figures import cpu_seconds, descendants, rss_mb, threads  # noqa: E402
 
 BARE = """
 import sys, time, viser
@@ -49,39 +52,15 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _tree(pid: int) -> list[int]:
-    parents: dict[int, list[int]] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        parents.setdefault(int(fields[1]), []).append(int(stat.parent.name))
-    out, todo = [], [pid]
-    while todo:
-        p = todo.pop()
-        out.append(p)
-        todo.extend(parents.get(p, []))
-    return out
-
-
 def figures(pid: int) -> tuple[float, int, float]:
     """(RSS MB of ``pid``, its threads, CPU seconds of it and its children so far)."""
-    rss_kb, threads = 0, 0
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            rss_kb = int(line.split()[1])
-        elif line.startswith("Threads:"):
-            threads = int(line.split()[1])
-    tick = os.sysconf("SC_CLK_TCK")
     cpu = 0.0
-    for p in _tree(pid):
+    for p in descendants(pid):
         try:
-            f = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:
+            cpu += cpu_seconds(p)
+        except OSError:  # ended meanwhile
             continue
-        cpu += (int(f[11]) + int(f[12])) / tick
-    return rss_kb / 1024, threads, cpu
+    return rss_mb(pid), threads(pid), cpu
 
 
 def viewer(port: int, source: str) -> Any:

@@ -26,6 +26,9 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from proc_figures import descendants  # noqa: E402
+
 REPO = Path(__file__).resolve().parent.parent
 CHROMIUM = "/usr/bin/chromium"
 ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -85,28 +88,11 @@ def _serve(robot: str, extra: list[str], repo: Path = REPO) -> tuple[subprocess.
     raise SystemExit(f"serve.py --robot {robot} did not serve {url}")
 
 
-def _descendants(pid: int) -> list[int]:
-    """``pid`` and every process under it (Linux /proc)."""
-    parents: dict[int, list[int]] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        parents.setdefault(int(fields[1]), []).append(int(stat.parent.name))
-    out, todo = [], [pid]
-    while todo:
-        p = todo.pop()
-        out.append(p)
-        todo.extend(parents.get(p, []))
-    return out
-
-
 def _chromium_cpu() -> float:
     """CPU seconds (user + system) of the Chromium processes under this one."""
     tick = os.sysconf("SC_CLK_TCK")
     total = 0.0
-    for pid in _descendants(os.getpid())[1:]:
+    for pid in descendants(os.getpid())[1:]:
         try:
             stat = Path(f"/proc/{pid}/stat").read_text()
             if "(chrom" not in stat:
