@@ -46,6 +46,7 @@ from console.panel_sets import DEFAULT_PANELS
 from console.core.model import model_for
 from console.serve_lifecycle import Lifecycle, port_in_use
 from console.web.connection_gate import ConnectionLimits
+from console.web.connection_gate import is_loopback as address_is_loopback
 from console.core.services import ConsoleServices
 from console.core.state import StateStore
 from core.robots import RobotFileError, available, load
@@ -111,13 +112,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def is_loopback(host: str) -> bool:
-    """Whether binding ``host`` serves this machine only."""
-    if host in ("localhost",):
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+    """Whether binding ``host`` serves this machine only (``localhost``, or a loopback address
+    as the connection gate reads a browser's: ``console.web.connection_gate.is_loopback``)."""
+    return host == "localhost" or address_is_loopback(host)
 
 
 def lan_addresses() -> list[str]:
