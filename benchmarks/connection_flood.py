@@ -34,7 +34,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
-from proc_figures import cpu_seconds, descendants, rss_mb, threads  # noqa: E402
+from proc_figures import cpu_seconds, descendants, end_process, rss_mb, threads  # noqa: E402
 
 BARE = """
 import sys, time, viser
@@ -162,11 +162,7 @@ def main() -> int:
                     start = log_path.stat().st_size
                     results[name] = flood(proc.pid, port, a.cycles, a.held, a.settle, a.sources)
                 finally:
-                    proc.terminate()
-                    try:
-                        proc.wait(timeout=15)
-                    except subprocess.TimeoutExpired:
-                        proc.kill()
+                    end_process(proc, 15.0)
             text = log_path.read_bytes()[start:].decode(errors="replace")
             if a.keep_log is not None:
                 a.keep_log.mkdir(parents=True, exist_ok=True)

@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from proc_figures import descendants  # noqa: E402
+from proc_figures import descendants, end_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 CHROMIUM = "/usr/bin/chromium"
@@ -111,11 +111,7 @@ def measure(pw: Any, robot: str, settle: float, seconds: float, shot: Path | Non
     try:
         return measure_page(pw, url, settle, seconds, shot)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        end_process(proc)
 
 
 def measure_bare(pw: Any, settle: float, seconds: float) -> dict[str, Any]:

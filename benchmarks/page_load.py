@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import sys
 import time
 from collections import Counter
@@ -37,6 +36,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from benchmarks.page_busy import ARGS, CHROMIUM, _serve
+from benchmarks.proc_figures import end_process
 
 # Records when the page's viser worker passes on server messages (performance.now(), ms).
 _TIMES = """(() => {
@@ -248,11 +248,7 @@ def main() -> None:
                         print(f"{'':21s} median STOP "
                               f"{statistics.median(r['stop'] for r in rows):.2f} s", flush=True)
                     finally:
-                        proc.terminate()
-                        try:
-                            proc.wait(timeout=10)
-                        except subprocess.TimeoutExpired:
-                            proc.kill()
+                        end_process(proc)
         finally:
             if browser is not None:
                 browser.close()
