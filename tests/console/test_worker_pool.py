@@ -23,7 +23,7 @@ def alive(pid: int) -> bool:
     """``pid`` runs (exists and is not a zombie)."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
-    except FileNotFoundError:
+    except (FileNotFoundError, ProcessLookupError):  # (ESRCH: reaped while the file was read)
         return False
     return stat.rpartition(")")[2].split()[0] != "Z"
 
