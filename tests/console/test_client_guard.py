@@ -317,11 +317,14 @@ def test_viewer_edits_of_shared_inputs_are_refused_before_they_are_stored(consol
                if app.guard.viewer_allowed(h)}
     assert allowed <= VIEWER_ALLOWED and "STOP  (Esc)" in allowed
     # (a hidden input, e.g. Restart control loop while the loop runs, cannot be used by
-    # anyone: the guard drops it as inactive, not as a viewer's refused edit)
+    # anyone: the guard drops it as inactive, not as a viewer's refused edit. Restart is
+    # shown while the loop's view is stale, which a loaded machine makes it for a moment:
+    # left out, or it was shown here and hidden again before its edit; fresh64)
+    restart = app.panel(HardwarePanel).restart_btn
     targets = {u: h for u, h in shared.items()
                if not app.guard.viewer_allowed(h) and _other_valid(h) is not None
                and not getattr(h._impl.props, "disabled", False)
-               and getattr(h._impl.props, "visible", True)}
+               and getattr(h._impl.props, "visible", True) and h is not restart}
     assert len(targets) >= 15
     _settled(app, shared)
     targets = {u: h for u, h in targets.items() if not getattr(h._impl.props, "disabled", 0)}
