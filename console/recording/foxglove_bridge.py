@@ -33,6 +33,7 @@ import time
 from typing import Any
 
 import foxglove
+from foxglove.websocket import ServerListener
 
 from console.recording.foxglove_log import BadFrameLog
 from console.recording.foxglove_relay import SubprotocolRelay
@@ -46,9 +47,11 @@ RESEND_AGAIN_S = 0.3  # a latched channel is sent again this long after a subscr
 RESEND_WAIT_S = 5.0  # how long a re-send waits for the subscription to take messages
 
 
-class _Subscriptions:
+class _Subscriptions(ServerListener):
     """foxglove-sdk server listener: a new subscription asks the bridge thread to re-send the
-    channel's latched message (runs on the SDK's threads: only enqueues)."""
+    channel's latched message (runs on the SDK's threads: only enqueues). The SDK calls every
+    callback of its ``ServerListener`` (an unsubscribe, a client leaving...): the others are its
+    no-ops, inherited (without them each call logged "Callback failed: AttributeError")."""
 
     def __init__(self, resend: Any) -> None:
         self._resend = resend
