@@ -262,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
         print("serve.py: --slip needs the extensible arm on the device emulator",
               file=sys.stderr)
         return 2
+    # A signal from now on, while starting: exit at once (installed before the hardware line,
+    # which is what a supervisor or test reads as "starting").
+    life = Lifecycle().install()
     from console.core.hardware_setup import describe
     status = describe(robot, args.hardware, args.port_path)
     print(f"serve.py: hardware: {status}", file=sys.stderr)
@@ -276,7 +279,6 @@ def main(argv: list[str] | None = None) -> int:
     if fox_busy:  # said before anything serves, like the page's port
         print(f"serve.py: --foxglove-port: {fox_busy}; choose another", file=sys.stderr)
         return 2
-    life = Lifecycle().install()  # a signal while starting: exit at once
     try:
         server, app, token = build(args, robot, status)
     except Exception as exc:  # noqa: BLE001 - say why, plainly, and leave no children behind
