@@ -98,7 +98,7 @@ class Lifecycle:
         while not self.done.wait(poll):
             pass
 
-    def shutdown(self, steps: Iterable[tuple[str, Callable[[], Any]]], budget: float = 2.0,
+    def shutdown(self, steps: Iterable[tuple[str, Callable[[], Any]]], budget: float = 5.0,
                  first_budget: float = 10.0, patient: int = 2) -> bool:
         """Run ``steps`` (name, function) in order in a helper thread: the first ``patient``
         (the arm's STOP, closing the hardware processes) get up to ``first_budget`` s, the rest
@@ -108,7 +108,9 @@ class Lifecycle:
         loaded machine each took more than 2 s, and exiting before they finished left
         multiprocessing's semaphores to the resource tracker's "leaked" warning); the later
         steps close browsers' connections, which a browser that does not answer can hold
-        forever.
+        forever. Their ``budget`` is 5 s: with no browser they take ~0.7 s, but 2 s was
+        overrun on a loaded machine (the suite's workers on 2 cores), which then exited past
+        the console's finalizers (the same "leaked" warning).
 
         Returns True when all finished; otherwise reports the step that hung and exits the
         process (code 0: a requested shutdown) without waiting further.
