@@ -150,16 +150,18 @@ class RawClient:
         self._thread.join(5.0)
 
 
-def wait_for(predicate: Callable[[], Any], timeout: float = 10.0, what: str = "condition",
-             interval: float = 0.02) -> Any:
+def wait_for(predicate: Callable[[], Any], timeout: float = 10.0,
+             what: str | Callable[[], str] = "condition", interval: float = 0.02) -> Any:
     """Call ``predicate`` every ``interval`` s until it returns a true value (returned); fail
-    after ``timeout`` s naming ``what``."""
+    after ``timeout`` s naming ``what`` (a callable: called then, so the message shows the state
+    at the failure, not when the wait began)."""
     deadline = time.monotonic() + timeout
     while True:
         value = predicate()
         if value:
             return value
         if time.monotonic() > deadline:
-            raise AssertionError(f"{what} not reached in {timeout} s")
+            said = what() if callable(what) else what
+            raise AssertionError(f"{said} not reached in {timeout} s")
         time.sleep(interval)
 

@@ -123,7 +123,7 @@ def wait_phase(app: Any, wanted: tuple[str, ...], avoid: tuple[str, ...] = (),
         assert ph not in avoid, (ph, control.state_md.content)
         return ph in wanted
 
-    wait_for(there, timeout=timeout, what=f"phase in {wanted}: {control.state_md.content}")
+    wait_for(there, timeout=timeout, what=lambda: f"phase in {wanted}: {control.state_md.content}")
 
 
 def type_object(objects: Any, operator: FakeClient, x: float, y: float) -> None:
@@ -147,9 +147,9 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
     x, y = paper_locations()[SPOT]
     type_object(objects, operator, x, y)
     wait_for(lambda: [(o.x, o.y) for o in session.view().objects] == [(x, y)],
-             what=f"Object 1 at {(x, y)}: {session.view().objects}")
+             what=lambda: f"Object 1 at {(x, y)}: {session.view().objects}")
     user(control.arm_btn, operator)  # Execute does not arm
-    wait_for(lambda: control_of(app).armed, timeout=30.0, what=f"armed ({operator.notes})")
+    wait_for(lambda: control_of(app).armed, timeout=30.0, what=lambda: f"armed ({operator.notes})")
     user(control.execute.execute_btn, operator)
     wait_phase(app, ("grasp", "move_to_bin"), avoid=("stopped", "released"))
     wait_for(lambda: measured(app), what="measured while it runs")
@@ -158,7 +158,7 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
     assert control_of(app).armed
     # The released object left the table (a single grasp clears it, as a row does).
     wait_for(lambda: not session.view().objects and session.view().selected is None,
-             what=f"the released object off the table: {session.view().objects}")
+             what=lambda: f"the released object off the table: {session.view().objects}")
     type_object(objects, operator, x, y)
     user(objects.add_button, operator)
     wait_for(lambda: session.view().selected is not None, what="a new object on the table")
@@ -182,7 +182,7 @@ def test_grasp_and_place_reaches_released_and_stop_holds_the_arm(
     m = wait_for(lambda: measured(app), what="a measurement at the STOP")
     tip_stop, ref_stop = m[1], m[2]
     wait_for(lambda: "STOP pressed by" in control.state_md.content,
-             what=f"the state line names the STOP: {control.state_md.content}")
+             what=lambda: f"the state line names the STOP: {control.state_md.content}")
     hold_after_stop(app, moved / WINDOW_S, tip_stop, ref_stop)
 
 
@@ -231,7 +231,7 @@ def test_click_to_grasp_on_the_default_emulator_console(served: Callable[[str], 
         wait_for(lambda: phase(app) == "idle", timeout=30.0,
                  what="the control process's first view")
         wait_for(lambda: "emulator" in control.link_md.content, timeout=30.0,
-                 what=f"the link line: {control.link_md.content}")
+                 what=lambda: f"the link line: {control.link_md.content}")
         assert tab.update(control.arm_btn._impl.uuid, value=True)  # a click on Arm
         wait_for(lambda: control_of(app).armed, timeout=30.0, what="armed")
         assert tab.update(control.execute.click_mode._impl.uuid, value=True)
@@ -249,7 +249,7 @@ def test_click_to_grasp_on_the_default_emulator_console(served: Callable[[str], 
         wait_phase(app, ("released",), avoid=("stopped", "idle"))
         assert control_of(app).armed
         wait_for(lambda: "ARMED" in control.link_md.content and "emulator" in
-                 control.link_md.content, what=f"the link line: {control.link_md.content}")
+                 control.link_md.content, what=lambda: f"the link line: {control.link_md.content}")
         assert app.access.is_operator(tab.client_id)
     finally:
         tab.close()

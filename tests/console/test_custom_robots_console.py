@@ -76,10 +76,10 @@ def test_four_segment_soft_arm_grasps_and_places(served: Callable[[Path], Any],
     wait_for(lambda: phase() == "idle", timeout=30.0, what="the control process's first view")
     user(control.arm_btn, operator)
     wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
-             what=f"armed (told: {operator.notes})")
+             what=lambda: f"armed (told: {operator.notes})")
     user(control.execute.execute_btn, operator)
     wait_for(lambda: phase() in ("grasp", "move_to_bin"), timeout=60.0,
-             what=f"grasping (told: {operator.notes})")
+             what=lambda: f"grasping (told: {operator.notes})")
     c = control.ctl.view.snapshot.control
     assert c.kappa_meas is not None and len(c.kappa_meas) == 4  # one per segment of the file
     cells = re.findall(r'data-testid="kappa-meas-(\d+)"', control.kappa_md.content)

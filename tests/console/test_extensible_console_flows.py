@@ -142,7 +142,7 @@ def arm_link(app: Any, hardware: Any, operator: FakeClient) -> None:
 
     user(hardware.arm_btn, operator)
     wait_for(lambda: (h := extensible_link_health(app)) is not None and h.armed, timeout=30.0,
-             what=f"the link armed ({extensible_link_health(app)}; told {operator.notes})")
+             what=lambda: f"the link armed ({extensible_link_health(app)}; told {operator.notes})")
 
 
 def test_path_preview_and_execute_on_mock_hardware(tab: Callable[..., Any]) -> None:
@@ -161,15 +161,15 @@ def test_path_preview_and_execute_on_mock_hardware(tab: Callable[..., Any]) -> N
     start = np.array([100.0, 0.0, 300.0])
     type_target(client, target, start)
     wait_for(lambda: np.abs(readout_tip(readout) - start).max() <= 1.0, timeout=30.0,
-             what=f"the tip at the start ({target.status.content})")
+             what=lambda: f"the tip at the start ({target.status.content})")
     user(paths.preview_btn, operator)
     wait_for(lambda: attr(paths.status.content, "data-state") == "previewed", timeout=60.0,
-             what=f"the preview ({paths.status.content})")
+             what=lambda: f"the preview ({paths.status.content})")
     centre = readout_tip(readout) / 1e3
     end = build_path("linear", centre, 0.08, "xy")[-1] * 1e3  # default: linear, 80 mm, xy
     user(paths.execute_btn, operator)
     wait_for(lambda: attr(paths.status.content, "data-state") == "done", timeout=60.0,
-             what=f"the run to finish ({paths.status.content}; told {operator.notes})")
+             what=lambda: f"the run to finish ({paths.status.content}; told {operator.notes})")
     wait_for(lambda: np.abs(readout_tip(readout) - end).max() <= 1.0,
              what="the readout at the path's end")
     wait_for(lambda: np.linalg.norm(jog_tip(jog) - end) <= 1.0,
@@ -192,7 +192,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
     # serve.py connected the link at start, disarmed; the operator connects again and arms.
     user(hardware.connect_btn, operator)
     wait_for(lambda: (h := extensible_link_health(app)) is not None and h.state == "inactive",
-             timeout=30.0, what=f"the link configured ({extensible_link_health(app)})")
+             timeout=30.0, what=lambda: f"the link configured ({extensible_link_health(app)})")
     assert "/dev/pts/" in extensible_link_health(app).port
     arm_link(app, hardware, operator)
     # The emulated arm powers up at the console's start pose and Arm holds where it is.
@@ -222,7 +222,7 @@ def test_emulator_console_measured_tip_reaches_a_typed_target(
         return bool(np.abs(samples[-1] - aim).max() <= 1.0)
 
     wait_for(arrived, timeout=60.0,
-             what=f"the measured tip at the target ({target.status.content})")
+             what=lambda: f"the measured tip at the target ({target.status.content})")
     elapsed = time.monotonic() - t0
     # Encoder-driven: no faster than the tip speed limit, and shown on the way (no jump).
     distance = float(np.linalg.norm(aim - start)) / 1e3

@@ -65,13 +65,13 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     wait_for(lambda: np.abs(readout_tip(readout) - start).max() <= 0.5, timeout=30.0,
              what="the readout at the start pose")
     wait_for(lambda: ">idle<" in app.header.status.content.replace("</span>", "<"),
-             what=f"the header's phase idle ({app.header.status.content})")
+             what=lambda: f"the header's phase idle ({app.header.status.content})")
 
     # A bend jog moves at start.
     dx1 = next(r for r in jog.rows if r.coord.key == "dx1")
     hold(client, dx1.plus, 1.0)
     wait_for(lambda: np.linalg.norm(readout_tip(readout) - start) > 2.0, timeout=30.0,
-             what=f"the tip moved by the bend jog ({jog.note.content})")
+             what=lambda: f"the tip moved by the bend jog ({jog.note.content})")
     wait_for(lambda: not app.hold.active, timeout=30.0, what="the jog to end")
     assert np.asarray(app.store.command.q)[0, 0] > 0.0  # Δx₁, the way of the button
 
@@ -90,7 +90,7 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     assert attr(target.status.content, "data-target-mm") == "0.0,0.0,250.0"
     assert attr(target.status.content, "data-state") != "pending", target.status.content
     wait_for(lambda: np.abs(readout_tip(readout) - aim).max() <= 1.0, timeout=40.0,
-             what=f"the tip at the typed target ({target.status.content})")
+             what=lambda: f"the tip at the typed target ({target.status.content})")
     assert attr(target.status.content, "data-state") == "reachable", target.status.content
 
     # Preview draws the requested path at once (before the plan), and ends planned.
@@ -110,10 +110,10 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     # ... all the way (the jog speed streams it there): a rack a hair above its minimum allows
     # a hair of bend, and the note then names that rack's limit instead (a fresh clone's run)
     wait_for(lambda: np.abs(np.asarray(app.store.command.q)).max() == 0.0, timeout=30.0,
-             what=f"every rack at its minimum ({app.store.command.q})")
+             what=lambda: f"every rack at its minimum ({app.store.command.q})")
     hold(client, dx1.minus, 0.5)
     wait_for(lambda: "clamped to +0 mm" in jog.note.content, timeout=30.0,
-             what=f"the clamp note ({jog.note.content!r})")
+             what=lambda: f"the clamp note ({jog.note.content!r})")
     assert "extend δL₁ first" in jog.note.content
     text = shown_text(app, readout.html, target.status, paths.status, jog.note)
     assert not NEGATIVE_ZERO.findall(text), [ln for ln in text.splitlines()

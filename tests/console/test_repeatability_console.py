@@ -62,7 +62,7 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
     # serve.py connected the emulator at start, disarmed: the operator connects and arms it.
     user(hardware.connect_btn, operator)
     wait_for(lambda: (h := extensible_link_health(app)) is not None and h.state == "inactive",
-             timeout=30.0, what=f"the link configured ({extensible_link_health(app)})")
+             timeout=30.0, what=lambda: f"the link configured ({extensible_link_health(app)})")
     arm_link(app, hardware, operator)
 
     for handle, value in zip(panel.inputs, POINT_MM):
@@ -74,7 +74,7 @@ def test_closed_loop_beats_open_loop_in_the_repeatability_panel(
     wait_for(lambda: 'data-testid="rep-compare"' in panel.table.content, timeout=30.0,
              what="the comparison running")
     wait_for(lambda: attr(panel.table.content, "data-state") != "running", timeout=180.0,
-             what=f"the comparison done ({panel.status.content}; told {operator.notes})")
+             what=lambda: f"the comparison done ({panel.status.content}; told {operator.notes})")
     table, plot = panel.table.content, panel.plot.content
     assert attr(table, "data-state") == "done", (table, panel.status.content)
     for loop in ("open", "closed"):

@@ -59,12 +59,12 @@ def test_execute_grasps_a_right_side_object_and_releases_it(quick_soft_app: Any)
     user(objects.x, operator, round(spot[0] * 1e3))
     user(objects.y, operator, round(spot[1] * 1e3))
     wait_for(lambda: [(round(o.x, 3), round(o.y, 3)) for o in session.view().objects]
-             == [(round(spot[0], 3), round(spot[1], 3))], what=f"Object 1 at {spot}")
+             == [(round(spot[0], 3), round(spot[1], 3))], what=lambda: f"Object 1 at {spot}")
     assert session.view().selected == "Object 1"
 
     user(control.arm_btn, operator)
     wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
-             what=f"armed (told the operator: {operator.notes})")
+             what=lambda: f"armed (told the operator: {operator.notes})")
     user(control.execute.execute_btn, operator)
 
     def phase() -> str:

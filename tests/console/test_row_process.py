@@ -97,7 +97,7 @@ def test_three_objects_are_cleared_into_a_clicked_bin(quick_soft_app: Any) -> No
     session_objects = session.view().objects
     user(control.arm_btn, operator)
     wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
-             what=f"armed (told the operator: {operator.notes})")
+             what=lambda: f"armed (told the operator: {operator.notes})")
     user(control.row.button, operator)
     wait_for(lambda: control.ctl.view.row is not None and control.ctl.view.row.running,
              timeout=30.0, what="the row running")

@@ -96,15 +96,15 @@ def test_clean_start_shows_no_fault_and_execute_does_not_arm(console: Any) -> No
              what="the control process's first view")
     # First load: the planner and the Waypoints panel tell the same plan of Object 1.
     wait_for(lambda: 'data-state="ok"' in planner.summary.content, timeout=30.0,
-             what=f"Object 1 planned: {planner.summary.content}")
+             what=lambda: f"Object 1 planned: {planner.summary.content}")
     n = attr(planner.summary.content, "data-waypoints")
     assert n and int(n) >= 2 and "Place an object" not in planner.summary.content
     wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=30.0,
-             what=f"waypoints agree: {waypoints.info.content}")
+             what=lambda: f"waypoints agree: {waypoints.info.content}")
     assert f"Waypoint 1 of {n}" in waypoints.info.content
     # A clean start: no fault in the header nor in the Control panel, for CLEAN_S.
     wait_for(lambda: "mock device" in app.header.text("link"), timeout=30.0,
-             what=f"the header's link: {app.header.text('link')!r}")
+             what=lambda: f"the header's link: {app.header.text('link')!r}")
     end = time.monotonic() + CLEAN_S
     while time.monotonic() < end:
         for text in (app.header.text("link"), control.link_md.content):
@@ -157,18 +157,18 @@ def test_execute_grasps_the_selected_planned_object_and_counts_its_waypoints(
              and o.obj.name == "Object 2" and o.plan is not None
              and 'data-state="ok"' in planner.summary.content
              and attr(planner.summary.content, "data-waypoints") == str(o.plan.n),
-             timeout=30.0, what=f"Object 2 planned: {planner.summary.content}")
+             timeout=30.0, what=lambda: f"Object 2 planned: {planner.summary.content}")
     n = session.view().outcome.plan.n
     assert n >= 2 and attr(planner.summary.content, "data-waypoints") == str(n)
     wait_for(lambda: f'data-count="{n}"' in waypoints.info.content, timeout=30.0,
-             what=f"the Waypoints panel shows the plan: {waypoints.info.content}")
+             what=lambda: f"the Waypoints panel shows the plan: {waypoints.info.content}")
     wait_for(lambda: "Object 2" in control.execute.target_md.content, timeout=30.0,
-             what=f"Execute's target: {control.execute.target_md.content}")
+             what=lambda: f"Execute's target: {control.execute.target_md.content}")
     assert f"{n}-waypoint plan" in control.execute.target_md.content
 
     user(control.arm_btn, operator)
     wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
-             what=f"armed (told: {operator.notes})")
+             what=lambda: f"armed (told: {operator.notes})")
     told = len(operator.notes)
     user(control.execute.execute_btn, operator)
     assert any("Object 2" in f"{t} {b}" for t, b in operator.notes[told:]), operator.notes
@@ -230,10 +230,10 @@ def test_arm_and_disarm_are_recorded_as_the_operators_actions(console: Any) -> N
              what="the control process's first view")
     user(control.arm_btn, operator)
     wait_for(lambda: control.ctl.view.snapshot.control.armed, timeout=30.0,
-             what=f"armed (told: {operator.notes})")
+             what=lambda: f"armed (told: {operator.notes})")
     user(control.disarm_btn, operator)
     wait_for(lambda: not control.ctl.view.snapshot.control.armed, timeout=30.0,
-             what=f"disarmed (told: {operator.notes})")
+             what=lambda: f"disarmed (told: {operator.notes})")
     pressed = [(what, client) for what, client in actions if "pressed" in what]
     assert pressed == [("arm pressed", operator), ("disarm pressed", operator)], actions
     assert action_sentence("arm pressed", "tester") == ("action", "Arm pressed by tester")

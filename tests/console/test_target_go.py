@@ -113,7 +113,7 @@ def test_typing_moves_nothing_and_go_makes_one_move_to_exactly_the_typed_target(
 
     user(panel.go, op)
     wait_for(lambda: len(moves) >= 1 and state_of(panel.status.content) != "solving",
-             timeout=60.0, what=f"the move after Go ({panel.status.content})")
+             timeout=60.0, what=lambda: f"the move after Go ({panel.status.content})")
     assert not panel.pending_ball.visible
     assert state_of(panel.status.content) == "reachable", panel.status.content
     run(app, op, clock, 30.0)  # far longer than the move takes at the capped speed
@@ -156,7 +156,7 @@ def test_target_to_tip_discards_a_pending_target(target_console) -> None:
     np.testing.assert_allclose([float(h.value) for h in panel.inputs], tip_mm, atol=0.05)
     user(panel.go, op)  # Go now: the fields hold the tip, so the arm stays where it is
     wait_for(lambda: state_of(panel.status.content) not in ("solving", "idle"), timeout=60.0,
-             what=f"the answer to Go ({panel.status.content})")
+             what=lambda: f"the answer to Go ({panel.status.content})")
     run(app, op, clock, 2.0)
     np.testing.assert_allclose(dk.tip_position(EXT, np.asarray(app.store.command.q)) * 1e3,
                                tip_mm, atol=0.01)
