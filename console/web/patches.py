@@ -11,7 +11,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
-from console.web import receive_guard, shared_sends, shared_windows, viewer_props
+from console.web import (callback_pool, receive_guard, shared_sends, shared_windows,
+                         viewer_props)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,4 +42,6 @@ PATCHES: tuple[Patch, ...] = (
           shared_windows.installed, shared_windows.uninstall),
     Patch("AsyncMessageBuffer.window_generator: viewers get operator-only widgets disabled",
           viewer_props.install, viewer_props.installed, viewer_props.uninstall),
+    Patch("ViserServer's callback pool: idle workers end", callback_pool.install,
+          callback_pool.installed, callback_pool.uninstall),
 )
