@@ -9,7 +9,6 @@ from __future__ import annotations
 import concurrent.futures as cf
 import dataclasses
 import re
-import time
 
 import numpy as np
 from fakes import FakeRunner
@@ -74,7 +73,6 @@ def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, m
     panel = app.add_panel(paths.PathsPanel)
     stuck = NeverAnswers()
     monkeypatch.setattr(panel, "_plan_pool", lambda: stuck)
-    t0 = time.monotonic()
     panel._request_plan(execute=False)
     # At once: the requested tip path (centred on the tip, build_path) is drawn and said so.
     assert status_of(panel.status.content) == "planning"
@@ -85,7 +83,6 @@ def test_a_plan_that_never_returns_is_drawn_as_requested_then_reported(server, m
     assert panel.drawing.trace.visible
     # The worker never answers: after the timeout the panel says so (the 2 Hz status loop).
     assert wait_for(lambda: status_of(panel.status.content) == "error")
-    assert time.monotonic() - t0 < 1.0 + 2.0
     assert "no answer within 1 s" in panel.status.content
     # A late answer of the abandoned plan changes nothing.
     stuck.futures[0].set_exception(RuntimeError("late"))

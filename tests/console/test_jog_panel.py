@@ -134,9 +134,9 @@ def test_holding_a_rows_button_jogs_its_coordinate_and_release_stops_it(lab, dir
     # last renewal; a fresh run failed waiting for the source to read "hold").
     wait_for(lambda: direction * app.store.command.q[2] > 0.5, what="the held jog")
     op.update(button._impl.uuid, value=True)  # mouse-up: the click ends the hold at once
-    released = time.monotonic()
-    wait_for(lambda: not app.hold.active, timeout=2.0, what="the jog to end")
-    assert time.monotonic() - released < 0.3 + 0.1  # expiry bound, usually at once
+    # (How soon is not asserted on the wall clock: a release ends a hold at once and is no
+    # STOP on the simulated clock, test_console_core.test_a_released_jog_is_no_stop.)
+    wait_for(lambda: not app.hold.active, timeout=30.0, what="the jog to end")
     q = np.asarray(app.store.command.q)
     assert direction * q[2] > 0.5  # moved κ₃ the way of the button (1/m)
     assert np.all(np.delete(q, 2) == 0.0)  # and nothing else
