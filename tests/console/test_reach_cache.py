@@ -99,9 +99,8 @@ def test_start_reach_map_computes_once_then_answers_from_cache(tmp_path, robot_f
     assert fractions and fractions[-1] == 1.0 and fractions == sorted(fractions)
     assert cache.file(request.key()).is_file()
     monkeypatch.setattr(reach_job, "_MEMORY", {})
-    t0 = time.perf_counter()
     start_reach_map(request, cache, results.append)
-    assert len(results) == 2 and time.perf_counter() - t0 < 2.0     # answered in this thread
+    assert len(results) == 2  # answered in this thread, before the call returned
     warm = results[1]
     assert warm.from_cache and warm.note() == "from cache"
     np.testing.assert_array_equal(warm.reach.status, cold.reach.status)
