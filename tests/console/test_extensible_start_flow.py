@@ -61,6 +61,13 @@ def test_every_action_moves_or_says_why_from_the_start_pose(tab: Callable[..., A
     app, client = tab("extensible", "mock")
     target, readout, jog, paths, _ = panels(app)
     operator = FakeClient(client.client_id)
+    # The start: the loop process has connected its (mock) device. Its connection makes the
+    # device's posture the console's command (hw_bridge.extensible_link: the hardware's truth),
+    # so a jog sent before it was put back on the start pose on a loaded machine (fresh69: the
+    # typed target's move cancelled, the target back on the start tip).
+    runner = app.services.extensible_runner
+    assert runner is not None and runner.connecting is not None
+    assert runner.connecting.result(120) is None
     start = dk.tip_position(ROBOT, ExtensibleModel(ROBOT).initial()) * 1e3
     wait_for(lambda: np.abs(readout_tip(readout) - start).max() <= 0.5, timeout=30.0,
              what="the readout at the start pose")
