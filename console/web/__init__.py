@@ -14,10 +14,11 @@ Modules: ``patches`` (the list of patches, each with its undo), ``receive_guard`
 receive loop with the guard in front), ``client_guard`` / ``client_message_checks`` /
 ``client_values`` (what a browser may send), ``shared_sends`` / ``shared_windows`` (each
 message, window and frame encoded once for all viewers; ``set_bone_poses``), ``share_tunnel``
-(no public tunnel), ``callback_pool`` (viser's callback threads end when idle), ``scene_clicks`` (a browser's clicks claimed by one tool), ``widgets``
-(widget ids, slider marks), ``phone_sheet`` (a style sheet for viser's phone layout), ``tab_order`` (tabs
-in a chosen order). This face imports them only when called, so none of them imports
-back into a half-built package.
+(no public tunnel), ``callback_pool`` (viser's callback threads end when idle),
+``scene_clicks`` (a browser's clicks claimed by one tool), ``widgets`` (widget ids, slider
+marks), ``phone_sheet`` (a style sheet for viser's phone layout), ``tab_order`` (tabs in a
+chosen order). This face imports them only when called, so none of them imports back into a
+half-built package.
 """
 
 from __future__ import annotations
