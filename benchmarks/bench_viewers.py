@@ -6,9 +6,10 @@ with the console's CPU and the control loop's p99.
 ``python benchmarks/bench_viewers.py [--seconds 10] [--viewers 50] [--robots soft-arm extensible]``
 
 The first row is a bare viser page (a button and a grid) with the same viewer: the floor of a
-still page (viser's own messages). Each (robot, method) runs the whole console in a child process (``serve.build``: every panel,
-lab mode, the emulator, as ``serve.py`` serves it) with websocket-only viewers (they register
-like a browser and count what arrives, without decoding or rendering):
+still page (viser's own messages). Each (robot, method) runs the whole console in a child
+process (``serve.build``: every panel, lab mode, the emulator, as ``serve.py`` serves it) with
+websocket-only viewers (they register like a browser and count what arrives, without decoding
+or rendering):
 
 * still: the soft arm is armed and holds still on its control process, drawn from what the
   simulated motion capture measures (0.2 mm marker noise: ~0.8 mm / 1.7 deg at the tip); the

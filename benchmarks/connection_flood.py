@@ -27,7 +27,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -35,6 +34,8 @@ sys.path.insert(0, str(REPO / "tests"))
 sys.path.insert(0, str(REPO / "benchmarks"))
 
 from proc_figures import cpu_seconds, descendants, end_process, rss_mb, threads  # noqa: E402
+from ws_client import drain  # noqa: E402
+from ws_client import viewer_socket as viewer  # noqa: E402
 
 BARE = """
 import sys, time, viser
@@ -61,22 +62,6 @@ def figures(pid: int) -> tuple[float, int, float]:
         except OSError:  # ended meanwhile
             continue
     return rss_mb(pid), threads(pid), cpu
-
-
-def viewer(port: int, source: str) -> Any:
-    from ws_client import CAMERA, encode, open_socket
-
-    ws = open_socket(port, source)
-    ws.send(encode(CAMERA))
-    return ws
-
-
-def drain(ws: Any) -> None:
-    try:
-        while True:
-            ws.recv(timeout=0)
-    except Exception:  # noqa: BLE001 - nothing queued, or closed
-        pass
 
 
 def flood(pid: int, port: int, cycles: int, held: int, settle: float, sources: int

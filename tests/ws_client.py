@@ -54,6 +54,23 @@ def open_socket(port: int, source: str | None = None) -> Any:
                    subprotocols=[f"viser-v{viser.__version__}"])  # type: ignore[list-item]
 
 
+def viewer_socket(port: int, source: str | None = None) -> Any:
+    """:func:`open_socket` that has said hello as a viewer (a camera message): viser and the
+    console build its client; nothing is read."""
+    ws = open_socket(port, source)
+    ws.send(encode(CAMERA))
+    return ws
+
+
+def drain(ws: Any) -> None:
+    """Read and drop whatever ``ws`` has received so far (as a browser takes it)."""
+    try:
+        while True:
+            ws.recv(timeout=0)
+    except Exception:  # noqa: BLE001 - nothing queued, or closed
+        pass
+
+
 class RawClient:
     """One websocket connection to a viser server, receiving on a thread.
 

@@ -62,33 +62,23 @@ FLOOD = """
 import sys
 import threading
 sys.path.insert(0, sys.argv[1])
-from ws_client import CAMERA, encode, open_socket
+from ws_client import drain, viewer_socket
 
 port, cycles, held = (int(a) for a in sys.argv[2:5])
 
 
-def viewer(source):  # says hello as a viewer
-    ws = open_socket(port, source)
-    ws.send(encode(CAMERA))
-    return ws
-
-
-def drain(sockets, stop):  # reads (and drops) what the held viewers get, as a browser would
+def drain_all(sockets, stop):  # reads (and drops) what the held viewers get, as a browser would
     while not stop.is_set():
         for ws in sockets:
-            try:
-                while True:
-                    ws.recv(timeout=0)
-            except Exception:  # nothing queued
-                pass
+            drain(ws)
         stop.wait(0.05)
 
 
 for k in range(cycles):
-    viewer(f"127.0.0.{2 + k % 20}").close()
-sockets = [viewer(f"127.0.0.{30 + k % 4}") for k in range(held)]
+    viewer_socket(port, f"127.0.0.{2 + k % 20}").close()
+sockets = [viewer_socket(port, f"127.0.0.{30 + k % 4}") for k in range(held)]
 stop = threading.Event()
-reader = threading.Thread(target=drain, args=(sockets, stop))
+reader = threading.Thread(target=drain_all, args=(sockets, stop))
 reader.start()
 print("held", flush=True)
 sys.stdin.readline()
@@ -102,8 +92,8 @@ print("closed", flush=True)
 
 class Flood:
     """``cycles`` viewers opened and closed one after another, then ``held`` opened and held
-    (reading what they get), from a process of its own (a client in this process would count its memory and threads in
-    the server's); :meth:`release` closes the held ones."""
+    (reading what they get), from a process of its own (a client in this process would count
+    its memory and threads in the server's); :meth:`release` closes the held ones."""
 
     def __init__(self, port: int, cycles: int, held: int) -> None:
         self.proc = subprocess.Popen(
