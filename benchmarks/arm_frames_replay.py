@@ -71,6 +71,7 @@ def replay(robot: Any, ts: np.ndarray, kappas: np.ndarray, band: Any) -> np.ndar
     import viser
 
     import console.scene.arm_view as av
+    from console.scene.arm_view_factory import make_arm_view
     from console.core.model import model_for
 
     class Clock:
@@ -84,7 +85,7 @@ def replay(robot: Any, ts: np.ndarray, kappas: np.ndarray, band: Any) -> np.ndar
     server = viser.ViserServer(port=0, verbose=False)
     try:
         av.time = clock  # type: ignore[assignment]  # the view's clock is the simulated one
-        view = av.make_arm_view(server.scene, model_for(robot), dead_band=band)
+        view = make_arm_view(server.scene, model_for(robot), dead_band=band)
         start = len(view.sent_at)
         frames = np.arange(ts[0], ts[-1], 1.0 / PUBLISH_HZ)
         idx = np.minimum(np.searchsorted(ts, frames), len(ts) - 1)
