@@ -184,6 +184,9 @@ class ArmView(ABC, Generic[ModelT]):
             return True
         now = time.monotonic()
         dt = now - self._mean_at
+        if self._mean is not None and band.jumped(self._mean, frames):
+            self._mean = None  # a jump, not noise or a move: average from here (DeadBand.jump)
+            self._steadiness, self._steady_run = Steadiness(), 0
         steady = self._steadiness.update(frames, dt)
         self._mean = band.average(self._mean, frames, dt, steady)
         self._mean_at = now

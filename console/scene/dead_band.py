@@ -51,6 +51,14 @@ class DeadBand:
             applies.
         moving_steps: Fewest steps the steadiness must be measured over since it started
             afresh (after a pause its first steps read as steady, noise included).
+        jump: Distance (m) of the newest frames from the average from which they jumped
+            (:meth:`jumped`): the average and the steadiness start afresh from them. Else the
+            average's catch-up was drawn ~1 frame/s for ~10 s after the arm stood still again,
+            and the jump's one step read as a steady move for ~2 s, every noisy frame drawn
+            (``benchmarks/bench_viewers.py``, extensible still: 1.0 frame/s). 20 mm: several
+            times the largest noise (the soft arm's gripper end, a few mm rms) and more than any
+            arm moves between two drawn frames.
+        jump_angle: The same for rotations (rad).
     """
 
     position: float = 1e-3
@@ -62,6 +70,8 @@ class DeadBand:
     moving_steadiness: float = 0.5
     moving_steps: int = 8
     moving_frames: int = 5
+    jump: float = 2e-2
+    jump_angle: float = float(np.deg2rad(20.0))
 
     def moved(self, sent: Array, now: Array, steadiness: float = 0.0) -> bool:
         """Whether any of the (P, 4, 4) frames ``now`` left the band around ``sent`` (the
@@ -69,17 +79,14 @@ class DeadBand:
         if sent.shape != now.shape:
             return True
         moving = steadiness >= self.moving_steadiness
-        position = self.moving_position if moving else self.position
-        angle = self.moving_angle if moving else self.angle
-        if np.abs(now[:, :3, 3] - sent[:, :3, 3]).max(initial=0.0) > position:
-            return True
-        # For rotations R_a, R_b: trace(R_a^T R_b) = 1 + 2 cos(angle between them), and
-        # |R|_F = sqrt(3). Scaled by the norms so that averaged (shrunk) rotations compare too.
-        a, b = sent[:, :3, :3], now[:, :3, :3]
-        dot = np.einsum("pij,pij->p", a, b)
-        norms = np.linalg.norm(a, axis=(1, 2)) * np.linalg.norm(b, axis=(1, 2))
-        cos = (3.0 * dot / norms - 1.0) / 2.0
-        return bool(np.any(cos < np.cos(angle)))
+        return _apart(sent, now, self.moving_position if moving else self.position,
+                      self.moving_angle if moving else self.angle)
+
+    def jumped(self, mean: Array, now: Array) -> bool:
+        """Whether the frames ``now`` are ``jump`` / ``jump_angle`` or more away from the
+        average ``mean``: a jump (a replay seek, a device connecting, a source that switched),
+        neither noise nor a move between two frames."""
+        return mean.shape != now.shape or _apart(mean, now, self.jump, self.jump_angle)
 
     def average(self, mean: Array | None, frames: Array, dt: float, steadiness: float = 0.0,
                 ) -> Array:
@@ -98,6 +105,20 @@ class DeadBand:
             return frames.copy()
         alpha = 1.0 - np.exp(-max(dt, 0.0) / tau)
         return mean + alpha * (frames - mean)
+
+
+def _apart(a_frames: Array, b_frames: Array, position: float, angle: float) -> bool:
+    """Whether any of the (P, 4, 4) frames ``b_frames`` is more than ``position`` (m) or
+    ``angle`` (rad) away from the same frame of ``a_frames``."""
+    if np.abs(b_frames[:, :3, 3] - a_frames[:, :3, 3]).max(initial=0.0) > position:
+        return True
+    # For rotations R_a, R_b: trace(R_a^T R_b) = 1 + 2 cos(angle between them), and
+    # |R|_F = sqrt(3). Scaled by the norms so that averaged (shrunk) rotations compare too.
+    a, b = a_frames[:, :3, :3], b_frames[:, :3, :3]
+    dot = np.einsum("pij,pij->p", a, b)
+    norms = np.linalg.norm(a, axis=(1, 2)) * np.linalg.norm(b, axis=(1, 2))
+    cos = (3.0 * dot / norms - 1.0) / 2.0
+    return bool(np.any(cos < np.cos(angle)))
 
 
 class Steadiness:

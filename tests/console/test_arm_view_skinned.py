@@ -4,6 +4,7 @@ vertex geometry at full bend (both arms), and the dead band sends nothing for su
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 import pytest
@@ -340,3 +341,53 @@ def _at(points: np.ndarray) -> np.ndarray:
     f = np.tile(np.eye(4), (len(points), 1, 1))
     f[:, :3, 3] = points
     return f
+
+
+@pytest.mark.parametrize("robot", ["soft-arm", "extensible"])
+def test_a_noisy_arm_that_jumped_and_stands_still_is_drawn_as_after_a_fresh_start(
+        server, monkeypatch, robot) -> None:
+    """A jump (a replay seek, a device connecting) to a pose where the arm then stands still,
+    measured with noise: drawn at the jump and afterwards as often as by a view that started
+    there (the same noise). The average used to catch up from the old pose (a frame every
+    0.4-3 s for ~10 s) and the jump's one step read as a steady move for ~2 s (every noisy frame
+    drawn: 76 frames in 12 s for the soft arm); the extensible still row of
+    ``benchmarks/bench_viewers.py`` measured 1.0 frame/s. Simulated clock, 30 frames/s."""
+    import console.scene.arm_view as arm_view
+
+    clock = [100.0]
+    monkeypatch.setattr(arm_view.time, "monotonic", lambda: clock[0])
+    model = model_for(SOFT if robot == "soft-arm" else EXT)
+    rng = np.random.default_rng(5)
+    if robot == "soft-arm":
+        start = np.zeros(6)
+        still = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+        sigma = np.array([0.035, 0.11, 0.19, 0.25, 0.31, 0.35])  # 1/m, as measured armed
+    else:
+        start = np.zeros(model.shape)
+        still = np.zeros(model.shape)
+        still[:, 2] = 0.5 * (EXT.rack_min + EXT.rack_max) - EXT.L0
+        still[0, 0], still[1, 1] = 0.015, -0.012
+        sigma = 2e-5  # m: the drawn tip moves by ~0.05 mm rms (bench_viewers' noise)
+    noise = sigma * rng.standard_normal((150 + 1 + 360, *start.shape))
+
+    def drawn_after(view: Any, frames: list[np.ndarray]) -> int:
+        sent = view.frames_sent
+        for q in frames:  # 12 s at 30 frames/s
+            clock[0] += 1 / 30
+            view.update(q)
+        return view.frames_sent - sent
+
+    jumped = make_arm_view(server.scene, model)
+    for k in range(150):  # 5 s standing at the start pose
+        clock[0] += 1 / 30
+        jumped.update(start + noise[k])
+    assert np.linalg.norm(jumped.frames(still)[-1, :3, 3] - jumped.frames(start)[-1, :3, 3]) > 0.05
+    clock[0] += 1 / 30
+    assert jumped.update(still + noise[150])  # the jump is drawn
+    after_jump = drawn_after(jumped, [still + n for n in noise[151:]])
+    fresh = make_arm_view(server.scene, model, root="/fresh")
+    clock[0] += 10.0
+    assert fresh.update(still + noise[150])
+    after_start = drawn_after(fresh, [still + n for n in noise[151:]])
+    assert after_jump <= after_start + 1, (after_jump, after_start)
+    assert after_start <= 6
