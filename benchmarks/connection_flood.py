@@ -9,8 +9,9 @@ same run, a bare viser server with one button; floods each from this machine: ``
 websockets opened (with the browser's subprotocol and a camera hello, as a viewer) and closed
 one after another from ``--sources`` local addresses (127.0.0.2 ...), then ``--held`` opened
 and held idle for ``--settle`` s, then all closed. Prints for each server its RSS (MB), threads
-and CPU (% of one core, from /proc of the server and its children) before, after the cycles,
-while the connections are held (CPU over the idle hold), and ``--settle`` s after they closed;
+and CPU (% of one core, from /proc of the server and its children) before, right after the
+cycles and ``--settle`` s after them, while the connections are held (CPU over the idle hold),
+and ``--settle`` s after they closed; each row's RSS beside the first row's;
 then the log lines each printed during the flood (tracebacks, warnings), counted
 (``--keep-log DIR`` keeps them). The console hands freed memory back 2 s after the last browser
 of a batch left (``console.web.connection_gate.release_free_memory``).
@@ -79,6 +80,10 @@ def flood(pid: int, port: int, cycles: int, held: int, settle: float, sources: i
         ws.close()
     r, t, c = figures(pid)
     rows.append((f"after {cycles} open/close", r, t, 100 * (c - c0) / (time.monotonic() - w0)))
+    w0, c0 = time.monotonic(), c
+    time.sleep(settle)
+    r, t, c = figures(pid)
+    rows.append((f"{settle:g} s after them", r, t, 100 * (c - c0) / (time.monotonic() - w0)))
     conns = [viewer(port, f"127.0.0.{2 + k % sources}") for k in range(held)]
     time.sleep(3.0)
     for ws in conns:
@@ -162,9 +167,11 @@ def main() -> int:
                 kinds[m.group(1)] = kinds.get(m.group(1), 0) + 1
         print(f"== {name}: {len(lines)} log lines during the flood, {tracebacks} tracebacks, "
               f"{queued} 'on a closed connection' warnings; by kind {kinds}")
-        print(f"   {'when':30s} {'RSS MB':>8s} {'threads':>8s} {'CPU %':>7s}")
+        print(f"   {'when':30s} {'RSS MB':>8s} {'vs start':>8s} {'threads':>8s} {'CPU %':>7s}")
+        rss0 = results[name][0][1]
         for when, rss, threads, cpu in results[name]:
-            print(f"   {when:30s} {rss:8.1f} {threads:8d} {cpu:7.1f}", flush=True)
+            print(f"   {when:30s} {rss:8.1f} {100 * (rss / rss0 - 1):+7.1f}% {threads:8d} "
+                  f"{cpu:7.1f}", flush=True)
     return 0
 
 
