@@ -130,7 +130,9 @@ def _framing(app: Any, client: Any) -> str:
     return (f"framed for {fit.framed_size(client.client_id)}, reported "
             f"{cam.image_width}x{cam.image_height}, camera at the framed pose: {at}, "
             f"framed look_at {None if pose is None else np.round(pose.look_at, 3).tolist()}, "
-            f"camera look_at {np.round(cam.look_at, 3).tolist()}")
+            f"camera look_at {np.round(cam.look_at, 3).tolist()}, fov {math.degrees(cam.fov):.1f} "
+            f"deg (framed {'-' if pose is None else f'{math.degrees(pose.fov):.1f}'}), up "
+            f"{np.round(cam.up_direction, 3).tolist()}, wxyz {np.round(cam.wxyz, 3).tolist()}")
 
 
 def arm_in_view(page: Any, app: Any, size: str) -> str | None:
