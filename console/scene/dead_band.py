@@ -51,7 +51,7 @@ class DeadBand:
             applies.
         moving_steps: Fewest steps the steadiness must be measured over since it started
             afresh (after a pause its first steps read as steady, noise included).
-        jump: Distance (m) of the newest frames from the average from which they jumped
+        jump: Distance (m) of the newest frames from the average beyond which they jumped
             (:meth:`jumped`): the average and the steadiness start afresh from them. Else the
             average's catch-up was drawn ~1 frame/s for ~10 s after the arm stood still again,
             and the jump's one step read as a steady move for ~2 s, every noisy frame drawn
@@ -83,7 +83,7 @@ class DeadBand:
                       self.moving_angle if moving else self.angle)
 
     def jumped(self, mean: Array, now: Array) -> bool:
-        """Whether the frames ``now`` are ``jump`` / ``jump_angle`` or more away from the
+        """Whether any of the frames ``now`` is more than ``jump`` / ``jump_angle`` away from the
         average ``mean``: a jump (a replay seek, a device connecting, a source that switched),
         neither noise nor a move between two frames."""
         return mean.shape != now.shape or _apart(mean, now, self.jump, self.jump_angle)
