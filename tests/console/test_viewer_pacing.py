@@ -43,8 +43,8 @@ def test_axis_top_is_a_1_2_5_step_above_the_values_with_headroom() -> None:
         assert 1.1 * v <= top < 2.5 * 1.1 * v + 1e-9  # holds it, never more than a step above
 
 
-def test_pacer_sends_a_visible_change_at_its_rate_and_nothing_else_until_still_s() -> None:
-    pacer = PlotPacer(max_hz=0.5, visible=0.03, still_s=30.0)
+def test_pacer_sends_a_visible_change_at_its_rate_and_pauses_while_nothing_changes() -> None:
+    pacer = PlotPacer(max_hz=0.5, visible=0.03)
     t = 0.0
     assert pacer.due(t, [1.5, 3.0], 5.0)  # the first draw
     rng = np.random.default_rng(1)
@@ -61,7 +61,8 @@ def test_pacer_sends_a_visible_change_at_its_rate_and_nothing_else_until_still_s
     assert pacer.due(t, [1.5, 4.5], 5.0)  # ... so it waits for the next slot
     assert not pacer.due(t + 2.5, [1.5, 4.5], 5.0)
     assert pacer.due(t + 2.5, [1.5, 4.5], 10.0)  # the axis changed: a redraw
-    assert pacer.due(t + 2.5 + 30.0, [1.5, 4.5], 10.0)  # nothing new, but still_s passed
+    assert not any(pacer.due(t + 2.5 + k, [1.5, 4.5], 10.0)  # nothing new: paused, however
+                   for k in (30.0, 300.0, 3000.0))               # long
     assert pacer.due(t + 40.0, [1.5, np.nan], 10.0)  # a value appeared / went: visible
     with pytest.raises(ValueError):
         PlotPacer(max_hz=0.0)
@@ -145,40 +146,57 @@ def test_rtt_jitter_a_viewer_could_not_see_sends_no_plot_and_a_visible_change_do
     run(1.0, 3.0)  # the first samples: the plot appears once
     settle(client, marker)
     client.clear()
-    run(25.0, 3.0)  # 25 s of a steady link whose round trip jitters by +-0.04 ms
+    run(25.0, 3.0, jitter=0.2)  # 25 s of a steady link whose round trips jitter by +-0.2 ms
     settle(client, marker)
-    assert updates(client, panel.plot, "data") == []  # 0.04 ms on a 0..5 ms axis: unseen
+    assert updates(client, panel.plot, "data") == []  # 4 % of a 0..5 ms axis: jitter
     run(0.25, 4.2, jitter=0.0)  # p99 up by 1.2 ms: a viewer sees it
     settle(client, marker)
     data = updates(client, panel.plot, "data")
     assert len(data) == 1 and len(data[0]) == 3  # t, p50, p99
     client.clear()
-    run(60.0, 4.2, jitter=0.0)  # a minute of the same: one redraw per PLOT_STILL_S
+    run(60.0, 4.2, jitter=0.0)  # a minute of the same: the plot pauses
     settle(client, marker)
-    assert len(updates(client, panel.plot, "data")) == int(60.0 // hwp.PLOT_STILL_S)
+    assert updates(client, panel.plot, "data") == []
 
 
-def test_readout_counters_every_few_seconds_and_news_at_once(hardware) -> None:
+def test_a_steady_links_readout_stays_put_and_news_and_rate_changes_show_at_once(
+        hardware) -> None:
+    """The readout's counters became rates and its round trips steady figures: a steady
+    100 Hz link whose round trips jitter sends viewers nothing after the rates are known; a
+    lost demand, a stalled reply stream and a slower round trip each show at once."""
     panel, controls, clock, client, marker = hardware
-    panel.refresh()
-    settle(client, marker)
-    client.clear()
-    for _ in range(int(2 * hwp.COUNTERS_S * hwp.REFRESH_HZ)):  # counters only, for 2 periods
-        clock.t += 1.0 / hwp.REFRESH_HZ
-        h = controls.h
-        controls.h = dataclasses.replace(h, sent=h.sent + 25, received=h.received + 25)
-        panel.refresh()
+    rng = np.random.default_rng(5)
+
+    def run(seconds: float, received_per_read: int = 25, p99: float = 3.0) -> list[str]:
+        client.clear()
+        for _ in range(int(seconds * hwp.REFRESH_HZ)):
+            clock.t += 1.0 / hwp.REFRESH_HZ
+            h = controls.h
+            controls.h = dataclasses.replace(
+                h, sent=h.sent + 25 + int(rng.integers(-1, 2)),
+                received=h.received + received_per_read,
+                rtt_ms_p50=1.5 + rng.uniform(-0.2, 0.2), rtt_ms_p99=p99 + rng.uniform(-0.3, 0.3),
+                state_age_ms=float(rng.uniform(0.0, 12.0)))
+            panel.refresh()
+            settle(client, marker)
         settle(client, marker)
-    settle(client, marker)
-    shown = updates(client, panel.readout, "_markdown")
-    assert len(shown) == 2 and f"received {controls.h.received}" in shown[-1]  # at 5 s, 10 s
-    client.clear()
+        return updates(client, panel.readout, "_markdown")
+
+    shown = run(hwp.RATE_WINDOW_S + 1.0)  # the rates become known
+    assert "sent 100/s" in shown[-1] and "received 100/s" in shown[-1], shown[-1]
+    assert run(30.0) == []  # 30 s of a steady link: nothing
     clock.t += 0.25
     controls.h = dataclasses.replace(controls.h, lost=1)  # a lost demand: shown at once
     panel.refresh()
     settle(client, marker)
     shown = updates(client, panel.readout, "_markdown")
     assert len(shown) == 1 and "lost 1" in shown[0]
+    shown = run(1.0, received_per_read=0)  # replies stop: shown within a second ...
+    assert shown and "received 100/s" not in shown[-1], shown
+    shown = run(hwp.RATE_WINDOW_S, received_per_read=0)  # ... and 0 once the window passed
+    assert shown and "received 0/s" in shown[-1], shown
+    shown = run(3.0, p99=6.0)  # the round trip doubles
+    assert shown and ("p99 6." in shown[-1] or "p99 5." in shown[-1]), shown
 
 
 # -- the Control panel's plots and kappa table (soft arm) ---------------------------------------
@@ -209,12 +227,12 @@ def test_error_plot_ignores_a_still_arms_noise_and_follows_a_move() -> None:
     ref = np.array([3.0, -2.0, 1.0, 0.0, 4.0, -1.0])
     t = 0.0
 
-    def run(seconds: float, ref: np.ndarray) -> None:
+    def run(seconds: float, ref: np.ndarray, phase: str = "idle") -> None:
         nonlocal t
         for i in range(int(seconds * 30)):
             t += 1 / 30
             meas = ref + 0.35 * rng.standard_normal(6)  # the simulator's noise (1/m rms)
-            plots.append(t, ref, meas, "idle", 10.0 + 0.3 * rng.standard_normal(),
+            plots.append(t, ref, meas, phase, 10.0 + 0.3 * rng.standard_normal(),
                          0.4 + 0.05 * rng.standard_normal())
             if i % 8 == 0:  # the panel draws at ~4 Hz
                 plots.draw(t)
@@ -229,9 +247,13 @@ def test_error_plot_ignores_a_still_arms_noise_and_follows_a_move() -> None:
     run(1.0, moved)  # a target moves by 2 1/m (drawn at once; its measurement follows)
     moves = plots.error_plot.data_sent() - err0
     assert 1 <= moves <= cp.ERROR_PLOT_HZ * 1.0
-    run(cp.STILL_PLOT_S + 1.0, moved)  # still again: one redraw per STILL_PLOT_S
+    run(60.0, moved)  # still again: the plots pause
+    assert plots.error_plot.data_sent() == err0 + moves
+    assert plots.loop_plot.data_sent() == loop0
+    run(1.0, moved, phase="grasp")  # a task starts (its grey band), nothing moves yet
     assert plots.error_plot.data_sent() == err0 + moves + 1
-    assert plots.loop_plot.data_sent() == loop0 + 1
+    run(1.0, moved, phase="released")  # ... and ends
+    assert plots.error_plot.data_sent() == err0 + moves + 2
 
 
 def test_kappa_table_follows_the_drawn_arm_not_the_noise() -> None:

@@ -20,15 +20,18 @@ only runs when the displayed arm state changes (``ConsoleApp._render_loop`` wait
 display state), which a disarmed arm never produces, so an idle thread refreshes as well when
 ``on_state`` has been silent: a fault on an idle link still shows.
 
-What viewers are sent (a still console should cost them ~nothing): the readout's news (state,
-arming, fault, watchdog, e-stop, losses and errors) at once, its ever-growing counters and round
-trip every ``COUNTERS_S``; the round-trip plot (0..``axis_top`` ms) only when p50 or p99 moved a
-visible amount (``PlotPacer``: 3 % of the axis) at most ``PLOT_HZ``, else every ``PLOT_STILL_S``.
+What viewers are sent (a still console costs them nothing): the readout only when its text
+changes: news (state, arming, fault, watchdog, e-stop, losses and errors) at once, message rates
+instead of ever-growing counters, round trips once they moved past ``RTT_BAND``
+(:mod:`console.panels.common.steady_figures`); the round-trip plot (0..``axis_top`` ms) only when
+p50 or p99 moved a visible amount (``PlotPacer``: ``PLOT_VISIBLE`` of the axis), at most
+``PLOT_HZ``; it pauses while nothing visibly changes.
 """
 
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import threading
 import time
@@ -42,6 +45,7 @@ from console.panels.common.header import Tone
 from console.recording.lab_feed import LinkFeed
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.plot_data import PlotPacer, axis_top, thin
+from console.panels.common.steady_figures import CountRate, SteadyFigure
 from console.core.state import ArmState
 from console.panels.common.events import client_of, target_of
 from hw_bridge.controls import BridgeControls
@@ -56,25 +60,33 @@ REFRESH_HZ = 4.0
 HISTORY = 240  # round-trip samples in the plot (a minute at REFRESH_HZ)
 PLOT_POINTS = 60  # of them drawn (x 3 float64 columns: ~1.4 KB a redraw, to every viewer)
 PLOT_HZ = 0.5  # largest redraw rate of the round-trip plot while it visibly changes
-PLOT_STILL_S = 30.0  # s between redraws of a round-trip plot that shows nothing new
+PLOT_VISIBLE = 0.1  # of the y axis: smaller moves of p50 / p99 are a steady link's jitter
 PLOT_MIN_TOP = 1.0  # ms: the plot's y axis spans at least 0..1 ms
-COUNTERS_S = 5.0  # s between readouts that only count on (sent, received, round trip)
+RTT_BAND = (0.25, 0.1)  # a shown round trip follows the measured one past 25 % and 0.1 ms
+RATE_WINDOW_S = 5.0  # s: message rates are counted over this long
+RATE_BAND = (0.1, 2.0)  # a shown rate follows the counted one past 10 % and 2/s
+LATE_STATE_MS = 100.0  # the readout tells the last STATE's age once it is this old
 
 
-def format_health(h: LinkHealth | None) -> str:
-    """Markdown readout of the link health."""
+def format_health(h: LinkHealth | None, sent_hz: float | None = None,
+                  received_hz: float | None = None) -> str:
+    """Markdown readout of the link health, with the message rates (None: not known yet)."""
     if h is None:
         return "**Link:** not connected"
 
     def ms(v: float | None) -> str:
         return "–" if v is None else f"{v:.2f} ms"
 
-    age = "" if h.state_age_ms is None else f" · last STATE {h.state_age_ms:.0f} ms ago"
+    def hz(v: float | None) -> str:
+        return "–/s" if v is None else f"{v:.0f}/s"
+
+    late = h.state_age_ms is not None and h.state_age_ms >= LATE_STATE_MS
+    age = f" · last STATE {h.state_age_ms:.0f} ms ago" if late else ""
     lines = [
         f"**Link:** {h.state} · `{h.port}` · {'ARMED' if h.armed else 'disarmed'}",
         f"round trip p50 {ms(h.rtt_ms_p50)} · p99 {ms(h.rtt_ms_p99)}{age}",
-        (f"sent {h.sent} · received {h.received} · lost {h.lost} · CRC errors {h.crc_errors} "
-         f"· bad frames {h.bad_frames} · device rx errors {h.device_rx_errors}"),
+        (f"sent {hz(sent_hz)} · received {hz(received_hz)} · lost {h.lost} · CRC errors "
+         f"{h.crc_errors} · bad frames {h.bad_frames} · device rx errors {h.device_rx_errors}"),
         (f"watchdog {'**TRIPPED**' if h.watchdog_tripped else 'ok'} · "
          f"e-stop {'**PRESSED**' if h.estop else 'released'}"),
     ]
@@ -83,13 +95,27 @@ def format_health(h: LinkHealth | None) -> str:
     return "  \n".join(lines)
 
 
-def health_news(h: LinkHealth | None) -> Any:
-    """What of the health a person must see at once (everything but the counters that grow on
-    every read and the round trip's jitter)."""
-    if h is None:
-        return None
-    return (h.state, h.armed, h.fault, h.watchdog_tripped, h.estop, h.port, h.lost,
-            h.crc_errors, h.bad_frames, h.device_rx_errors)
+class HealthReadout:
+    """The readout's text for successive health snapshots, steady while the link is (pure, no
+    viser): round trips as :class:`SteadyFigure` (``RTT_BAND``), the sent and received counters
+    as rates over ``RATE_WINDOW_S`` (:class:`CountRate`; the counters arrive in batches: a 100 Hz
+    link read over 2 s measured 94-105/s), shown once they move past ``RATE_BAND``; the rest as
+    read.
+    """
+
+    def __init__(self) -> None:
+        self._p50, self._p99 = SteadyFigure(*RTT_BAND), SteadyFigure(*RTT_BAND)
+        self._sent, self._received = CountRate(RATE_WINDOW_S), CountRate(RATE_WINDOW_S)
+        self._sent_hz, self._received_hz = SteadyFigure(*RATE_BAND), SteadyFigure(*RATE_BAND)
+
+    def text(self, now: float, h: LinkHealth | None) -> str:
+        """The readout at ``now`` (the caller's clock) for ``h``."""
+        if h is None:
+            return format_health(None)
+        shown = dataclasses.replace(h, rtt_ms_p50=self._p50.shown(h.rtt_ms_p50),
+                                    rtt_ms_p99=self._p99.shown(h.rtt_ms_p99))
+        return format_health(shown, self._sent_hz.shown(self._sent.rate(now, h.sent)),
+                             self._received_hz.shown(self._received.rate(now, h.received)))
 
 
 def header_link(kind: str | None, h: LinkHealth | None) -> tuple[str, Tone | None]:
@@ -207,10 +233,9 @@ class HardwarePanel(Panel):
         self.clock = time.monotonic  # what the panel's pacing reads (tests move it by hand)
         self._t0 = self.clock()
         self._samples: collections.deque = collections.deque(maxlen=HISTORY)
-        self._pacer = PlotPacer(PLOT_HZ, still_s=PLOT_STILL_S)
+        self._pacer = PlotPacer(PLOT_HZ, visible=PLOT_VISIBLE)
         self._top = PLOT_MIN_TOP
-        self._readout_key: Any = ()
-        self._readout_at = 0.0
+        self._readout_text = HealthReadout()
         self._received = -1
         self._refreshed_at = 0.0
         self._fill_port = not default_port  # once: the path the loop reports (soft-arm pty)
@@ -372,13 +397,8 @@ class HardwarePanel(Panel):
             self.disarm_btn.disabled = ctl is None or state != "active"
             if ctl is None:
                 return
-            # Counters change on every refresh: every COUNTERS_S is readable (and costs viewers
-            # little); news (state, arming, fault, watchdog, e-stop, losses) is shown at once.
-            now = self.clock()
-            key = health_news(h)
-            if key != self._readout_key or now - self._readout_at >= COUNTERS_S:
-                self._readout_key, self._readout_at = key, now
-                self.readout.content = format_health(h)
+            # (a steady link's text stays the same: viewers are sent nothing)
+            self.readout.content = self._readout_text.text(self.clock(), h)
             if h is None:
                 return
             if self._fill_port and h.port:
@@ -409,8 +429,8 @@ class HardwarePanel(Panel):
             return  # the plot is hidden until it has a line to show
         data = np.asarray(self._samples, dtype=float)
         top = axis_top(data[:, 1:], PLOT_MIN_TOP)
-        # A steady link's plot costs each viewer a redraw every PLOT_STILL_S; a jittering
-        # one at most PLOT_HZ, and only for jitter a person could see on the axis.
+        # A steady link's plot pauses; a jittering one is redrawn at most PLOT_HZ, and only for
+        # moves a person could tell from jitter on the axis.
         if not self._pacer.due(now, (h.rtt_ms_p50, p99), top):
             return
         if top != self._top:

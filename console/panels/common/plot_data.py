@@ -7,8 +7,9 @@ resolves), though viser 1.1.1 sends a uPlot's columns as float64 (8 bytes a valu
 they are, uncompressed.
 
 :class:`PlotPacer`: when a plot is worth re-sending at all, a dead band on what a person could
-see change (a fraction of the y axis, :func:`axis_top`), at most ``max_hz`` while it changes and
-once every ``still_s`` while it does not. viser does not tell the server which tab or folder a
+see change (a fraction of the y axis, :func:`axis_top`), at most ``max_hz`` while it changes;
+it pauses while nothing visibly changes (issue 29: a still console costs viewers nothing; its
+next redraw shows the whole history again). viser does not tell the server which tab or folder a
 browser has open (and each viewer may have another one open), so a plot is paced, never
 skipped for being hidden.
 """
@@ -59,21 +60,18 @@ class PlotPacer:
 
     :meth:`due` is true when the newest values moved by more than ``visible`` of the y axis
     (0.03: ~4 px of a 150 px plot) since the values last sent, or the axis changed; at most
-    ``max_hz`` times a second while they keep moving (a batch of new samples each time); and,
-    while nothing visibly changes, once every ``still_s`` (so the time axis does not look
-    stopped). Pure: the caller passes the time.
+    ``max_hz`` times a second while they keep moving (a batch of new samples each time). While
+    nothing visibly changes the plot pauses. Pure: the caller passes the time.
 
     Args:
         max_hz: Largest redraw rate while the plot changes.
         visible: Smallest change that counts, as a fraction of the axis top.
-        still_s: Longest time without a redraw while new samples arrive.
     """
 
-    def __init__(self, max_hz: float = 2.0, visible: float = 0.03, still_s: float = 30.0
-                 ) -> None:
-        if max_hz <= 0 or visible < 0 or still_s <= 0:
-            raise ValueError("max_hz and still_s must be > 0 and visible >= 0")
-        self.max_hz, self.visible, self.still_s = max_hz, visible, still_s
+    def __init__(self, max_hz: float = 2.0, visible: float = 0.03) -> None:
+        if max_hz <= 0 or visible < 0:
+            raise ValueError("max_hz must be > 0 and visible >= 0")
+        self.max_hz, self.visible = max_hz, visible
         self._shown: npt.NDArray[np.float64] | None = None
         self._top = math.nan
         self._at = -math.inf
@@ -86,7 +84,6 @@ class PlotPacer:
             return False
         last = self._shown
         changed = (last is None or last.shape != new.shape or top != self._top
-                   or now - self._at >= self.still_s
                    or not np.allclose(new, last, rtol=0.0, atol=self.visible * top,
                                       equal_nan=True))
         if changed:

@@ -38,6 +38,7 @@ from console.recording.lab_feed import ControlFeed
 from console.core.arm_status import loop_trouble
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.loop_header import LoopSource, news_of
+from console.panels.common.steady_figures import SteadyFigure
 from console.panels.soft_arm.control_execute import ExecuteControls
 from console.panels.soft_arm.control_plots import ControlPlots
 from console.panels.soft_arm.control_progress import ProgressControls
@@ -51,6 +52,7 @@ from console.panels.soft_arm.control_text import (
     header_phase,
     kappa_html,
     link_line,
+    loop_line,
     state_html,
     table_point,
 )
@@ -65,7 +67,8 @@ PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can dr
 PUMP_POLL_S = 0.004  # how often the pump looks for a new view
 PLOT_HZ = 4.0
 TABLE_HZ = 2.0  # the kappa table follows the drawn arm at most at this rate
-COUNTERS_HZ = 0.2  # link and loop lines (their counters change on every refresh; news at once)
+RTT_BAND = (0.25, 0.1)  # the link line's round trip follows the measured one past 25 % and 0.1 ms
+LOOP_BAND = (0.5, 0.1)  # the loop line's p99s follow the measured ones past 50 % and 0.1 ms
 HISTORY_S = 10.0
 STATS_TICKS = 1000
 
@@ -137,8 +140,10 @@ class ControlPanel(Panel):
         self._plot_at = 0.0
         self._table_at = 0.0
         self._table_key: Any = None
-        self._counters_at = 0.0
-        self._link_key: Any = None
+        # What the link and loop lines show of jittering measurements (a still console's
+        # lines then stay put and cost viewers nothing):
+        self._rtt_p99 = SteadyFigure(*RTT_BAND)
+        self._period_p99, self._work_p99 = SteadyFigure(*LOOP_BAND), SteadyFigure(*LOOP_BAND)
         self._reported: ControlView | None = None  # the view last reported to the store
         self._last_fault: str | None = None
         self._feed = ControlFeed(  # phase, timing, faults (+ link health) -> lab data
@@ -281,7 +286,6 @@ class ControlPanel(Panel):
                 "now.")
             # What the last view said is no longer true: never leave ARMED or active showing.
             self.link_md.content = f"<small>link: unknown ({html.escape(died or trouble)})</small>"
-            self._link_key = None
             self.loop_md.content = "<small>loop: not running</small>" if died else \
                 f"<small>loop: {html.escape(trouble)}</small>"
             for btn in (self.arm_btn, self.disarm_btn, self.execute.execute_btn, self.row.button):
@@ -313,25 +317,16 @@ class ControlPanel(Panel):
         fault = fault_markdown(view.fault)
         self.fault_md.content = fault
         self.fault_md.visible = bool(fault)
-        now = time.monotonic()
-        # Counters (ticks, round trips) change on every refresh: once a second is readable;
-        # a change of the link's state, arming or losses is shown at once.
+        # (viser sends a text only when it changed: a steady loop's lines cost nothing)
         h = view.link
-        link_key = (view.device, None if h is None else (h.state, h.armed, h.lost))
-        counters = now - self._counters_at >= 1.0 / COUNTERS_HZ
-        if counters or link_key != self._link_key:
-            self._link_key = link_key
-            self.link_md.content = link_line(view)
+        self.link_md.content = link_line(
+            view, self._rtt_p99.shown(None if h is None else h.rtt_ms_p99))
         if len(self.plots.hist) < 2:  # else the table is redrawn with the plot (_draw_plots)
             self.kappa_md.content = kappa_html(view)
-        if counters:
-            self._counters_at = now
-            st = view.stats
-            self.loop_md.content = (f"<small>loop (own process, {view.scheduling}): {st.ticks} "
-                                    f"ticks · overruns {st.overruns} · last "
-                                    f"{STATS_TICKS // 100} s: period error p99 "
-                                    f"{st.period_error_ms_p99:.3f} ms · tick work p99 "
-                                    f"{st.work_ms_p99:.3f} ms</small>")
+        st = view.stats
+        self.loop_md.content = loop_line(
+            view.scheduling, st.ticks, st.overruns, STATS_TICKS / 100.0,
+            self._period_p99.shown(st.period_error_ms_p99), self._work_p99.shown(st.work_ms_p99))
         self._draw_scene(view)
         self._draw_plots()
 

@@ -11,8 +11,8 @@ Issue 15 (a still console costs viewers ~nothing): each redraw re-sends a plot w
 to every viewer), so the error plot is redrawn only when a target moved or the measured
 curvature, averaged over the last ``MEAS_AVERAGE_S`` (the simulator's noise then stays well
 inside ``MEAS_BAND``), moved; the loop-timing plot (0..``axis_top`` ms) only when the period
-or tick work, averaged the same way, moved a visible amount (``PlotPacer``). Both at least every
-``STILL_PLOT_S`` while samples arrive.
+or tick work, averaged the same way, moved a visible amount (``PlotPacer``). Both pause while
+nothing moves (issue 29: a still console costs viewers nothing).
 """
 
 from __future__ import annotations
@@ -36,9 +36,8 @@ ERROR_PLOT_POINTS = 60
 ERROR_PLOT_HZ = 2.0
 MIN_ERROR_RANGE = 5.0  # 1/m: the error axis spans at least 0..5 (a still arm's noise: <= 1)
 PLOT_BAND = 0.05  # 1/m: the error plot is redrawn when a target moved more than this,
-MEAS_BAND = 1.0  # 1/m: ... a measured curvature (averaged) more than this,
+MEAS_BAND = 1.0  # 1/m: ... or a measured curvature (averaged) more than this
 MEAS_AVERAGE_S = 0.5  # s: the average (the sim's noise, <= 0.35 rms per sample, -> ~0.1)
-STILL_PLOT_S = 30.0  # s: ... or this long after the last redraw
 LOOP_PLOT_HZ = 0.2  # loop timing is noise on a still arm too: at most every 5 s
 LOOP_PLOT_POINTS = 60
 LOOP_MIN_TOP = 20.0  # ms: the loop plot's axis spans at least 0..20 ms (period 10 ms)
@@ -90,10 +89,10 @@ class ControlPlots:
             scales=self._loop_scales(LOOP_MIN_TOP),
             axes=(uplot.Axis(label="t (s)"), uplot.Axis(label="ms", scale="ms")),
             title="Control loop (100 Hz)", aspect=2.0)
-        self._plotted: tuple[np.ndarray, np.ndarray] | None = None
+        self._plotted: tuple[np.ndarray, np.ndarray, float] | None = None
         self._plotted_at = 0.0
         self.redraws = 0  # error plot redraws so far (the κ table follows them while disarmed)
-        self._loop_pacer = PlotPacer(LOOP_PLOT_HZ, still_s=STILL_PLOT_S)
+        self._loop_pacer = PlotPacer(LOOP_PLOT_HZ)
         self._loop_top = LOOP_MIN_TOP
 
     @staticmethod
@@ -125,13 +124,14 @@ class ControlPlots:
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a segment never measured: NaN
             meas_now = np.nanmean(meas[recent], axis=0)
-        if now - self._plotted_at >= 1.0 / ERROR_PLOT_HZ and self._moved(ref[-1], meas_now, now):
+        band = np.array([h[3] for h in hist])
+        if (now - self._plotted_at >= 1.0 / ERROR_PLOT_HZ
+                and self._moved(ref[-1], meas_now, band[-1], now)):
             err = tracking_error(ref, meas)
             top = error_range(err)
             if top != self._top:
                 self._top = top
                 self.error_plot.scales = self._scales()
-            band = np.array([h[3] for h in hist])
             self.error_plot.data = thin([t, *err.T, band], ERROR_PLOT_POINTS)
             self.redraws += 1
         period = np.array([h[4] for h in hist])
@@ -145,15 +145,14 @@ class ControlPlots:
                 self.loop_plot.scales = self._loop_scales(top)
             self.loop_plot.data = thin((t, period, work), LOOP_PLOT_POINTS)
 
-    def _moved(self, ref: np.ndarray, meas: np.ndarray, now: float) -> bool:
-        """Whether the curvatures moved enough to redraw the plot: a target moved
-        by PLOT_BAND, a measurement (averaged) by MEAS_BAND, or STILL_PLOT_S passed. A still
-        arm's noise then costs a redraw every STILL_PLOT_S, not ERROR_PLOT_HZ of them."""
+    def _moved(self, ref: np.ndarray, meas: np.ndarray, task: float, now: float) -> bool:
+        """Whether the plot is worth redrawing: a target moved by PLOT_BAND, a measurement
+        (averaged) by MEAS_BAND, or a task started or ended (its grey band). A still arm's
+        noise then costs no redraw."""
         last = self._plotted
-        moved = (last is None or last[0].shape != ref.shape
-                 or now - self._plotted_at >= STILL_PLOT_S
+        moved = (last is None or last[0].shape != ref.shape or task != last[2]
                  or not np.allclose(ref, last[0], rtol=0.0, atol=PLOT_BAND, equal_nan=True)
                  or not np.allclose(meas, last[1], rtol=0.0, atol=MEAS_BAND, equal_nan=True))
         if moved:
-            self._plotted, self._plotted_at = (ref.copy(), meas.copy()), now
+            self._plotted, self._plotted_at = (ref.copy(), meas.copy(), task), now
         return moved

@@ -160,8 +160,10 @@ def fault_markdown(fault: str | None) -> str:
             "the operator must press **Arm** again (it reconnects the link first).")
 
 
-def link_line(view: ControlView) -> str:
-    """One line of link health: device, lifecycle state, armed, round trip p99, lost."""
+def link_line(view: ControlView, rtt_ms_p99: float | None = None) -> str:
+    """One line of link health: device, lifecycle state, armed, round trip p99 (``rtt_ms_p99``
+    as shown, a :class:`~console.panels.common.steady_figures.SteadyFigure`; None: the view's),
+    lost."""
     name = DEVICE_NAMES.get(view.device, view.device)
     h = view.link
     if view.device == "sim" and (h is None or h.port == "sim://"):
@@ -169,9 +171,25 @@ def link_line(view: ControlView) -> str:
     if h is None:
         return f"<small>link: {name} · starting…</small>"
     where = f" {h.port}" if view.device == "port" else ""
-    rtt = "–" if h.rtt_ms_p99 is None else f"{h.rtt_ms_p99:.2f} ms"
+    p99 = h.rtt_ms_p99 if rtt_ms_p99 is None else rtt_ms_p99
+    rtt = "–" if p99 is None else f"{p99:.2f} ms"
     return (f'<small data-testid="control-link">link: {name}{where} · {h.state} · '
             f"{'ARMED' if h.armed else 'disarmed'} · round trip p99 {rtt} · lost {h.lost}"
+            "</small>")
+
+
+def loop_line(scheduling: str, ticks: int, overruns: int, window_s: float,
+              period_error_ms_p99: float | None, work_ms_p99: float | None) -> str:
+    """One line of loop health: where it runs, for how long (whole minutes of 100 Hz ticks, so
+    the line stays put while the loop runs steadily), overruns, and the last ``window_s``'s
+    p99 period error and tick work (as shown)."""
+
+    def ms(v: float | None) -> str:
+        return "–" if v is None else f"{v:.2f} ms"
+
+    return (f"<small>loop (own process, {html.escape(scheduling)}): "
+            f"{ticks // 6000} min of ticks · overruns {overruns} · last {window_s:.0f} s: "
+            f"period error p99 {ms(period_error_ms_p99)} · tick work p99 {ms(work_ms_p99)}"
             "</small>")
 
 
