@@ -113,6 +113,8 @@ def main() -> int:
     p.add_argument("--warmup", type=float, default=3.0)
     p.add_argument("--move", action="store_true", help="trials / demo motion instead of still")
     p.add_argument("--data-dir", default="/tmp/viewer_messages")
+    p.add_argument("--texts", action="store_true",
+                   help="also print every text (markdown, HTML) a viewer was sent, by source")
     p.add_argument("--band", choices=("default", "still-only"), default="default",
                    help="the arm view's dead band: as shipped, or without its moving band")
     a = p.parse_args()
@@ -185,6 +187,11 @@ def main() -> int:
         for key, n in sorted(count.items(), key=lambda kv: -share[kv[0]]):
             print(f"{n / a.seconds:7.2f} {size[key] / a.seconds:8.0f} "
                   f"{share[key] / a.seconds:8.0f}  {key}")
+        if a.texts:  # what changed in them, to see why a still console re-sent a text
+            for m, _, _ in sized:
+                for prop, value in m.get("updates", {}).items():
+                    if prop in ("_markdown", "content") and isinstance(value, str):
+                        print(f"  {source(m, names)}: {value}")
     finally:
         stop.set()
         app.stop()
