@@ -208,6 +208,7 @@ def ws_viewer(url: str, stop: threading.Event, counts: list[list[int]], i: int) 
     import msgspec
     import viser
     from viser import _messages
+    from websockets.exceptions import ConnectionClosed
     from websockets.sync.client import connect
 
     cam = _messages.ViewerCameraMessage((1.0, 0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 1.0, 0.01, 100.0,
@@ -221,6 +222,8 @@ def ws_viewer(url: str, stop: threading.Event, counts: list[list[int]], i: int) 
                 counts[i][1] += 1
             except TimeoutError:
                 continue
+            except ConnectionClosed:  # the console stopped at the end of its phase
+                return
 
 
 class Console:
