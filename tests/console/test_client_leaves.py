@@ -12,6 +12,7 @@ Connection floods as a whole: ``benchmarks/connection_flood.py``.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Iterator
 from typing import Any
@@ -19,6 +20,7 @@ from typing import Any
 import pytest
 import viser
 
+from console.panels.common import session as session_mod
 from console.panels.common.session import SessionPanel
 from console.playback.replay import ReplayPlayer
 from core.robots import load
@@ -49,6 +51,7 @@ def test_a_browser_that_left_before_its_set_up_ran_gets_nothing_built(app: Any) 
              and browser.client_id not in app.viewer_line._lines, what="its teardown")
     # Its set-up runs late (as from viser's thread pool after the disconnect callbacks):
     session._on_connect(handle)
+    session.build_due(math.inf)  # (its widgets were due at once)
     app.viewer_line._on_connect(handle)
     assert browser.client_id not in session.clients and len(session.player) == 0
     assert browser.client_id not in app.viewer_line._lines
@@ -84,3 +87,42 @@ def test_the_replay_players_thread_ends_with_the_last_session_and_starts_with_a_
         assert len(replay_threads() - others - ours) == 1
     finally:
         player.stop()
+
+
+def test_a_socket_that_leaves_before_build_after_s_costs_no_widgets_and_one_that_stays_gets_them(
+        app: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 32: a connection flood's sockets (open, hello, close) each got the Session panel's
+    per-browser widgets built, after they had left (viser warned for each). Now a browser's
+    widgets are due BUILD_AFTER_S after it connected (the panel's clock, frozen here), and a
+    batch of them refreshes the role lines once."""
+    server, session = app.server, app.panel(SessionPanel)
+    session._quit.set()  # the test builds by hand
+    session._wake.set()
+    assert session._builder is not None
+    session._builder.join(2.0)
+    clock = [session.clock()]
+    session.clock = lambda: clock[0]
+    built: list[int] = []
+    build = session._build_client
+    monkeypatch.setattr(session, "_build_client",
+                        lambda client, access: (built.append(client.client_id),
+                                                build(client, access)))
+    refreshes: list[int] = []
+    refresh, me = session.refresh, threading.current_thread()
+    monkeypatch.setattr(session, "refresh", lambda: (  # (this thread's: build_due's)
+        refreshes.append(1) if threading.current_thread() is me else None, refresh()))
+    flood = [RawClient(server) for _ in range(5)]
+    stays = [RawClient(server) for _ in range(3)]
+    for browser in flood:
+        browser.close()
+    wait_for(lambda: not any(b.client_id in server.get_clients() or b.client_id in
+                             session._pending for b in flood),
+             what="the flood's sockets dropped (their disconnect callbacks ran)")
+    assert session.build_due(clock[0] + session_mod.BUILD_AFTER_S - 0.01) is not None
+    assert built == [] and session.clients == {}  # not due yet
+    clock[0] += session_mod.BUILD_AFTER_S
+    assert session.build_due(clock[0]) is None  # nobody waits any more
+    assert sorted(built) == sorted(b.client_id for b in stays)  # the flood: nothing built
+    assert set(session.clients) == {b.client_id for b in stays} and len(refreshes) == 1
+    for browser in stays:
+        browser.close()

@@ -4,10 +4,13 @@ Shared widgets (every browser sees the same): who holds control (shown in the he
 ``console.panels.common.header``), recording start/stop (operator only) and "Export scene (HTML)" (anyone: a
 plan to hand to students).
 
-Per-browser widgets (``client.gui``, added on connect inside this panel's folder, so what one
-browser types is never shown to another -- the operator token least of all): the user's role,
-name, the token field, Take control / Release control, and the replay section
-(``console.playback.replay``).
+Per-browser widgets (``client.gui``, added inside this panel's folder, so what one browser types
+is never shown to another -- the operator token least of all): the user's role, name, the token
+field, Take control / Release control, and the replay section (``console.playback.replay``).
+They are built by the panel's own thread once a browser has stayed ``BUILD_AFTER_S``, a batch
+at a time with one refresh of the role lines: a socket that connects and leaves at once (a
+connection flood: 1000 in 8 s) costs no widgets, and their allocations no longer spread over
+memory the process then keeps (issue 32).
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ from console.panels.common.events import connected
 from console.playback.replay import ReplayPlayer, ReplaySession
 
 log = logging.getLogger(__name__)
+
+BUILD_AFTER_S = 0.5  # s a browser stays before its own widgets are built
 
 
 class _ClientWidgets:
@@ -52,6 +57,11 @@ class SessionPanel(Panel):
         self._build_lock = threading.Lock()
         self._ready = threading.Event()  # set once build() has left the folder's `with` block
         self.clients: dict[int, _ClientWidgets] = {}
+        self.clock = time.monotonic  # when browsers are due (tests move it by hand)
+        self._pending: dict[int, tuple[float, viser.ClientHandle]] = {}  # id -> (due, client)
+        self._wake = threading.Event()
+        self._quit = threading.Event()
+        self._builder: threading.Thread | None = None  # started by after_build
         self.player = ReplayPlayer()
         self.demo_btn = None
         if self.app.services.demo is not None:
@@ -73,29 +83,67 @@ class SessionPanel(Panel):
 
     def after_build(self) -> None:
         self._ready.set()
-        for client in list(self.app.server.get_clients().values()):
-            self._on_connect(client)  # browsers that connected before the panels were built
+        built = [self._build_now(client)  # browsers that connected before the panels were built
+                 for client in list(self.app.server.get_clients().values())]
+        if any(built):
+            self.refresh()
+        self._builder = threading.Thread(target=self._builder_loop, name="session-widgets",
+                                         daemon=True)
+        self._builder.start()
 
     # -- per-client widgets ------------------------------------------------------------------
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        access = self.app.access
-        # A browser connecting while build() runs must wait: build() is inside the folder's
-        # `with` block, which _build_client enters too (viser allows one at a time).
+        """(viser's thread pool) Due in BUILD_AFTER_S, if it stays."""
+        with self._lock:
+            self._pending[client.client_id] = (self.clock() + BUILD_AFTER_S, client)
+        self._wake.set()
+
+    def _builder_loop(self) -> None:
+        wait: float | None = None
+        while not self._quit.is_set():
+            self._wake.wait(wait)
+            self._wake.clear()
+            if self._quit.is_set():
+                return
+            try:
+                due = self.build_due(self.clock())
+            except Exception:  # a browser's widgets must not end the thread
+                log.exception("building a browser's Session widgets failed")
+                due = None
+            wait = None if due is None else max(0.01, due - self.clock())
+
+    def build_due(self, now: float) -> float | None:
+        """Build the widgets of the browsers due by ``now`` that are still connected, refresh
+        the role lines once for them; when the next browser is due (None: none waits)."""
+        with self._lock:
+            due = [client for at, client in self._pending.values() if at <= now]
+            for client in due:
+                del self._pending[client.client_id]
+            later = min((at for at, _ in self._pending.values()), default=None)
+        built = [self._build_now(client) for client in due]
+        if any(built):
+            self.refresh()
+        return later
+
+    def _build_now(self, client: viser.ClientHandle) -> bool:
+        """Build ``client``'s widgets unless built or gone; whether it built them."""
+        # build() runs inside the folder's `with` block, which _build_client enters too (viser
+        # allows one at a time): wait for it.
         self._ready.wait(60.0)
         server = self.app.server
         with self._build_lock:
             if client.client_id in self.clients or not connected(server, client):
-                return  # already built (connected while the panel was being built), or gone
+                return False  # already built, or gone
             try:
-                self._build_client(client, access)
+                self._build_client(client, self.app.access)
             except KeyError:  # viser removed the browser's containers: it left mid-build
                 if connected(server, client):
                     raise
             if not connected(server, client):  # it left meanwhile: its disconnect callback
                 self._on_disconnect(client)  # may have found nothing yet to drop
-                return
-        self.refresh()
+                return False
+        return True
 
     def _build_client(self, client: viser.ClientHandle, access: Any) -> None:
         gui = client.gui
@@ -120,6 +168,7 @@ class SessionPanel(Panel):
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
         with self._lock:
+            self._pending.pop(client.client_id, None)
             self.clients.pop(client.client_id, None)
         self.player.remove(client.client_id)
         self.refresh()
@@ -229,5 +278,9 @@ class SessionPanel(Panel):
                 log.debug("role update for client %s failed", cid)
 
     def close(self) -> None:
+        self._quit.set()
+        self._wake.set()
+        if self._builder is not None and self._builder is not threading.current_thread():
+            self._builder.join(2.0)
         self.player.stop()
         super().close()
