@@ -87,22 +87,30 @@ _RECTS = """() => {
 }"""
 
 
-def scene_points(app: Any) -> np.ndarray:
-    """World points (m) of what must stay in view: the arm's drawn surfaces at its shown pose;
-    for the soft arm also each object's rim and the plan's approach circles and waypoints."""
+def scene_parts(app: Any) -> dict[str, np.ndarray]:
+    """World points (m) of what must stay in view, by part: the arm's drawn surfaces at its
+    shown pose; for the soft arm also each object's rim and the plan's approach circles and
+    waypoints."""
     g = app.view.geometry(np.asarray(app.store.display.q))
-    parts = [g[k] for k in ("body", "gripper", "backbone", "platforms") if k in g]
-    parts += list(g.get("racks", []))
+    parts = {k: g[k] for k in ("body", "gripper", "backbone", "platforms") if k in g}
+    parts.update({f"rack {i + 1}": r for i, r in enumerate(g.get("racks", []))})
     if app.grasp_scene is not None:
         a = np.linspace(0.0, 2 * math.pi, 24)
         for o in app.grasp_session.view().objects:
-            parts.append(np.stack([o.x + o.r * np.cos(a), o.y + o.r * np.sin(a), 0 * a], -1))
+            parts[f"object {o.name}"] = np.stack([o.x + o.r * np.cos(a), o.y + o.r * np.sin(a),
+                                                  0 * a], -1)
         plan = app.grasp_scene.plan_scene
         assert plan.circles.visible, "no approach circles drawn"
-        parts += [plan.circles.points, plan.palms.points]               # circles, waypoints
+        parts["approach circles"] = plan.circles.points
+        parts["waypoints"] = plan.palms.points
         if plan.circles_failed.visible:
-            parts.append(plan.circles_failed.points)
-    return np.concatenate([np.asarray(p, float).reshape(-1, 3) for p in parts])
+            parts["failed circles"] = plan.circles_failed.points
+    return {k: np.asarray(v, float).reshape(-1, 3) for k, v in parts.items()}
+
+
+def scene_points(app: Any) -> np.ndarray:
+    """All of :func:`scene_parts` in one array."""
+    return np.concatenate(list(scene_parts(app).values()))
 
 
 def on_page(camera: Any, points: np.ndarray, canvas: list[float]) -> tuple[float, ...]:
@@ -152,8 +160,15 @@ def arm_in_view(page: Any, app: Any, size: str) -> str | None:
     where = f"{size}: the arm at {[round(v) for v in box]}"
     if not (box[0] >= canvas[0] and box[1] >= canvas[1] and box[2] <= canvas[2]
             and box[3] <= canvas[3]):
-        return (f"{where} is not all in the 3D view {[round(v) for v in canvas]}; "
-                f"{_framing(app, clients[0])}")
+        outside = []  # which parts, where (page px) and their world extent (mm)
+        for name, pts in scene_parts(app).items():
+            b = on_page(camera, pts, canvas)
+            if b[0] < canvas[0] or b[1] < canvas[1] or b[2] > canvas[2] or b[3] > canvas[3]:
+                lo, hi = (np.round(1e3 * pts.min(0)).tolist(), np.round(1e3 * pts.max(0)).tolist())
+                outside.append(f"{name} at {[round(v) for v in b]} (x, y, z mm {lo}..{hi})")
+        return (f"{where} is not all in the 3D view {[round(v) for v in canvas]}: "
+                f"{'; '.join(outside)}; camera at "
+                f"{np.round(np.asarray(camera.position), 3).tolist()}; {_framing(app, clients[0])}")
     if box[0] < panel[2] and panel[0] < box[2] and box[1] < panel[3] and panel[1] < box[3]:
         return f"{where} is behind the panel {[round(v) for v in panel]}"
     return None
