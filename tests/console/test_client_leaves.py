@@ -126,3 +126,30 @@ def test_a_socket_that_leaves_before_build_after_s_costs_no_widgets_and_one_that
     assert set(session.clients) == {b.client_id for b in stays} and len(refreshes) == 1
     for browser in stays:
         browser.close()
+
+
+def test_a_browser_whose_widgets_fail_to_build_costs_the_others_of_its_batch_nothing(
+        app: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    server, session = app.server, app.panel(SessionPanel)
+    session._quit.set()  # the test builds by hand
+    session._wake.set()
+    assert session._builder is not None
+    session._builder.join(2.0)
+    browsers = [RawClient(server) for _ in range(3)]
+    wait_for(lambda: all(b.client_id in session._pending for b in browsers),
+             what="three browsers waiting")
+    bad = browsers[1].client_id
+    build = session._build_client
+
+    def build_or_fail(client: Any, access: Any) -> None:
+        if client.client_id == bad:
+            raise RuntimeError("a widget could not be built")
+        build(client, access)
+
+    monkeypatch.setattr(session, "_build_client", build_or_fail)
+    assert session.build_due(math.inf) is None
+    assert set(session.clients) == {browsers[0].client_id, browsers[2].client_id}
+    assert any("building the Session widgets of browser" in r.getMessage()
+               for r in caplog.records)
+    for browser in browsers:
+        browser.close()

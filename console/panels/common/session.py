@@ -108,9 +108,9 @@ class SessionPanel(Panel):
                 return
             try:
                 due = self.build_due(self.clock())
-            except Exception:  # a browser's widgets must not end the thread
-                log.exception("building a browser's Session widgets failed")
-                due = None
+            except Exception:  # (the role lines' refresh) must not end the thread
+                log.exception("refreshing the Session panel failed")
+                due = self.clock() + BUILD_AFTER_S  # those still waiting: look again
             wait = None if due is None else max(0.01, due - self.clock())
 
     def build_due(self, now: float) -> float | None:
@@ -121,8 +121,14 @@ class SessionPanel(Panel):
             for client in due:
                 del self._pending[client.client_id]
             later = min((at for at, _ in self._pending.values()), default=None)
-        built = [self._build_now(client) for client in due]
-        if any(built):
+        built = False
+        for client in due:
+            try:
+                built = self._build_now(client) or built
+            except Exception:  # one browser's widgets must not cost the others theirs
+                log.exception("building the Session widgets of browser %s failed",
+                              client.client_id)
+        if built:
             self.refresh()
         return later
 
