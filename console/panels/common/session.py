@@ -32,7 +32,7 @@ from console.playback.replay import ReplayPlayer, ReplaySession
 
 log = logging.getLogger(__name__)
 
-BUILD_AFTER_S = 0.5  # s a browser stays before its own widgets are built
+BUILD_AFTER_S = 0.2  # s a browser stays before its own widgets are built (a flood: 0.5 s, the same)
 
 
 class _ClientWidgets:
