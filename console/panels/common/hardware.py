@@ -45,7 +45,7 @@ from console.panels.common.header import Tone
 from console.recording.lab_feed import LinkFeed
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.plot_data import PlotPacer, axis_top, thin
-from console.panels.common.steady_figures import CountRate, SteadyFigure
+from console.panels.common.steady_figures import RTT_BAND, CountRate, SteadyFigure
 from console.core.state import ArmState
 from console.panels.common.events import client_of, target_of
 from hw_bridge.controls import BridgeControls
@@ -62,7 +62,6 @@ PLOT_POINTS = 60  # of them drawn (x 3 float64 columns: ~1.4 KB a redraw, to eve
 PLOT_HZ = 0.5  # largest redraw rate of the round-trip plot while it visibly changes
 PLOT_VISIBLE = 0.1  # of the y axis: smaller moves of p50 / p99 are a steady link's jitter
 PLOT_MIN_TOP = 1.0  # ms: the plot's y axis spans at least 0..1 ms
-RTT_BAND = (0.25, 0.1)  # a shown round trip follows the measured one past 25 % and 0.1 ms
 RATE_WINDOW_S = 5.0  # s: message rates are counted over this long
 RATE_BAND = (0.1, 2.0)  # a shown rate follows the counted one past 10 % and 2/s
 LATE_STATE_MS = 100.0  # the readout tells the last STATE's age once it is this old

@@ -13,6 +13,10 @@ from __future__ import annotations
 import collections
 import math
 
+# A round trip as shown follows the measured one past 25 % and 0.1 ms: a steady link's p99
+# jitters by less (the Hardware readout and the soft arm's link line).
+RTT_BAND = (0.25, 0.1)
+
 
 class SteadyFigure:
     """A measured figure as shown: it follows the value only once that moved past a band.

@@ -38,7 +38,7 @@ from console.recording.lab_feed import ControlFeed
 from console.core.arm_status import loop_trouble
 from console.panels.common.base import Panel, operator_only
 from console.panels.common.loop_header import LoopSource, news_of
-from console.panels.common.steady_figures import SteadyFigure
+from console.panels.common.steady_figures import RTT_BAND, SteadyFigure
 from console.panels.soft_arm.control_execute import ExecuteControls
 from console.panels.soft_arm.control_plots import ControlPlots
 from console.panels.soft_arm.control_progress import ProgressControls
@@ -67,7 +67,6 @@ PUMP_HZ = 30.0  # the control process publishes at 30 Hz: what the 3D arm can dr
 PUMP_POLL_S = 0.004  # how often the pump looks for a new view
 PLOT_HZ = 4.0
 TABLE_HZ = 2.0  # the kappa table follows the drawn arm at most at this rate
-RTT_BAND = (0.25, 0.1)  # the link line's round trip follows the measured one past 25 % and 0.1 ms
 LOOP_BAND = (0.5, 0.1)  # the loop line's p99s follow the measured ones past 50 % and 0.1 ms
 HISTORY_S = 10.0
 STATS_TICKS = 1000
