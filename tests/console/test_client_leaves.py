@@ -89,6 +89,14 @@ def test_the_replay_players_thread_ends_with_the_last_session_and_starts_with_a_
         player.stop()
 
 
+def stop_builder(session: SessionPanel) -> None:
+    """End the Session panel's builder thread (a test then calls ``build_due`` itself)."""
+    session._quit.set()
+    session._wake.set()
+    assert session._builder is not None
+    session._builder.join(2.0)
+
+
 def test_a_socket_that_leaves_before_build_after_s_costs_no_widgets_and_one_that_stays_gets_them(
         app: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 32: a connection flood's sockets (open, hello, close) each got the Session panel's
@@ -96,10 +104,7 @@ def test_a_socket_that_leaves_before_build_after_s_costs_no_widgets_and_one_that
     widgets are due BUILD_AFTER_S after it connected (the panel's clock, frozen here), and a
     batch of them refreshes the role lines once."""
     server, session = app.server, app.panel(SessionPanel)
-    session._quit.set()  # the test builds by hand
-    session._wake.set()
-    assert session._builder is not None
-    session._builder.join(2.0)
+    stop_builder(session)  # the test builds by hand
     clock = [session.clock()]
     session.clock = lambda: clock[0]
     built: list[int] = []
@@ -131,10 +136,7 @@ def test_a_socket_that_leaves_before_build_after_s_costs_no_widgets_and_one_that
 def test_a_browser_whose_widgets_fail_to_build_costs_the_others_of_its_batch_nothing(
         app: Any, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
     server, session = app.server, app.panel(SessionPanel)
-    session._quit.set()  # the test builds by hand
-    session._wake.set()
-    assert session._builder is not None
-    session._builder.join(2.0)
+    stop_builder(session)  # the test builds by hand
     browsers = [RawClient(server) for _ in range(3)]
     wait_for(lambda: all(b.client_id in session._pending for b in browsers),
              what="three browsers waiting")
