@@ -55,7 +55,6 @@ class SessionPanel(Panel):
         # viser runs connect callbacks concurrently, and a folder handle can be entered by one
         # thread at a time: per-client widgets are built one client after the other.
         self._build_lock = threading.Lock()
-        self._ready = threading.Event()  # set once build() has left the folder's `with` block
         self.clients: dict[int, _ClientWidgets] = {}
         self.clock = time.monotonic  # when browsers are due (tests move it by hand)
         self._pending: dict[int, tuple[float, viser.ClientHandle]] = {}  # id -> (due, client)
@@ -82,7 +81,6 @@ class SessionPanel(Panel):
         self.refresh()
 
     def after_build(self) -> None:
-        self._ready.set()
         built = [self._build_now(client)  # browsers that connected before the panels were built
                  for client in list(self.app.server.get_clients().values())]
         if any(built):
@@ -134,9 +132,8 @@ class SessionPanel(Panel):
 
     def _build_now(self, client: viser.ClientHandle) -> bool:
         """Build ``client``'s widgets unless built or gone; whether it built them."""
-        # build() runs inside the folder's `with` block, which _build_client enters too (viser
-        # allows one at a time): wait for it.
-        self._ready.wait(60.0)
+        # (only after build(), which runs inside the folder's `with` block that _build_client
+        # enters too: after_build calls it, and the builder thread starts there)
         server = self.app.server
         with self._build_lock:
             if client.client_id in self.clients or not connected(server, client):
