@@ -15,6 +15,7 @@ receive loop with the guard in front), ``client_guard`` / ``client_message_check
 ``client_values`` (what a browser may send), ``shared_sends`` / ``shared_windows`` (each
 message, window and frame encoded once for all viewers; ``set_bone_poses``), ``share_tunnel``
 (no public tunnel), ``callback_pool`` (viser's callback threads end when idle),
+``resting_redraw`` (a still page does not redraw its 3D view once a second),
 ``scene_clicks`` (a browser's clicks claimed by one tool), ``widgets`` (widget ids, slider
 marks), ``phone_sheet`` (a style sheet for viser's phone layout), ``tab_order`` (tabs in a
 chosen order). This face imports them only when called, so none of them imports back into a

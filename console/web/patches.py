@@ -11,8 +11,8 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
-from console.web import (callback_pool, receive_guard, shared_sends, shared_windows,
-                         viewer_props)
+from console.web import (callback_pool, receive_guard, resting_redraw, shared_sends,
+                         shared_windows, viewer_props)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -44,4 +44,6 @@ PATCHES: tuple[Patch, ...] = (
           viewer_props.install, viewer_props.installed, viewer_props.uninstall),
     Patch("ViserServer's callback pool: idle workers end", callback_pool.install,
           callback_pool.installed, callback_pool.uninstall),
+    Patch("WebsockServer.start: viser's page with its 1 s redraw resting while still",
+          resting_redraw.install, resting_redraw.installed, resting_redraw.uninstall),
 )

@@ -187,6 +187,11 @@ def test_click_to_place_and_plan_then_top_down_and_two_clicks_measure_a_distance
     page.goto(url)
     open_tab(page, "Operate", timeout_ms=60_000)
     page.locator('[data-testid="plan-summary"][data-state="ok"]').wait_for(timeout=60_000)
+    # viser's real page starts the one once-a-second redraw the console's page lets rest while
+    # it is still (console.web.resting_redraw; the script on a simulated clock:
+    # test_resting_redraw_browser.py); the clicks below draw through it.
+    assert page.evaluate("() => window.__restingRedraw && window.__restingRedraw.found") == 1, \
+        "viser's page no longer starts the 1 s redraw that console/web/resting_redraw.py rests"
     client = wait_for(lambda: len(server.get_clients()) == 1 and the_client(server), 30,
                       "client")
     wait_for(lambda: client.camera._state.update_timestamp != 0.0, 30, "camera reported")
