@@ -1,17 +1,20 @@
 """How busy a still console keeps a browser without a GPU: CPU, frames drawn and messages received.
 
-``python benchmarks/page_busy.py [--robot soft-arm extensible] [--repo CHECKOUT ...]``
+``python benchmarks/page_busy.py [--robot soft-arm extensible] [--repo CHECKOUT ...] [--armed]``
 
 Starts ``serve.py --robot NAME --hardware mock --no-token`` of each ``--repo`` checkout (default
-this one) on a free port, opens it in headless Chromium (/usr/bin/chromium with the browser
-tests' flags: ``--disable-gpu``, so WebGL is drawn in software, and ``?fixedDpr=0.5``) as its
-operator, lets the page settle, then over ``--seconds`` counts what the still page costs: the
+this one) on a free port (``--armed``: instead builds the whole console on the emulator in this
+process, the soft arm armed and holding still, the extensible arm under mocap noise), opens it in
+headless Chromium (/usr/bin/chromium with the browser tests' flags: ``--disable-gpu``, so WebGL
+is drawn in software, and ``?fixedDpr=0.5``) as its operator, lets the page settle (and rest:
+``console.web.resting_redraw``), then over ``--seconds`` counts what the still page costs: the
 CPU seconds of every Chromium process (renderer and the software-GL GPU process, from /proc),
 the renderer's task and script time (CDP ``Performance.getMetrics``), the 3D frames drawn
 (animation frames with a WebGL draw call, counted by a wrapper on the context) and the server's
 messages the page received, by type; first the same for a bare viser server with one button
-and a grid (viser's own floor, in the same run). Everything runs one after the other: give both robots and
-two checkouts (``--repo /path/to/main .``) in one call to compare them under the same load.
+and a grid, as viser serves it and with the console's resting redraw (viser's own floor, in the
+same run). Everything runs one after the other: give both robots and two checkouts
+(``--repo /path/to/main .``) in one call to compare them under the same load.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from proc_figures import descendants, end_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
@@ -120,12 +124,66 @@ def measure(pw: Any, robot: str, settle: float, seconds: float, shot: Path | Non
         end_process(proc)
 
 
-def measure_bare(pw: Any, settle: float, seconds: float) -> dict[str, Any]:
+def measure_armed(pw: Any, robot_name: str, settle: float, seconds: float, shot: Path | None,
+                  data_dir: Path) -> dict[str, Any]:
+    """The same for the whole console on the emulator, built in this process as
+    ``viewer_messages.py`` builds it: the soft arm armed and holding still on its control process
+    (under the simulated motion capture's noise), the extensible arm at a bent pose with 100 Hz
+    "motion capture" noise of 0.05 mm at the tip."""
+    import threading
+
+    import numpy as np
+
+    import bench_viewers as bv
+    from core.robots import load
+
+    serve = bv._serve_module()
+    robot = load(robot_name)
+    port = _free_port()
+    args = serve.parse_args(["--robot", robot_name, "--host", "127.0.0.1", "--port", str(port),
+                             "--no-token", "--data-dir", str(data_dir), "--rt-cpu", "none"])
+    server, app, _ = serve.build(args, robot, "page busy")
+    app.start()
+    stop = threading.Event()
+    try:
+        soft = app.services.soft_control
+        if soft is not None:
+            soft.arm().result(60)
+        else:
+            q0 = bv.still_pose(app.model)
+            bv.mocap_only(app)
+            app.store.request(q0, "bench")
+            scale = bv.noise_scale(app.view, q0)
+            rng = np.random.default_rng(0)
+
+            def mocap() -> None:
+                while not stop.wait(0.01):
+                    app.store.report(q0 + scale * rng.standard_normal(q0.shape), "mocap")
+
+            threading.Thread(target=mocap, daemon=True).start()
+        return measure_page(pw, f"http://127.0.0.1:{port}/", settle, seconds, shot)
+    finally:
+        stop.set()
+        app.stop()
+        app.services.close()
+        server.stop()
+
+
+def measure_bare(pw: Any, settle: float, seconds: float, resting: bool = False
+                 ) -> dict[str, Any]:
     """The same for a bare viser server with a "STOP (Esc)" button and a grid (viser's own
-    floor: what any still viser page costs this browser)."""
+    floor: what any still viser page costs this browser); ``resting``: its page served with
+    the console's resting redraw (``console.web.resting_redraw``)."""
     import viser
 
-    srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    from console.web import resting_redraw
+
+    patched = resting and resting_redraw.install()
+    try:
+        srv = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    finally:
+        if patched:
+            resting_redraw.uninstall()
     try:
         srv.gui.add_button("STOP (Esc)")
         srv.scene.add_grid("/grid")
@@ -152,7 +210,10 @@ def measure_page(pw: Any, url: str, settle: float, seconds: float, shot: Path | 
                 notice.locator("button").first.click(timeout=2_000)
             except Exception:  # noqa: BLE001, S110 - closed by itself meanwhile
                 pass
-        time.sleep(2.0)
+        # Those clicks are the operator's input: the console's page redraws for its rest time
+        # after them (console/web/resting_redraw.py), so the still page is measured after it.
+        rest_ms = page.evaluate("() => (window.__restingRedraw || {}).restAfterMs || 0")
+        time.sleep(2.0 + float(rest_ms) / 1000.0)
 
         def metrics() -> dict[str, float]:
             got = cdp.send("Performance.getMetrics")["metrics"]
@@ -195,6 +256,9 @@ def main() -> None:
     parser.add_argument("--shots", type=Path, default=None, help="folder for a PNG per robot")
     parser.add_argument("--repo", type=Path, nargs="+", default=[REPO],
                         help="checkouts whose serve.py to run, in turn (compare two versions)")
+    parser.add_argument("--armed", action="store_true",
+                        help="the console on the emulator (built in this process), the soft "
+                             "arm armed and holding, the extensible arm under mocap noise")
     parser.add_argument("extra", nargs="*", help="more serve.py flags (after --)")
     args = parser.parse_args()
     from playwright.sync_api import sync_playwright
@@ -203,12 +267,19 @@ def main() -> None:
     print("checkout   robot        Chromium CPU s/s  task s/s  script s/s  frames/s  draws/frame")
     with sync_playwright() as pw:
         _print("bare viser", "(button+grid)", measure_bare(pw, args.settle, args.seconds))
+        _print("bare viser", "+ resting", measure_bare(pw, args.settle, args.seconds, True))
         for repo in args.repo:
             for robot in args.robot:
                 shot = None
                 if args.shots is not None:
                     args.shots.mkdir(parents=True, exist_ok=True)
                     shot = args.shots / f"{repo.name}-{Path(robot).stem}.png"
+                if args.armed:
+                    import tempfile
+                    with tempfile.TemporaryDirectory() as data_dir:
+                        _print(repo.name, f"{robot} armed", measure_armed(
+                            pw, robot, args.settle, args.seconds, shot, Path(data_dir)))
+                    continue
                 _print(repo.name, robot,
                        measure(pw, robot, args.settle, args.seconds, shot, args.extra, repo))
 
