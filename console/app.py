@@ -92,6 +92,10 @@ log = logging.getLogger(__name__)
 P = TypeVar("P", bound=Panel)
 # The extensible arm's tip this close (m) to the top its views were framed for: re-framed.
 FOLLOW_MARGIN_M = 0.02
+# The display this long (s) without a new state: the state the arm view's dead band held back is
+# drawn (its source went quiet). Not sooner: an armed soft arm's view pauses 0.2-0.3 s about 4
+# times a minute while it keeps reporting its noise, and each such flush drew one noisy frame.
+FLUSH_IDLE_S = 1.0
 
 
 class ConsoleApp:
@@ -441,12 +445,15 @@ class ConsoleApp:
         self.last_drawn_seq = state.seq
         self.recorder.on_state(state, self.store.command)
 
-    def _idle(self) -> None:
-        with self.server.atomic():
-            try:
-                self.view.flush()  # the newest state, if the dead band held it back
-            except Exception:
-                log.exception("arm view flush failed")
+    def _idle(self, idle_s: float = FLUSH_IDLE_S) -> None:
+        """The display has had no new state for ``idle_s`` seconds: from :data:`FLUSH_IDLE_S` on
+        the arm view draws the state its dead band held back; panels catch up."""
+        if idle_s >= FLUSH_IDLE_S:
+            with self.server.atomic():
+                try:
+                    self.view.flush()  # the newest state, if the dead band held it back
+                except Exception:
+                    log.exception("arm view flush failed")
         for panel in self.panels:
             try:
                 panel.on_idle()
@@ -456,11 +463,13 @@ class ConsoleApp:
     def _render_loop(self) -> None:
         last_seq = -1
         next_frame = 0.0
+        last_state_at = self.core.clock()
         while not self._stop.is_set():
             state = self.store.wait_display(last_seq, timeout=0.2)
             if state is None:
-                self._idle()
+                self._idle(self.core.clock() - last_state_at)
                 continue
+            last_state_at = self.core.clock()
             wait = next_frame - time.perf_counter()
             if wait > 0 and self._stop.wait(wait):
                 break

@@ -307,6 +307,30 @@ def test_readout_follows_the_drawn_arm_at_a_readable_rate_and_catches_up_when_id
     assert readout.html.content == readout._render(last)
 
 
+def test_a_short_pause_of_a_noisy_source_draws_nothing_a_quiet_one_draws_what_was_held(
+        server) -> None:
+    """The display without a new state for less than FLUSH_IDLE_S (an armed soft arm's view
+    pauses 0.2-0.3 s a few times a minute while it keeps reporting noise) draws nothing; once
+    the source has been quiet that long, the state the dead band held back is drawn."""
+    from console.app import FLUSH_IDLE_S, ConsoleApp
+
+    app = ConsoleApp(SOFT, server)
+    q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])
+    app.render(app.store.request(q, "test"))
+    noisy = q + 0.005  # inside the band: held back
+    assert not app.view.dead_band.moved(app.view.frames(q), app.view.frames(noisy))
+    app.render(app.store.report(noisy, "mocap"))
+    sent = app.view.frames_sent
+    for idle_s in (0.2, 0.4, 0.6, FLUSH_IDLE_S - 0.01):
+        app._idle(idle_s)
+    assert app.view.frames_sent == sent
+    np.testing.assert_allclose(app.view.palm.position, app.view.geometry(q)["palm"], atol=1e-9)
+    app._idle(FLUSH_IDLE_S)
+    assert app.view.frames_sent == sent + 1
+    np.testing.assert_allclose(app.view.palm.position, app.view.geometry(noisy)["palm"],
+                               atol=1e-9)
+
+
 def test_plot_columns_are_thinned_to_float32_keeping_the_newest_sample() -> None:
     from console.panels.common.plot_data import thin
 
