@@ -13,7 +13,7 @@
 // `window.__restingRedraw` counts what it did.
 (() => {
   "use strict";
-  const REST_AFTER_MS = 10000;
+  const REST_AFTER_MS = 3000;
   const HEARTBEAT_MS = 1000;
   const BARE_CALL = /^\(\)\s*=>\s*[\w$]+\(\)$/;
   const state = { found: 0, drawn: 0, rested: 0, restAfterMs: REST_AFTER_MS };

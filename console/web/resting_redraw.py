@@ -7,9 +7,9 @@ heartbeat and 0.02 without it, a still console ~0.2 (``benchmarks/page_busy.py``
 
 :func:`install` makes every ``ViserServer`` built afterwards serve viser's own page with one
 script first in its ``<head>``, ``static/resting_redraw.js``: it lets the heartbeat fire only
-within 10 s of the last message from the server, of the operator's input or of a resize, so the
-safety net still covers a change's late parts (a texture, a font) and a still page draws
-nothing. Nothing else of viser's page changes (:func:`patched_page` inserts the script and
+within 3 s of the last server message that draws, of the operator's input or of a resize, so
+the safety net still covers a change's late parts (a texture, a font: viser's own settle after a
+message is 250 ms) and a still page draws nothing. Nothing else of viser's page changes (:func:`patched_page` inserts the script and
 nothing else; the tests check both).
 
 How it is served: viser's websocket server serves files from ``WebsockServer._http_server_root``
