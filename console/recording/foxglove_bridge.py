@@ -5,8 +5,8 @@ one :class:`FoxgloveBridge`. It taps the console's recorder (``Recorder.add_tap`
 exactly what a recording would hold -- the same topics, schemas and messages
 (``core.labdata.channels``) -- whether or not a recording runs, with log times on the console's
 clock (ns since the epoch). State channels are latched: the bridge starts with the recorder's
-newest state records (``Recorder.latched``: robot file, configuration, objects, plan, phase,
-link, scene layers) and sends a channel's newest message again whenever a client subscribes to it (the SDK
+newest state records (``Recorder.add_tap(..., latched=True)``: robot file, configuration,
+objects, plan, phase, link, scene layers, taken in the same step as it joins) and sends a channel's newest message again whenever a client subscribes to it (the SDK
 has no latching of its own, so its ``on_subscribe`` callback asks the bridge thread), so a
 viewer that joins late sees the table at once; nothing is repeated on a timer, so ``/events``
 carries only what happened.
@@ -91,11 +91,11 @@ class FoxgloveBridge:
         self.bad_frames.attach()
         self._queue: queue.Queue[tuple[dict[str, Any], int] | str | None] = \
             queue.Queue(max_queue)
-        for record in recorder.latched():  # the scene logged before the bridge existed
-            self._enqueue(record, time.time_ns())
+        # The scene logged before the bridge existed, then every record (in one step: a record
+        # logged in between would reach neither).
+        recorder.add_tap(self._enqueue, latched=True)
         self._thread = threading.Thread(target=self._run, name="foxglove-bridge", daemon=True)
         self._thread.start()
-        recorder.add_tap(self._enqueue)
 
     @property
     def port(self) -> int:

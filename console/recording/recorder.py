@@ -211,10 +211,21 @@ class Recorder:
         except queue.Full:
             self.dropped += 1
 
-    def add_tap(self, fn: Callable[[dict[str, Any], int], None]) -> None:
+    def add_tap(self, fn: Callable[[dict[str, Any], int], None], latched: bool = False) -> None:
         """Also hand every record, recording or not, to ``fn(record, ns)`` (ns: the console's
-        clock, ns since the epoch); ``fn`` runs on the caller's thread and must only enqueue."""
-        self.taps.append(fn)
+        clock, ns since the epoch); ``fn`` runs on the caller's thread and must only enqueue.
+
+        With ``latched``, ``fn`` first gets a copy of every latched record (:meth:`latched`)
+        in the same step as it joins, so no state logged meanwhile by another thread is missed
+        (one logged just then may come twice). Read apart, a record logged between
+        :meth:`latched` and joining reached neither (a late Foxglove viewer's table stayed
+        empty, issue 29)."""
+        with self._latch_lock:
+            if latched:
+                ns = time.time_ns()
+                for r in self._latched.values():
+                    fn({k: v for k, v in r.items() if k not in ("t", "ns")}, ns)
+            self.taps.append(fn)
 
     def latched(self) -> list[dict[str, Any]]:
         """Copies of the newest record of every latched kind

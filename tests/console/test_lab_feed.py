@@ -143,3 +143,42 @@ def test_a_planned_tip_path_becomes_a_plan_record_with_its_waypoints(tmp_path) -
     strip = [ln for ln in got["/scene/plan"][0]["entities"][0]["lines"] if ln["type"] == 0]
     np.testing.assert_allclose([[p["x"], p["y"], p["z"]] for p in strip[0]["points"]],
                                waypoints)
+
+
+def test_a_tap_joining_with_the_latched_state_misses_no_record_logged_meanwhile(tmp_path) -> None:
+    """``add_tap(fn, latched=True)`` hands ``fn`` the latched records and every later one in one
+    step: while another thread logs the table over and over, each of 50 taps that join in the
+    middle ends with the newest table (before, the latched records were read apart from joining,
+    and a table logged in between reached neither: a late Foxglove viewer saw an empty table)."""
+    import threading
+
+    rec = Recorder(DataDir(tmp_path), model_for(load("soft-arm")))
+    rec.log("robot", {"name": "soft-arm"})
+    taps: list[list[dict]] = []
+    stop = threading.Event()
+    logged = [0]
+
+    def table_worker() -> None:
+        while not stop.is_set():
+            logged[0] += 1
+            rec.log("objects", {"objects": [], "n": logged[0]})
+
+    worker = threading.Thread(target=table_worker)
+    worker.start()
+    try:
+        for _ in range(50):
+            got: list[dict] = []
+            rec.add_tap(lambda r, ns, got=got: got.append(r), latched=True)
+            taps.append(got)
+    finally:
+        stop.set()
+        worker.join()
+    newest = logged[0]
+    for got in taps:
+        assert got[0] == {"kind": "robot", "who": "server", "client": None,
+                          "data": {"name": "soft-arm"}}
+        tables = [r["data"]["n"] for r in got if r["kind"] == "objects"]
+        # From the latched table on, every one logged, in order, none missed (the one logged
+        # while joining may come twice); reading apart, 6 taps of 50 missed one here.
+        assert tables and tables[-1] == newest
+        assert all(b - a in (0, 1) for a, b in zip(tables, tables[1:])), tables[:5]
