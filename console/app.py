@@ -463,13 +463,13 @@ class ConsoleApp:
     def _render_loop(self) -> None:
         last_seq = -1
         next_frame = 0.0
-        last_state_at = self.core.clock()
+        last_state_at = time.monotonic()  # (the loop waits on the wall clock, as its frames)
         while not self._stop.is_set():
             state = self.store.wait_display(last_seq, timeout=0.2)
             if state is None:
-                self._idle(self.core.clock() - last_state_at)
+                self._idle(time.monotonic() - last_state_at)
                 continue
-            last_state_at = self.core.clock()
+            last_state_at = time.monotonic()
             wait = next_frame - time.perf_counter()
             if wait > 0 and self._stop.wait(wait):
                 break
