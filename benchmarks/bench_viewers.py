@@ -85,6 +85,26 @@ def noise_scale(view: Any, q0: np.ndarray, tip_rms: float = 5e-5) -> float:
     return probe * tip_rms / float(np.sqrt(np.mean(np.square(moves))))
 
 
+def start_mocap(app: Any, q0: np.ndarray, stop: threading.Event, moving: bool = False,
+                seed: int = 0) -> threading.Thread:
+    """Report ``q0`` (the demo motion while ``moving``) as "motion capture" at :data:`NOISE_HZ`,
+    with noise that moves the drawn tip by 0.05 mm rms (:func:`noise_scale`), until ``stop``."""
+    from console.core.demo_motion import demo_configuration
+
+    scale = noise_scale(app.view, q0)
+    rng = np.random.default_rng(seed)
+
+    def run() -> None:
+        t0 = time.monotonic()
+        while not stop.wait(1.0 / NOISE_HZ):
+            q = demo_configuration(app.model, time.monotonic() - t0) if moving else q0
+            app.store.report(q + scale * rng.standard_normal(q0.shape), "mocap")
+
+    thread = threading.Thread(target=run, name="bench-mocap", daemon=True)
+    thread.start()
+    return thread
+
+
 def mocap_only(app: Any) -> None:
     """Draw only what the benchmark's "motion capture" reports (the extensible arm).
 
@@ -128,7 +148,6 @@ def child(a: argparse.Namespace) -> int:
     if a.method == "bare":
         return bare_child()
     from console.scene.arm_view_factory import make_arm_view
-    from console.core.demo_motion import demo_configuration
     from core.robots import load
 
     sys.path.insert(0, str(REPO / "benchmarks"))
@@ -143,15 +162,7 @@ def child(a: argparse.Namespace) -> int:
         app.view = make_arm_view(server.scene, app.model, method="vertices", dead_band=None)
     app.start()
     stop_noise, stop_trials = threading.Event(), threading.Event()
-    rng = np.random.default_rng(0)
     q0 = still_pose(app.model)
-    scale = noise_scale(app.view, q0)
-
-    def mocap(stop: threading.Event, moving: bool) -> None:
-        t0 = time.monotonic()
-        while not stop.wait(1.0 / NOISE_HZ):
-            q = demo_configuration(app.model, time.monotonic() - t0) if moving else q0
-            app.store.report(q + scale * rng.standard_normal(q0.shape), "mocap")
 
     ctl: Any = None
     # Start-up overlays (the reachability map) arrive once, some seconds after start: wait for
@@ -174,14 +185,14 @@ def child(a: argparse.Namespace) -> int:
             if soft is None:
                 mocap_only(app)
                 app.store.request(q0, "bench")
-                threading.Thread(target=mocap, args=(stop_noise, False), daemon=True).start()
+                start_mocap(app, q0, stop_noise)
             print("STILL", flush=True)
         elif cmd == "move":
             stop_noise.set()
             time.sleep(0.1)
             ctl, _ = start_trials(app, robot, stop_trials)
             if ctl is None:  # no control process: "motion capture" of the demo motion
-                threading.Thread(target=mocap, args=(stop_trials, True), daemon=True).start()
+                start_mocap(app, q0, stop_trials, moving=True)
         elif cmd == "stats":
             view = None if ctl is None else ctl.view
             loop = None if view is None else {"p99_ms": view.stats.period_error_ms_p99,

@@ -132,8 +132,6 @@ def measure_armed(pw: Any, robot_name: str, settle: float, seconds: float, shot:
     "motion capture" noise of 0.05 mm at the tip."""
     import threading
 
-    import numpy as np
-
     import bench_viewers as bv
     from core.robots import load
 
@@ -153,14 +151,7 @@ def measure_armed(pw: Any, robot_name: str, settle: float, seconds: float, shot:
             q0 = bv.still_pose(app.model)
             bv.mocap_only(app)
             app.store.request(q0, "bench")
-            scale = bv.noise_scale(app.view, q0)
-            rng = np.random.default_rng(0)
-
-            def mocap() -> None:
-                while not stop.wait(0.01):
-                    app.store.report(q0 + scale * rng.standard_normal(q0.shape), "mocap")
-
-            threading.Thread(target=mocap, daemon=True).start()
+            bv.start_mocap(app, q0, stop)
         return measure_page(pw, f"http://127.0.0.1:{port}/", settle, seconds, shot)
     finally:
         stop.set()

@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
-import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
@@ -149,17 +148,7 @@ def main() -> int:
         else:
             bv.mocap_only(app)
             app.store.request(q0, "bench")
-            scale = bv.noise_scale(app.view, q0)
-            rng = np.random.default_rng(0)
-
-            def mocap() -> None:
-                from console.core.demo_motion import demo_configuration
-                start = time.monotonic()
-                while not stop.wait(0.01):
-                    q = demo_configuration(app.model, time.monotonic() - start) if a.move else q0
-                    app.store.report(q + scale * rng.standard_normal(q0.shape), "mocap")
-
-            threading.Thread(target=mocap, daemon=True).start()
+            bv.start_mocap(app, q0, stop, moving=a.move)
         client = counting_client(server)
         time.sleep(a.warmup + (5.0 if a.move and soft is not None else 0.0))
         client.clear()
