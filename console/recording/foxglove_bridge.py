@@ -6,9 +6,10 @@ exactly what a recording would hold -- the same topics, schemas and messages
 (``core.labdata.channels``) -- whether or not a recording runs, with log times on the console's
 clock (ns since the epoch). State channels are latched: the bridge starts with the recorder's
 newest state records (``Recorder.add_tap(..., latched=True)``: robot file, configuration,
-objects, plan, phase, link, scene layers, taken in the same step as it joins) and sends a channel's newest message again whenever a client subscribes to it (the SDK
-has no latching of its own, so its ``on_subscribe`` callback asks the bridge thread), so a
-viewer that joins late sees the table at once; nothing is repeated on a timer, so ``/events``
+objects, plan, phase, link, scene layers, taken in the same step as it joins) and sends a
+channel's newest message again whenever a client subscribes to it (the SDK has no latching of
+its own, so its ``on_subscribe`` callback asks the bridge thread), so a viewer that joins late
+sees the table at once; nothing is repeated on a timer, so ``/events``
 carries only what happened.
 
 Read-only: the server is started with no capabilities (no client publish, no services, no

@@ -9,8 +9,8 @@ heartbeat and 0.02 without it, a still console ~0.2 (``benchmarks/page_busy.py``
 script first in its ``<head>``, ``static/resting_redraw.js``: it lets the heartbeat fire only
 within 3 s of the last server message that draws, of the operator's input or of a resize, so
 the safety net still covers a change's late parts (a texture, a font: viser's own settle after a
-message is 250 ms) and a still page draws nothing. Nothing else of viser's page changes (:func:`patched_page` inserts the script and
-nothing else; the tests check both).
+message is 250 ms) and a still page draws nothing. Nothing else of viser's page changes
+(:func:`patched_page` inserts the script and nothing else; the tests check both).
 
 How it is served: viser's websocket server serves files from ``WebsockServer._http_server_root``
 (its package's ``client/build``, read when the server starts), so the patch wraps
@@ -66,23 +66,18 @@ def patched_root(build: Path | None = None, script_path: Path = SCRIPT_PATH) -> 
         if files != ["index.html"]:
             raise ValueError(f"viser's client build holds {files}, not index.html alone")
         page = patched_page((build / "index.html").read_bytes(), script_path.read_bytes())
-    except (OSError, ValueError) as exc:
-        log.warning("viser's page is served as built, redrawing once a second (%s)", exc)
-        return None
-    digest = hashlib.sha256(page).hexdigest()[:16]
-    root = Path(tempfile.gettempdir()) / f"softarm-viser-page-{os.getuid()}-{digest}"
-    target = root / "index.html"
-    try:
+        digest = hashlib.sha256(page).hexdigest()[:16]
+        root = Path(tempfile.gettempdir()) / f"softarm-viser-page-{os.getuid()}-{digest}"
+        target = root / "index.html"
         if not (target.is_file() and target.read_bytes() == page):
             root.mkdir(mode=0o700, exist_ok=True)
             part = root / f"index.html.{os.getpid()}"
             part.write_bytes(page)
             os.replace(part, target)
-    except OSError as exc:
+    except (OSError, ValueError) as exc:
         log.warning("viser's page is served as built, redrawing once a second (%s)", exc)
         return None
     return root
-
 
 def install() -> bool:
     """Servers started from now on serve viser's page with the resting-redraw script.
