@@ -36,7 +36,7 @@ class DeadBand:
     / ``moving_angle`` instead: the still band let a grasp-and-place approach (the soft arm's
     points move at a few mm/s) through only every 3rd to 4th frame, ~10 frames/s
     (``benchmarks/arm_frames_replay.py``). A still arm's noise is not steady: its steadiness
-    reads ~0.15 and passes 0.5 in about one update of 100, never several in a row.
+    reads ~0.1-0.2 and seldom passes 0.5, hardly ever several updates in a row.
 
     Args:
         position: Largest unsent translation (m).
@@ -126,12 +126,20 @@ class Steadiness:
 
     About 1 for a move (every step points the same way), about sqrt(dt / 2 tau) for noise.
     ``steps``: how many steps it is measured over (a first step alone reads 1: it cannot yet
-    tell a move from noise). After a pause of over ``5 tau`` it starts afresh from the frames
-    that end it: a step across a pause from a noisy frame made a clean move after it read as
-    noise for a dozen updates.
+    tell a move from noise); the first ``tau / dt`` steps are averaged with equal weights (a
+    plain mean, then the exponential one), so n steps of noise read ~1/sqrt(n) from the start
+    instead of the first step's weight keeping them "steady" for ~``tau``. After a pause of
+    over ``5 tau`` it starts afresh from the frames that end it: a step across a pause from a
+    noisy frame made a clean move after it read as noise for a dozen updates.
+
+    ``tau`` 0.75 s: an armed soft arm holding still measures curvatures whose steps correlate
+    (the controller acts on the motion capture's noise; lag-1 ~0.25), and over 0.25 s such
+    noise read as a steady move for 5 updates in a row a few times a minute, each drawn through
+    the moving band (emulator: 4 frames/min; 0.75 s: ~1/min, 4 minutes of it replayed). The
+    price: after a move ends its steadiness takes ~0.5 s longer to fall (~6 more frames).
     """
 
-    def __init__(self, tau: float = 0.25) -> None:
+    def __init__(self, tau: float = 0.75) -> None:
         self.tau = tau
         self.steps = 0
         self._last: Array | None = None
@@ -154,6 +162,7 @@ class Steadiness:
             self.steps = 1
         else:
             self.steps += 1
+            alpha = max(alpha, 1.0 / self.steps)
             self._drift += alpha * (step - self._drift)
             self._jitter += alpha * (float(np.linalg.norm(step)) - self._jitter)
         if self._jitter <= 1e-12:
