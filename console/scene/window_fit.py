@@ -171,9 +171,12 @@ class WindowFit:
             return None
         with self._lock:
             framed = self._framed.get(client.client_id) or _Framed((0, 0), self._initial)
-            if not framed.put_by_console(camera):  # the person moved it: theirs; the size
-                if framed.size != size:
-                    self._framed[client.client_id] = _Framed(size, framed.pose, framed.name)
+            if not framed.put_by_console(camera):
+                # The person moved it (theirs), or a pose the console put is half applied
+                # (viser sets the position, then the look-at): the record stays as it is, so
+                # a report at the console's pose for another canvas is framed for it (the size
+                # recorded here with the old pose left a page turned from phone to tablet
+                # during a refit at the phone's framing, counted as the tablet's).
                 return None
             if framed.size == size:
                 pose = framed.pose             # at it (nothing to do), or at one put before

@@ -345,6 +345,47 @@ def test_a_new_plan_reframes_the_browsers_the_console_framed_and_not_a_moved_cam
     assert fit.framed_pose(1).name == "Perspective"
 
 
+def test_a_resize_reported_while_a_refit_is_in_flight_is_framed_for_the_new_canvas(plans):
+    """fresh85's layout failure: a phone page re-framed for the far plan, then turned into a
+    tablet's at once. The browser's first report of the tablet's canvas came while the refit's
+    pose was half applied (viser sets the position first and moves the look-at point along;
+    the look-at follows), at no pose the console put: taken for the person's camera, the
+    tablet's size was recorded with the phone's pose, and when the camera arrived there the
+    console counted it framed for the tablet (the far plan's circles cut off at the left). A
+    report at no pose the console put changes nothing; the next one at its pose is framed."""
+    from console.scene.plan_frame import plan_points
+
+    span, table = arm_span(SOFT, "planar"), table_extent(SOFT, "planar")
+    initial = camera.presets("planar", span, table)[0]
+    planned: list[Any] = [None]
+    server = _Server()
+    fit = WindowFit(server, initial, lambda w, h: camera.presets_for_window(
+        "planar", span, table, w, h, planned[0]))
+    page = _Client(1, initial, SIZES["phone"])
+    server.join(page)
+    page.camera.report()                                              # framed for the phone
+    near = fit.framed_pose(1)
+    far, must = plans["Object 2"]
+    planned[0] = plan_points(far)
+    assert fit.refit() == [1]                                         # the far plan
+    phone_far, moves = fit.framed_pose(1), page.moves
+    # The browser, turned into a tablet, reports the refit half applied ...
+    page.camera.position = np.array(phone_far.position)
+    page.camera.look_at = np.array(near.look_at) + np.subtract(phone_far.position,
+                                                               near.position)
+    page.camera.report(SIZES["tablet"])
+    assert page.moves == moves                                        # (the person's, maybe)
+    # ... then arrives at the refit's pose: the console's, framed for the tablet.
+    page.camera.look_at = np.array(phone_far.look_at)
+    page.camera.report()
+    assert page.moves == moves + 1 and fit.framed_size(1) == SIZES["tablet"]
+    tablet_far = fit.framed_pose(1)
+    assert tablet_far != phone_far
+    np.testing.assert_allclose(page.camera.position, tablet_far.position)
+    assert _outside(tablet_far, must, SIZES["tablet"][0] / SIZES["tablet"][1]) == 0
+    assert _outside(phone_far, must, SIZES["tablet"][0] / SIZES["tablet"][1]) > 0  # (was left)
+
+
 # -- the extensible arm framed as tall as it is ---------------------------------------------
 
 def _extensible_q(extension: float) -> np.ndarray:
