@@ -12,7 +12,7 @@ clean move after a pause were drawn; beside it the same with the band before (0.
 ``--closed-loop``: the noise instead comes from core's control cycle (``SimLoop``) with the arm
 armed and holding, at the console's 30 states/s: the controller acts on the motion capture's
 noise, so the measured curvatures' steps correlate (lag-1 ~0.25, as on the emulator); beside the
-shipped band, its steadiness as it was before (over 0.25 s, ``Steadiness(0.25)``).
+shipped band, its steadiness as it was before (over 0.25 s: ``DeadBand.steadiness_s``).
 """
 
 from __future__ import annotations
@@ -66,16 +66,14 @@ def run(seconds: float, seed: int, band: Any = None) -> tuple[int, int]:
         server.stop()
 
 
-def closed_loop(seconds: float, seed: int, tau: float | None = None) -> int:
+def closed_loop(seconds: float, seed: int, band: Any = None) -> int:
     """Frames sent over ``seconds`` (after 30 s) of the armed soft arm holding in the closed-loop
-    simulator, its measurement at 30 states/s; ``tau``: the steadiness's time constant (None:
-    as shipped)."""
+    simulator, its measurement at 30 states/s, with ``band`` (None: the shipped dead band)."""
     import viser
 
     import console.scene.arm_view as arm_view
     from console.core.model import model_for
     from console.scene.arm_view_factory import make_arm_view
-    from console.scene.dead_band import Steadiness
     from core.control.grasp_place import immediate
     from core.control.sim import SoftArmSim
     from core.control.sim_loop import SimLoop
@@ -89,11 +87,11 @@ def closed_loop(seconds: float, seed: int, tau: float | None = None) -> int:
     loop.arm()
     clock = [100.0]
     arm_view.time.monotonic = lambda: clock[0]  # type: ignore[attr-defined]
-    if tau is not None:
-        arm_view.Steadiness = lambda: Steadiness(tau)  # type: ignore[assignment,misc]
     server = viser.ViserServer(port=0, verbose=False)
     try:
         view = make_arm_view(server.scene, model_for(robot))
+        if band is not None:
+            view.dead_band = band
         start = 0
         for k in range(int((seconds + 30.0) * 100)):
             control = loop.tick()
@@ -104,7 +102,6 @@ def closed_loop(seconds: float, seed: int, tau: float | None = None) -> int:
                 view.update(control.kappa_meas)
         return view.frames_sent - start
     finally:
-        arm_view.Steadiness = Steadiness  # type: ignore[misc]
         server.stop()
 
 
@@ -120,9 +117,10 @@ def main() -> int:
                    help="the noise of the armed arm holding in the closed-loop simulator")
     a = p.parse_args()
     if a.closed_loop:
-        for label, tau in (("shipped", None), ("steadiness over 0.25 s (as before)", 0.25)):
+        quick = dataclasses.replace(DeadBand(), steadiness_s=0.25)
+        for label, band in (("shipped", None), ("steadiness over 0.25 s (as before)", quick)):
             for seed in a.seeds:
-                n = closed_loop(a.seconds, seed, tau)
+                n = closed_loop(a.seconds, seed, band)
                 print(f"closed loop, {label:36s} seed {seed}: {n * 60.0 / a.seconds:5.1f} "
                       "frames/min still (target 0)")
         return 0

@@ -186,7 +186,9 @@ class ArmView(ABC, Generic[ModelT]):
         dt = now - self._mean_at
         if self._mean is not None and band.jumped(self._mean, frames):
             self._mean = None  # a jump, not noise or a move: average from here (DeadBand.jump)
-            self._steadiness, self._steady_run = Steadiness(), 0
+            self._steadiness, self._steady_run = Steadiness(band.steadiness_s), 0
+        if self._steadiness.tau != band.steadiness_s:  # (a band set after construction)
+            self._steadiness, self._steady_run = Steadiness(band.steadiness_s), 0
         steady = self._steadiness.update(frames, dt)
         self._mean = band.average(self._mean, frames, dt, steady)
         self._mean_at = now

@@ -51,6 +51,8 @@ class DeadBand:
             applies.
         moving_steps: Fewest steps the steadiness must be measured over since it started
             afresh (after a pause its first steps read as steady, noise included).
+        steadiness_s: Time constant (s) over which the steadiness is measured
+            (:class:`Steadiness`; why 0.75 s there).
         jump: Distance (m) of the newest frames from the average beyond which they jumped
             (:meth:`jumped`): the average and the steadiness start afresh from them. Else the
             average's catch-up was drawn ~1 frame/s for ~10 s after the arm stood still again,
@@ -69,6 +71,7 @@ class DeadBand:
     moving_angle: float = float(np.deg2rad(0.1))
     moving_steadiness: float = 0.5
     moving_steps: int = 8
+    steadiness_s: float = 0.75
     moving_frames: int = 5
     jump: float = 2e-2
     jump_angle: float = float(np.deg2rad(20.0))
