@@ -302,15 +302,22 @@ def test_a_plan_already_in_view_leaves_the_view_as_it_was(plans):
                                                                              table)[0]
 
 
-def test_a_new_plan_reframes_the_browsers_the_console_framed_and_not_a_moved_camera(plans):
-    from console.scene.plan_frame import plan_points
-
+def _planned_fit() -> tuple[_Server, WindowFit, camera.CameraPose, list[Any]]:
+    """A soft-arm WindowFit whose presets frame ``planned[0]`` (plan points; None: nothing
+    planned): (server, fit, the initial pose, planned)."""
     span, table = arm_span(SOFT, "planar"), table_extent(SOFT, "planar")
     initial = camera.presets("planar", span, table)[0]
     planned: list[Any] = [None]
     server = _Server()
     fit = WindowFit(server, initial, lambda w, h: camera.presets_for_window(
         "planar", span, table, w, h, planned[0]))
+    return server, fit, initial, planned
+
+
+def test_a_new_plan_reframes_the_browsers_the_console_framed_and_not_a_moved_camera(plans):
+    from console.scene.plan_frame import plan_points
+
+    server, fit, initial, planned = _planned_fit()
     desk = _Client(1, initial, SIZES["desktop"])
     tablet = _Client(2, initial, SIZES["tablet"])
     moved = _Client(3, initial, SIZES["desktop"])
@@ -355,12 +362,7 @@ def test_a_resize_reported_while_a_refit_is_in_flight_is_framed_for_the_new_canv
     report at no pose the console put changes nothing; the next one at its pose is framed."""
     from console.scene.plan_frame import plan_points
 
-    span, table = arm_span(SOFT, "planar"), table_extent(SOFT, "planar")
-    initial = camera.presets("planar", span, table)[0]
-    planned: list[Any] = [None]
-    server = _Server()
-    fit = WindowFit(server, initial, lambda w, h: camera.presets_for_window(
-        "planar", span, table, w, h, planned[0]))
+    server, fit, initial, planned = _planned_fit()
     page = _Client(1, initial, SIZES["phone"])
     server.join(page)
     page.camera.report()                                              # framed for the phone
