@@ -147,7 +147,7 @@ class ArmView(ABC, Generic[ModelT]):
         self._sent: Array | None = None  # the (averaged) frames when the last frame was sent
         self._mean: Array | None = None
         self._mean_at = 0.0
-        self._steadiness = Steadiness()
+        self._steadiness: Steadiness | None = None  # measured over the band's steadiness_s
         self._steady_run = 0  # updates in a row at the band's moving steadiness or more
         self._held: Array | None = None  # the newest configuration not sent
         self._last_q: Array | None = None  # the configuration of the previous update
@@ -184,10 +184,10 @@ class ArmView(ABC, Generic[ModelT]):
             return True
         now = time.monotonic()
         dt = now - self._mean_at
-        if self._mean is not None and band.jumped(self._mean, frames):
+        jumped = self._mean is not None and band.jumped(self._mean, frames)
+        if jumped:
             self._mean = None  # a jump, not noise or a move: average from here (DeadBand.jump)
-            self._steadiness, self._steady_run = Steadiness(band.steadiness_s), 0
-        if self._steadiness.tau != band.steadiness_s:  # (a band set after construction)
+        if jumped or self._steadiness is None or self._steadiness.tau != band.steadiness_s:
             self._steadiness, self._steady_run = Steadiness(band.steadiness_s), 0
         steady = self._steadiness.update(frames, dt)
         self._mean = band.average(self._mean, frames, dt, steady)

@@ -135,14 +135,14 @@ class Steadiness:
     over ``5 tau`` it starts afresh from the frames that end it: a step across a pause from a
     noisy frame made a clean move after it read as noise for a dozen updates.
 
-    ``tau`` 0.75 s: an armed soft arm holding still measures curvatures whose steps correlate
+    ``tau`` (the arm view's: ``DeadBand.steadiness_s``) 0.75 s: an armed soft arm holding still measures curvatures whose steps correlate
     (the controller acts on the motion capture's noise; lag-1 ~0.25), and over 0.25 s such
     noise read as a steady move for 5 updates in a row a few times a minute, each drawn through
     the moving band (emulator: 4 frames/min; 0.75 s: ~1/min, 4 minutes of it replayed). The
     price: after a move ends its steadiness takes ~0.5 s longer to fall (~6 more frames).
     """
 
-    def __init__(self, tau: float = 0.75) -> None:
+    def __init__(self, tau: float) -> None:
         self.tau = tau
         self.steps = 0
         self._last: Array | None = None
