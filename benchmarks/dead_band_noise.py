@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 Q = np.array([8.0, -5.0, 3.0, 0.0, 2.0, -1.0])  # 1/m, the still pose of the tests
 SIGMA = np.array([0.035, 0.11, 0.19, 0.25, 0.31, 0.35])  # 1/m, measured on the sim, armed
@@ -70,21 +71,15 @@ def closed_loop(seconds: float, seed: int, band: Any = None) -> int:
     """Frames sent over ``seconds`` (after 30 s) of the armed soft arm holding in the closed-loop
     simulator, its measurement at 30 states/s, with ``band`` (None: the shipped dead band)."""
     import viser
+    from holding_arm import holding_kappa
 
     import console.scene.arm_view as arm_view
     from console.core.model import model_for
     from console.scene.arm_view_factory import make_arm_view
-    from core.control.grasp_place import immediate
-    from core.control.sim import SoftArmSim
-    from core.control.sim_loop import SimLoop
-    from core.control.stack import ControlStack
     from core.robots import load
 
     robot = load("soft-arm")
-    loop = SimLoop(SoftArmSim(robot, seed=seed),
-                   ControlStack(robot, 0.01, immediate(lambda req: None)), 0.01)
-    loop.run(0.05)
-    loop.arm()
+    measured, _ = holding_kappa(robot, seed, seconds + 30.0)
     clock = [100.0]
     arm_view.time.monotonic = lambda: clock[0]  # type: ignore[attr-defined]
     server = viser.ViserServer(port=0, verbose=False)
@@ -93,13 +88,11 @@ def closed_loop(seconds: float, seed: int, band: Any = None) -> int:
         if band is not None:
             view.dead_band = band
         start = 0
-        for k in range(int((seconds + 30.0) * 100)):
-            control = loop.tick()
-            if k == 3000:
+        for i, kappa in enumerate(measured):
+            if i == 1000:  # after 30 s
                 start = view.frames_sent
-            if k % 3 == 0 and control is not None and control.kappa_meas is not None:
-                clock[0] += 0.03
-                view.update(control.kappa_meas)
+            clock[0] += 0.03
+            view.update(kappa)
         return view.frames_sent - start
     finally:
         server.stop()

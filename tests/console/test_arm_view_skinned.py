@@ -225,25 +225,13 @@ def test_an_armed_soft_arm_holding_in_the_closed_loop_simulator_is_drawn_about_n
     a few times a minute (the moving band drew it: 1-3 frames/min here, ~4 on the emulator,
     each costing a software-rendered page ~1 s of redraws; issue 29)."""
     import console.scene.arm_view as arm_view
-    from core.control.grasp_place import immediate
-    from core.control.sim import SoftArmSim
-    from core.control.sim_loop import SimLoop
-    from core.control.stack import ControlStack
+    from holding_arm import holding_kappa
 
     clock = [100.0]
     monkeypatch.setattr(arm_view.time, "monotonic", lambda: clock[0])
-    sim = SoftArmSim(SOFT, seed=seed)
-    loop = SimLoop(sim, ControlStack(SOFT, 0.01, immediate(lambda req: None)), 0.01)
-    loop.run(0.05)
-    loop.arm()
     view = make_arm_view(server.scene, model_for(SOFT))
-    measured = []
-    for k in range(3 * 60 * 100):  # 3 minutes of 100 Hz ticks; a state every third
-        control = loop.tick()
-        assert control is not None and control.armed
-        if k % 3 == 0 and control.kappa_meas is not None:  # (None: a marker dropped out)
-            measured.append(control.kappa_meas.copy())
-    q = np.array(measured)
+    q, armed = holding_kappa(SOFT, seed, 3 * 60.0)  # 3 minutes; a state every third tick
+    assert armed
     assert np.all(q[300:].std(axis=0) > 0.5 * SOFT_KAPPA_NOISE)  # the noise is there
     for i, kappa in enumerate(q):
         if i == 1000:  # after the first 30 s
